@@ -1,0 +1,15 @@
+//! The OPC DA data model of ServerCTOPC as a deterministic, pure-Rust state machine.
+//!
+//! No I/O, no clock: every time-dependent call takes `now` (a [`Timestamp`]).
+//! The COM layer (`ctopc-com`) only translates between COM and this crate.
+#![forbid(unsafe_code)]
+
+pub mod error;
+pub mod quality;
+pub mod time;
+pub mod value;
+
+pub use error::{OpcError, OpcResult};
+pub use quality::Quality;
+pub use time::Timestamp;
+pub use value::{Value, VarType};
