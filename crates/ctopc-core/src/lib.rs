@@ -5,6 +5,7 @@
 #![forbid(unsafe_code)]
 
 pub mod error;
+pub mod namespace;
 pub mod quality;
 pub mod time;
 pub mod value;
