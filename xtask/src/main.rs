@@ -1,1 +1,55 @@
-fn main() {}
+//! Project automation, reached as `cargo xtask <command>` (alias in .cargo/config.toml).
+//! std only, so that it compiles in seconds on a fresh machine.
+
+mod build;
+mod proxy;
+mod setup;
+mod test;
+mod util;
+mod wine;
+
+use std::process::ExitCode;
+
+const USAGE: &str = "\
+usage: cargo xtask <command>
+
+commands:
+  setup   install what the build and tests need on Debian 12 (apt packages, the
+          rustup target, the bcryptprimitives shim, a Wine prefix under target/wine);
+          idempotent: skips what exists
+  build   build the Windows artifacts (ServerCTOPC.exe, opc_ps.dll, clients) into
+          target/x86_64-pc-windows-gnu/release
+  test    native `cargo test` of every host crate, then the Wine end-to-end tests
+  proxy   build only the proxy/stub DLL from idl/
+";
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(cmd) = args.first() else {
+        eprint!("{USAGE}");
+        return ExitCode::from(2);
+    };
+    let rest = &args[1..];
+    let result = match cmd.as_str() {
+        "setup" => setup::run(rest),
+        "build" => build::run(rest).map(|_| ()),
+        "test" => test::run(rest),
+        "proxy" => {
+            let root = util::root();
+            let out = root.join("target/x86_64-pc-windows-gnu/release");
+            proxy::build_proxy(&root, &out).map(|p| println!("built {}", p.display()))
+        }
+        "help" | "--help" | "-h" => {
+            print!("{USAGE}");
+            Ok(())
+        }
+        other => Err(format!("unknown command `{other}`\n{USAGE}")),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask: error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,1 +1,13 @@
+//! The COM layer of ServerCTOPC: OPC interface definitions (mirroring `idl/`), the COM
+//! objects over `ctopc-core`, registration and the server host. Every `unsafe` block of
+//! the project is in this crate, each with a `// SAFETY:` comment.
 #![cfg(windows)]
+
+pub mod client;
+pub mod factory;
+pub mod host;
+pub mod interfaces;
+pub mod lifetime;
+pub mod mem;
+pub mod registry;
+pub mod server;

@@ -1,0 +1,47 @@
+//! The class object registered with CoRegisterClassObject (REGCLS_MULTIPLEUSE): every
+//! CreateInstance makes a new server object for that client.
+
+use crate::lifetime;
+use std::ffi::c_void;
+use windows::core::{implement, Interface, IUnknown, Ref, BOOL, GUID};
+use windows::Win32::Foundation::{CLASS_E_NOAGGREGATION, E_POINTER};
+use windows::Win32::System::Com::{IClassFactory, IClassFactory_Impl};
+
+/// Makes a new object for one client.
+pub type Constructor = fn() -> windows::core::Result<IUnknown>;
+
+#[implement(IClassFactory)]
+pub struct ClassFactory {
+    create: Constructor,
+}
+
+impl ClassFactory {
+    pub fn new(create: Constructor) -> IClassFactory {
+        ClassFactory { create }.into()
+    }
+}
+
+impl IClassFactory_Impl for ClassFactory_Impl {
+    fn CreateInstance(&self, outer: Ref<IUnknown>, riid: *const GUID, ppv: *mut *mut c_void) -> windows::core::Result<()> {
+        if ppv.is_null() {
+            return Err(E_POINTER.into());
+        }
+        // SAFETY: ppv checked non-null; the out-parameter is cleared before anything can fail.
+        unsafe { *ppv = std::ptr::null_mut() };
+        if riid.is_null() {
+            return Err(E_POINTER.into());
+        }
+        if outer.is_some() {
+            return Err(CLASS_E_NOAGGREGATION.into());
+        }
+        let object = (self.create)()?;
+        // SAFETY: riid and ppv are valid pointers (checked above); on failure QueryInterface
+        // leaves *ppv null and returns E_NOINTERFACE, and the object is released on drop.
+        unsafe { object.query(riid, ppv).ok() }
+    }
+
+    fn LockServer(&self, lock: BOOL) -> windows::core::Result<()> {
+        lifetime::lock_server(lock.as_bool());
+        Ok(())
+    }
+}

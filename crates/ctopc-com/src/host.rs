@@ -1,0 +1,102 @@
+//! What ServerCTOPC.exe does for each switch: register, unregister, serve.
+
+use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
+use crate::registry::{self, Category, ServerRegistration};
+use crate::{factory::ClassFactory, lifetime, server};
+use std::time::Duration;
+use windows::core::GUID;
+use windows::Win32::System::Com::{
+    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CoUninitialize,
+    CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
+    RPC_C_IMP_LEVEL_IDENTIFY,
+};
+
+/// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
+pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(0x3277b556_ba68_4bde_8687_8ee4e4b46336);
+pub const PROGID: &str = "ServerCTOPC.App";
+pub const PROGID_VERSIONED: &str = "ServerCTOPC.App.1";
+pub const DESCRIPTION: &str = "ServerCTOPC OPC DA Server for asix";
+pub const EXE_NAME: &str = "ServerCTOPC.exe";
+/// How long a server started by COM waits for its first client before it exits.
+pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
+
+/// COM initialised for the lifetime of the value (multithreaded apartment).
+struct ComInit;
+
+impl ComInit {
+    fn mta() -> windows::core::Result<ComInit> {
+        // SAFETY: paired with CoUninitialize in Drop on this thread.
+        unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
+        Ok(ComInit)
+    }
+}
+
+impl Drop for ComInit {
+    fn drop(&mut self) {
+        // SAFETY: this thread initialised COM in `mta`.
+        unsafe { CoUninitialize() };
+    }
+}
+
+fn exe_path() -> windows::core::Result<String> {
+    let exe = std::env::current_exe().map_err(|e| windows::core::Error::new(windows::Win32::Foundation::E_FAIL, e.to_string()))?;
+    Ok(exe.to_string_lossy().into_owned())
+}
+
+fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
+    let exe = exe_path()?;
+    let categories = [
+        Category { catid: CATID_OPCDAServer20, description: "OPC Data Access Servers Version 2.0" },
+        Category { catid: CATID_OPCDAServer30, description: "OPC Data Access Servers Version 3.0" },
+    ];
+    let reg = ServerRegistration {
+        clsid: CLSID_SERVERCTOPC,
+        appid: CLSID_SERVERCTOPC,
+        progid: PROGID,
+        progid_versioned: PROGID_VERSIONED,
+        description: DESCRIPTION,
+        exe_path: &exe,
+        exe_name: EXE_NAME,
+        service_name: None,
+        categories: &categories,
+        opc_key_vendor: Some(server::VENDOR_INFO),
+    };
+    Ok(f(&reg))
+}
+
+/// `/RegServer`.
+pub fn register() -> windows::core::Result<()> {
+    let _com = ComInit::mta()?;
+    with_registration(registry::register)??;
+    println!("ServerCTOPC: registered {PROGID} ({})", registry::guid_string(&CLSID_SERVERCTOPC));
+    Ok(())
+}
+
+/// `/UnregServer`.
+pub fn unregister() -> windows::core::Result<()> {
+    let _com = ComInit::mta()?;
+    with_registration(registry::unregister)??;
+    println!("ServerCTOPC: unregistered {PROGID}");
+    Ok(())
+}
+
+/// `-Embedding`: register the class object for multiple use, serve until the last client
+/// has gone, then revoke it and exit.
+pub fn serve() -> windows::core::Result<()> {
+    let _com = ComInit::mta()?;
+    // Authentication level NONE and identify-level impersonation: the usual OPC setting,
+    // so that callbacks into clients on other machines work without a shared domain;
+    // access is governed by the AppID's DCOM settings (see the deployment guide).
+    // SAFETY: called once, before any marshalling on this process.
+    let _ = unsafe {
+        CoInitializeSecurity(None, -1, None, None, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY, None, EOAC_NONE, None)
+    };
+    let factory = ClassFactory::new(server::create_instance);
+    // SAFETY: the factory outlives the registration (revoked below before it is dropped).
+    let cookie = unsafe { CoRegisterClassObject(&CLSID_SERVERCTOPC, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
+    let reason = lifetime::wait_until_unused(STARTUP_GRACE);
+    // SAFETY: the cookie came from CoRegisterClassObject above.
+    unsafe { CoRevokeClassObject(cookie)? };
+    eprintln!("ServerCTOPC: exiting ({reason:?})");
+    Ok(())
+}

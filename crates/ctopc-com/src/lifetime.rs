@@ -1,0 +1,98 @@
+//! Process lifetime of the out-of-process server: counts live server objects and
+//! IClassFactory::LockServer locks, and wakes the main thread when the last is gone.
+
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+#[derive(Default)]
+struct Counts {
+    objects: usize,
+    locks: usize,
+    ever_used: bool,
+    stop_requested: bool,
+}
+
+static COUNTS: Mutex<Counts> = Mutex::new(Counts { objects: 0, locks: 0, ever_used: false, stop_requested: false });
+static CHANGED: Condvar = Condvar::new();
+
+fn with<R>(f: impl FnOnce(&mut Counts) -> R) -> R {
+    let mut g = COUNTS.lock().unwrap_or_else(|p| p.into_inner());
+    let r = f(&mut g);
+    CHANGED.notify_all();
+    r
+}
+
+/// A live COM object that keeps the process up (held by every server object).
+pub struct ObjectGuard(());
+
+impl ObjectGuard {
+    pub fn new() -> Self {
+        with(|c| {
+            c.objects += 1;
+            c.ever_used = true;
+        });
+        ObjectGuard(())
+    }
+}
+
+impl Default for ObjectGuard {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for ObjectGuard {
+    fn drop(&mut self) {
+        with(|c| c.objects = c.objects.saturating_sub(1));
+    }
+}
+
+pub fn lock_server(lock: bool) {
+    with(|c| {
+        if lock {
+            c.locks += 1;
+            c.ever_used = true;
+        } else {
+            c.locks = c.locks.saturating_sub(1);
+        }
+    });
+}
+
+pub fn live_objects() -> usize {
+    with(|c| c.objects)
+}
+
+/// Asks the main loop to stop (console Ctrl+C, service stop).
+pub fn request_stop() {
+    with(|c| c.stop_requested = true);
+}
+
+/// Why `wait_until_unused` returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitReason {
+    /// The last client released its last object.
+    LastClientGone,
+    /// Nobody connected within the start-up grace period.
+    NeverUsed,
+    StopRequested,
+}
+
+/// Blocks until the server is unused: every object and lock released after at least one
+/// client came, or no client within `grace` of start, or a stop was requested.
+pub fn wait_until_unused(grace: Duration) -> ExitReason {
+    let start = Instant::now();
+    let mut g = COUNTS.lock().unwrap_or_else(|p| p.into_inner());
+    loop {
+        if g.stop_requested {
+            return ExitReason::StopRequested;
+        }
+        if g.ever_used && g.objects == 0 && g.locks == 0 {
+            return ExitReason::LastClientGone;
+        }
+        if !g.ever_used && start.elapsed() >= grace {
+            return ExitReason::NeverUsed;
+        }
+        let wait = if g.ever_used { Duration::from_secs(1) } else { grace.saturating_sub(start.elapsed()).max(Duration::from_millis(10)) };
+        g = CHANGED.wait_timeout(g, wait).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+    }
+}

@@ -1,0 +1,99 @@
+//! CoTaskMem allocation for out-parameters, and the one place where core errors become
+//! HRESULTs.
+//!
+//! Out-parameters are all-or-nothing: allocate into [`TaskMem`] owners, which free
+//! everything on drop unless `into_raw` hands the memory to the caller after every
+//! allocation of the call has succeeded.
+
+use ctopc_core::{OpcError, Timestamp};
+use std::ffi::c_void;
+use windows::core::PWSTR;
+use windows::Win32::Foundation::{E_OUTOFMEMORY, FILETIME};
+use windows::Win32::System::Com::{CoTaskMemAlloc, CoTaskMemFree};
+
+/// Maps a core error to a COM error (the single mapping point).
+pub fn to_com(e: OpcError) -> windows::core::Error {
+    windows::core::Error::new(windows::core::HRESULT(e.hresult()), e.symbol())
+}
+
+pub fn hresult(e: OpcError) -> windows::core::HRESULT {
+    windows::core::HRESULT(e.hresult())
+}
+
+/// A CoTaskMem block owned until handed out with [`TaskMem::into_raw`].
+pub struct TaskMem<T> {
+    ptr: *mut T,
+    len: usize,
+}
+
+impl<T> TaskMem<T> {
+    /// A zeroed array of `len` elements (`len` may be 0: then a valid 1-byte block).
+    pub fn zeroed(len: usize) -> windows::core::Result<TaskMem<T>> {
+        let bytes = std::mem::size_of::<T>().checked_mul(len).ok_or_else(|| windows::core::Error::from(E_OUTOFMEMORY))?;
+        // SAFETY: CoTaskMemAlloc returns null or a block of at least `bytes.max(1)` bytes.
+        let ptr = unsafe { CoTaskMemAlloc(bytes.max(1)) }.cast::<T>();
+        if ptr.is_null() {
+            return Err(E_OUTOFMEMORY.into());
+        }
+        // SAFETY: the block has `bytes` writable bytes.
+        unsafe { std::ptr::write_bytes(ptr.cast::<u8>(), 0, bytes) };
+        Ok(TaskMem { ptr, len })
+    }
+
+    pub fn as_mut_slice(&mut self) -> &mut [T] {
+        // SAFETY: `ptr` holds `len` zero-initialised elements of a type for which all-zero is
+        // valid (callers use only C structs, integers and pointers).
+        unsafe { std::slice::from_raw_parts_mut(self.ptr, self.len) }
+    }
+
+    pub fn into_raw(self) -> *mut T {
+        let p = self.ptr;
+        std::mem::forget(self);
+        p
+    }
+}
+
+impl<T> Drop for TaskMem<T> {
+    fn drop(&mut self) {
+        // SAFETY: the block came from CoTaskMemAlloc and was not handed out.
+        unsafe { CoTaskMemFree(Some(self.ptr.cast::<c_void>())) };
+    }
+}
+
+/// A CoTaskMem copy of `s` as a NUL-terminated UTF-16 string.
+pub fn alloc_wstr(s: &str) -> windows::core::Result<PWSTR> {
+    let wide: Vec<u16> = s.encode_utf16().chain(std::iter::once(0)).collect();
+    let mut mem = TaskMem::<u16>::zeroed(wide.len())?;
+    mem.as_mut_slice().copy_from_slice(&wide);
+    Ok(PWSTR(mem.into_raw()))
+}
+
+/// Frees a string from [`alloc_wstr`] (for error paths after a partial success).
+pub fn free_wstr(p: PWSTR) {
+    if !p.is_null() {
+        // SAFETY: `p` came from CoTaskMemAlloc.
+        unsafe { CoTaskMemFree(Some(p.0.cast::<c_void>())) };
+    }
+}
+
+pub fn filetime(t: Timestamp) -> FILETIME {
+    let (lo, hi) = t.filetime_parts();
+    FILETIME { dwLowDateTime: lo, dwHighDateTime: hi }
+}
+
+/// The current UTC time (the only clock read of the COM layer's data path).
+pub fn now() -> Timestamp {
+    let since = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    Timestamp::from_unix_millis(0).add_micros_saturating(since.as_micros())
+}
+
+trait AddMicros {
+    fn add_micros_saturating(self, us: u128) -> Timestamp;
+}
+
+impl AddMicros for Timestamp {
+    fn add_micros_saturating(self, us: u128) -> Timestamp {
+        let ticks = i64::try_from(us.saturating_mul(10)).unwrap_or(i64::MAX);
+        Timestamp(self.0.saturating_add(ticks))
+    }
+}

@@ -1,0 +1,198 @@
+//! The OPC server object: one per client (CreateInstance of the multiple-use class object).
+
+use crate::interfaces::*;
+use crate::lifetime::ObjectGuard;
+use crate::mem::{self, TaskMem};
+use ctopc_core::lang::Lang;
+use ctopc_core::{OpcError, Timestamp};
+use std::sync::{Mutex, OnceLock};
+use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
+use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL};
+
+/// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
+pub const VENDOR_INFO: &str = "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
+
+/// Process-wide facts every server object reports.
+pub struct ProcessInfo {
+    pub start_time: Timestamp,
+    pub state: OPCSERVERSTATE,
+    pub default_lang: Lang,
+}
+
+static PROCESS: OnceLock<ProcessInfo> = OnceLock::new();
+
+/// Sets the process facts once, at start-up (later calls are ignored).
+pub fn init_process(info: ProcessInfo) {
+    let _ = PROCESS.set(info);
+}
+
+fn process() -> &'static ProcessInfo {
+    PROCESS.get_or_init(|| ProcessInfo { start_time: mem::now(), state: OPC_STATUS_NOCONFIG, default_lang: Lang::English })
+}
+
+struct Session {
+    lcid: u32,
+    client_name: Option<String>,
+}
+
+#[implement(IOPCServer, IOPCCommon)]
+pub struct OpcServer {
+    session: Mutex<Session>,
+    _guard: ObjectGuard,
+}
+
+/// The class factory's constructor: a new server object for one client.
+pub fn create_instance() -> windows::core::Result<IUnknown> {
+    let lang = process().default_lang;
+    let server = OpcServer { session: Mutex::new(Session { lcid: lang.lcid(), client_name: None }), _guard: ObjectGuard::new() };
+    Ok(server.into())
+}
+
+impl OpcServer {
+    fn session(&self) -> std::sync::MutexGuard<'_, Session> {
+        self.session.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The language for an LCID a client passes: Polish, any English, or the system/user
+/// default and neutral locales (the server's default language). Others are not available.
+fn lang_for(lcid: u32) -> Option<Lang> {
+    Lang::from_lcid(lcid, process().default_lang)
+}
+
+/// The text of `code` in `lang`: our own codes from the core table, else the system's.
+fn error_text(code: HRESULT, lang: Lang) -> windows::core::Result<String> {
+    if let Some(e) = OpcError::from_hresult(code.0) {
+        return Ok(e.text(lang).to_string());
+    }
+    let msg = code.message();
+    if msg.trim().is_empty() {
+        Err(E_INVALIDARG.into())
+    } else {
+        Ok(msg.trim_end().to_string())
+    }
+}
+
+fn write_out<T>(ptr: *mut T, value: T) -> windows::core::Result<()> {
+    if ptr.is_null() {
+        return Err(E_INVALIDARG.into());
+    }
+    // SAFETY: checked non-null; COM out-parameters point to caller-owned storage.
+    unsafe { ptr.write(value) };
+    Ok(())
+}
+
+impl IOPCCommon_Impl for OpcServer_Impl {
+    unsafe fn SetLocaleID(&self, lcid: u32) -> windows::core::Result<()> {
+        lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
+        self.session().lcid = lcid;
+        Ok(())
+    }
+
+    unsafe fn GetLocaleID(&self, plcid: *mut u32) -> windows::core::Result<()> {
+        let lcid = self.session().lcid;
+        write_out(plcid, lcid)
+    }
+
+    unsafe fn QueryAvailableLocaleIDs(&self, pcount: *mut u32, plcids: *mut *mut u32) -> windows::core::Result<()> {
+        if pcount.is_null() || plcids.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        let ids = Lang::available_lcids();
+        let mut arr = TaskMem::<u32>::zeroed(ids.len())?;
+        arr.as_mut_slice().copy_from_slice(ids);
+        // SAFETY: both checked non-null above; all allocation has succeeded.
+        unsafe {
+            *pcount = ids.len() as u32;
+            *plcids = arr.into_raw();
+        }
+        Ok(())
+    }
+
+    unsafe fn GetErrorString(&self, code: HRESULT, pstring: *mut PWSTR) -> windows::core::Result<()> {
+        if pstring.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        let lang = lang_for(self.session().lcid).unwrap_or(process().default_lang);
+        let text = mem::alloc_wstr(&error_text(code, lang)?)?;
+        write_out(pstring, text)
+    }
+
+    unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
+        if name.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        // SAFETY: a non-null [in, string] parameter is a NUL-terminated UTF-16 string.
+        let name = unsafe { name.to_string() }.map_err(|_| windows::core::Error::from(E_INVALIDARG))?;
+        self.session().client_name = Some(name);
+        Ok(())
+    }
+}
+
+impl IOPCServer_Impl for OpcServer_Impl {
+    unsafe fn AddGroup(
+        &self,
+        _name: PCWSTR,
+        _active: BOOL,
+        _rate: u32,
+        _client: u32,
+        _bias: *const i32,
+        _deadband: *const f32,
+        _lcid: u32,
+        _server: *mut u32,
+        _revised: *mut u32,
+        _riid: *const GUID,
+        _unk: *mut Option<IUnknown>,
+    ) -> HRESULT {
+        E_NOTIMPL
+    }
+
+    unsafe fn GetErrorString(&self, code: HRESULT, lcid: u32, pstring: *mut PWSTR) -> windows::core::Result<()> {
+        if pstring.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        let lang = lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
+        let text = mem::alloc_wstr(&error_text(code, lang)?)?;
+        write_out(pstring, text)
+    }
+
+    unsafe fn GetGroupByName(&self, _name: PCWSTR, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+        Err(E_NOTIMPL.into())
+    }
+
+    unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
+        if pstatus.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        let p = process();
+        let version = |i: usize| env!("CARGO_PKG_VERSION").split('.').nth(i).and_then(|s| s.parse::<u16>().ok()).unwrap_or(0);
+        let now = mem::now();
+        let mut block = TaskMem::<OPCSERVERSTATUS>::zeroed(1)?;
+        let vendor = mem::alloc_wstr(VENDOR_INFO)?;
+        block.as_mut_slice()[0] = OPCSERVERSTATUS {
+            ftStartTime: mem::filetime(p.start_time),
+            ftCurrentTime: mem::filetime(now),
+            // No data callbacks are sent yet at this stage: the last update is the start.
+            ftLastUpdateTime: mem::filetime(p.start_time),
+            dwServerState: p.state,
+            dwGroupCount: 0,
+            dwBandWidth: u32::MAX,
+            wMajorVersion: version(0),
+            wMinorVersion: version(1),
+            wBuildNumber: version(2),
+            wReserved: 0,
+            szVendorInfo: vendor,
+        };
+        // SAFETY: checked non-null; every allocation has succeeded.
+        unsafe { *pstatus = block.into_raw() };
+        Ok(())
+    }
+
+    unsafe fn RemoveGroup(&self, _server_group: u32, _force: BOOL) -> HRESULT {
+        E_NOTIMPL
+    }
+
+    unsafe fn CreateGroupEnumerator(&self, _scope: OPCENUMSCOPE, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> HRESULT {
+        E_NOTIMPL
+    }
+}

@@ -1,0 +1,57 @@
+//! `cargo xtask test`: the one test command (README, .ci/run).
+//!
+//! 1. setup (idempotent), 2. native `cargo test` of every host crate, 3. the Windows
+//! build, 4. registration of the proxy/stub DLL and the server in the project's Wine
+//! prefix, 5. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner),
+//! always ending every Wine process of the prefix, with timeouts on everything.
+
+use crate::{build, setup, util, wine};
+use std::time::Duration;
+
+/// The whole end-to-end run may not take longer than this.
+const E2E_LIMIT: Duration = Duration::from_secs(25 * 60);
+
+pub fn run(args: &[String]) -> Result<(), String> {
+    let native_only = args.iter().any(|a| a == "--native");
+    setup::run(&[])?;
+
+    println!("test: native tests (cargo test --workspace)");
+    util::run(util::cargo().args(["test", "--workspace", "--release"]))?;
+    if native_only {
+        return Ok(());
+    }
+
+    let artifacts = build::run(&[])?;
+    wine::kill_all();
+    let result = (|| {
+        register(&artifacts)?;
+        println!("test: end-to-end tests under Wine");
+        let mut c = util::cargo();
+        c.args(["test", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "--", "--test-threads=1"]);
+        c.env("CTOPC_BIN_DIR", &artifacts.dir);
+        let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("end-to-end tests failed: {status}"))
+        }
+    })();
+    wine::kill_all();
+    result
+}
+
+/// Registers the proxy/stub DLL (its own DllRegisterServer, through regsvr32) and the
+/// server (/RegServer) in the prefix.
+pub fn register(a: &build::Artifacts) -> Result<(), String> {
+    let limit = Duration::from_secs(120);
+    let status = util::run_with_timeout(wine::wine("regsvr32").arg("/s").arg(&a.proxy), limit)?;
+    if !status.success() {
+        return Err(format!("regsvr32 {} failed: {status}", a.proxy.display()));
+    }
+    let status = util::run_with_timeout(wine::wine(&a.server).arg("/RegServer"), limit)?;
+    if !status.success() {
+        return Err(format!("{} /RegServer failed: {status}", a.server.display()));
+    }
+    println!("test: registered {} and {}", a.proxy.display(), a.server.display());
+    Ok(())
+}
