@@ -30,11 +30,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
         c.args(["test", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "--", "--test-threads=1"]);
         c.env("CTOPC_BIN_DIR", &artifacts.dir);
         let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
-        if status.success() {
-            Ok(())
-        } else {
-            Err(format!("end-to-end tests failed: {status}"))
+        if !status.success() {
+            return Err(format!("end-to-end tests failed: {status}"));
         }
+        thirdparty_client()
     })();
     wine::kill_all();
     result
@@ -54,4 +53,26 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
     }
     println!("test: registered {} and {}", a.proxy.display(), a.server.display());
     Ok(())
+}
+
+/// Builds and runs tests/thirdparty-client: an OPC DA client we did not write (the opc_da
+/// crate, with bindings from the OPC Foundation's IDL) reads the server's status through
+/// our proxy/stub DLL.
+fn thirdparty_client() -> Result<(), String> {
+    println!("test: third-party OPC client (opc_da crate) under Wine");
+    let root = util::root();
+    let target_dir = root.join("target/thirdparty");
+    util::run(
+        util::cargo()
+            .args(["build", "--release", "--target", setup::TARGET, "--manifest-path"])
+            .arg(root.join("tests/thirdparty-client/Cargo.toml"))
+            .env("CARGO_TARGET_DIR", &target_dir),
+    )?;
+    let exe = target_dir.join(setup::TARGET).join("release/thirdparty-client.exe");
+    let status = util::run_with_timeout(&mut wine::wine(&exe), Duration::from_secs(120))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("third-party client failed: {status}"))
+    }
 }
