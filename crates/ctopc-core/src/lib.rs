@@ -4,13 +4,19 @@
 //! The COM layer (`ctopc-com`) only translates between COM and this crate.
 #![forbid(unsafe_code)]
 
+pub mod asix;
+pub mod browse;
+pub mod convert;
 pub mod error;
+pub mod lang;
 pub mod namespace;
+pub mod properties;
 pub mod quality;
 pub mod time;
 pub mod value;
 
 pub use error::{OpcError, OpcResult};
+pub use lang::Lang;
 pub use quality::Quality;
 pub use time::Timestamp;
-pub use value::{Value, VarType};
+pub use value::{Value, VarType, Vqt};
