@@ -9,5 +9,8 @@ pub mod host;
 pub mod interfaces;
 pub mod lifetime;
 pub mod mem;
+#[cfg(feature = "marshal-probe")]
+pub mod probe;
 pub mod registry;
 pub mod server;
+pub mod variant;

@@ -1,0 +1,290 @@
+//! VARIANT <-> core `Value`, including 1-D SAFEARRAYs (VT_ARRAY | element, and
+//! VT_ARRAY | VT_VARIANT for mixed arrays such as the original's extended write
+//! [value, quality, timestamp]).
+
+use ctopc_core::value::ArrayValue;
+use ctopc_core::{OpcError, Value, VarType};
+use std::ffi::c_void;
+use std::mem::ManuallyDrop;
+use windows::core::BSTR;
+use windows::Win32::Foundation::{VARIANT_BOOL, VARIANT_FALSE, VARIANT_TRUE};
+use windows::Win32::System::Com::{CY, SAFEARRAY};
+use windows::Win32::System::Ole::{
+    SafeArrayAccessData, SafeArrayCreateVector, SafeArrayDestroy, SafeArrayGetDim, SafeArrayGetLBound,
+    SafeArrayGetUBound, SafeArrayUnaccessData,
+};
+use windows::Win32::System::Variant::*;
+
+/// Frees what a VARIANT owns and leaves it VT_EMPTY.
+pub fn clear(v: &mut VARIANT) {
+    // SAFETY: `v` is a valid, initialised VARIANT (zeroed or written by us / COM).
+    let _ = unsafe { VariantClear(v) };
+}
+
+fn vt_of(v: &VARIANT) -> u16 {
+    // SAFETY: every VARIANT starts with its VARTYPE; reading it is always valid.
+    unsafe { v.Anonymous.Anonymous.vt.0 }
+}
+
+fn set(v: &mut VARIANT, vt: VARENUM, f: impl FnOnce(&mut VARIANT_0_0_0)) {
+    let mut inner = VARIANT_0_0 { vt, ..Default::default() };
+    f(&mut inner.Anonymous);
+    v.Anonymous.Anonymous = ManuallyDrop::new(inner);
+}
+
+/// A new VARIANT holding `value` (owned by the caller: clear it or hand it out).
+pub fn to_variant(value: &Value) -> windows::core::Result<VARIANT> {
+    let mut v = VARIANT::default();
+    match value {
+        Value::Empty => {}
+        Value::I1(x) => set(&mut v, VT_I1, |u| u.cVal = *x),
+        Value::UI1(x) => set(&mut v, VT_UI1, |u| u.bVal = *x),
+        Value::I2(x) => set(&mut v, VT_I2, |u| u.iVal = *x),
+        Value::UI2(x) => set(&mut v, VT_UI2, |u| u.uiVal = *x),
+        Value::I4(x) => set(&mut v, VT_I4, |u| u.lVal = *x),
+        Value::UI4(x) => set(&mut v, VT_UI4, |u| u.ulVal = *x),
+        Value::I8(x) => set(&mut v, VT_I8, |u| u.llVal = *x),
+        Value::UI8(x) => set(&mut v, VT_UI8, |u| u.ullVal = *x),
+        Value::R4(x) => set(&mut v, VT_R4, |u| u.fltVal = *x),
+        Value::R8(x) => set(&mut v, VT_R8, |u| u.dblVal = *x),
+        Value::Cy(x) => set(&mut v, VT_CY, |u| u.cyVal = CY { int64: *x }),
+        Value::Date(x) => set(&mut v, VT_DATE, |u| u.date = *x),
+        Value::Bool(x) => set(&mut v, VT_BOOL, |u| u.boolVal = if *x { VARIANT_TRUE } else { VARIANT_FALSE }),
+        Value::Error(x) => set(&mut v, VT_ERROR, |u| u.scode = *x),
+        Value::Bstr(s) => {
+            let b = BSTR::from(s.as_str());
+            set(&mut v, VT_BSTR, |u| u.bstrVal = ManuallyDrop::new(b));
+        }
+        Value::Array(a) => {
+            let psa = to_safearray(a)?;
+            set(&mut v, VARENUM(VT_ARRAY.0 | a.element_type.0), |u| u.parray = psa);
+        }
+    }
+    Ok(v)
+}
+
+/// Writes `value` into caller storage `dst` (which must not own anything yet).
+///
+/// # Safety
+/// `dst` must be valid for writes of one VARIANT.
+pub unsafe fn write_variant(dst: *mut VARIANT, value: &Value) -> windows::core::Result<()> {
+    let v = to_variant(value)?;
+    // SAFETY: the caller guarantees `dst` is writable; ownership moves into it.
+    unsafe { dst.write(v) };
+    Ok(())
+}
+
+fn element_size(vt: VarType) -> Option<usize> {
+    Some(match vt {
+        VarType::I1 | VarType::UI1 => 1,
+        VarType::I2 | VarType::UI2 | VarType::BOOL => 2,
+        VarType::I4 | VarType::UI4 | VarType::R4 | VarType::ERROR => 4,
+        VarType::I8 | VarType::UI8 | VarType::R8 | VarType::CY | VarType::DATE => 8,
+        VarType::BSTR => std::mem::size_of::<usize>(),
+        VarType::VARIANT => std::mem::size_of::<VARIANT>(),
+        _ => return None,
+    })
+}
+
+fn to_safearray(a: &ArrayValue) -> windows::core::Result<*mut SAFEARRAY> {
+    let bad = || windows::core::Error::from(windows::core::HRESULT(OpcError::BadType.hresult()));
+    element_size(a.element_type).ok_or_else(bad)?;
+    let n = u32::try_from(a.elements.len()).map_err(|_| bad())?;
+    // SAFETY: plain constructor; null means out of memory.
+    let psa = unsafe { SafeArrayCreateVector(VARENUM(a.element_type.0), 0, n) };
+    if psa.is_null() {
+        return Err(windows::Win32::Foundation::E_OUTOFMEMORY.into());
+    }
+    let fill = || -> windows::core::Result<()> {
+        let mut data: *mut c_void = std::ptr::null_mut();
+        // SAFETY: `psa` is a valid array; data is unlocked below.
+        unsafe { SafeArrayAccessData(psa, &mut data)? };
+        let mut result = Ok(());
+        for (i, e) in a.elements.iter().enumerate() {
+            let converted;
+            let e = if a.element_type == VarType::VARIANT || e.var_type() == a.element_type {
+                e
+            } else {
+                converted = e.convert(a.element_type).map_err(|err| windows::core::Error::from(windows::core::HRESULT(err.hresult())));
+                match &converted {
+                    Ok(c) => c,
+                    Err(err) => {
+                        result = Err(err.clone());
+                        break;
+                    }
+                }
+            };
+            // SAFETY: `data` points at `n` elements of the array's type; index i < n. Each
+            // write moves an owned value (BSTR, VARIANT) into the array, which now owns it.
+            let r = unsafe { write_element(data, i, a.element_type, e) };
+            if let Err(err) = r {
+                result = Err(err);
+                break;
+            }
+        }
+        // SAFETY: paired with the access above.
+        unsafe { SafeArrayUnaccessData(psa)? };
+        result
+    };
+    if let Err(e) = fill() {
+        // SAFETY: destroys the array and whatever elements were written.
+        let _ = unsafe { SafeArrayDestroy(psa) };
+        return Err(e);
+    }
+    Ok(psa)
+}
+
+/// # Safety
+/// `data` must point at an array of at least `i + 1` elements of type `vt`.
+unsafe fn write_element(data: *mut c_void, i: usize, vt: VarType, e: &Value) -> windows::core::Result<()> {
+    let mismatch = || windows::core::Error::from(windows::core::HRESULT(OpcError::BadType.hresult()));
+    // SAFETY (whole body): guaranteed by the caller; each arm writes one element of the
+    // array's element type at index i.
+    unsafe {
+        match (vt, e) {
+            (VarType::VARIANT, e) => data.cast::<VARIANT>().add(i).write(to_variant(e)?),
+            (VarType::I1, Value::I1(x)) => data.cast::<i8>().add(i).write(*x),
+            (VarType::UI1, Value::UI1(x)) => data.cast::<u8>().add(i).write(*x),
+            (VarType::I2, Value::I2(x)) => data.cast::<i16>().add(i).write(*x),
+            (VarType::UI2, Value::UI2(x)) => data.cast::<u16>().add(i).write(*x),
+            (VarType::I4, Value::I4(x)) => data.cast::<i32>().add(i).write(*x),
+            (VarType::UI4, Value::UI4(x)) => data.cast::<u32>().add(i).write(*x),
+            (VarType::I8, Value::I8(x)) => data.cast::<i64>().add(i).write(*x),
+            (VarType::UI8, Value::UI8(x)) => data.cast::<u64>().add(i).write(*x),
+            (VarType::R4, Value::R4(x)) => data.cast::<f32>().add(i).write(*x),
+            (VarType::R8, Value::R8(x)) => data.cast::<f64>().add(i).write(*x),
+            (VarType::CY, Value::Cy(x)) => data.cast::<i64>().add(i).write(*x),
+            (VarType::DATE, Value::Date(x)) => data.cast::<f64>().add(i).write(*x),
+            (VarType::ERROR, Value::Error(x)) => data.cast::<i32>().add(i).write(*x),
+            (VarType::BOOL, Value::Bool(x)) => data.cast::<VARIANT_BOOL>().add(i).write(if *x { VARIANT_TRUE } else { VARIANT_FALSE }),
+            (VarType::BSTR, Value::Bstr(s)) => data.cast::<ManuallyDrop<BSTR>>().add(i).write(ManuallyDrop::new(BSTR::from(s.as_str()))),
+            _ => return Err(mismatch()),
+        }
+    }
+    Ok(())
+}
+
+/// The value a client passed in a VARIANT. VT_BYREF is followed; objects (VT_UNKNOWN,
+/// VT_DISPATCH), VT_NULL, records and multi-dimensional arrays are `OPC_E_BADTYPE`.
+pub fn from_variant(v: &VARIANT) -> Result<Value, OpcError> {
+    let vt = vt_of(v);
+    // SAFETY: each arm reads the union member that `vt` says is valid; BYREF pointers are
+    // followed only when non-null.
+    unsafe {
+        let u = &v.Anonymous.Anonymous.Anonymous;
+        if vt & VT_BYREF.0 != 0 {
+            let base = vt & !VT_BYREF.0;
+            if u.byref.is_null() {
+                return Err(OpcError::BadType);
+            }
+            let p = u.byref;
+            return Ok(match VARENUM(base) {
+                VT_I1 => Value::I1(*p.cast::<i8>()),
+                VT_UI1 => Value::UI1(*p.cast::<u8>()),
+                VT_I2 => Value::I2(*p.cast::<i16>()),
+                VT_UI2 => Value::UI2(*p.cast::<u16>()),
+                VT_I4 | VT_INT => Value::I4(*p.cast::<i32>()),
+                VT_UI4 | VT_UINT => Value::UI4(*p.cast::<u32>()),
+                VT_I8 => Value::I8(*p.cast::<i64>()),
+                VT_UI8 => Value::UI8(*p.cast::<u64>()),
+                VT_R4 => Value::R4(*p.cast::<f32>()),
+                VT_R8 => Value::R8(*p.cast::<f64>()),
+                VT_CY => Value::Cy(*p.cast::<i64>()),
+                VT_DATE => Value::Date(*p.cast::<f64>()),
+                VT_ERROR => Value::Error(*p.cast::<i32>()),
+                VT_BOOL => Value::Bool((*p.cast::<VARIANT_BOOL>()).0 != 0),
+                VT_BSTR => Value::Bstr((*p.cast::<BSTR>()).to_string()),
+                VT_VARIANT => return from_variant(&*p.cast::<VARIANT>()),
+                _ => return Err(OpcError::BadType),
+            });
+        }
+        if vt & VT_ARRAY.0 != 0 {
+            return from_safearray(u.parray, VarType(vt & !VT_ARRAY.0));
+        }
+        Ok(match VARENUM(vt) {
+            VT_EMPTY => Value::Empty,
+            VT_I1 => Value::I1(u.cVal),
+            VT_UI1 => Value::UI1(u.bVal),
+            VT_I2 => Value::I2(u.iVal),
+            VT_UI2 => Value::UI2(u.uiVal),
+            VT_I4 | VT_INT => Value::I4(u.lVal),
+            VT_UI4 | VT_UINT => Value::UI4(u.ulVal),
+            VT_I8 => Value::I8(u.llVal),
+            VT_UI8 => Value::UI8(u.ullVal),
+            VT_R4 => Value::R4(u.fltVal),
+            VT_R8 => Value::R8(u.dblVal),
+            VT_CY => Value::Cy(u.cyVal.int64),
+            VT_DATE => Value::Date(u.date),
+            VT_ERROR => Value::Error(u.scode),
+            VT_BOOL => Value::Bool(u.boolVal.0 != 0),
+            VT_BSTR => Value::Bstr(u.bstrVal.to_string()),
+            VT_DECIMAL => {
+                let mut r8 = VARIANT::default();
+                if VariantChangeType(&mut r8, v, VAR_CHANGE_FLAGS(0), VT_R8).is_err() {
+                    return Err(OpcError::Overflow);
+                }
+                Value::R8(r8.Anonymous.Anonymous.Anonymous.dblVal)
+            }
+            _ => return Err(OpcError::BadType),
+        })
+    }
+}
+
+fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError> {
+    if psa.is_null() {
+        return Err(OpcError::BadType);
+    }
+    let size = element_size(elem).ok_or(OpcError::BadType)?;
+    // SAFETY: `psa` is a non-null SAFEARRAY from a VARIANT; bounds come from the array.
+    unsafe {
+        if SafeArrayGetDim(psa) != 1 {
+            return Err(OpcError::BadType);
+        }
+        let lo = SafeArrayGetLBound(psa, 1).map_err(|_| OpcError::BadType)?;
+        let hi = SafeArrayGetUBound(psa, 1).map_err(|_| OpcError::BadType)?;
+        let n = usize::try_from(i64::from(hi) - i64::from(lo) + 1).unwrap_or(0);
+        if (*psa).cbElements as usize != size {
+            return Err(OpcError::BadType);
+        }
+        let mut data: *mut c_void = std::ptr::null_mut();
+        SafeArrayAccessData(psa, &mut data).map_err(|_| OpcError::BadType)?;
+        let mut elements = Vec::with_capacity(n);
+        let mut result = Ok(());
+        for i in 0..n {
+            let e = match elem {
+                VarType::VARIANT => from_variant(&*data.cast::<VARIANT>().add(i)),
+                VarType::I1 => Ok(Value::I1(*data.cast::<i8>().add(i))),
+                VarType::UI1 => Ok(Value::UI1(*data.cast::<u8>().add(i))),
+                VarType::I2 => Ok(Value::I2(*data.cast::<i16>().add(i))),
+                VarType::UI2 => Ok(Value::UI2(*data.cast::<u16>().add(i))),
+                VarType::I4 => Ok(Value::I4(*data.cast::<i32>().add(i))),
+                VarType::UI4 => Ok(Value::UI4(*data.cast::<u32>().add(i))),
+                VarType::I8 => Ok(Value::I8(*data.cast::<i64>().add(i))),
+                VarType::UI8 => Ok(Value::UI8(*data.cast::<u64>().add(i))),
+                VarType::R4 => Ok(Value::R4(*data.cast::<f32>().add(i))),
+                VarType::R8 => Ok(Value::R8(*data.cast::<f64>().add(i))),
+                VarType::CY => Ok(Value::Cy(*data.cast::<i64>().add(i))),
+                VarType::DATE => Ok(Value::Date(*data.cast::<f64>().add(i))),
+                VarType::ERROR => Ok(Value::Error(*data.cast::<i32>().add(i))),
+                VarType::BOOL => Ok(Value::Bool((*data.cast::<VARIANT_BOOL>().add(i)).0 != 0)),
+                VarType::BSTR => Ok(Value::Bstr((*data.cast::<BSTR>().add(i)).to_string())),
+                _ => Err(OpcError::BadType),
+            };
+            match e {
+                Ok(e) => elements.push(e),
+                Err(e) => {
+                    result = Err(e);
+                    break;
+                }
+            }
+        }
+        let _ = SafeArrayUnaccessData(psa);
+        result?;
+        Ok(Value::Array(ArrayValue { element_type: elem, elements }))
+    }
+}
+
+/// The VARTYPE of a VARIANT.
+pub fn var_type(v: &VARIANT) -> VarType {
+    VarType(vt_of(v))
+}
