@@ -4,6 +4,7 @@
 //! The COM layer (`ctopc-com`) only translates between COM and this crate.
 #![forbid(unsafe_code)]
 
+pub mod asix;
 pub mod browse;
 pub mod convert;
 pub mod error;

@@ -1,0 +1,977 @@
+//! `ASIXConnect.ini`: package options, channels and the external server lists.
+//!
+//! Layout (documented for users in `asixconnect.ini.example` at the repository root):
+//!
+//! ```ini
+//! [Server]                        ; package options (Opcje pakietu) + asix network client
+//! AttributesAsItems = nie
+//! [Channel:*]                     ; the basic channel; always exists, even without a section
+//! ItemsDatabase = C:\asix\Aplikacje\Wytwornia_Kwasu\wytwornia_kwasu.zez
+//! [Channel:Demo_Wytwornia_Kwasu]  ; a named channel (name case-sensitive, as in asix)
+//! CheckLimits = tak
+//! [AsixCTServers]                 ; external server lists: resource = srv1, srv2
+//! Demo_Wytwornia_Kwasu = STACJA1, STACJA2
+//! [AsixHTServers]
+//! [AsixALServers]
+//! ```
+//!
+//! Rules: option names are ASCII case-insensitive; an empty value means "not set" (the
+//! default applies); booleans are `tak/true/1` and `nie/false/0`; an unknown option or
+//! section is ignored with a [`Warning`]; an invalid value is a [`ConfigError`] naming file,
+//! line and option. Each channel section is complete in itself: an option a named channel
+//! does not set takes the documented default, not the value of `*` (as in the original,
+//! where every channel stored its whole option set).
+//!
+//! Channel resolution for an OPC access path ([`AsixConfig::resolve_channel`]): `*`, empty
+//! and names starting with `ANY` use channel `*`; names starting with `NEW` get the
+//! defaults and no stored options; the prefixes are case-sensitive (a channel called
+//! `Newton` is an ordinary name). Any other name must have a `[Channel:<name>]` section,
+//! else `OPC_E_UNKNOWNPATH`. Sections for `ANY...`/`NEW...` names are rejected.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use super::ini::{parse_ini, IniEntry, IniSection};
+use super::text::{parse_bool, Warning};
+use crate::{OpcError, OpcResult};
+
+/// The name of the basic channel.
+pub const BASIC_CHANNEL: &str = "*";
+
+/// Options of the `[Server]` section, in file spelling.
+pub const SERVER_OPTIONS: &[&str] = &[
+    "LogDirectory",
+    "AttributesAsItems",
+    "MinUpdateRate",
+    "DefaultLanguage",
+    "SimulateCurrentData",
+    "ClientName",
+    "BroadcastAddress",
+    "DiscoveryPort",
+    "DataPort",
+    "ReconnectInterval",
+];
+
+/// Options of a `[Channel:<name>]` section, in file spelling.
+pub const CHANNEL_OPTIONS: &[&str] = &[
+    "AsixServerName",
+    "StopAfterFirstServerFound",
+    "FindServerTimeout",
+    "NetTimeout",
+    "ItemsDatabase",
+    "AliasAttributeName",
+    "CheckControlVariables",
+    "CheckLimits",
+    "AggregateMode",
+    "QualityGoodThreshold",
+    "AlarmsSystemNetworkName",
+    "ReportsDirectory",
+    "IniFilePath",
+];
+
+/// The language the server uses when a client sets none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DefaultLanguage {
+    /// Polish (LCID 0x0415).
+    Polish,
+    /// English US (LCID 0x0409).
+    English,
+    /// Polish on Polish Windows, else English (the original's behaviour).
+    #[default]
+    System,
+}
+
+impl DefaultLanguage {
+    /// The configured language, or `None` for [`DefaultLanguage::System`] (the caller
+    /// then asks Windows, see [`Lang::default_for_system`](crate::Lang::default_for_system)).
+    pub const fn fixed(self) -> Option<crate::Lang> {
+        match self {
+            DefaultLanguage::Polish => Some(crate::Lang::Polish),
+            DefaultLanguage::English => Some(crate::Lang::English),
+            DefaultLanguage::System => None,
+        }
+    }
+}
+
+/// Package options (`[Server]`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ServerOptions {
+    /// `LogDirectory` (Katalog plików logu). `None`: `<install folder>\Log`.
+    pub log_directory: Option<String>,
+    /// `AttributesAsItems` (Atrybuty OPC widoczne jako zmienne): browse variables as branches.
+    pub attributes_as_items: bool,
+    /// `MinUpdateRate`, ms (default 1000): shorter group rates are raised to it.
+    pub min_update_rate_ms: u32,
+    /// `DefaultLanguage`: `pl`, `en` or `system`.
+    pub default_language: DefaultLanguage,
+    /// `SimulateCurrentData` (Symulacja danych): simulated values, server state TEST.
+    pub simulate_current_data: bool,
+    /// `ClientName`: this computer's name in asix (`[ASLINK] Nazwa`); `None`: computer name + `.`.
+    pub client_name: Option<String>,
+    /// `BroadcastAddress` for server discovery; `None`: the network client's default.
+    pub broadcast_address: Option<String>,
+    /// `DiscoveryPort` (UDP); `None`: the network client's default.
+    pub discovery_port: Option<u16>,
+    /// `DataPort` (TCP); `None`: the network client's default.
+    pub data_port: Option<u16>,
+    /// `ReconnectInterval`, ms (default 5000): retry period of failed asix subscriptions.
+    pub reconnect_interval_ms: u32,
+}
+
+impl Default for ServerOptions {
+    fn default() -> Self {
+        ServerOptions {
+            log_directory: None,
+            attributes_as_items: false,
+            min_update_rate_ms: 1000,
+            default_language: DefaultLanguage::System,
+            simulate_current_data: false,
+            client_name: None,
+            broadcast_address: None,
+            discovery_port: None,
+            data_port: None,
+            reconnect_interval_ms: 5000,
+        }
+    }
+}
+
+/// Archive aggregate algorithm (`AggregateMode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AggregateMode {
+    /// 0: the Askom algorithm.
+    #[default]
+    Askom,
+    /// 1: the OPC algorithm.
+    Opc,
+}
+
+/// The options of one channel (manual §3.6).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelOptions {
+    /// `AsixServerName`: empty, `*`, `LOCAL`, one name or a comma-separated list.
+    pub asix_server_name: String,
+    /// `StopAfterFirstServerFound` (default tak).
+    pub stop_after_first_server_found: bool,
+    /// `FindServerTimeout`, ms (default 3000).
+    pub find_server_timeout_ms: u32,
+    /// `NetTimeout`, ms (default 3000).
+    pub net_timeout_ms: u32,
+    /// `ItemsDatabase`: the variable-set file (`.zez`) or an attribute table (`.csv`).
+    pub items_database: Option<String>,
+    /// `AliasAttributeName`: the attribute holding alternative names.
+    pub alias_attribute_name: Option<String>,
+    /// `CheckControlVariables` (default nie).
+    pub check_control_variables: bool,
+    /// `CheckLimits` (default nie).
+    pub check_limits: bool,
+    /// `AggregateMode` (default 0).
+    pub aggregate_mode: AggregateMode,
+    /// `QualityGoodThreshold`, percent 0..=100 (default 80).
+    pub quality_good_threshold: u8,
+    /// `AlarmsSystemNetworkName`.
+    pub alarms_system_network_name: Option<String>,
+    /// `ReportsDirectory`.
+    pub reports_directory: Option<String>,
+    /// `IniFilePath`: the asix application's ini file.
+    pub ini_file_path: Option<String>,
+}
+
+impl Default for ChannelOptions {
+    fn default() -> Self {
+        ChannelOptions {
+            asix_server_name: String::new(),
+            stop_after_first_server_found: true,
+            find_server_timeout_ms: 3000,
+            net_timeout_ms: 3000,
+            items_database: None,
+            alias_attribute_name: None,
+            check_control_variables: false,
+            check_limits: false,
+            aggregate_mode: AggregateMode::Askom,
+            quality_good_threshold: 80,
+            alarms_system_network_name: None,
+            reports_directory: None,
+            ini_file_path: None,
+        }
+    }
+}
+
+/// Which asix servers a resource may be served by (manual §3.6.1.2).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ServerSelection {
+    /// Any server offering the resource (variant 1).
+    Any,
+    /// Only the local asix server (variant 4, `LOCAL`).
+    Local,
+    /// One of these servers (variants 2 and 3).
+    Named(Vec<String>),
+}
+
+impl ServerSelection {
+    /// Parses an `AsixServerName` value or a server-list value.
+    pub fn parse(text: &str) -> ServerSelection {
+        let t = text.trim();
+        if t.is_empty() || t == "*" {
+            return ServerSelection::Any;
+        }
+        if t.eq_ignore_ascii_case("LOCAL") {
+            return ServerSelection::Local;
+        }
+        let names: Vec<String> = t
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(str::to_owned)
+            .collect();
+        if names.is_empty() {
+            ServerSelection::Any
+        } else {
+            ServerSelection::Named(names)
+        }
+    }
+}
+
+/// A channel an access path resolved to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ResolvedChannel<'a> {
+    /// `*` for the basic channel (also for empty and `ANY...` paths), else the name.
+    pub name: &'a str,
+    pub options: &'a ChannelOptions,
+    /// False for `NEW...` channels (defaults, nothing stored).
+    pub stored: bool,
+}
+
+/// The whole configuration file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AsixConfig {
+    /// The file name used in messages.
+    pub file: String,
+    /// Directory relative paths in options are resolved against (the ini's folder).
+    pub base_dir: Option<PathBuf>,
+    pub server: ServerOptions,
+    /// Channels by name; `*` is always present.
+    pub channels: BTreeMap<String, ChannelOptions>,
+    /// `[AsixCTServers]`: current-data servers by channel.
+    pub ct_servers: BTreeMap<String, Vec<String>>,
+    /// `[AsixHTServers]`: archive servers by archive.
+    pub ht_servers: BTreeMap<String, Vec<String>>,
+    /// `[AsixALServers]`: alarm servers by alarm-server network name.
+    pub al_servers: BTreeMap<String, Vec<String>>,
+}
+
+/// The options every `NEW...` channel gets.
+static NEW_CHANNEL_DEFAULTS: std::sync::OnceLock<ChannelOptions> = std::sync::OnceLock::new();
+
+impl Default for AsixConfig {
+    fn default() -> Self {
+        let mut channels = BTreeMap::new();
+        channels.insert(BASIC_CHANNEL.to_owned(), ChannelOptions::default());
+        AsixConfig {
+            file: "ASIXConnect.ini".to_owned(),
+            base_dir: None,
+            server: ServerOptions::default(),
+            channels,
+            ct_servers: BTreeMap::new(),
+            ht_servers: BTreeMap::new(),
+            al_servers: BTreeMap::new(),
+        }
+    }
+}
+
+impl AsixConfig {
+    /// The basic channel's options.
+    pub fn basic(&self) -> &ChannelOptions {
+        // `*` is inserted by every constructor; fall back to defaults if a caller removed it.
+        self.channels
+            .get(BASIC_CHANNEL)
+            .unwrap_or_else(|| NEW_CHANNEL_DEFAULTS.get_or_init(ChannelOptions::default))
+    }
+
+    /// Resolves an OPC access path to a channel (rules in the module documentation).
+    pub fn resolve_channel<'a>(&'a self, access_path: &'a str) -> OpcResult<ResolvedChannel<'a>> {
+        if access_path.is_empty() || access_path == BASIC_CHANNEL || access_path.starts_with("ANY")
+        {
+            return Ok(ResolvedChannel {
+                name: BASIC_CHANNEL,
+                options: self.basic(),
+                stored: true,
+            });
+        }
+        if access_path.starts_with("NEW") {
+            let options = NEW_CHANNEL_DEFAULTS.get_or_init(ChannelOptions::default);
+            return Ok(ResolvedChannel {
+                name: access_path,
+                options,
+                stored: false,
+            });
+        }
+        match self.channels.get_key_value(access_path) {
+            Some((name, options)) => Ok(ResolvedChannel {
+                name,
+                options,
+                stored: true,
+            }),
+            None => Err(OpcError::UnknownPath),
+        }
+    }
+
+    /// The servers the current data of `channel` may come from: its `AsixServerName`, else
+    /// its `[AsixCTServers]` entry, else any server.
+    pub fn current_data_servers(&self, channel: &str) -> ServerSelection {
+        let own = self
+            .resolve_channel(channel)
+            .map(|c| c.options.asix_server_name.as_str())
+            .unwrap_or("");
+        match ServerSelection::parse(own) {
+            ServerSelection::Any => match self.ct_servers.get(channel) {
+                Some(list) if !list.is_empty() => ServerSelection::Named(list.clone()),
+                _ => ServerSelection::Any,
+            },
+            other => other,
+        }
+    }
+
+    /// Resolves a path option: absolute paths (`C:\...`, `\\server\...`, `/...`) are kept,
+    /// relative ones are taken from [`base_dir`](Self::base_dir). On hosts whose separator
+    /// is `/`, backslashes are turned into slashes.
+    pub fn resolve_path(&self, path: &str) -> PathBuf {
+        let native = if std::path::MAIN_SEPARATOR == '/' {
+            path.replace('\\', "/")
+        } else {
+            path.to_owned()
+        };
+        let b = path.as_bytes();
+        let windows_absolute = (b.len() >= 2 && b[0].is_ascii_alphabetic() && b[1] == b':')
+            || path.starts_with("\\\\")
+            || path.starts_with('\\');
+        if windows_absolute || Path::new(&native).is_absolute() {
+            return PathBuf::from(native);
+        }
+        match &self.base_dir {
+            Some(dir) => dir.join(native),
+            None => PathBuf::from(native),
+        }
+    }
+}
+
+/// Why the configuration could not be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConfigErrorKind {
+    /// The file does not exist.
+    NotFound,
+    /// The file exists but could not be read.
+    Unreadable,
+    /// Bad syntax or an invalid option value.
+    Invalid,
+}
+
+/// A configuration error naming the file, the line (0: the whole file) and the option.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigError {
+    pub kind: ConfigErrorKind,
+    pub file: String,
+    pub line: usize,
+    pub option: Option<String>,
+    pub message: String,
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if self.line > 0 {
+            write!(f, ":{}", self.line)?;
+        }
+        if let Some(o) = &self.option {
+            write!(f, ": option {o}")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+fn invalid(file: &str, e: &IniEntry, expected: &str) -> ConfigError {
+    ConfigError {
+        kind: ConfigErrorKind::Invalid,
+        file: file.to_owned(),
+        line: e.line,
+        option: Some(e.key.clone()),
+        message: format!("invalid value `{}`: expected {expected}", e.value),
+    }
+}
+
+fn set_bool(target: &mut bool, file: &str, e: &IniEntry) -> Result<(), ConfigError> {
+    if e.value.trim().is_empty() {
+        return Ok(());
+    }
+    *target = parse_bool(&e.value).ok_or_else(|| invalid(file, e, "tak/true/1 or nie/false/0"))?;
+    Ok(())
+}
+
+fn number(file: &str, e: &IniEntry, min: u32, max: u32) -> Result<Option<u32>, ConfigError> {
+    let t = e.value.trim();
+    if t.is_empty() {
+        return Ok(None);
+    }
+    match t.parse::<u32>() {
+        Ok(v) if (min..=max).contains(&v) => Ok(Some(v)),
+        _ => Err(invalid(
+            file,
+            e,
+            &format!("a whole number from {min} to {max}"),
+        )),
+    }
+}
+
+fn set_number(
+    target: &mut u32,
+    file: &str,
+    e: &IniEntry,
+    min: u32,
+    max: u32,
+) -> Result<(), ConfigError> {
+    if let Some(v) = number(file, e, min, max)? {
+        *target = v;
+    }
+    Ok(())
+}
+
+fn text(e: &IniEntry) -> Option<String> {
+    let t = e.value.trim();
+    (!t.is_empty()).then(|| t.to_owned())
+}
+
+/// Applies one `[Server]` option; `Ok(false)` for an unknown option.
+fn apply_server_option(
+    o: &mut ServerOptions,
+    file: &str,
+    e: &IniEntry,
+) -> Result<bool, ConfigError> {
+    match e.key.to_ascii_lowercase().as_str() {
+        "logdirectory" => o.log_directory = text(e),
+        "attributesasitems" => set_bool(&mut o.attributes_as_items, file, e)?,
+        "minupdaterate" => set_number(&mut o.min_update_rate_ms, file, e, 1, u32::MAX)?,
+        "defaultlanguage" => {
+            let t = e.value.trim().to_ascii_lowercase();
+            o.default_language = match t.as_str() {
+                "" | "system" | "auto" => DefaultLanguage::System,
+                "pl" | "polski" | "polish" | "1045" | "0x0415" => DefaultLanguage::Polish,
+                "en" | "angielski" | "english" | "1033" | "0x0409" => DefaultLanguage::English,
+                _ => return Err(invalid(file, e, "pl, en or system")),
+            }
+        }
+        "simulatecurrentdata" => set_bool(&mut o.simulate_current_data, file, e)?,
+        "clientname" => o.client_name = text(e),
+        "broadcastaddress" => o.broadcast_address = text(e),
+        "discoveryport" => o.discovery_port = number(file, e, 1, 65535)?.map(|v| v as u16),
+        "dataport" => o.data_port = number(file, e, 1, 65535)?.map(|v| v as u16),
+        "reconnectinterval" => set_number(&mut o.reconnect_interval_ms, file, e, 1, u32::MAX)?,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+/// Applies one channel option; `Ok(false)` for an unknown option.
+fn apply_channel_option(
+    o: &mut ChannelOptions,
+    file: &str,
+    e: &IniEntry,
+) -> Result<bool, ConfigError> {
+    match e.key.to_ascii_lowercase().as_str() {
+        "asixservername" => o.asix_server_name = e.value.trim().to_owned(),
+        "stopafterfirstserverfound" => set_bool(&mut o.stop_after_first_server_found, file, e)?,
+        "findservertimeout" => set_number(&mut o.find_server_timeout_ms, file, e, 0, u32::MAX)?,
+        "nettimeout" => set_number(&mut o.net_timeout_ms, file, e, 0, u32::MAX)?,
+        "itemsdatabase" => o.items_database = text(e),
+        "aliasattributename" => o.alias_attribute_name = text(e),
+        "checkcontrolvariables" => set_bool(&mut o.check_control_variables, file, e)?,
+        "checklimits" => set_bool(&mut o.check_limits, file, e)?,
+        "aggregatemode" => {
+            if let Some(v) =
+                number(file, e, 0, 1).map_err(|_| invalid(file, e, "0 (Askom) or 1 (OPC)"))?
+            {
+                o.aggregate_mode = if v == 0 {
+                    AggregateMode::Askom
+                } else {
+                    AggregateMode::Opc
+                };
+            }
+        }
+        "qualitygoodthreshold" => {
+            if let Some(v) = number(file, e, 0, 100)? {
+                o.quality_good_threshold = v as u8;
+            }
+        }
+        "alarmssystemnetworkname" => o.alarms_system_network_name = text(e),
+        "reportsdirectory" => o.reports_directory = text(e),
+        "inifilepath" => o.ini_file_path = text(e),
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+fn server_list(
+    section: &IniSection,
+    file: &str,
+    warnings: &mut Vec<Warning>,
+) -> BTreeMap<String, Vec<String>> {
+    let mut map = BTreeMap::new();
+    for e in &section.entries {
+        let names: Vec<String> = e
+            .value
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(str::to_owned)
+            .collect();
+        if names.is_empty() {
+            warnings.push(Warning::new(
+                file,
+                e.line,
+                format!("[{}] {}: empty server list ignored", section.name, e.key),
+            ));
+            continue;
+        }
+        map.insert(e.key.clone(), names);
+    }
+    map
+}
+
+/// Parses `ASIXConnect.ini` bytes; `file` names the file in messages. Relative paths are
+/// left unresolved ([`AsixConfig::base_dir`] is `None`).
+pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
+    let (doc, mut warnings) = parse_ini(bytes, file).map_err(|e| ConfigError {
+        kind: ConfigErrorKind::Invalid,
+        file: file.to_owned(),
+        line: e.line,
+        option: None,
+        message: e.message,
+    })?;
+    let mut config = AsixConfig {
+        file: file.to_owned(),
+        ..AsixConfig::default()
+    };
+    for section in &doc.sections {
+        let lower = section.name.to_ascii_lowercase();
+        if lower == "server" {
+            for e in &section.entries {
+                if !apply_server_option(&mut config.server, file, e)? {
+                    warnings.push(Warning::new(
+                        file,
+                        e.line,
+                        format!("unknown option `{}` in [Server] ignored", e.key),
+                    ));
+                }
+            }
+        } else if let Some(name) = lower
+            .strip_prefix("channel:")
+            .map(|_| section.name[8..].trim())
+        {
+            let error = |message: String| ConfigError {
+                kind: ConfigErrorKind::Invalid,
+                file: file.to_owned(),
+                line: section.line,
+                option: None,
+                message,
+            };
+            if name.is_empty() {
+                return Err(error(
+                    "[Channel:] needs a channel name (use [Channel:*] for the basic channel)"
+                        .into(),
+                ));
+            }
+            if name.starts_with("ANY") || name.starts_with("NEW") {
+                return Err(error(format!(
+                    "channel name `{name}` is reserved: names starting with ANY use channel *, names starting with NEW get the defaults"
+                )));
+            }
+            let mut options = ChannelOptions::default();
+            for e in &section.entries {
+                if !apply_channel_option(&mut options, file, e)? {
+                    warnings.push(Warning::new(
+                        file,
+                        e.line,
+                        format!("unknown option `{}` in [{}] ignored", e.key, section.name),
+                    ));
+                }
+            }
+            config.channels.insert(name.to_owned(), options);
+        } else if lower == "asixctservers" {
+            config.ct_servers = server_list(section, file, &mut warnings);
+        } else if lower == "asixhtservers" {
+            config.ht_servers = server_list(section, file, &mut warnings);
+        } else if lower == "asixalservers" {
+            config.al_servers = server_list(section, file, &mut warnings);
+        } else {
+            warnings.push(Warning::new(
+                file,
+                section.line,
+                format!("unknown section [{}] ignored", section.name),
+            ));
+        }
+    }
+    Ok((config, warnings))
+}
+
+/// Reads and parses a configuration file; relative paths in it resolve against its folder.
+pub fn load_config_file(path: &Path) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
+    let file = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| ConfigError {
+        kind: if e.kind() == std::io::ErrorKind::NotFound {
+            ConfigErrorKind::NotFound
+        } else {
+            ConfigErrorKind::Unreadable
+        },
+        file: file.clone(),
+        line: 0,
+        option: None,
+        message: e.to_string(),
+    })?;
+    let (mut config, warnings) = parse_config(&bytes, &file)?;
+    config.base_dir = path.parent().map(Path::to_path_buf);
+    Ok((config, warnings))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn parse(text: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
+        parse_config(text.as_bytes(), "ASIXConnect.ini")
+    }
+
+    #[test]
+    fn empty_file_gives_documented_defaults() {
+        let (c, w) = parse("").unwrap();
+        assert!(w.is_empty());
+        let b = c.basic();
+        assert_eq!(b.asix_server_name, "");
+        assert!(b.stop_after_first_server_found);
+        assert_eq!(b.find_server_timeout_ms, 3000);
+        assert_eq!(b.net_timeout_ms, 3000);
+        assert_eq!(b.items_database, None);
+        assert_eq!(b.alias_attribute_name, None);
+        assert!(!b.check_control_variables);
+        assert!(!b.check_limits);
+        assert_eq!(b.aggregate_mode, AggregateMode::Askom);
+        assert_eq!(b.quality_good_threshold, 80);
+        assert_eq!(b.alarms_system_network_name, None);
+        assert_eq!(b.reports_directory, None);
+        assert_eq!(b.ini_file_path, None);
+        assert_eq!(c.server, ServerOptions::default());
+        assert_eq!(c.server.min_update_rate_ms, 1000);
+        assert!(!c.server.attributes_as_items);
+        assert_eq!(c.channels.len(), 1);
+    }
+
+    /// One row per (channel option, value) -> expected effect.
+    #[test]
+    fn channel_option_values() {
+        type Check = fn(&ChannelOptions) -> bool;
+        let rows: &[(&str, &str, Check)] = &[
+            ("AsixServerName", "STACJA1, STACJA2", |o| {
+                o.asix_server_name == "STACJA1, STACJA2"
+            }),
+            ("asixservername", "LOCAL", |o| o.asix_server_name == "LOCAL"),
+            ("StopAfterFirstServerFound", "nie", |o| {
+                !o.stop_after_first_server_found
+            }),
+            ("StopAfterFirstServerFound", "NIE", |o| {
+                !o.stop_after_first_server_found
+            }),
+            ("StopAfterFirstServerFound", "false", |o| {
+                !o.stop_after_first_server_found
+            }),
+            ("StopAfterFirstServerFound", "0", |o| {
+                !o.stop_after_first_server_found
+            }),
+            ("StopAfterFirstServerFound", "", |o| {
+                o.stop_after_first_server_found
+            }),
+            ("FindServerTimeout", "5000", |o| {
+                o.find_server_timeout_ms == 5000
+            }),
+            ("FINDSERVERTIMEOUT", "0", |o| o.find_server_timeout_ms == 0),
+            ("NetTimeout", "10000", |o| o.net_timeout_ms == 10000),
+            ("ItemsDatabase", "C:\\asix\\baza.zez", |o| {
+                o.items_database.as_deref() == Some("C:\\asix\\baza.zez")
+            }),
+            ("ItemsDatabase", "", |o| o.items_database.is_none()),
+            ("AliasAttributeName", "Alias", |o| {
+                o.alias_attribute_name.as_deref() == Some("Alias")
+            }),
+            ("CheckControlVariables", "tak", |o| {
+                o.check_control_variables
+            }),
+            ("CheckControlVariables", "Tak", |o| {
+                o.check_control_variables
+            }),
+            ("CheckLimits", "true", |o| o.check_limits),
+            ("CheckLimits", "1", |o| o.check_limits),
+            ("AggregateMode", "1", |o| {
+                o.aggregate_mode == AggregateMode::Opc
+            }),
+            ("AggregateMode", "0", |o| {
+                o.aggregate_mode == AggregateMode::Askom
+            }),
+            ("QualityGoodThreshold", "100", |o| {
+                o.quality_good_threshold == 100
+            }),
+            ("QualityGoodThreshold", "0", |o| {
+                o.quality_good_threshold == 0
+            }),
+            ("AlarmsSystemNetworkName", "ALARMY", |o| {
+                o.alarms_system_network_name.as_deref() == Some("ALARMY")
+            }),
+            ("ReportsDirectory", "C:\\asix\\Raporty", |o| {
+                o.reports_directory.as_deref() == Some("C:\\asix\\Raporty")
+            }),
+            ("IniFilePath", "C:\\asix\\kwas.ini", |o| {
+                o.ini_file_path.as_deref() == Some("C:\\asix\\kwas.ini")
+            }),
+        ];
+        for (key, value, check) in rows {
+            let (c, w) = parse(&format!("[Channel:Kanal]\n{key} = {value}\n")).unwrap();
+            assert!(w.is_empty(), "{key}={value}: {w:?}");
+            assert!(check(&c.channels["Kanal"]), "{key} = {value}");
+            let (c, _) = parse(&format!("[Channel:*]\n{key} = {value}\n")).unwrap();
+            assert!(check(c.basic()), "* {key} = {value}");
+        }
+    }
+
+    #[test]
+    fn invalid_channel_values_name_file_line_and_option() {
+        let rows = [
+            ("StopAfterFirstServerFound", "yes"),
+            ("CheckLimits", "2"),
+            ("CheckControlVariables", "tak!"),
+            ("FindServerTimeout", "-1"),
+            ("FindServerTimeout", "3s"),
+            ("NetTimeout", "99999999999"),
+            ("AggregateMode", "2"),
+            ("QualityGoodThreshold", "101"),
+        ];
+        for (key, value) in rows {
+            let err = parse(&format!("; c\n[Channel:*]\n{key} = {value}\n")).unwrap_err();
+            assert_eq!(err.kind, ConfigErrorKind::Invalid);
+            assert_eq!(
+                (err.line, err.option.as_deref()),
+                (3, Some(key)),
+                "{key}={value}"
+            );
+            let msg = err.to_string();
+            assert!(
+                msg.starts_with(&format!(
+                    "ASIXConnect.ini:3: option {key}: invalid value `{value}`"
+                )),
+                "{msg}"
+            );
+        }
+    }
+
+    #[test]
+    fn server_option_values() {
+        type Check = fn(&ServerOptions) -> bool;
+        let rows: &[(&str, &str, Check)] = &[
+            ("LogDirectory", "D:\\logi", |o| {
+                o.log_directory.as_deref() == Some("D:\\logi")
+            }),
+            ("AttributesAsItems", "tak", |o| o.attributes_as_items),
+            ("MinUpdateRate", "500", |o| o.min_update_rate_ms == 500),
+            ("DefaultLanguage", "pl", |o| {
+                o.default_language == DefaultLanguage::Polish
+            }),
+            ("DefaultLanguage", "EN", |o| {
+                o.default_language == DefaultLanguage::English
+            }),
+            ("DefaultLanguage", "0x0409", |o| {
+                o.default_language == DefaultLanguage::English
+            }),
+            ("DefaultLanguage", "system", |o| {
+                o.default_language == DefaultLanguage::System
+            }),
+            ("SimulateCurrentData", "tak", |o| o.simulate_current_data),
+            ("ClientName", "CLI.", |o| {
+                o.client_name.as_deref() == Some("CLI.")
+            }),
+            ("BroadcastAddress", "192.168.1.255", |o| {
+                o.broadcast_address.as_deref() == Some("192.168.1.255")
+            }),
+            ("DiscoveryPort", "4711", |o| o.discovery_port == Some(4711)),
+            ("DataPort", "4712", |o| o.data_port == Some(4712)),
+            ("ReconnectInterval", "10000", |o| {
+                o.reconnect_interval_ms == 10000
+            }),
+        ];
+        for (key, value, check) in rows {
+            let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();
+            assert!(w.is_empty(), "{w:?}");
+            assert!(check(&c.server), "{key} = {value}");
+        }
+        assert_eq!(DefaultLanguage::Polish.fixed(), Some(crate::Lang::Polish));
+        assert_eq!(DefaultLanguage::English.fixed(), Some(crate::Lang::English));
+        assert_eq!(DefaultLanguage::System.fixed(), None);
+        for (key, value) in [
+            ("AttributesAsItems", "ja"),
+            ("MinUpdateRate", "0"),
+            ("DefaultLanguage", "de"),
+            ("DiscoveryPort", "70000"),
+            ("DataPort", "0"),
+        ] {
+            let err = parse(&format!("[Server]\n{key}={value}\n")).unwrap_err();
+            assert_eq!((err.line, err.option.as_deref()), (2, Some(key)));
+        }
+    }
+
+    #[test]
+    fn unknown_options_and_sections_are_warnings() {
+        let (c, w) =
+            parse("[Server]\nColour = blue\n[Channel:*]\nCheckLimits=tak\nFoo=1\n[Misc]\nx=1\n")
+                .unwrap();
+        assert!(c.basic().check_limits);
+        let got: Vec<(usize, bool)> = w
+            .iter()
+            .map(|w| (w.line, w.message.contains("ignored")))
+            .collect();
+        assert_eq!(got, vec![(2, true), (5, true), (6, true)]);
+        assert!(w[0].message.contains("Colour"));
+    }
+
+    #[test]
+    #[allow(clippy::type_complexity)]
+    fn channel_resolution() {
+        let (c, _) = parse("[Channel:*]\nCheckLimits=tak\n[Channel:Demo_Wytwornia_Kwasu]\nNetTimeout=1\n[Channel:Newton]\n").unwrap();
+        let rows: &[(&str, Result<(&str, bool), OpcError>)] = &[
+            ("*", Ok(("*", true))),
+            ("", Ok(("*", true))),
+            ("ANY", Ok(("*", true))),
+            ("ANY_channel", Ok(("*", true))),
+            ("Demo_Wytwornia_Kwasu", Ok(("Demo_Wytwornia_Kwasu", true))),
+            ("Newton", Ok(("Newton", true))),
+            ("NEW", Ok(("NEW", false))),
+            ("NEW1", Ok(("NEW1", false))),
+            ("demo_wytwornia_kwasu", Err(OpcError::UnknownPath)),
+            ("any", Err(OpcError::UnknownPath)),
+            ("Camac", Err(OpcError::UnknownPath)),
+        ];
+        for (path, expected) in rows {
+            let got = c.resolve_channel(path).map(|r| (r.name, r.stored));
+            assert_eq!(&got, expected, "access path `{path}`");
+        }
+        assert!(c.resolve_channel("ANY").unwrap().options.check_limits);
+        // NEW channels and named channels do not inherit from `*`.
+        assert!(!c.resolve_channel("NEW").unwrap().options.check_limits);
+        assert!(!c.resolve_channel("Newton").unwrap().options.check_limits);
+        assert_eq!(
+            c.resolve_channel("Demo_Wytwornia_Kwasu")
+                .unwrap()
+                .options
+                .net_timeout_ms,
+            1
+        );
+    }
+
+    #[test]
+    fn reserved_and_empty_channel_sections_are_errors() {
+        for (text, line) in [
+            ("[Channel:ANY1]\n", 1),
+            ("x\n[Channel:NEWx]\n", 2),
+            ("[Channel: ]\n", 1),
+        ] {
+            let err = parse(text).unwrap_err();
+            assert_eq!(err.line, line, "{text}");
+        }
+    }
+
+    #[test]
+    fn external_server_lists_and_server_selection() {
+        let text = "\
+[Channel:*]
+[Channel:Named]
+AsixServerName = LOCAL
+[Channel:Listed]
+[AsixCTServers]
+Listed = STACJA1 , STACJA2
+Empty =
+[AsixHTServers]
+KWAS_ARCH = ARCH1
+[AsixALServers]
+ALARMY = AL1, AL2
+";
+        let (c, w) = parse(text).unwrap();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].line, 7);
+        assert_eq!(c.ct_servers["Listed"], vec!["STACJA1", "STACJA2"]);
+        assert_eq!(c.ht_servers["KWAS_ARCH"], vec!["ARCH1"]);
+        assert_eq!(c.al_servers["ALARMY"], vec!["AL1", "AL2"]);
+        assert_eq!(c.current_data_servers("*"), ServerSelection::Any);
+        assert_eq!(c.current_data_servers("Named"), ServerSelection::Local);
+        assert_eq!(
+            c.current_data_servers("Listed"),
+            ServerSelection::Named(vec!["STACJA1".into(), "STACJA2".into()])
+        );
+        let rows = [
+            ("", ServerSelection::Any),
+            ("*", ServerSelection::Any),
+            (" local ", ServerSelection::Local),
+            ("S1", ServerSelection::Named(vec!["S1".into()])),
+            (
+                "S1,,S2 ",
+                ServerSelection::Named(vec!["S1".into(), "S2".into()]),
+            ),
+        ];
+        for (t, s) in rows {
+            assert_eq!(ServerSelection::parse(t), s, "{t}");
+        }
+    }
+
+    #[test]
+    fn windows_1250_file_and_relative_paths() {
+        let mut bytes = b"[Channel:Wytw\xF3rnia]\nItemsDatabase = demo\\baza.zez\n".to_vec();
+        bytes.extend_from_slice(b"ReportsDirectory = C:\\Raporty\n");
+        let (mut c, _) = parse_config(&bytes, "x.ini").unwrap();
+        let ch = &c.channels["Wytwórnia"];
+        let db = ch.items_database.clone().unwrap();
+        let reports = ch.reports_directory.clone().unwrap();
+        c.base_dir = Some(PathBuf::from("/opt/asix"));
+        if std::path::MAIN_SEPARATOR == '/' {
+            assert_eq!(
+                c.resolve_path(&db),
+                PathBuf::from("/opt/asix/demo/baza.zez")
+            );
+            assert_eq!(c.resolve_path(&reports), PathBuf::from("C:/Raporty"));
+            assert_eq!(c.resolve_path("/abs/x.zez"), PathBuf::from("/abs/x.zez"));
+        }
+    }
+
+    #[test]
+    fn missing_file_is_not_found() {
+        let err = load_config_file(Path::new("/nonexistent/ASIXConnect.ini")).unwrap_err();
+        assert_eq!(err.kind, ConfigErrorKind::NotFound);
+    }
+
+    proptest! {
+        #[test]
+        fn never_panics_on_arbitrary_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..512)) {
+            let _ = parse_config(&bytes, "fuzz.ini");
+        }
+
+        #[test]
+        fn never_panics_on_config_like_text(
+            lines in proptest::collection::vec(
+                prop_oneof![
+                    Just("[Server]".to_string()),
+                    Just("[Channel:*]".to_string()),
+                    "\\[Channel:[A-Za-z*]{0,5}\\]",
+                    Just("[AsixCTServers]".to_string()),
+                    "(CheckLimits|NetTimeout|DefaultLanguage|DiscoveryPort|AggregateMode|Foo) ?= ?[a-z0-9,]{0,6}",
+                ],
+                0..20,
+            )
+        ) {
+            let _ = parse_config(lines.join("\n").as_bytes(), "fuzz.ini");
+        }
+    }
+}

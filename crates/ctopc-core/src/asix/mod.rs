@@ -1,0 +1,35 @@
+//! asix semantics: `ASIXConnect.ini` channels and options, the variable database
+//! (attribute table + variable-set tree), item identifiers, derived values, quality
+//! rules and the [`Namespace`](crate::namespace::Namespace) implementation.
+//!
+//! Everything here is pure; the only file access is in the thin `load_*` wrappers
+//! ([`load_config_file`], [`load_database_file`], [`AsixNamespace::load`]) around the
+//! `parse_*` functions that hold the logic.
+//!
+//! User documentation: `asixconnect.ini.example` (configuration) and
+//! `docs/variable-database.md` (database format) at the repository root.
+
+pub mod config;
+pub mod format;
+pub mod ini;
+pub mod itemid;
+pub mod namespace;
+pub mod quality_rules;
+pub mod text;
+pub mod vardb;
+
+#[cfg(test)]
+mod demo_tests;
+
+pub use config::{
+    load_config_file, parse_config, AsixConfig, ChannelOptions, ConfigError, ConfigErrorKind,
+    DefaultLanguage, ServerOptions, ServerSelection, BASIC_CHANNEL,
+};
+pub use format::FormatSpec;
+pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarItem};
+pub use namespace::{
+    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LiveItem,
+};
+pub use quality_rules::{apply_quality_rules, check_write_value, RuleOptions};
+pub use text::Warning;
+pub use vardb::{load_database_file, DbError, Limit, VarDatabase, Variable};

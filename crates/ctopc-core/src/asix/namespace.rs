@@ -1,0 +1,551 @@
+//! [`AsixNamespace`]: the asix item model behind [`Namespace`]: configuration, the
+//! channels' variable databases, item-ID resolution, the browse tree and item attributes.
+//!
+//! Resolution of `(item ID, access path)`:
+//! 1. the access path selects the channel ([`AsixConfig::resolve_channel`]; unknown ->
+//!    `OPC_E_UNKNOWNPATH`); database IDs use that channel's database (`ANY...`, `*` and
+//!    empty use channel `*`'s; `NEW...` channels have none, so only descriptive IDs work);
+//! 2. the ID is parsed ([`parse_item_id`]) with the longest-prefix rule over the visible
+//!    (alias) names;
+//! 3. the item is built:
+//!
+//! | ID | type | rights | value | EU |
+//! |---|---|---|---|---|
+//! | `<V>`, `<V>.CV` | `DataType` (default R4) | R, +W unless `Writable=nie` | live | Analog [RangeFrom, RangeTo] if set |
+//! | `<V>.DATA_TYPE` | I2 | R | constant: the VARTYPE code | - |
+//! | `<V>.EU_UNIT`, `.DESC` | BSTR | R | constant `Unit`, `Description` | - |
+//! | `<V>.HI_EU`, `.LO_EU` | R8 | R | constant `RangeTo`, `RangeFrom`; no range -> unknown item | - |
+//! | `<V>.<A>` | R8 if the cell is a number, else BSTR | R | constant cell | - |
+//! | `<V>.FormatedCV` | BSTR | R | live, derived | - |
+//! | `<V>.PercentageCV` | R8 | R | live, derived; no range -> unknown item | Analog [0, 100] |
+//! | `<V>.BarCVs` | R8 array | R | live, derived; no range -> unknown item | - |
+//! | `<V>.<A>.CV[.S]`, cell a number n | R8 / BSTR / R8 / R8 array | R | constant: n, formatted by V's `Format`, percent or bars of V's range | - |
+//! | `<V>.<A>.CV[.S]`, cell a variable name W | as `W[.S]` | as `W[.S]` | as `W[.S]` | as `W[.S]` |
+//! | `asmen.<ch>.<var>.<T>` | T | R+W | live | - |
+//!
+//! An attribute that is not a column, an empty cell under `.CV`, or a cell naming no
+//! variable is `OPC_E_UNKNOWNITEMID`; `.CV.<A2>` on a numeric cell too. Indirect targets
+//! are looked up by their asix name (attribute cells hold asix names), hidden (alias-less)
+//! variables included.
+//!
+//! `ItemDef::source_key` is the canonical ID with asix names: `.CV` dropped, aliases and
+//! indirections resolved (`LI101.WarnHigh.CV.PercentageCV` -> `KW_L001.PercentageCV`),
+//! descriptive IDs as `asmen.<ch>.<var>.<T>`. [`AsixNamespace::live_item`] turns a live
+//! source key back into what to subscribe and how to derive the item's value.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::config::{AsixConfig, BASIC_CHANNEL};
+use super::format::{bar_values, format_value, percentage, value_as_f64, FormatSpec};
+use super::itemid::{parse_item_id, ItemId, Suffix, VarItem};
+use super::text::{parse_number, Warning};
+use super::vardb::{load_database_file, DbError, GroupNode, VarDatabase, Variable};
+use crate::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
+use crate::value::ArrayValue;
+use crate::{OpcError, OpcResult, Value, VarType};
+
+/// The database state of one channel.
+#[derive(Debug, Clone)]
+pub enum ChannelDatabase {
+    /// The channel has no `ItemsDatabase`.
+    NotConfigured,
+    Loaded(Arc<VarDatabase>),
+    /// `ItemsDatabase` is set but could not be loaded.
+    Failed(DbError),
+}
+
+/// Attribute values of an item for its OPC item properties.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ItemAttributes {
+    /// `Description` of the variable behind the item (Polish, the asix original).
+    pub description: Option<String>,
+    /// `DescriptionEn`, when given.
+    pub description_en: Option<String>,
+    /// EU units (value items: `Unit`; `PercentageCV`: `%`).
+    pub eu_units: Option<String>,
+    /// EU type with high/low EU (value items with a range; `PercentageCV`: 0..100).
+    pub eu: EuInfo,
+}
+
+/// How a live item's value is computed from its asix variable's value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Derivation {
+    /// The value itself.
+    Value,
+    /// `FormatedCV`: formatted by the variable's `Format` (default form when `None`).
+    Formatted(Option<FormatSpec>),
+    /// `PercentageCV`.
+    Percentage { low: f64, high: f64 },
+    /// `BarCVs`.
+    Bars { low: f64, high: f64, base: f64 },
+}
+
+impl Derivation {
+    /// The item value for a variable value; `None` when it cannot be derived (non-numeric
+    /// value): the caller reports BAD (config error) quality.
+    pub fn apply(&self, v: &Value) -> Option<Value> {
+        match self {
+            Derivation::Value => Some(v.clone()),
+            Derivation::Formatted(spec) => format_value(spec.as_ref(), v).map(Value::Bstr),
+            Derivation::Percentage { low, high } => {
+                percentage(value_as_f64(v)?, *low, *high).map(Value::R8)
+            }
+            Derivation::Bars { low, high, base } => {
+                bar_values(value_as_f64(v)?, *low, *high, *base).map(r8_pair)
+            }
+        }
+    }
+}
+
+fn r8_pair(b: [f64; 2]) -> Value {
+    Value::Array(ArrayValue {
+        element_type: VarType::R8,
+        elements: vec![Value::R8(b[0]), Value::R8(b[1])],
+    })
+}
+
+/// What the data source subscribes for a live item.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveItem {
+    /// The asix variable name.
+    pub variable: String,
+    /// Descriptive IDs: the asix (Asmen) channel; `None` for database variables.
+    pub asmen_channel: Option<String>,
+    /// The type of the asix variable's value.
+    pub var_type: VarType,
+    pub derivation: Derivation,
+    /// The database definition (quality rules, control variable); `None` for descriptive IDs.
+    pub definition: Option<Variable>,
+}
+
+/// One node of the browse tree, in pre-order (a branch before its contents).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BrowseNode {
+    /// Names from the root; the last is this node's browse name.
+    pub path: Vec<String>,
+    /// The fully qualified item ID; `None` for groups.
+    pub item_id: Option<String>,
+    pub is_leaf: bool,
+}
+
+/// The asix namespace: configuration plus the channels' databases.
+#[derive(Debug, Clone)]
+pub struct AsixNamespace {
+    config: AsixConfig,
+    databases: BTreeMap<String, ChannelDatabase>,
+}
+
+const DESCRIPTIVE_RIGHTS: u32 = OPC_READABLE | OPC_WRITEABLE;
+
+impl AsixNamespace {
+    /// A namespace with no database loaded (every channel [`ChannelDatabase::NotConfigured`]).
+    pub fn new(config: AsixConfig) -> Self {
+        AsixNamespace {
+            config,
+            databases: BTreeMap::new(),
+        }
+    }
+
+    /// Sets a channel's database state (for callers that load databases themselves).
+    pub fn set_database(&mut self, channel: &str, db: ChannelDatabase) {
+        self.databases.insert(channel.to_owned(), db);
+    }
+
+    /// Loads the database of every channel that names one (channels naming the same file
+    /// with the same alias attribute share it). Failures are kept as
+    /// [`ChannelDatabase::Failed`]; database warnings are returned for logging.
+    pub fn load(config: AsixConfig) -> (Self, Vec<Warning>) {
+        let mut ns = AsixNamespace::new(config);
+        let mut warnings = Vec::new();
+        let mut cache: BTreeMap<(PathBuf, Option<String>), ChannelDatabase> = BTreeMap::new();
+        let wanted: Vec<(String, String, Option<String>)> = ns
+            .config
+            .channels
+            .iter()
+            .filter_map(|(name, o)| {
+                Some((
+                    name.clone(),
+                    o.items_database.clone()?,
+                    o.alias_attribute_name.clone(),
+                ))
+            })
+            .collect();
+        for (channel, file, alias) in wanted {
+            let key = (ns.config.resolve_path(&file), alias);
+            let state = cache
+                .entry(key.clone())
+                .or_insert_with(|| match load_database_file(&key.0, key.1.as_deref()) {
+                    Ok((db, w)) => {
+                        warnings.extend(w);
+                        ChannelDatabase::Loaded(Arc::new(db))
+                    }
+                    Err(e) => ChannelDatabase::Failed(e),
+                })
+                .clone();
+            ns.databases.insert(channel, state);
+        }
+        (ns, warnings)
+    }
+
+    pub fn config(&self) -> &AsixConfig {
+        &self.config
+    }
+
+    /// The database state of a (resolved) channel name.
+    pub fn database_state(&self, channel: &str) -> &ChannelDatabase {
+        const NONE: &ChannelDatabase = &ChannelDatabase::NotConfigured;
+        self.databases.get(channel).unwrap_or(NONE)
+    }
+
+    /// The loaded database of a (resolved) channel name.
+    pub fn database(&self, channel: &str) -> Option<&Arc<VarDatabase>> {
+        match self.database_state(channel) {
+            ChannelDatabase::Loaded(db) => Some(db),
+            _ => None,
+        }
+    }
+
+    /// Why the server runs without configuration (`OPC_STATUS_NOCONFIG`): `None` when
+    /// channel `*` has its database, else the reason for the log.
+    pub fn no_config_reason(&self) -> Option<String> {
+        match self.database_state(BASIC_CHANNEL) {
+            ChannelDatabase::Loaded(_) => None,
+            ChannelDatabase::NotConfigured => {
+                Some("no ItemsDatabase is configured for channel *".to_owned())
+            }
+            ChannelDatabase::Failed(e) => Some(e.to_string()),
+        }
+    }
+
+    /// Resolves an item and its attribute values (see the module documentation).
+    pub fn resolve_with_attributes(
+        &self,
+        item_id: &str,
+        access_path: &str,
+    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+        let channel = self.config.resolve_channel(access_path)?;
+        let db = self.database(channel.name).map(Arc::as_ref);
+        let id = parse_item_id(item_id, |n| {
+            db.is_some_and(|db| db.find_public(n).is_some())
+        })?;
+        let ctx = Ctx {
+            channel: channel.name,
+        };
+        match (id, db) {
+            (ItemId::Descriptive(d), _) => {
+                let def = ItemDef {
+                    source_key: ItemId::Descriptive(d.clone()).to_string(),
+                    channel: channel.name.to_owned(),
+                    canonical_type: d.var_type.var_type(),
+                    access_rights: DESCRIPTIVE_RIGHTS,
+                    eu: EuInfo::None,
+                    constant: None,
+                };
+                Ok((def, ItemAttributes::default()))
+            }
+            (ItemId::Variable { variable, item }, Some(db)) => {
+                let var = db.find_public(&variable).ok_or(OpcError::UnknownItemId)?;
+                match item {
+                    VarItem::Direct(s) => ctx.suffix_item(db, var, &s),
+                    VarItem::ViaAttribute { attribute, then } => {
+                        let cell = db
+                            .attribute(var, &attribute)
+                            .ok_or(OpcError::UnknownItemId)?
+                            .trim();
+                        if cell.is_empty() {
+                            return Err(OpcError::UnknownItemId);
+                        }
+                        if let Some(n) = parse_number(cell) {
+                            return ctx.numeric_attribute_item(var, &attribute, n, then.as_ref());
+                        }
+                        let target = db.find_real(cell).ok_or(OpcError::UnknownItemId)?;
+                        ctx.suffix_item(db, target, then.as_ref().unwrap_or(&Suffix::Value))
+                    }
+                }
+            }
+            // Parsing found a variable, so there is a database; kept total for safety.
+            (ItemId::Variable { .. }, None) => Err(OpcError::UnknownItemId),
+        }
+    }
+
+    /// The OPC item-property values of an item.
+    pub fn item_attributes(&self, item_id: &str, access_path: &str) -> OpcResult<ItemAttributes> {
+        self.resolve_with_attributes(item_id, access_path)
+            .map(|(_, a)| a)
+    }
+
+    /// What to subscribe for a live item: `channel` and `source_key` as in its [`ItemDef`].
+    /// `None` for constants and unknown keys.
+    pub fn live_item(&self, channel: &str, source_key: &str) -> Option<LiveItem> {
+        let db = self.database(channel).map(Arc::as_ref);
+        let id = parse_item_id(source_key, |n| {
+            db.is_some_and(|db| db.find_real(n).is_some())
+        })
+        .ok()?;
+        match id {
+            ItemId::Descriptive(d) => Some(LiveItem {
+                variable: d.variable,
+                asmen_channel: Some(d.channel),
+                var_type: d.var_type.var_type(),
+                derivation: Derivation::Value,
+                definition: None,
+            }),
+            ItemId::Variable {
+                variable,
+                item: VarItem::Direct(s),
+            } => {
+                let var = db?.find_real(&variable)?;
+                let derivation = match s {
+                    Suffix::Value => Derivation::Value,
+                    Suffix::Formatted => Derivation::Formatted(var.format.clone()),
+                    Suffix::Percentage => {
+                        let (low, high) = var.range?;
+                        Derivation::Percentage { low, high }
+                    }
+                    Suffix::Bars => {
+                        let (low, high) = var.range?;
+                        Derivation::Bars {
+                            low,
+                            high,
+                            base: var.effective_bar_base()?,
+                        }
+                    }
+                    _ => return None,
+                };
+                Some(LiveItem {
+                    variable: var.name.clone(),
+                    asmen_channel: None,
+                    var_type: var.data_type,
+                    derivation,
+                    definition: Some(var.clone()),
+                })
+            }
+            ItemId::Variable { .. } => None,
+        }
+    }
+
+    /// The browse tree of channel `*`'s database, in pre-order: groups are branches,
+    /// variables leaves; with `AttributesAsItems` variables are branches with the leaves
+    /// `CV`, `DESC`, `EU_UNIT`, `HI_EU`, `LO_EU` (the last two only with a range).
+    /// Groups without visible variables are left out. Empty without a database.
+    pub fn browse_nodes(&self) -> impl Iterator<Item = BrowseNode> {
+        let mut out = Vec::new();
+        if let Some(db) = self.database(BASIC_CHANNEL) {
+            let mut path = Vec::new();
+            walk(
+                db,
+                &db.root,
+                &mut path,
+                self.config.server.attributes_as_items,
+                &mut out,
+            );
+        }
+        out.into_iter()
+    }
+}
+
+/// Groups with no (visible) variable anywhere below are not browsed.
+fn has_variables(g: &GroupNode) -> bool {
+    !g.variables.is_empty() || g.groups.iter().any(has_variables)
+}
+
+fn walk(
+    db: &VarDatabase,
+    node: &GroupNode,
+    path: &mut Vec<String>,
+    attributes_as_items: bool,
+    out: &mut Vec<BrowseNode>,
+) {
+    for g in node.groups.iter().filter(|g| has_variables(g)) {
+        path.push(g.name.clone());
+        out.push(BrowseNode {
+            path: path.clone(),
+            item_id: None,
+            is_leaf: false,
+        });
+        walk(db, g, path, attributes_as_items, out);
+        path.pop();
+    }
+    for &i in &node.variables {
+        let var = &db.variables[i];
+        let name = var.public_name.clone();
+        path.push(name.clone());
+        out.push(BrowseNode {
+            path: path.clone(),
+            item_id: Some(name.clone()),
+            is_leaf: !attributes_as_items,
+        });
+        if attributes_as_items {
+            let mut leaves = vec!["CV", "DESC", "EU_UNIT"];
+            if var.range.is_some() {
+                leaves.extend(["HI_EU", "LO_EU"]);
+            }
+            for leaf in leaves {
+                path.push(leaf.to_owned());
+                out.push(BrowseNode {
+                    path: path.clone(),
+                    item_id: Some(format!("{name}.{leaf}")),
+                    is_leaf: true,
+                });
+                path.pop();
+            }
+        }
+        path.pop();
+    }
+}
+
+struct Ctx<'a> {
+    channel: &'a str,
+}
+
+impl Ctx<'_> {
+    fn def(
+        &self,
+        source_key: String,
+        canonical_type: VarType,
+        access_rights: u32,
+        eu: EuInfo,
+        constant: Option<Value>,
+    ) -> ItemDef {
+        ItemDef {
+            source_key,
+            channel: self.channel.to_owned(),
+            canonical_type,
+            access_rights,
+            eu,
+            constant,
+        }
+    }
+
+    fn constant(&self, key: String, value: Value) -> ItemDef {
+        self.def(
+            key,
+            value.var_type(),
+            OPC_READABLE,
+            EuInfo::None,
+            Some(value),
+        )
+    }
+
+    fn attrs(var: &Variable) -> ItemAttributes {
+        let opt = |s: &str| (!s.is_empty()).then(|| s.to_owned());
+        ItemAttributes {
+            description: opt(&var.description),
+            description_en: opt(&var.description_en),
+            eu_units: None,
+            eu: EuInfo::None,
+        }
+    }
+
+    fn suffix_item(
+        &self,
+        db: &VarDatabase,
+        var: &Variable,
+        s: &Suffix,
+    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+        let key = |suffix: &str| format!("{}.{suffix}", var.name);
+        let mut attrs = Self::attrs(var);
+        let range = var.range;
+        let def = match s {
+            Suffix::Value => {
+                let eu = range.map_or(EuInfo::None, |(low, high)| EuInfo::Analog { low, high });
+                attrs.eu_units = (!var.unit.is_empty()).then(|| var.unit.clone());
+                attrs.eu = eu.clone();
+                let rights = if var.writable {
+                    OPC_READABLE | OPC_WRITEABLE
+                } else {
+                    OPC_READABLE
+                };
+                self.def(var.name.clone(), var.data_type, rights, eu, None)
+            }
+            Suffix::DataType => self.constant(key("DATA_TYPE"), Value::I2(var.data_type.0 as i16)),
+            Suffix::EuUnit => self.constant(key("EU_UNIT"), Value::Bstr(var.unit.clone())),
+            Suffix::Desc => self.constant(key("DESC"), Value::Bstr(var.description.clone())),
+            Suffix::HiEu => self.constant(
+                key("HI_EU"),
+                Value::R8(range.ok_or(OpcError::UnknownItemId)?.1),
+            ),
+            Suffix::LoEu => self.constant(
+                key("LO_EU"),
+                Value::R8(range.ok_or(OpcError::UnknownItemId)?.0),
+            ),
+            Suffix::Formatted => self.def(
+                key("FormatedCV"),
+                VarType::BSTR,
+                OPC_READABLE,
+                EuInfo::None,
+                None,
+            ),
+            Suffix::Percentage => {
+                range.ok_or(OpcError::UnknownItemId)?;
+                let eu = EuInfo::Analog {
+                    low: 0.0,
+                    high: 100.0,
+                };
+                attrs.eu_units = Some("%".to_owned());
+                attrs.eu = eu.clone();
+                self.def(key("PercentageCV"), VarType::R8, OPC_READABLE, eu, None)
+            }
+            Suffix::Bars => {
+                range.ok_or(OpcError::UnknownItemId)?;
+                self.def(
+                    key("BarCVs"),
+                    VarType::array_of(VarType::R8),
+                    OPC_READABLE,
+                    EuInfo::None,
+                    None,
+                )
+            }
+            Suffix::Attribute(a) => {
+                let cell = db.attribute(var, a).ok_or(OpcError::UnknownItemId)?;
+                let value = match parse_number(cell) {
+                    Some(n) => Value::R8(n),
+                    None => Value::Bstr(cell.to_owned()),
+                };
+                self.constant(key(a), value)
+            }
+        };
+        Ok((def, attrs))
+    }
+
+    fn numeric_attribute_item(
+        &self,
+        var: &Variable,
+        attribute: &str,
+        n: f64,
+        then: Option<&Suffix>,
+    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+        let key = format!("{}.{attribute}.CV", var.name);
+        let attrs = Self::attrs(var);
+        let def = match then {
+            None => self.constant(key, Value::R8(n)),
+            Some(Suffix::Formatted) => {
+                let text = format_value(var.format.as_ref(), &Value::R8(n))
+                    .ok_or(OpcError::UnknownItemId)?;
+                self.constant(key + ".FormatedCV", Value::Bstr(text))
+            }
+            Some(Suffix::Percentage) => {
+                let (low, high) = var.range.ok_or(OpcError::UnknownItemId)?;
+                let p = percentage(n, low, high).ok_or(OpcError::UnknownItemId)?;
+                self.constant(key + ".PercentageCV", Value::R8(p))
+            }
+            Some(Suffix::Bars) => {
+                let (low, high) = var.range.ok_or(OpcError::UnknownItemId)?;
+                let base = var.effective_bar_base().ok_or(OpcError::UnknownItemId)?;
+                let b = bar_values(n, low, high, base).ok_or(OpcError::UnknownItemId)?;
+                self.constant(key + ".BarCVs", r8_pair(b))
+            }
+            Some(_) => return Err(OpcError::UnknownItemId),
+        };
+        Ok((def, attrs))
+    }
+}
+
+impl Namespace for AsixNamespace {
+    fn resolve(&self, item_id: &str, access_path: &str) -> OpcResult<ItemDef> {
+        self.resolve_with_attributes(item_id, access_path)
+            .map(|(def, _)| def)
+    }
+}

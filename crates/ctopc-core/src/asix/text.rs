@@ -1,0 +1,223 @@
+//! Text decoding of the configuration and database files, and the warning type the
+//! readers return.
+//!
+//! asix tools on Polish Windows write Windows-1250; hand editors write UTF-8, with or
+//! without a byte-order mark. [`decode_text`] accepts all three (plus UTF-16 LE with a
+//! BOM, which `WritePrivateProfileString` produces for Unicode INI files): valid UTF-8 is
+//! taken as UTF-8, anything else as Windows-1250 (every byte decodes, so decoding never
+//! fails).
+
+use std::fmt;
+
+/// The encoding [`decode_text`] recognised.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TextEncoding {
+    /// UTF-8 without a byte-order mark (plain ASCII is reported as this).
+    Utf8,
+    /// UTF-8 with the `EF BB BF` byte-order mark.
+    Utf8Bom,
+    /// UTF-16 little-endian with the `FF FE` byte-order mark.
+    Utf16LeBom,
+    /// Windows-1250 (Central European): bytes that are not valid UTF-8.
+    Windows1250,
+}
+
+/// Decodes file bytes to text (see the module documentation for the rules).
+pub fn decode_text(bytes: &[u8]) -> (String, TextEncoding) {
+    if let Some(rest) = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]) {
+        return (
+            String::from_utf8_lossy(rest).into_owned(),
+            TextEncoding::Utf8Bom,
+        );
+    }
+    if let Some(rest) = bytes.strip_prefix(&[0xFF, 0xFE]) {
+        let units = rest
+            .chunks(2)
+            .map(|c| u16::from_le_bytes([c[0], *c.get(1).unwrap_or(&0)]));
+        let text = char::decode_utf16(units)
+            .map(|r| r.unwrap_or('\u{FFFD}'))
+            .collect();
+        return (text, TextEncoding::Utf16LeBom);
+    }
+    match std::str::from_utf8(bytes) {
+        Ok(s) => (s.to_owned(), TextEncoding::Utf8),
+        Err(_) => (decode_windows_1250(bytes), TextEncoding::Windows1250),
+    }
+}
+
+/// Decodes Windows-1250 bytes. The five bytes the code page leaves undefined
+/// (0x81, 0x83, 0x88, 0x90, 0x98) become U+FFFD.
+pub fn decode_windows_1250(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|&b| {
+            if b < 0x80 {
+                b as char
+            } else {
+                char::from_u32(CP1250_HIGH[(b - 0x80) as usize] as u32).unwrap_or('\u{FFFD}')
+            }
+        })
+        .collect()
+}
+
+/// Windows-1250 bytes 0x80..=0xFF as Unicode scalar values.
+const CP1250_HIGH: [u16; 128] = [
+    0x20AC, 0xFFFD, 0x201A, 0xFFFD, 0x201E, 0x2026, 0x2020, 0x2021, //
+    0xFFFD, 0x2030, 0x0160, 0x2039, 0x015A, 0x0164, 0x017D, 0x0179, //
+    0xFFFD, 0x2018, 0x2019, 0x201C, 0x201D, 0x2022, 0x2013, 0x2014, //
+    0xFFFD, 0x2122, 0x0161, 0x203A, 0x015B, 0x0165, 0x017E, 0x017A, //
+    0x00A0, 0x02C7, 0x02D8, 0x0141, 0x00A4, 0x0104, 0x00A6, 0x00A7, //
+    0x00A8, 0x00A9, 0x015E, 0x00AB, 0x00AC, 0x00AD, 0x00AE, 0x017B, //
+    0x00B0, 0x00B1, 0x02DB, 0x0142, 0x00B4, 0x00B5, 0x00B6, 0x00B7, //
+    0x00B8, 0x0105, 0x015F, 0x00BB, 0x013D, 0x02DD, 0x013E, 0x017C, //
+    0x0154, 0x00C1, 0x00C2, 0x0102, 0x00C4, 0x0139, 0x0106, 0x00C7, //
+    0x010C, 0x00C9, 0x0118, 0x00CB, 0x011A, 0x00CD, 0x00CE, 0x010E, //
+    0x0110, 0x0143, 0x0147, 0x00D3, 0x00D4, 0x0150, 0x00D6, 0x00D7, //
+    0x0158, 0x016E, 0x00DA, 0x0170, 0x00DC, 0x00DD, 0x0162, 0x00DF, //
+    0x0155, 0x00E1, 0x00E2, 0x0103, 0x00E4, 0x013A, 0x0107, 0x00E7, //
+    0x010D, 0x00E9, 0x0119, 0x00EB, 0x011B, 0x00ED, 0x00EE, 0x010F, //
+    0x0111, 0x0144, 0x0148, 0x00F3, 0x00F4, 0x0151, 0x00F6, 0x00F7, //
+    0x0159, 0x016F, 0x00FA, 0x0171, 0x00FC, 0x00FD, 0x0163, 0x02D9, //
+];
+
+/// A problem that did not stop a reader (unknown option, duplicate key, ...). The caller
+/// logs it. `line` is 1-based; 0 when the warning concerns the file as a whole.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Warning {
+    pub file: String,
+    pub line: usize,
+    pub message: String,
+}
+
+impl Warning {
+    pub(crate) fn new(file: &str, line: usize, message: impl Into<String>) -> Self {
+        Warning {
+            file: file.to_owned(),
+            line,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Warning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.line == 0 {
+            write!(f, "{}: {}", self.file, self.message)
+        } else {
+            write!(f, "{}:{}: {}", self.file, self.line, self.message)
+        }
+    }
+}
+
+/// Parses a boolean the asix way: `tak`/`true`/`1` and `nie`/`false`/`0`, ASCII
+/// case-insensitive, surrounding blanks ignored.
+pub fn parse_bool(text: &str) -> Option<bool> {
+    let t = text.trim();
+    for yes in ["tak", "true", "1"] {
+        if t.eq_ignore_ascii_case(yes) {
+            return Some(true);
+        }
+    }
+    for no in ["nie", "false", "0"] {
+        if t.eq_ignore_ascii_case(no) {
+            return Some(false);
+        }
+    }
+    None
+}
+
+/// Parses a real number as written in the database: `.` decimal point, or `,` when the
+/// text has exactly one comma and no point (Polish spreadsheets write `12,5`); an
+/// optional exponent. Surrounding blanks ignored; NaN and infinities are rejected.
+pub fn parse_number(text: &str) -> Option<f64> {
+    let t = text.trim();
+    if t.is_empty() {
+        return None;
+    }
+    let owned;
+    let t = if !t.contains('.') && t.matches(',').count() == 1 {
+        owned = t.replace(',', ".");
+        owned.as_str()
+    } else {
+        t
+    };
+    // Rust's parser accepts "inf", "nan", "infinity": only digits, sign, point and exponent here.
+    if !t
+        .bytes()
+        .all(|b| b.is_ascii_digit() || matches!(b, b'+' | b'-' | b'.' | b'e' | b'E'))
+    {
+        return None;
+    }
+    t.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decodes_utf8_bom_utf16_and_windows_1250() {
+        let cases: &[(&[u8], &str, TextEncoding)] = &[
+            (b"abc", "abc", TextEncoding::Utf8),
+            ("Wytwórnia".as_bytes(), "Wytwórnia", TextEncoding::Utf8),
+            (
+                b"\xEF\xBB\xBFZa\xC5\xBC\xC3\xB3\xC5\x82\xC4\x87",
+                "Zażółć",
+                TextEncoding::Utf8Bom,
+            ),
+            (b"\xFF\xFEP\x00\x05\x01", "Pą", TextEncoding::Utf16LeBom),
+            // "Zażółć gęślą jaźń" in Windows-1250.
+            (
+                b"Za\xBF\xF3\xB3\xE6 g\xEA\x9Cl\xB9 ja\x9F\xF1",
+                "Zażółć gęślą jaźń",
+                TextEncoding::Windows1250,
+            ),
+            (
+                b"\xA5\xC6\xCA\xA3\xD1\xD3\x8C\x8F\xAF",
+                "ĄĆĘŁŃÓŚŹŻ",
+                TextEncoding::Windows1250,
+            ),
+            (b"\x80\x81", "€\u{FFFD}", TextEncoding::Windows1250),
+        ];
+        for (bytes, text, enc) in cases {
+            assert_eq!(decode_text(bytes), (text.to_string(), *enc), "{bytes:?}");
+        }
+    }
+
+    #[test]
+    fn booleans_and_numbers() {
+        for (t, v) in [
+            ("tak", Some(true)),
+            (" TAK ", Some(true)),
+            ("True", Some(true)),
+            ("1", Some(true)),
+        ] {
+            assert_eq!(parse_bool(t), v, "{t}");
+        }
+        for (t, v) in [
+            ("nie", Some(false)),
+            ("NIE", Some(false)),
+            ("false", Some(false)),
+            ("0", Some(false)),
+        ] {
+            assert_eq!(parse_bool(t), v, "{t}");
+        }
+        for t in ["", "yes", "no", "2", "t"] {
+            assert_eq!(parse_bool(t), None, "{t}");
+        }
+        let nums = [
+            ("12.5", Some(12.5)),
+            ("12,5", Some(12.5)),
+            (" -3 ", Some(-3.0)),
+            ("1e3", Some(1000.0)),
+        ];
+        for (t, v) in nums {
+            assert_eq!(parse_number(t), v, "{t}");
+        }
+        for t in [
+            "", "1,000.5", "1,2,3", "inf", "NaN", "KW_L101", "0x10", "1e999",
+        ] {
+            assert_eq!(parse_number(t), None, "{t}");
+        }
+    }
+}
