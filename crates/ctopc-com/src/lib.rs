@@ -4,6 +4,8 @@
 #![cfg(windows)]
 
 pub mod client;
+pub mod connpoint;
+pub mod enums;
 pub mod factory;
 pub mod host;
 pub mod interfaces;
