@@ -19,6 +19,9 @@ pub const DESCRIPTION: &str = "ServerCTOPC OPC DA Server for asix";
 pub const EXE_NAME: &str = "ServerCTOPC.exe";
 /// How long a server started by COM waits for its first client before it exits.
 pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
+/// How long the server stays up after its last client has gone, so that a client
+/// connecting right then is served instead of reaching a process that is exiting.
+pub const EXIT_LINGER: Duration = Duration::from_secs(3);
 
 /// COM initialised for the lifetime of the value (multithreaded apartment).
 struct ComInit;
@@ -94,7 +97,7 @@ pub fn serve() -> windows::core::Result<()> {
     let factory = ClassFactory::new(server::create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe { CoRegisterClassObject(&CLSID_SERVERCTOPC, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
-    let reason = lifetime::wait_until_unused(STARTUP_GRACE);
+    let reason = lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
     eprintln!("ServerCTOPC: exiting ({reason:?})");

@@ -78,17 +78,27 @@ pub enum ExitReason {
 }
 
 /// Blocks until the server is unused: every object and lock released after at least one
-/// client came, or no client within `grace` of start, or a stop was requested.
-pub fn wait_until_unused(grace: Duration) -> ExitReason {
+/// client came (and still so `linger` later: a client that connects right after the last
+/// one left must not reach a process that is revoking its class object), or no client
+/// within `grace` of start, or a stop was requested.
+pub fn wait_until_unused(grace: Duration, linger: Duration) -> ExitReason {
     let start = Instant::now();
+    let mut idle_since: Option<Instant> = None;
     let mut g = COUNTS.lock().unwrap_or_else(|p| p.into_inner());
     loop {
         if g.stop_requested {
             return ExitReason::StopRequested;
         }
         if g.ever_used && g.objects == 0 && g.locks == 0 {
-            return ExitReason::LastClientGone;
+            let since = *idle_since.get_or_insert_with(Instant::now);
+            if since.elapsed() >= linger {
+                return ExitReason::LastClientGone;
+            }
+            let left = linger.saturating_sub(since.elapsed()).max(Duration::from_millis(10));
+            g = CHANGED.wait_timeout(g, left).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+            continue;
         }
+        idle_since = None;
         if !g.ever_used && start.elapsed() >= grace {
             return ExitReason::NeverUsed;
         }

@@ -1119,18 +1119,7 @@ pub fn serve() -> windows::core::Result<()> {
     let factory = ClassFactory::new(create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe { CoRegisterClassObject(&CLSID_MARSHAL_PROBE, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
-    let reason = loop {
-        let reason = lifetime::wait_until_unused(STARTUP_GRACE);
-        if reason != lifetime::ExitReason::LastClientGone {
-            break reason;
-        }
-        // Stay a while for the next client: one that activates while the process exits
-        // gets RPC_S_SERVER_UNAVAILABLE (tests connect one after the other).
-        std::thread::sleep(LINGER);
-        if lifetime::live_objects() == 0 {
-            break reason;
-        }
-    };
+    let reason = lifetime::wait_until_unused(STARTUP_GRACE, LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
     eprintln!("marshal-probe: exiting ({reason:?})");
