@@ -9,9 +9,11 @@ pub mod browse;
 pub mod convert;
 pub mod error;
 pub mod lang;
+pub mod model;
 pub mod namespace;
 pub mod properties;
 pub mod quality;
+pub mod source;
 pub mod time;
 pub mod value;
 

@@ -9,6 +9,7 @@
 //! User documentation: `asixconnect.ini.example` (configuration) and
 //! `docs/variable-database.md` (database format) at the repository root.
 
+pub mod address_space;
 pub mod config;
 pub mod format;
 pub mod ini;

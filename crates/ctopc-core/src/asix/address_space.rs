@@ -1,0 +1,82 @@
+//! The OPC address space of the asix namespace: channel `*`'s variable-set tree, with
+//! groups as branches and variables as leaves (or, with `AttributesAsItems`, variables
+//! as branches that are also items, with attribute leaves).
+
+use super::namespace::AsixNamespace;
+use crate::browse::{AddressSpace, BuildError, NodeId};
+use std::collections::HashMap;
+
+/// Separator of the item IDs given to group branches (groups are not items; the ID only
+/// serves OPC_BROWSE_TO and IOPCBrowse::Browse): the group path joined with `/`.
+pub const GROUP_PATH_SEPARATOR: &str = "/";
+
+/// Builds the address space from [`AsixNamespace::browse_nodes`]. Without a database it
+/// is an empty root (descriptive IDs still work; they are not browsable).
+pub fn build_address_space(ns: &AsixNamespace) -> Result<AddressSpace, BuildError> {
+    let mut b = AddressSpace::builder();
+    let mut ids: HashMap<Vec<String>, NodeId> = HashMap::new();
+    for node in ns.browse_nodes() {
+        let Some((name, parent_path)) = node.path.split_last() else { continue };
+        let parent = if parent_path.is_empty() { NodeId::ROOT } else { ids.get(parent_path).copied().unwrap_or(NodeId::ROOT) };
+        let id = match (&node.item_id, node.is_leaf) {
+            (Some(item), true) => b.add_leaf(parent, name, item)?,
+            (Some(item), false) => {
+                let id = b.add_branch(parent, name, item)?;
+                b.set_is_item(id, true)?;
+                id
+            }
+            (None, _) => b.add_branch(parent, name, &node.path.join(GROUP_PATH_SEPARATOR))?,
+        };
+        ids.insert(node.path.clone(), id);
+    }
+    Ok(b.build())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::asix::{parse_config, ChannelDatabase};
+    use crate::browse::{BrowseCursor, BrowseDirection, BrowseType};
+    use std::sync::Arc;
+
+    fn demo(attributes_as_items: bool) -> AsixNamespace {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        let ini = format!("[Server]\nAttributesAsItems = {}\n[Channel:*]\nItemsDatabase = {dir}\n", if attributes_as_items { "tak" } else { "nie" });
+        let (cfg, _) = parse_config(ini.as_bytes(), "test.ini").unwrap();
+        let (ns, _) = AsixNamespace::load(cfg);
+        assert!(matches!(ns.database_state("*"), ChannelDatabase::Loaded(_)));
+        ns
+    }
+
+    #[test]
+    fn groups_are_branches_and_variables_leaves() {
+        let space = Arc::new(build_address_space(&demo(false)).unwrap());
+        let mut c = BrowseCursor::new(space);
+        let top = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
+        assert!(top.iter().any(|n| n == "Magazyn siarki"), "{top:?}");
+        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki").unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101").unwrap();
+        let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
+        assert!(!leaves.is_empty());
+        // GetItemID returns the bare variable ID (names are unique).
+        let id = c.get_item_id(&leaves[0]).unwrap();
+        assert!(!id.contains('/'), "{id}");
+        let flat = BrowseCursor::new(Arc::new(build_address_space(&demo(false)).unwrap())).browse_opc_item_ids(BrowseType::Flat, "", 0, 0).unwrap();
+        assert!(flat.len() >= 200, "{}", flat.len());
+    }
+
+    #[test]
+    fn attributes_as_items_makes_variables_branches_with_attribute_leaves() {
+        let space = Arc::new(build_address_space(&demo(true)).unwrap());
+        let mut c = BrowseCursor::new(Arc::clone(&space));
+        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki").unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101").unwrap();
+        let vars = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
+        assert!(!vars.is_empty());
+        c.change_browse_position(BrowseDirection::Down, &vars[0]).unwrap();
+        let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
+        for want in ["CV", "DESC", "EU_UNIT"] {
+            assert!(leaves.iter().any(|l| l == want), "{want} missing in {leaves:?}");
+        }
+    }
+}

@@ -1,0 +1,720 @@
+//! The process-wide item cache: one entry per source item, shared by every group item that
+//! refers to it, with the subscription bookkeeping (reference counts, requested sampling
+//! rates, what the backend was last told).
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
+
+use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
+use super::util::Interner;
+use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
+use crate::{Quality, Timestamp, Value, VarType, Vqt};
+
+/// "Never refreshed by the source."
+pub(crate) const NEVER: Timestamp = Timestamp(i64::MIN);
+
+/// A value as the cache and the last-sent state of group items hold it: numbers inline
+/// (type and bits, exact), strings and arrays shared.
+#[derive(Debug, Clone)]
+pub(crate) enum CachedValue {
+    Num { vt: VarType, bits: u64 },
+    Shared(Arc<Value>),
+}
+
+fn num_bits(v: &Value) -> Option<(VarType, u64)> {
+    Some(match *v {
+        Value::Empty => (VarType::EMPTY, 0),
+        Value::I1(x) => (VarType::I1, x as i64 as u64),
+        Value::UI1(x) => (VarType::UI1, u64::from(x)),
+        Value::I2(x) => (VarType::I2, x as i64 as u64),
+        Value::UI2(x) => (VarType::UI2, u64::from(x)),
+        Value::I4(x) => (VarType::I4, x as i64 as u64),
+        Value::UI4(x) => (VarType::UI4, u64::from(x)),
+        Value::I8(x) => (VarType::I8, x as u64),
+        Value::UI8(x) => (VarType::UI8, x),
+        Value::R4(x) => (VarType::R4, u64::from(x.to_bits())),
+        Value::R8(x) => (VarType::R8, x.to_bits()),
+        Value::Cy(x) => (VarType::CY, x as u64),
+        Value::Date(x) => (VarType::DATE, x.to_bits()),
+        Value::Bool(b) => (VarType::BOOL, u64::from(b)),
+        Value::Error(e) => (VarType::ERROR, e as i64 as u64),
+        Value::Bstr(_) | Value::Array(_) => return None,
+    })
+}
+
+impl CachedValue {
+    pub const EMPTY: CachedValue = CachedValue::Num { vt: VarType::EMPTY, bits: 0 };
+
+    pub fn from_value(v: Value) -> Self {
+        match num_bits(&v) {
+            Some((vt, bits)) => CachedValue::Num { vt, bits },
+            None => CachedValue::Shared(Arc::new(v)),
+        }
+    }
+
+    /// Equal to `v` (same type, same bits or equal contents), without allocating.
+    pub fn same_as(&self, v: &Value) -> bool {
+        match (self, num_bits(v)) {
+            (CachedValue::Num { vt, bits }, Some((vt2, bits2))) => *vt == vt2 && *bits == bits2,
+            (CachedValue::Shared(a), None) => **a == *v,
+            _ => false,
+        }
+    }
+
+    pub fn to_value(&self) -> Value {
+        match self {
+            CachedValue::Shared(a) => (**a).clone(),
+            &CachedValue::Num { vt, bits } => match vt {
+                VarType::I1 => Value::I1(bits as i8),
+                VarType::UI1 => Value::UI1(bits as u8),
+                VarType::I2 => Value::I2(bits as i16),
+                VarType::UI2 => Value::UI2(bits as u16),
+                VarType::I4 => Value::I4(bits as i32),
+                VarType::UI4 => Value::UI4(bits as u32),
+                VarType::I8 => Value::I8(bits as i64),
+                VarType::UI8 => Value::UI8(bits),
+                VarType::R4 => Value::R4(f32::from_bits(bits as u32)),
+                VarType::R8 => Value::R8(f64::from_bits(bits)),
+                VarType::CY => Value::Cy(bits as i64),
+                VarType::DATE => Value::Date(f64::from_bits(bits)),
+                VarType::BOOL => Value::Bool(bits != 0),
+                VarType::ERROR => Value::Error(bits as i32),
+                _ => Value::Empty,
+            },
+        }
+    }
+
+    /// The number for deadband checks (see [`Value::as_f64`]); `None` for non-numbers.
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            CachedValue::Num { .. } => self.to_value().as_f64(),
+            CachedValue::Shared(a) => a.as_f64(),
+        }
+    }
+
+}
+
+impl PartialEq for CachedValue {
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (CachedValue::Num { vt: a, bits: x }, CachedValue::Num { vt: b, bits: y }) => a == b && x == y,
+            (CachedValue::Shared(a), CachedValue::Shared(b)) => Arc::ptr_eq(a, b) || **a == **b,
+            _ => false,
+        }
+    }
+}
+
+/// The sampling rates requested by the subscribers of one source item, with counts. More
+/// than one distinct rate spills into [`SourceTable`]'s side table (rare), which keeps the
+/// entry small.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum RateSet {
+    #[default]
+    Empty,
+    One { rate: u32, count: u32 },
+    /// Index into `SourceTable::many_rates`.
+    Many(u32),
+}
+
+pub(crate) const LIVE: u8 = 1;
+pub(crate) const CONSTANT: u8 = 2;
+pub(crate) const DIRTY: u8 = 4;
+/// EU type OPC_ANALOG: `eu_low..eu_high` hold the range.
+pub(crate) const ANALOG: u8 = 8;
+/// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
+pub(crate) const ENUMERATED: u8 = 16;
+/// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
+pub(crate) const MANY_RATES: u8 = 32;
+
+/// One source item in the cache (104 bytes; its key string is the only other allocation).
+#[derive(Debug)]
+pub(crate) struct SourceEntry {
+    pub key: Box<str>,
+    pub value: CachedValue,
+    pub timestamp: Timestamp,
+    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
+    pub refreshed_at: Timestamp,
+    /// `Engine::change_seq` when value or quality last changed.
+    pub changed_seq: u64,
+    /// The EU range with [`ANALOG`].
+    pub eu_low: f64,
+    pub eu_high: f64,
+    /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
+    /// [`MANY_RATES`] an index into the side table.
+    sub_rate: u32,
+    sub_count: u32,
+    /// The sampling rate the backend was last told (0: not subscribed).
+    pub announced_rate: u32,
+    pub generation: u32,
+    /// Group items referring to this entry.
+    pub refs: u32,
+    pub channel: u32,
+    pub quality: Quality,
+    pub canonical: VarType,
+    pub access: u8,
+    pub flags: u8,
+}
+
+impl SourceEntry {
+    pub fn rates(&self) -> RateSet {
+        if self.flags & MANY_RATES != 0 {
+            RateSet::Many(self.sub_rate)
+        } else if self.sub_count == 0 {
+            RateSet::Empty
+        } else {
+            RateSet::One { rate: self.sub_rate, count: self.sub_count }
+        }
+    }
+
+    fn set_rates(&mut self, r: RateSet) {
+        self.flags &= !MANY_RATES;
+        (self.sub_rate, self.sub_count) = match r {
+            RateSet::Empty => (0, 0),
+            RateSet::One { rate, count } => (rate, count),
+            RateSet::Many(slot) => {
+                self.flags |= MANY_RATES;
+                (slot, 0)
+            }
+        };
+    }
+
+    pub fn is_constant(&self) -> bool {
+        self.flags & CONSTANT != 0
+    }
+    pub fn readable(&self) -> bool {
+        u32::from(self.access) & OPC_READABLE != 0
+    }
+    pub fn writable(&self) -> bool {
+        u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
+    }
+    /// The EU range when the item is analog (percent deadband applies).
+    pub fn analog_range(&self) -> Option<(f64, f64)> {
+        (self.flags & ANALOG != 0).then_some((self.eu_low, self.eu_high))
+    }
+
+    /// Stores a sample; true when value or quality changed.
+    pub fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
+        let quality_changed = self.quality != vqt.quality;
+        let value_changed = !self.value.same_as(&vqt.value);
+        if value_changed {
+            self.value = CachedValue::from_value(vqt.value);
+        }
+        self.quality = vqt.quality;
+        self.timestamp = vqt.timestamp;
+        self.refreshed_at = now;
+        quality_changed || value_changed
+    }
+}
+
+/// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
+#[derive(Default)]
+pub(crate) struct SourceTable {
+    pub entries: Vec<SourceEntry>,
+    free: Vec<u32>,
+    /// (channel, source key) -> entry index.
+    index: SourceIndex,
+    /// Access paths and channels.
+    pub paths: Interner,
+    dirty: Vec<u32>,
+    live: usize,
+    /// Rate sets with more than one distinct rate.
+    many_rates: Vec<Vec<(u32, u32)>>,
+    free_many: Vec<u32>,
+    /// OPC_ENUMERATED texts by entry index.
+    enum_texts: HashMap<u32, Vec<String>>,
+}
+
+impl SourceTable {
+    pub fn live(&self) -> usize {
+        self.live
+    }
+
+    /// The entry for `def`, created if needed (constant items get their value now).
+    pub fn find_or_insert(&mut self, def: &ItemDef, now: Timestamp) -> u32 {
+        let channel = self.paths.intern(&def.channel);
+        let hash = key_hash(channel, &def.source_key);
+        let entries = &self.entries;
+        if let Some(idx) = self.index.find(hash, |i| {
+            let e = &entries[i as usize];
+            e.channel == channel && *e.key == *def.source_key
+        }) {
+            return idx;
+        }
+        let (value, quality, refreshed_at, mut flags) = match &def.constant {
+            Some(v) => (
+                CachedValue::from_value(v.clone()),
+                Quality::GOOD.with_limit(Quality::LIMIT_CONST),
+                now,
+                LIVE | CONSTANT,
+            ),
+            None => (CachedValue::EMPTY, Quality::BAD_WAITING_FOR_INITIAL_DATA, NEVER, LIVE),
+        };
+        let (eu_low, eu_high) = match &def.eu {
+            EuInfo::Analog { low, high } => {
+                flags |= ANALOG;
+                (*low, *high)
+            }
+            EuInfo::Enumerated(_) => {
+                flags |= ENUMERATED;
+                (0.0, 0.0)
+            }
+            EuInfo::None => (0.0, 0.0),
+        };
+        let entry = SourceEntry {
+            key: def.source_key.as_str().into(),
+            value,
+            timestamp: now,
+            refreshed_at,
+            changed_seq: 0,
+            eu_low,
+            eu_high,
+            sub_rate: 0,
+            sub_count: 0,
+            announced_rate: 0,
+            generation: 0,
+            refs: 0,
+            channel,
+            quality,
+            canonical: def.canonical_type,
+            access: (def.access_rights & (OPC_READABLE | OPC_WRITEABLE)) as u8,
+            flags,
+        };
+        let idx = match self.free.pop() {
+            Some(idx) => {
+                let generation = self.entries[idx as usize].generation;
+                self.entries[idx as usize] = SourceEntry { generation, ..entry };
+                idx
+            }
+            None => {
+                self.entries.push(entry);
+                (self.entries.len() - 1) as u32
+            }
+        };
+        if let EuInfo::Enumerated(texts) = &def.eu {
+            self.enum_texts.insert(idx, texts.clone());
+        }
+        self.index.insert(hash, idx);
+        self.live += 1;
+        idx
+    }
+
+    pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
+        self.entries
+            .get(key.index() as usize)
+            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
+    }
+
+    pub fn get_mut(&mut self, key: SourceKey) -> Option<&mut SourceEntry> {
+        self.entries
+            .get_mut(key.index() as usize)
+            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
+    }
+
+    pub fn source_item(&self, idx: u32) -> SourceItem {
+        let e = &self.entries[idx as usize];
+        SourceItem {
+            key: SourceKey::new(idx, e.generation),
+            channel: self.paths.get(e.channel).clone(),
+            item_id: Arc::from(&*e.key),
+            canonical_type: e.canonical,
+        }
+    }
+
+    fn mark_dirty(&mut self, idx: u32) {
+        let e = &mut self.entries[idx as usize];
+        if e.flags & DIRTY == 0 {
+            e.flags |= DIRTY;
+            self.dirty.push(idx);
+        }
+    }
+
+    pub fn add_ref(&mut self, idx: u32) {
+        self.entries[idx as usize].refs += 1;
+    }
+
+    pub fn release(&mut self, idx: u32) {
+        let e = &mut self.entries[idx as usize];
+        e.refs -= 1;
+        if e.refs == 0 {
+            self.mark_dirty(idx);
+        }
+    }
+
+    /// The EU information of an entry (OPCITEMATTRIBUTES).
+    pub fn eu_info(&self, idx: u32) -> EuInfo {
+        let e = &self.entries[idx as usize];
+        if e.flags & ANALOG != 0 {
+            EuInfo::Analog { low: e.eu_low, high: e.eu_high }
+        } else if e.flags & ENUMERATED != 0 {
+            EuInfo::Enumerated(self.enum_texts.get(&idx).cloned().unwrap_or_default())
+        } else {
+            EuInfo::None
+        }
+    }
+
+    /// Counts a subscriber of `idx` at `rate`.
+    pub fn add_rate(&mut self, idx: u32, rate: u32) {
+        let e = &mut self.entries[idx as usize];
+        let set = match e.rates() {
+            RateSet::Empty => RateSet::One { rate, count: 1 },
+            RateSet::One { rate: r, count } if r == rate => RateSet::One { rate, count: count + 1 },
+            RateSet::One { rate: r, count } => {
+                let v = vec![(r, count), (rate, 1)];
+                let slot = match self.free_many.pop() {
+                    Some(slot) => {
+                        self.many_rates[slot as usize] = v;
+                        slot
+                    }
+                    None => {
+                        self.many_rates.push(v);
+                        (self.many_rates.len() - 1) as u32
+                    }
+                };
+                RateSet::Many(slot)
+            }
+            RateSet::Many(slot) => {
+                let v = &mut self.many_rates[slot as usize];
+                match v.iter_mut().find(|(r, _)| *r == rate) {
+                    Some((_, c)) => *c += 1,
+                    None => v.push((rate, 1)),
+                }
+                RateSet::Many(slot)
+            }
+        };
+        self.entries[idx as usize].set_rates(set);
+        self.mark_dirty(idx);
+    }
+
+    /// Removes a subscriber of `idx` counted at `rate`.
+    pub fn remove_rate(&mut self, idx: u32, rate: u32) {
+        let e = &mut self.entries[idx as usize];
+        let set = match e.rates() {
+            RateSet::Empty => RateSet::Empty,
+            RateSet::One { rate: r, count } if r == rate => {
+                if count > 1 {
+                    RateSet::One { rate, count: count - 1 }
+                } else {
+                    RateSet::Empty
+                }
+            }
+            one @ RateSet::One { .. } => one,
+            RateSet::Many(slot) => {
+                let v = &mut self.many_rates[slot as usize];
+                if let Some(i) = v.iter().position(|(r, _)| *r == rate) {
+                    v[i].1 -= 1;
+                    if v[i].1 == 0 {
+                        v.swap_remove(i);
+                    }
+                }
+                match v.len() {
+                    0 | 1 => {
+                        let set = v.first().map_or(RateSet::Empty, |&(rate, count)| RateSet::One { rate, count });
+                        self.many_rates[slot as usize] = Vec::new();
+                        self.free_many.push(slot);
+                        set
+                    }
+                    _ => RateSet::Many(slot),
+                }
+            }
+        };
+        self.entries[idx as usize].set_rates(set);
+        self.mark_dirty(idx);
+    }
+
+    /// The fastest rate any subscriber of `idx` asks for, 0 when nobody subscribes.
+    pub fn fastest(&self, idx: u32) -> u32 {
+        match self.entries[idx as usize].rates() {
+            RateSet::Empty => 0,
+            RateSet::One { rate, .. } => rate,
+            RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(r, _)| *r).min().unwrap_or(0),
+        }
+    }
+
+    /// The number of subscribers of `idx`.
+    pub fn subscribers(&self, idx: u32) -> u32 {
+        match self.entries[idx as usize].rates() {
+            RateSet::Empty => 0,
+            RateSet::One { count, .. } => count,
+            RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(_, c)| *c).sum(),
+        }
+    }
+
+    /// Sources with at least one subscriber.
+    pub fn subscribed(&self) -> usize {
+        (0..self.entries.len() as u32)
+            .filter(|&i| self.entries[i as usize].flags & LIVE != 0 && self.subscribers(i) > 0)
+            .count()
+    }
+
+    /// Turns the net subscription changes since the last flush into requests, and frees
+    /// entries nobody refers to any more.
+    pub fn flush(&mut self, out: &mut VecDeque<SourceRequest>) {
+        if self.dirty.is_empty() {
+            return;
+        }
+        let mut subscribe = Vec::new();
+        let mut set_rate = Vec::new();
+        let mut unsubscribe = Vec::new();
+        let dirty = std::mem::take(&mut self.dirty);
+        for &idx in &dirty {
+            let want = self.fastest(idx);
+            let e = &mut self.entries[idx as usize];
+            e.flags &= !DIRTY;
+            if e.flags & LIVE == 0 {
+                continue;
+            }
+            if want != e.announced_rate {
+                let key = SourceKey::new(idx, e.generation);
+                if e.announced_rate == 0 {
+                    e.announced_rate = want;
+                    subscribe.push(Subscription { item: self.source_item(idx), sampling_rate_ms: want });
+                } else if want == 0 {
+                    e.announced_rate = 0;
+                    unsubscribe.push(key);
+                } else {
+                    e.announced_rate = want;
+                    set_rate.push((key, want));
+                }
+            }
+            let e = &self.entries[idx as usize];
+            if e.refs == 0 && e.announced_rate == 0 {
+                self.free_entry(idx);
+            }
+        }
+        if dirty.capacity() <= 4096 {
+            self.dirty = dirty;
+            self.dirty.clear();
+        }
+        if !subscribe.is_empty() {
+            out.push_back(SourceRequest::Subscribe(subscribe));
+        }
+        if !set_rate.is_empty() {
+            out.push_back(SourceRequest::SetSamplingRate(set_rate));
+        }
+        if !unsubscribe.is_empty() {
+            out.push_back(SourceRequest::Unsubscribe(unsubscribe));
+        }
+    }
+
+    fn free_entry(&mut self, idx: u32) {
+        if self.entries[idx as usize].flags & ENUMERATED != 0 {
+            self.enum_texts.remove(&idx);
+        }
+        let e = &mut self.entries[idx as usize];
+        self.index.remove(key_hash(e.channel, &e.key), idx);
+        e.key = Box::from("");
+        e.value = CachedValue::EMPTY;
+        e.set_rates(RateSet::Empty);
+        e.flags = 0;
+        e.generation = e.generation.wrapping_add(1);
+        self.free.push(idx);
+        self.live -= 1;
+    }
+}
+
+/// The 32-bit hash of a source item identity (FxHash-style; the key space is the
+/// server's own namespace, not attacker-chosen buckets of a shared service).
+fn key_hash(channel: u32, key: &str) -> u32 {
+    const K: u64 = 0x517C_C1B7_2722_0A95;
+    let mut h = u64::from(channel).wrapping_mul(K);
+    let mut chunks = key.as_bytes().chunks_exact(8);
+    for c in &mut chunks {
+        let w = u64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]);
+        h = (h.rotate_left(5) ^ w).wrapping_mul(K);
+    }
+    let mut tail = 0u64;
+    for (i, &b) in chunks.remainder().iter().enumerate() {
+        tail |= u64::from(b) << (8 * i);
+    }
+    h = (h.rotate_left(5) ^ tail ^ (key.len() as u64) << 56).wrapping_mul(K);
+    (h >> 32) as u32 ^ h as u32
+}
+
+/// An open-addressing (linear probing) index from a 32-bit hash to entry indices, 8 bytes
+/// per slot: `hash << 32 | (index + 1)`, 0 = empty. Keys are compared through the entries
+/// themselves, so no string is stored twice. Deletion shifts back (no tombstones).
+#[derive(Default)]
+pub(crate) struct SourceIndex {
+    slots: Vec<u64>,
+    len: usize,
+}
+
+impl SourceIndex {
+    fn mask(&self) -> usize {
+        self.slots.len().wrapping_sub(1)
+    }
+
+    pub fn find(&self, hash: u32, mut eq: impl FnMut(u32) -> bool) -> Option<u32> {
+        if self.slots.is_empty() {
+            return None;
+        }
+        let mask = self.mask();
+        let mut i = hash as usize & mask;
+        loop {
+            let s = self.slots[i];
+            if s == 0 {
+                return None;
+            }
+            if (s >> 32) as u32 == hash && eq((s as u32) - 1) {
+                return Some((s as u32) - 1);
+            }
+            i = (i + 1) & mask;
+        }
+    }
+
+    pub fn insert(&mut self, hash: u32, idx: u32) {
+        if (self.len + 1) * 8 > self.slots.len() * 7 {
+            self.grow();
+        }
+        let mask = self.mask();
+        let mut i = hash as usize & mask;
+        while self.slots[i] != 0 {
+            i = (i + 1) & mask;
+        }
+        self.slots[i] = (u64::from(hash) << 32) | u64::from(idx + 1);
+        self.len += 1;
+    }
+
+    pub fn remove(&mut self, hash: u32, idx: u32) {
+        if self.slots.is_empty() {
+            return;
+        }
+        let mask = self.mask();
+        let want = (u64::from(hash) << 32) | u64::from(idx + 1);
+        let mut hole = hash as usize & mask;
+        loop {
+            let s = self.slots[hole];
+            if s == 0 {
+                return;
+            }
+            if s == want {
+                break;
+            }
+            hole = (hole + 1) & mask;
+        }
+        let mut j = hole;
+        loop {
+            j = (j + 1) & mask;
+            let s = self.slots[j];
+            if s == 0 {
+                break;
+            }
+            let ideal = (s >> 32) as usize & mask;
+            // `s` may move into the hole when the hole lies between its ideal slot and j.
+            if (j.wrapping_sub(ideal) & mask) >= (j.wrapping_sub(hole) & mask) {
+                self.slots[hole] = s;
+                hole = j;
+            }
+        }
+        self.slots[hole] = 0;
+        self.len -= 1;
+    }
+
+    fn grow(&mut self) {
+        let new_len = (self.slots.len() * 2).max(16);
+        let old = std::mem::replace(&mut self.slots, vec![0; new_len]);
+        let mask = new_len - 1;
+        for s in old.into_iter().filter(|&s| s != 0) {
+            let mut i = (s >> 32) as usize & mask;
+            while self.slots[i] != 0 {
+                i = (i + 1) & mask;
+            }
+            self.slots[i] = s;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use std::collections::HashMap;
+
+    proptest! {
+        /// The index behaves like a map under any sequence of inserts and removes,
+        /// including colliding hashes.
+        #[test]
+        fn source_index_matches_a_hash_map(ops in proptest::collection::vec((0u32..64, any::<bool>()), 1..400)) {
+            let mut index = SourceIndex::default();
+            let mut model: HashMap<u32, u32> = HashMap::new(); // key -> idx
+            let mut next = 0u32;
+            let hash = |k: u32| k % 7; // many collisions
+            for (k, insert) in ops {
+                if insert && !model.contains_key(&k) {
+                    index.insert(hash(k), next);
+                    model.insert(k, next);
+                    next += 1;
+                } else if !insert {
+                    if let Some(idx) = model.remove(&k) {
+                        index.remove(hash(k), idx);
+                    }
+                }
+                let keys: HashMap<u32, u32> = model.iter().map(|(k, i)| (*i, *k)).collect();
+                for probe in 0u32..64 {
+                    let found = index.find(hash(probe), |i| keys.get(&i) == Some(&probe));
+                    prop_assert_eq!(found, model.get(&probe).copied());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rate_set_tracks_the_fastest_subscriber() {
+        let mut t = SourceTable::default();
+        let def = ItemDef {
+            source_key: "X".into(),
+            channel: "*".into(),
+            canonical_type: VarType::R8,
+            access_rights: 3,
+            eu: EuInfo::None,
+            constant: None,
+        };
+        let i = t.find_or_insert(&def, Timestamp(0));
+        assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
+        t.add_rate(i, 5000);
+        t.add_rate(i, 1000);
+        t.add_rate(i, 1000);
+        assert_eq!((t.fastest(i), t.subscribers(i)), (1000, 3));
+        t.remove_rate(i, 1000);
+        t.remove_rate(i, 1000);
+        assert_eq!((t.fastest(i), t.subscribers(i)), (5000, 1));
+        assert_eq!(t.entries[i as usize].rates(), RateSet::One { rate: 5000, count: 1 });
+        t.remove_rate(i, 5000);
+        assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
+    }
+
+    #[test]
+    fn entries_stay_small() {
+        assert!(std::mem::size_of::<SourceEntry>() <= 104, "{}", std::mem::size_of::<SourceEntry>());
+        assert_eq!(std::mem::size_of::<CachedValue>(), 16);
+    }
+
+    #[test]
+    fn cached_values_round_trip_exactly() {
+        let values = [
+            Value::Empty,
+            Value::I1(-3),
+            Value::UI1(200),
+            Value::I2(-30000),
+            Value::UI2(65000),
+            Value::I4(-7),
+            Value::UI4(4_000_000_000),
+            Value::I8(i64::MIN),
+            Value::UI8(u64::MAX),
+            Value::R4(1.5),
+            Value::R8(-0.0),
+            Value::Cy(123_456),
+            Value::Date(45_000.25),
+            Value::Bool(true),
+            Value::Error(-2147352571),
+            Value::Bstr("x".into()),
+        ];
+        for v in values {
+            let c = CachedValue::from_value(v.clone());
+            assert_eq!(c.to_value(), v);
+            assert!(c.same_as(&v));
+        }
+        assert!(!CachedValue::from_value(Value::I4(1)).same_as(&Value::I2(1)));
+    }
+}
+

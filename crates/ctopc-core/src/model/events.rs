@@ -1,0 +1,143 @@
+//! Outputs for the client: the IOPCDataCallback calls, and synchronous read results.
+
+use super::engine::{GroupHandle, SessionHandle};
+use crate::{OpcError, Quality, Timestamp, Value};
+
+/// One item of an OnDataChange or OnReadComplete callback.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ItemValue {
+    pub client_handle: u32,
+    /// Converted to the item's requested type (VT_EMPTY when `error` is set).
+    pub value: Value,
+    pub quality: Quality,
+    pub timestamp: Timestamp,
+    /// `None` is S_OK.
+    pub error: Option<OpcError>,
+}
+
+/// One item of a synchronous read (OPCITEMSTATE; the client handle is ignored by
+/// ReadMaxAge).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ItemState {
+    pub client_handle: u32,
+    pub value: Value,
+    pub quality: Quality,
+    pub timestamp: Timestamp,
+}
+
+/// Why an OnDataChange is sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DataChangeKind {
+    /// Subscription update at the update rate (transaction ID 0).
+    Subscription,
+    /// Completion of Refresh2 / RefreshMaxAge (the client's transaction ID).
+    Refresh,
+    /// Keep-alive: no items, transaction ID 0 (OPC DA 3.0 IOPCGroupStateMgt2).
+    KeepAlive,
+}
+
+/// IOPCDataCallback::OnDataChange.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DataChange {
+    pub session: SessionHandle,
+    pub group: GroupHandle,
+    /// hGroup: the group's client handle.
+    pub client_group: u32,
+    pub kind: DataChangeKind,
+    pub transaction_id: u32,
+    /// The server's cancel ID of a refresh (0 for subscription and keep-alive callbacks).
+    pub cancel_id: u32,
+    /// hrMasterquality: `None` (S_OK) when every quality is GOOD, else S_FALSE.
+    pub master_quality: Option<OpcError>,
+    /// hrMastererror: `None` (S_OK) when every item error is S_OK, else S_FALSE.
+    pub master_error: Option<OpcError>,
+    pub items: Vec<ItemValue>,
+}
+
+/// IOPCDataCallback::OnReadComplete (async Read / ReadMaxAge).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadComplete {
+    pub session: SessionHandle,
+    pub group: GroupHandle,
+    pub client_group: u32,
+    pub transaction_id: u32,
+    pub cancel_id: u32,
+    pub master_quality: Option<OpcError>,
+    pub master_error: Option<OpcError>,
+    pub items: Vec<ItemValue>,
+}
+
+/// One item of OnWriteComplete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WriteResult {
+    pub client_handle: u32,
+    /// `None` is S_OK.
+    pub error: Option<OpcError>,
+}
+
+/// IOPCDataCallback::OnWriteComplete (async Write / WriteVQT).
+#[derive(Debug, Clone, PartialEq)]
+pub struct WriteComplete {
+    pub session: SessionHandle,
+    pub group: GroupHandle,
+    pub client_group: u32,
+    pub transaction_id: u32,
+    pub cancel_id: u32,
+    pub master_error: Option<OpcError>,
+    pub items: Vec<WriteResult>,
+}
+
+/// IOPCDataCallback::OnCancelComplete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CancelComplete {
+    pub session: SessionHandle,
+    pub group: GroupHandle,
+    pub client_group: u32,
+    pub transaction_id: u32,
+    pub cancel_id: u32,
+}
+
+/// A callback to deliver to a group's IOPCDataCallback sink.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    DataChange(DataChange),
+    ReadComplete(ReadComplete),
+    WriteComplete(WriteComplete),
+    CancelComplete(CancelComplete),
+}
+
+impl Event {
+    pub fn session(&self) -> SessionHandle {
+        match self {
+            Event::DataChange(e) => e.session,
+            Event::ReadComplete(e) => e.session,
+            Event::WriteComplete(e) => e.session,
+            Event::CancelComplete(e) => e.session,
+        }
+    }
+    pub fn group(&self) -> GroupHandle {
+        match self {
+            Event::DataChange(e) => e.group,
+            Event::ReadComplete(e) => e.group,
+            Event::WriteComplete(e) => e.group,
+            Event::CancelComplete(e) => e.group,
+        }
+    }
+    /// The cancel ID of an asynchronous transaction's completion; 0 for subscription
+    /// updates and keep-alives.
+    pub fn cancel_id(&self) -> u32 {
+        match self {
+            Event::DataChange(e) => e.cancel_id,
+            Event::ReadComplete(e) => e.cancel_id,
+            Event::WriteComplete(e) => e.cancel_id,
+            Event::CancelComplete(e) => e.cancel_id,
+        }
+    }
+}
+
+/// hrMasterquality and hrMastererror for a list of items.
+pub(crate) fn master_codes(items: &[ItemValue]) -> (Option<OpcError>, Option<OpcError>) {
+    let quality = if items.iter().all(|i| i.quality.is_good()) { None } else { Some(OpcError::False) };
+    let error = if items.iter().all(|i| i.error.is_none()) { None } else { Some(OpcError::False) };
+    (quality, error)
+}

@@ -1,0 +1,201 @@
+//! The update scheduler: group update-rate ticks, keep-alives and source-request timeouts,
+//! driven by `poll_timeout()` / `handle_timeout(now)`; the event queue (`poll_event`).
+//!
+//! Each ticking group (active, live, callback connected and enabled) has one valid entry in
+//! a binary heap, keyed by its next deadline: the next update tick, or the keep-alive
+//! deadline when that comes first. Stale entries (the group was rescheduled or removed)
+//! are skipped lazily. A group's first tick after it starts ticking is immediate; ticks
+//! then keep their phase (a late `handle_timeout` skips the missed periods instead of
+//! bursting).
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use super::deadband::{band, value_changed};
+use super::engine::Engine;
+use super::events::{master_codes, DataChange, DataChangeKind, Event};
+use super::item::{ACTIVE, SENT};
+use super::transactions::item_value;
+use crate::convert::Locale;
+use crate::{OpcError, Timestamp};
+
+#[derive(Default)]
+pub(crate) struct Scheduler {
+    /// (deadline, group slot, group sched_seq).
+    groups: BinaryHeap<Reverse<(Timestamp, u32, u32)>>,
+    /// (deadline, source request id).
+    pub timeouts: BinaryHeap<Reverse<(Timestamp, u64)>>,
+}
+
+impl Engine {
+    fn valid_wake(&self, slot: u32, seq: u32) -> bool {
+        matches!(self.groups.get(slot as usize), Some(Some(g)) if g.sched_seq == seq && g.wake.is_some())
+    }
+
+    /// (Re)computes a group's deadline. `start_now`: the group (re)starts ticking, its
+    /// first update is due at once and the keep-alive period starts now.
+    pub(crate) fn schedule_group(&mut self, slot: usize, now: Timestamp, start_now: bool) {
+        let g = self.groups[slot].as_mut().expect("group");
+        if !g.ticking() {
+            g.wake = None;
+            g.sched_seq = g.sched_seq.wrapping_add(1);
+            return;
+        }
+        if start_now {
+            g.next_update = now;
+            g.last_callback = now;
+        }
+        let mut due = g.next_update;
+        if g.keep_alive > 0 {
+            due = due.min(g.last_callback.add_millis(u64::from(g.keep_alive)));
+        }
+        if !matches!(g.wake, Some(w) if w <= due) {
+            g.sched_seq = g.sched_seq.wrapping_add(1);
+            g.wake = Some(due);
+            self.sched.groups.push(Reverse((due, slot as u32, g.sched_seq)));
+        }
+    }
+
+    /// When `handle_timeout` must be called next (`None`: nothing scheduled).
+    pub fn poll_timeout(&mut self) -> Option<Timestamp> {
+        let mut next = None;
+        while let Some(&Reverse((t, slot, seq))) = self.sched.groups.peek() {
+            if self.valid_wake(slot, seq) {
+                next = Some(t);
+                break;
+            }
+            self.sched.groups.pop();
+        }
+        while let Some(&Reverse((t, req))) = self.sched.timeouts.peek() {
+            if self.txns.by_req.contains_key(&req) {
+                next = Some(next.map_or(t, |n: Timestamp| n.min(t)));
+                break;
+            }
+            self.sched.timeouts.pop();
+        }
+        next
+    }
+
+    /// Runs everything due at `now`: group updates (OnDataChange of changed items),
+    /// keep-alives, and source-request timeouts.
+    pub fn handle_timeout(&mut self, now: Timestamp) {
+        while let Some(&Reverse((t, slot, seq))) = self.sched.groups.peek() {
+            if t > now {
+                break;
+            }
+            self.sched.groups.pop();
+            if !self.valid_wake(slot, seq) {
+                continue;
+            }
+            self.group_mut(slot as usize).wake = None;
+            self.run_group(slot as usize, now);
+        }
+        while let Some(&Reverse((t, req))) = self.sched.timeouts.peek() {
+            if t > now {
+                break;
+            }
+            self.sched.timeouts.pop();
+            self.fail_source_request(now, req, OpcError::NetAnswerTimeout);
+        }
+    }
+
+    /// The next callback for the client, in the order they were produced.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        let ev = self.events.pop_front()?;
+        if ev.cancel_id() != 0 {
+            if let Some(&slot) = self.group_slots.get(&ev.group().0) {
+                if let Some(g) = self.groups[slot as usize].as_mut() {
+                    g.outstanding = g.outstanding.saturating_sub(1);
+                }
+            }
+        }
+        Some(ev)
+    }
+
+    fn run_group(&mut self, slot: usize, now: Timestamp) {
+        if !self.group(slot).ticking() {
+            return;
+        }
+        let mut sent = false;
+        if now >= self.group(slot).next_update {
+            sent = self.scan_group(slot, now);
+            let g = self.group_mut(slot);
+            let period = i64::from(g.update_rate) * Timestamp::TICKS_PER_MS;
+            if g.next_update <= now {
+                let behind = now.0 - g.next_update.0;
+                g.next_update = Timestamp(g.next_update.0 + (behind / period + 1) * period);
+            }
+        }
+        let g = self.group_mut(slot);
+        if !sent && g.keep_alive > 0 && now >= g.last_callback.add_millis(u64::from(g.keep_alive)) {
+            g.last_callback = now;
+            let ev = Event::DataChange(DataChange {
+                session: g.session,
+                group: g.handle,
+                client_group: g.client_handle,
+                kind: DataChangeKind::KeepAlive,
+                transaction_id: 0,
+                cancel_id: 0,
+                master_quality: None,
+                master_error: None,
+                items: Vec::new(),
+            });
+            self.events.push_back(ev);
+        }
+        self.schedule_group(slot, now, false);
+    }
+
+    /// Change detection for one group: queues an OnDataChange with every active item whose
+    /// quality changed or whose value changed beyond the deadband since it was last sent.
+    /// True when something was sent.
+    fn scan_group(&mut self, slot: usize, now: Timestamp) -> bool {
+        let Engine { groups, sources, events, sessions, change_seq, cfg, .. } = self;
+        let g = groups[slot].as_mut().expect("group");
+        if !g.needs_scan && g.scanned_seq == *change_seq {
+            return false;
+        }
+        let locale = Locale::from_lcid(g.lcid, cfg.default_locale);
+        let scanned = g.scanned_seq;
+        let group_deadband = g.deadband;
+        let mut items = Vec::new();
+        for it in g.items.iter_mut() {
+            if it.flags & ACTIVE == 0 {
+                continue;
+            }
+            let e = &sources.entries[it.source as usize];
+            if it.flags & SENT != 0
+                && (e.changed_seq <= scanned
+                    || (e.quality == it.last_quality
+                        && !value_changed(&e.value, &it.last, band(it.item_deadband(), group_deadband, e.analog_range()))))
+            {
+                continue;
+            }
+            items.push(item_value(it.client, &e.value, e.quality, e.timestamp, it.req_type, locale));
+            it.last = e.value.clone();
+            it.last_quality = e.quality;
+            it.flags |= SENT;
+        }
+        g.scanned_seq = *change_seq;
+        g.needs_scan = false;
+        if items.is_empty() {
+            return false;
+        }
+        let (master_quality, master_error) = master_codes(&items);
+        events.push_back(Event::DataChange(DataChange {
+            session: g.session,
+            group: g.handle,
+            client_group: g.client_handle,
+            kind: DataChangeKind::Subscription,
+            transaction_id: 0,
+            cancel_id: 0,
+            master_quality,
+            master_error,
+            items,
+        }));
+        g.last_callback = now;
+        if let Some(s) = sessions.get_mut(&g.session.0) {
+            s.last_update = now;
+        }
+        true
+    }
+}
