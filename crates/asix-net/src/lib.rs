@@ -1,1 +1,26 @@
+//! The asix network of ServerCTOPC: how the OPC server reaches asix data servers.
+//!
+//! - [`proto`]: the versioned wire protocol (UDP discovery datagrams, framed TCP link),
+//!   documented for gateway writers in `docs/asix-net-protocol.md`.
+//! - [`client`]: the discovery-and-failover client ([`AsixClient`], a non-blocking handle
+//!   over a sans-IO [`client::ClientCore`]).
+//! - [`sim`]: `asix-sim`, a simulated asix data server serving a plant.
+//! - [`naming`], [`config`], [`ini`]: the client's asix name, channel options, INI reading.
+#![forbid(unsafe_code)]
 
+pub mod client;
+pub mod config;
+pub mod datasource;
+pub mod discovery;
+pub mod ini;
+pub mod inproc;
+pub mod naming;
+pub mod proto;
+pub mod sim;
+
+pub use client::{channel_sink, AsixClient, ClientEvent, EventSink, ItemKey, RequestId};
+pub use config::{ClientConfig, ConnectOptions, ExternalServerLists, ServerChoice};
+pub use naming::{asix_client_name, computer_name};
+pub use proto::frame::ReadSource;
+/// The value-quality-timestamp triple, shared with the core.
+pub use ctopc_core::Vqt;

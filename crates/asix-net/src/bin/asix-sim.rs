@@ -1,0 +1,237 @@
+//! asix-sim: a simulated asix data server speaking the asix network protocol.
+//!
+//! Runs until `quit` on stdin, `--run-for-ms` elapses, or the process is killed. Other stdin
+//! lines are control commands (`drop-links`, `stop-answering`, `answer`, `fail-source`,
+//! `restore-source`, `status`); each is answered with one line on stdout.
+
+use std::io::BufRead;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use asix_net::proto::{DEFAULT_DISCOVERY_PORT, DEFAULT_TCP_PORT};
+use asix_net::sim::plant::{
+    acid_plant, channels_from_database, ChannelDef, VarSpec, ACID_PLANT_CHANNEL,
+};
+use asix_net::sim::{self, SimConfig};
+use ctopc_core::VarType;
+
+const USAGE: &str = "\
+usage: asix-sim [options]
+  --name NAME             server name (default ASIX-SIM)
+  --host NAME             computer name; clients reporting it are local (default: this computer)
+  --udp ADDR|PORT         discovery address (default 0.0.0.0:48100)
+  --tcp ADDR|PORT         link address (default 0.0.0.0:48101)
+  --channel NAME[=FILE]   serve a channel: the built-in acid plant variables, or those listed
+                          in FILE (lines: NAME TYPE LOW HIGH [rw]; TYPE R4 I2 UI2 I4 UI4 UI1 R8)
+                          (default: one channel Demo_Wytwornia_Kwasu)
+  --demo-db FILE          serve an asix variable database (the demo: demo/wytwornia_kwasu/
+                          wytwornia_kwasu.zez), one channel per `Channel` attribute
+  --noisy NAME:COUNT      serve a channel of COUNT noisy R4 variables V00000.. (benchmarks)
+  --archive NAME          announce an archive resource
+  --seed N                simulation seed (default 1)
+  --tick-ms N             simulation step (default 100)
+  --app-ini FILE          asix application ini with write rights ([ASMEN] ZEZWOLENIE_ZAPISU ...)
+  --bridge                announce as a bridge
+  --source-failed         start with the data source failed
+  --extra-clients N       add N to the announced client count
+  --driver-delay-ms N     delay of reads from the driver (default 20)
+  --run-for-ms N          exit after N ms
+stdin commands: drop-links stop-answering answer fail-source restore-source status quit
+";
+
+fn addr(s: &str) -> Result<SocketAddr, String> {
+    if let Ok(p) = s.parse::<u16>() {
+        return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), p));
+    }
+    s.parse().map_err(|_| format!("bad address {s:?}"))
+}
+
+fn parse_type(s: &str) -> Option<VarType> {
+    Some(match s.to_ascii_uppercase().as_str() {
+        "R4" => VarType::R4,
+        "R8" => VarType::R8,
+        "I2" => VarType::I2,
+        "UI2" => VarType::UI2,
+        "I4" => VarType::I4,
+        "UI4" => VarType::UI4,
+        "UI1" => VarType::UI1,
+        "BOOL" => VarType::BOOL,
+        _ => return None,
+    })
+}
+
+/// Reads a simple variable list: `NAME TYPE LOW HIGH [rw]` per line (separators: blanks,
+/// commas or semicolons; `#` or `;` starts a comment line).
+fn read_var_list(text: &str) -> Result<Vec<VarSpec>, String> {
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') || line.starts_with(';') {
+            continue;
+        }
+        let f: Vec<&str> = line
+            .split(|c: char| c.is_whitespace() || c == ',' || c == ';')
+            .filter(|x| !x.is_empty())
+            .collect();
+        let bad = || format!("line {}: expected NAME TYPE LOW HIGH [rw]", n + 1);
+        if f.len() < 4 {
+            return Err(bad());
+        }
+        let t = parse_type(f[1]).ok_or_else(bad)?;
+        let lo: f64 = f[2].parse().map_err(|_| bad())?;
+        let hi: f64 = f[3].parse().map_err(|_| bad())?;
+        let rw = f
+            .get(4)
+            .is_some_and(|x| x.eq_ignore_ascii_case("rw") || x.eq_ignore_ascii_case("w"));
+        out.push(VarSpec::new(f[0], t, lo, hi, rw));
+    }
+    Ok(out)
+}
+
+fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
+    let mut cfg = SimConfig::new("ASIX-SIM");
+    cfg.host_name = asix_net::computer_name();
+    cfg.discovery_addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), DEFAULT_DISCOVERY_PORT);
+    cfg.tcp_addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), DEFAULT_TCP_PORT);
+    cfg.channels.clear();
+    let mut run_for = None;
+    let mut it = args.into_iter();
+    while let Some(a) = it.next() {
+        let mut val = || it.next().ok_or_else(|| format!("{a} needs a value"));
+        let num = |s: String| s.parse::<u64>().map_err(|_| format!("bad number {s:?}"));
+        match a.as_str() {
+            "--name" => cfg.server_name = val()?,
+            "--host" => cfg.host_name = val()?,
+            "--udp" => cfg.discovery_addr = addr(&val()?)?,
+            "--tcp" => cfg.tcp_addr = addr(&val()?)?,
+            "--channel" => {
+                let v = val()?;
+                match v.split_once('=') {
+                    Some((name, file)) => {
+                        let text =
+                            std::fs::read_to_string(file).map_err(|e| format!("{file}: {e}"))?;
+                        cfg.channels.push(ChannelDef::from_specs(
+                            name,
+                            read_var_list(&text).map_err(|e| format!("{file}: {e}"))?,
+                        ));
+                    }
+                    None => {
+                        let mut c = acid_plant();
+                        c.name = v;
+                        cfg.channels.push(c);
+                    }
+                }
+            }
+            "--demo-db" => {
+                let f = val()?;
+                let (db, warnings) =
+                    ctopc_core::asix::load_database_file(std::path::Path::new(&f), None)
+                        .map_err(|e| e.to_string())?;
+                for w in warnings {
+                    eprintln!("asix-sim: {w}");
+                }
+                cfg.channels
+                    .extend(channels_from_database(&db, ACID_PLANT_CHANNEL));
+            }
+            "--noisy" => {
+                let v = val()?;
+                let (name, n) = v.split_once(':').ok_or("--noisy needs NAME:COUNT")?;
+                cfg.channels
+                    .push(ChannelDef::noisy(name, num(n.to_owned())? as usize));
+            }
+            "--archive" => cfg.archives.push(val()?),
+            "--seed" => cfg.seed = num(val()?)?,
+            "--tick-ms" => cfg.tick_ms = num(val()?)?,
+            "--app-ini" => {
+                let f = val()?;
+                cfg.app_ini = Some(std::fs::read_to_string(&f).map_err(|e| format!("{f}: {e}"))?);
+            }
+            "--bridge" => cfg.bridge = true,
+            "--source-failed" => cfg.source_failed = true,
+            "--extra-clients" => cfg.extra_clients = num(val()?)? as u32,
+            "--driver-delay-ms" => cfg.driver_delay = Duration::from_millis(num(val()?)?),
+            "--run-for-ms" => run_for = Some(num(val()?)?),
+            "-h" | "--help" => return Err(String::new()),
+            other => return Err(format!("unknown option {other}")),
+        }
+    }
+    if cfg.channels.is_empty() {
+        let mut c = acid_plant();
+        c.name = ACID_PLANT_CHANNEL.to_owned();
+        cfg.channels.push(c);
+    }
+    Ok((cfg, run_for))
+}
+
+fn main() -> ExitCode {
+    let (cfg, run_for) = match parse(std::env::args().skip(1).collect()) {
+        Ok(x) => x,
+        Err(e) if e.is_empty() => {
+            print!("{USAGE}");
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            eprintln!("asix-sim: {e}\n\n{USAGE}");
+            return ExitCode::from(2);
+        }
+    };
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("asix-sim: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    rt.block_on(async move {
+        let sim = match sim::start(cfg).await {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("asix-sim: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        println!(
+            "asix-sim {} udp={} tcp={}",
+            sim.server_name(),
+            sim.discovery_addr(),
+            sim.tcp_addr()
+        );
+        // stdin is read on a plain thread (no tokio io-std needed); EOF just ends control.
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<String>();
+        std::thread::spawn(move || {
+            for line in std::io::stdin().lock().lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let deadline = run_for.map(|ms| tokio::time::Instant::now() + Duration::from_millis(ms));
+        let mut stdin_open = true;
+        loop {
+            let sleep = async {
+                match deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            };
+            tokio::select! {
+                line = rx.recv(), if stdin_open => match line {
+                    Some(l) if l.trim() == "quit" => break,
+                    Some(l) => match sim.control(&l) {
+                        Ok(s) => println!("{s}"),
+                        Err(e) => println!("error: {e}"),
+                    },
+                    None => stdin_open = false,
+                },
+                () = sleep => break,
+            }
+        }
+        sim.shutdown().await;
+        ExitCode::SUCCESS
+    })
+}

@@ -1,0 +1,221 @@
+//! Client configuration: the channel options that govern discovery (AsixServerName,
+//! StopAfterFirstServerFound, FindServerTimeout, NetTimeout) and the external server lists.
+
+use std::collections::HashMap;
+use std::net::{Ipv4Addr, SocketAddr};
+use std::time::Duration;
+
+use crate::ini::{split_list, Ini};
+use crate::proto::discovery::{Announce, Resource, ResourceKind};
+use crate::proto::DEFAULT_DISCOVERY_PORT;
+
+/// Which servers a channel may use (the `AsixServerName` option, or an external list).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ServerChoice {
+    /// Empty or `*`: any server offering the resource.
+    Any,
+    /// One name or a comma-separated list: only these servers (case-insensitive).
+    Names(Vec<String>),
+    /// `LOCAL`: only the server on this computer.
+    Local,
+}
+
+impl ServerChoice {
+    /// Parses an `AsixServerName` value.
+    pub fn parse(asix_server_name: &str) -> ServerChoice {
+        let s = asix_server_name.trim();
+        if s.is_empty() || s == "*" {
+            return ServerChoice::Any;
+        }
+        if s.eq_ignore_ascii_case("LOCAL") {
+            return ServerChoice::Local;
+        }
+        let names = split_list(s);
+        if names.is_empty() {
+            ServerChoice::Any
+        } else {
+            ServerChoice::Names(names)
+        }
+    }
+
+    /// May this announcing server be used (at first connection and after a link loss)?
+    pub fn allows(&self, a: &Announce) -> bool {
+        match self {
+            ServerChoice::Any => true,
+            ServerChoice::Local => a.flags.local(),
+            ServerChoice::Names(n) => n.iter().any(|x| x.eq_ignore_ascii_case(&a.server_name)),
+        }
+    }
+}
+
+/// The discovery options of an AsixConnect channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConnectOptions {
+    /// `AsixServerName`: empty, `*`, a name, a comma-separated list, or `LOCAL`.
+    pub asix_server_name: String,
+    /// `StopAfterFirstServerFound` (default tak).
+    pub stop_after_first_server_found: bool,
+    /// `FindServerTimeout` (default 3000 ms).
+    pub find_server_timeout: Duration,
+    /// `NetTimeout` (default 3000 ms): the longest wait for any answer of a server.
+    pub net_timeout: Duration,
+}
+
+impl Default for ConnectOptions {
+    fn default() -> Self {
+        ConnectOptions {
+            asix_server_name: String::new(),
+            stop_after_first_server_found: true,
+            find_server_timeout: Duration::from_millis(3000),
+            net_timeout: Duration::from_millis(3000),
+        }
+    }
+}
+
+/// The external server lists of `ASIXConnect.ini` (`[AsixCTServers]` by channel,
+/// `[AsixHTServers]` by archive, `[AsixALServers]` by alarm-server network name), used only
+/// when a channel names no server.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ExternalServerLists {
+    lists: HashMap<(ResourceKind, String), Vec<String>>,
+}
+
+impl ExternalServerLists {
+    /// Reads the three sections from the text of `ASIXConnect.ini`. Resource names are
+    /// matched case-insensitively, as the INI API does.
+    pub fn parse(asixconnect_ini: &str) -> Self {
+        let ini = Ini::parse(asixconnect_ini);
+        let mut lists = HashMap::new();
+        for (section, kind) in [
+            ("AsixCTServers", ResourceKind::Channel),
+            ("AsixHTServers", ResourceKind::Archive),
+            ("AsixALServers", ResourceKind::AlarmServer),
+        ] {
+            for (k, v) in ini.entries(section) {
+                let servers = split_list(v);
+                if !servers.is_empty() {
+                    lists.insert((kind, k.to_ascii_uppercase()), servers);
+                }
+            }
+        }
+        ExternalServerLists { lists }
+    }
+
+    pub fn insert(&mut self, resource: &Resource, servers: Vec<String>) {
+        self.lists
+            .insert((resource.kind, resource.name.to_ascii_uppercase()), servers);
+    }
+
+    pub fn get(&self, resource: &Resource) -> Option<&[String]> {
+        self.lists
+            .get(&(resource.kind, resource.name.to_ascii_uppercase()))
+            .map(Vec::as_slice)
+    }
+}
+
+/// Everything the client needs.
+#[derive(Debug, Clone)]
+pub struct ClientConfig {
+    /// The client's asix name (see [`crate::asix_client_name`]); write rights are granted to it.
+    pub client_name: String,
+    /// This computer's name (servers on the same computer announce themselves as local).
+    pub client_host: String,
+    pub options: ConnectOptions,
+    pub external: ExternalServerLists,
+    /// Where FindServer requests go: in production the LAN broadcast address and the local
+    /// server; in tests loopback addresses with distinct ports.
+    pub discovery_targets: Vec<SocketAddr>,
+    /// Local address of the discovery socket.
+    pub discovery_bind: SocketAddr,
+    /// FindServer is repeated this often while a search runs (UDP may lose datagrams).
+    pub discovery_resend: Duration,
+    /// A Ping is sent this often; no Pong within NetTimeout means the link is lost.
+    pub keepalive: Duration,
+    /// Pause between unsuccessful rounds of discovery and connection.
+    pub reconnect_interval: Duration,
+    /// Items a server refused are subscribed again this often.
+    pub retry_failed_items: Duration,
+    /// Ask servers for changed values only (default: every sample, as the engine's
+    /// data-source boundary wants them for MaxAge).
+    pub changes_only: bool,
+}
+
+impl ClientConfig {
+    pub fn new(client_name: impl Into<String>, client_host: impl Into<String>) -> Self {
+        ClientConfig {
+            client_name: client_name.into(),
+            client_host: client_host.into(),
+            options: ConnectOptions::default(),
+            external: ExternalServerLists::default(),
+            discovery_targets: vec![
+                SocketAddr::from((Ipv4Addr::BROADCAST, DEFAULT_DISCOVERY_PORT)),
+                SocketAddr::from((Ipv4Addr::LOCALHOST, DEFAULT_DISCOVERY_PORT)),
+            ],
+            discovery_bind: SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)),
+            discovery_resend: Duration::from_millis(500),
+            keepalive: Duration::from_millis(1000),
+            reconnect_interval: Duration::from_millis(1000),
+            retry_failed_items: Duration::from_secs(10),
+            changes_only: false,
+        }
+    }
+
+    /// The servers allowed for a resource: `AsixServerName`, or when that names no server,
+    /// the external list for the resource if there is one.
+    pub fn choice_for(&self, resource: &Resource) -> ServerChoice {
+        match ServerChoice::parse(&self.options.asix_server_name) {
+            ServerChoice::Any => match self.external.get(resource) {
+                Some(list) => ServerChoice::Names(list.to_vec()),
+                None => ServerChoice::Any,
+            },
+            other => other,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn asix_server_name_variants() {
+        assert_eq!(ServerChoice::parse(""), ServerChoice::Any);
+        assert_eq!(ServerChoice::parse(" * "), ServerChoice::Any);
+        assert_eq!(ServerChoice::parse("local"), ServerChoice::Local);
+        assert_eq!(
+            ServerChoice::parse("A"),
+            ServerChoice::Names(vec!["A".into()])
+        );
+        assert_eq!(
+            ServerChoice::parse("A, B ,"),
+            ServerChoice::Names(vec!["A".into(), "B".into()])
+        );
+    }
+
+    #[test]
+    fn external_list_applies_only_when_no_server_is_named() {
+        let mut cfg = ClientConfig::new("CLI.", "CLI");
+        cfg.external = ExternalServerLists::parse(
+            "[AsixCTServers]\nKANAL1 = S1, S2\n[AsixHTServers]\nARCH = S3\n",
+        );
+        let k1 = Resource::channel("kanal1");
+        assert_eq!(
+            cfg.choice_for(&k1),
+            ServerChoice::Names(vec!["S1".into(), "S2".into()])
+        );
+        assert_eq!(
+            cfg.choice_for(&Resource::channel("OTHER")),
+            ServerChoice::Any
+        );
+        let arch = Resource {
+            kind: ResourceKind::Archive,
+            name: "ARCH".into(),
+        };
+        assert_eq!(
+            cfg.choice_for(&arch),
+            ServerChoice::Names(vec!["S3".into()])
+        );
+        cfg.options.asix_server_name = "LOCAL".into();
+        assert_eq!(cfg.choice_for(&k1), ServerChoice::Local);
+    }
+}

@@ -1,0 +1,732 @@
+//! The asix network client as the engine's data source ([`ctopc_core::source::Backend`]).
+//!
+//! One [`AsixClient`] per AsixConnect channel (the OPC access path, `SourceItem::channel`),
+//! configured from that channel's options; a source item maps to an asix variable
+//! ([`ItemKey`]: asix channel + variable) plus a [`Derivation`] (value, formatted, percent,
+//! bars) applied to every sample. Several source items may share one asix variable: it is
+//! subscribed once, at the fastest rate asked for, and its samples fan out.
+//!
+//! Never blocks: requests go to the clients' queues; the clients' events come back through a
+//! channel and a [`Wake`], and [`Backend::poll`] drains them.
+
+use std::collections::{BTreeMap, HashMap};
+use std::sync::mpsc;
+use std::sync::Arc;
+
+use ctopc_core::asix::namespace::{AsixNamespace, Derivation};
+use ctopc_core::asix::{
+    apply_quality_rules, check_write_value, RuleOptions, ServerOptions, ServerSelection, Variable,
+};
+use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
+use ctopc_core::source::{Backend, SourceOutput, Wake};
+use ctopc_core::{OpcError, Quality, Timestamp, Value};
+use tokio::runtime::{Handle, Runtime};
+use tracing::{info, warn};
+
+use crate::client::{AsixClient, ClientEvent, ItemKey, RequestId};
+use crate::config::{ClientConfig, ConnectOptions};
+use crate::naming::asix_client_name;
+use crate::proto::frame::ReadSource;
+use crate::proto::DEFAULT_DISCOVERY_PORT;
+use crate::Vqt;
+
+/// What a source item is on the asix network.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resolved {
+    /// The asix variable.
+    pub key: ItemKey,
+    /// How the item's value derives from the variable's.
+    pub derivation: Derivation,
+    /// The variable's database definition (limits, control variable); `None` for
+    /// descriptive IDs.
+    pub definition: Option<Variable>,
+    /// CheckLimits / CheckControlVariables of the item's channel.
+    pub rules: RuleOptions,
+    /// The control variable, when the rules check it.
+    pub control: Option<ItemKey>,
+}
+
+/// Maps source items onto the asix network.
+pub trait Resolver: Send {
+    /// The asix variable behind a source item; `None`: not an asix item (reported
+    /// ASKOM_E_ItemUnknown).
+    fn resolve(&self, item: &SourceItem) -> Option<Resolved>;
+    /// The client configuration for an AsixConnect channel.
+    fn client_config(&self, channel: &str) -> ClientConfig;
+}
+
+/// The client configuration the `[Server]` options of `ASIXConnect.ini` give: `ClientName`
+/// (else the computer name plus a dot), discovery to `BroadcastAddress` (default
+/// 255.255.255.255) and the local server on `DiscoveryPort` (default 48100), and
+/// `ReconnectInterval` as the retry period of refused subscriptions. (`DataPort` is the
+/// gateway's listening port; the client learns it from the announcements.)
+pub fn client_config_from_server_options(
+    opts: &ServerOptions,
+    computer_name: &str,
+) -> ClientConfig {
+    let name = match opts.client_name.as_deref().map(str::trim) {
+        Some(n) if !n.is_empty() => n.to_owned(),
+        _ => asix_client_name(None, computer_name),
+    };
+    let mut c = ClientConfig::new(name, computer_name);
+    let port = opts.discovery_port.unwrap_or(DEFAULT_DISCOVERY_PORT);
+    let broadcast = opts
+        .broadcast_address
+        .as_deref()
+        .and_then(|a| a.trim().parse::<std::net::IpAddr>().ok())
+        .unwrap_or(std::net::IpAddr::V4(std::net::Ipv4Addr::BROADCAST));
+    c.discovery_targets = vec![
+        std::net::SocketAddr::new(broadcast, port),
+        std::net::SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), port),
+    ];
+    c.retry_failed_items =
+        std::time::Duration::from_millis(u64::from(opts.reconnect_interval_ms.max(100)));
+    c
+}
+
+/// The attribute of the variable database naming a variable's asix channel.
+pub const CHANNEL_ATTRIBUTE: &str = "Channel";
+
+/// Resolves through the asix namespace of the core: descriptive IDs carry their channel,
+/// database variables take it from the `Channel` attribute (empty when there is none: the
+/// server then finds the variable by name).
+pub struct NamespaceResolver {
+    ns: Arc<AsixNamespace>,
+    /// Client name, host, discovery targets and timings; the discovery options come from
+    /// each channel.
+    base: ClientConfig,
+}
+
+impl NamespaceResolver {
+    pub fn new(ns: Arc<AsixNamespace>, base: ClientConfig) -> Self {
+        NamespaceResolver { ns, base }
+    }
+}
+
+impl NamespaceResolver {
+    /// The asix channel of a database variable (its `Channel` attribute; "" if none).
+    fn db_channel(&self, channel: &str, def: &Variable) -> String {
+        self.ns
+            .database(channel)
+            .and_then(|db| db.attribute(def, CHANNEL_ATTRIBUTE))
+            .unwrap_or("")
+            .trim()
+            .to_owned()
+    }
+}
+
+impl Resolver for NamespaceResolver {
+    fn resolve(&self, item: &SourceItem) -> Option<Resolved> {
+        let live = self.ns.live_item(&item.channel, &item.item_id)?;
+        let channel = match (&live.asmen_channel, &live.definition) {
+            (Some(c), _) => c.clone(),
+            (None, Some(def)) => self.db_channel(&item.channel, def),
+            (None, None) => String::new(),
+        };
+        let rules = self
+            .ns
+            .config()
+            .resolve_channel(&item.channel)
+            .map(|r| RuleOptions::from(r.options))
+            .unwrap_or_default();
+        let control = match (&live.definition, rules.check_control_variables) {
+            (Some(def), true) => def.control_variable.as_deref().map(|cv| {
+                let db = self.ns.database(&item.channel);
+                let ch = db
+                    .and_then(|db| db.find_real(cv))
+                    .map(|v| self.db_channel(&item.channel, v))
+                    .unwrap_or_default();
+                ItemKey::new(&ch, cv)
+            }),
+            _ => None,
+        };
+        Some(Resolved {
+            key: ItemKey::new(&channel, &live.variable),
+            derivation: live.derivation,
+            definition: live.definition,
+            rules,
+            control,
+        })
+    }
+
+    fn client_config(&self, channel: &str) -> ClientConfig {
+        let mut c = self.base.clone();
+        let cfg = self.ns.config();
+        if let Ok(rc) = cfg.resolve_channel(channel) {
+            let o = rc.options;
+            c.options = ConnectOptions {
+                asix_server_name: match cfg.current_data_servers(rc.name) {
+                    ServerSelection::Any => String::new(),
+                    ServerSelection::Local => "LOCAL".into(),
+                    ServerSelection::Named(v) => v.join(","),
+                },
+                stop_after_first_server_found: o.stop_after_first_server_found,
+                find_server_timeout: std::time::Duration::from_millis(u64::from(
+                    o.find_server_timeout_ms,
+                )),
+                net_timeout: std::time::Duration::from_millis(u64::from(o.net_timeout_ms)),
+            };
+        }
+        c
+    }
+}
+
+struct Mapped {
+    channel: Arc<str>,
+    r: Resolved,
+    rate: u32,
+}
+
+impl Mapped {
+    fn key(&self) -> &ItemKey {
+        &self.r.key
+    }
+}
+
+enum Kind {
+    Read,
+    Write,
+}
+
+/// One device request of the engine, possibly spread over several clients.
+struct Pending {
+    kind: Kind,
+    results: Vec<Option<Result<Vqt, OpcError>>>,
+    resolved: Vec<Option<Resolved>>,
+    remaining: usize,
+}
+
+/// The asix network data source.
+pub struct AsixSource<R: Resolver> {
+    resolver: R,
+    rt: Handle,
+    /// The runtime when the source owns one ([`AsixSource::with_own_runtime`]).
+    own_rt: Option<Runtime>,
+    wake: Arc<dyn Wake>,
+    clients: HashMap<Arc<str>, AsixClient>,
+    tx: mpsc::Sender<(Arc<str>, ClientEvent)>,
+    rx: mpsc::Receiver<(Arc<str>, ClientEvent)>,
+    items: HashMap<SourceKey, Mapped>,
+    fanout: HashMap<(Arc<str>, ItemKey), Vec<SourceKey>>,
+    /// Control variables subscribed for the quality rules: how many items need each.
+    controls: HashMap<(Arc<str>, ItemKey), usize>,
+    /// Last values of the control variables.
+    control_values: HashMap<(Arc<str>, ItemKey), Value>,
+    /// (client channel, client request) -> (engine request, positions in it).
+    parts: HashMap<(Arc<str>, RequestId), (SourceReqId, Vec<usize>)>,
+    pending: HashMap<SourceReqId, Pending>,
+    /// Reads: the AsixConnect channel of each position (for the quality rules).
+    read_channels: HashMap<SourceReqId, HashMap<usize, Arc<str>>>,
+    ready_reads: Vec<(SourceReqId, Vec<Result<Vqt, OpcError>>)>,
+    ready_writes: Vec<(SourceReqId, Vec<Result<(), OpcError>>)>,
+}
+
+/// At most this many client events are taken in one `poll` (the rest wake it again).
+const POLL_BATCH: usize = 4096;
+
+impl<R: Resolver> AsixSource<R> {
+    /// `rt` runs the clients; `wake` is called (from the clients' task) when events arrive.
+    pub fn new(resolver: R, rt: Handle, wake: Arc<dyn Wake>) -> Self {
+        let (tx, rx) = mpsc::channel();
+        AsixSource {
+            resolver,
+            rt,
+            own_rt: None,
+            wake,
+            clients: HashMap::new(),
+            tx,
+            rx,
+            items: HashMap::new(),
+            fanout: HashMap::new(),
+            controls: HashMap::new(),
+            control_values: HashMap::new(),
+            parts: HashMap::new(),
+            pending: HashMap::new(),
+            read_channels: HashMap::new(),
+            ready_reads: Vec::new(),
+            ready_writes: Vec::new(),
+        }
+    }
+
+    /// As [`AsixSource::new`] with a runtime of its own (one worker thread), for callers
+    /// without tokio (the COM driver thread).
+    pub fn with_own_runtime(resolver: R, wake: Arc<dyn Wake>) -> std::io::Result<Self> {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("asix-net")
+            .enable_all()
+            .build()?;
+        let mut s = AsixSource::new(resolver, rt.handle().clone(), wake);
+        s.own_rt = Some(rt);
+        Ok(s)
+    }
+
+    fn client(&mut self, channel: &Arc<str>) -> Option<&AsixClient> {
+        if !self.clients.contains_key(channel) {
+            let cfg = self.resolver.client_config(channel);
+            let tx = self.tx.clone();
+            let wake = self.wake.clone();
+            let ch = channel.clone();
+            let sink = move |ev: ClientEvent| {
+                let _ = tx.send((ch.clone(), ev));
+                wake.wake();
+            };
+            match AsixClient::start(cfg, sink, &self.rt) {
+                Ok(c) => {
+                    info!(channel = %channel, "asix client started");
+                    self.clients.insert(channel.clone(), c);
+                }
+                Err(e) => {
+                    warn!(channel = %channel, error = %e, "asix client cannot start");
+                    return None;
+                }
+            }
+        }
+        self.clients.get(channel)
+    }
+
+    /// The fastest rate any source item of an asix variable asks for.
+    fn rate_of(&self, fan: &(Arc<str>, ItemKey)) -> Option<u32> {
+        self.fanout
+            .get(fan)?
+            .iter()
+            .filter_map(|k| self.items.get(k))
+            .map(|m| m.rate)
+            .min()
+    }
+
+    /// Is the asix variable wanted by an item or as a control variable?
+    fn wanted(&self, fan: &(Arc<str>, ItemKey)) -> bool {
+        self.fanout.contains_key(fan) || self.controls.contains_key(fan)
+    }
+
+    fn subscribe(&mut self, subs: Vec<(SourceItem, u32)>) {
+        let mut wanted: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
+        for (item, rate) in subs {
+            let Some(r) = self.resolver.resolve(&item) else {
+                warn!(item = %item.item_id, "not an asix item");
+                continue;
+            };
+            let channel = item.channel.clone();
+            let fan = (channel.clone(), r.key.clone());
+            let was_wanted = self.wanted(&fan);
+            let before = self.rate_of(&fan);
+            if let Some(old) = self.items.remove(&item.key) {
+                self.release_control(&old);
+            }
+            if let Some(c) = &r.control {
+                let cfan = (channel.clone(), c.clone());
+                if !self.wanted(&cfan) {
+                    wanted
+                        .entry((channel.clone(), rate))
+                        .or_default()
+                        .push(c.clone());
+                }
+                *self.controls.entry(cfan).or_default() += 1;
+            }
+            self.items.insert(
+                item.key,
+                Mapped {
+                    channel: channel.clone(),
+                    r,
+                    rate,
+                },
+            );
+            let keys = self.fanout.entry(fan.clone()).or_default();
+            if !keys.contains(&item.key) {
+                keys.push(item.key);
+            }
+            let after = self.rate_of(&fan);
+            if before != after || !was_wanted {
+                if let Some(r) = after {
+                    wanted.entry((channel, r)).or_default().push(fan.1);
+                }
+            }
+        }
+        for ((channel, rate), keys) in wanted {
+            if let Some(c) = self.client(&channel) {
+                c.subscribe(keys, rate);
+            }
+        }
+    }
+
+    /// One item less needs its control variable; unsubscribes it when nothing needs it.
+    fn release_control(&mut self, m: &Mapped) {
+        let Some(c) = &m.r.control else { return };
+        let cfan = (m.channel.clone(), c.clone());
+        let Some(n) = self.controls.get_mut(&cfan) else {
+            return;
+        };
+        *n -= 1;
+        if *n == 0 {
+            self.controls.remove(&cfan);
+            self.control_values.remove(&cfan);
+            if !self.fanout.contains_key(&cfan) {
+                if let Some(client) = self.clients.get(&m.channel) {
+                    client.unsubscribe(vec![c.clone()]);
+                }
+            }
+        }
+    }
+
+    fn set_rates(&mut self, rates: Vec<(SourceKey, u32)>) {
+        let mut wanted: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
+        for (k, rate) in rates {
+            let Some(m) = self.items.get(&k) else {
+                continue;
+            };
+            let fan = (m.channel.clone(), m.key().clone());
+            let before = self.rate_of(&fan);
+            if let Some(m) = self.items.get_mut(&k) {
+                m.rate = rate;
+            }
+            let after = self.rate_of(&fan);
+            if let (true, Some(r)) = (before != after, after) {
+                wanted.entry((fan.0.clone(), r)).or_default().push(fan.1);
+            }
+        }
+        for ((channel, rate), keys) in wanted {
+            if let Some(c) = self.client(&channel) {
+                c.subscribe(keys, rate);
+            }
+        }
+    }
+
+    fn unsubscribe(&mut self, keys: Vec<SourceKey>) {
+        let mut gone: HashMap<Arc<str>, Vec<ItemKey>> = HashMap::new();
+        let mut lowered: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
+        for k in keys {
+            let Some(m) = self.items.remove(&k) else {
+                continue;
+            };
+            self.release_control(&m);
+            let fan = (m.channel.clone(), m.key().clone());
+            let Some(list) = self.fanout.get_mut(&fan) else {
+                continue;
+            };
+            list.retain(|x| *x != k);
+            if list.is_empty() {
+                self.fanout.remove(&fan);
+                if !self.controls.contains_key(&fan) {
+                    gone.entry(fan.0).or_default().push(fan.1);
+                }
+            } else if let Some(r) = self.rate_of(&fan) {
+                if r != m.rate {
+                    lowered.entry((fan.0, r)).or_default().push(fan.1);
+                }
+            }
+        }
+        for (channel, keys) in gone {
+            if let Some(c) = self.clients.get(&channel) {
+                c.unsubscribe(keys);
+            }
+        }
+        for ((channel, rate), keys) in lowered {
+            if let Some(c) = self.clients.get(&channel) {
+                c.subscribe(keys, rate);
+            }
+        }
+    }
+
+    fn start_request(&mut self, req_id: SourceReqId, kind: Kind, n: usize) {
+        self.pending.insert(
+            req_id,
+            Pending {
+                kind,
+                results: vec![None; n],
+                resolved: vec![None; n],
+                remaining: n,
+            },
+        );
+    }
+
+    fn fill(&mut self, req_id: SourceReqId, pos: usize, r: Result<Vqt, OpcError>) {
+        let Some(p) = self.pending.get_mut(&req_id) else {
+            return;
+        };
+        if let Some(slot @ None) = p.results.get_mut(pos) {
+            *slot = Some(r);
+            p.remaining -= 1;
+        }
+    }
+
+    fn finish_if_done(&mut self, req_id: SourceReqId, channels: &HashMap<usize, Arc<str>>) {
+        if self.pending.get(&req_id).is_none_or(|p| p.remaining > 0) {
+            return;
+        }
+        let Some(p) = self.pending.remove(&req_id) else {
+            return;
+        };
+        match p.kind {
+            Kind::Read => {
+                let results = p
+                    .results
+                    .into_iter()
+                    .zip(p.resolved)
+                    .enumerate()
+                    .map(|(i, (r, res))| {
+                        let r = r.unwrap_or(Err(OpcError::Fail))?;
+                        Ok(match (res, channels.get(&i)) {
+                            (Some(res), Some(ch)) => self.item_vqt(ch, &res, r),
+                            _ => r,
+                        })
+                    })
+                    .collect();
+                self.ready_reads.push((req_id, results));
+            }
+            Kind::Write => {
+                let results = p
+                    .results
+                    .into_iter()
+                    .map(|r| r.unwrap_or(Err(OpcError::Fail)).map(|_| ()))
+                    .collect();
+                self.ready_writes.push((req_id, results));
+            }
+        }
+    }
+
+    /// An item's VQT from its variable's: the quality rules, then the derivation.
+    fn item_vqt(&self, channel: &Arc<str>, r: &Resolved, v: Vqt) -> Vqt {
+        let quality = match &r.definition {
+            Some(def) if r.rules.check_limits || r.rules.check_control_variables => {
+                let control = r
+                    .control
+                    .as_ref()
+                    .and_then(|c| self.control_values.get(&(channel.clone(), c.clone())));
+                apply_quality_rules(def, &v.value, v.quality, control, r.rules)
+            }
+            _ => v.quality,
+        };
+        derive(&r.derivation, Vqt::new(v.value, quality, v.timestamp))
+    }
+
+    fn read(&mut self, req_id: SourceReqId, items: Vec<SourceItem>) {
+        self.start_request(req_id, Kind::Read, items.len());
+        let mut by_channel: BTreeMap<Arc<str>, (Vec<usize>, Vec<ItemKey>)> = BTreeMap::new();
+        for (i, item) in items.iter().enumerate() {
+            match self.resolver.resolve(item) {
+                Some(r) => {
+                    let e = by_channel.entry(item.channel.clone()).or_default();
+                    e.0.push(i);
+                    e.1.push(r.key.clone());
+                    if let Some(p) = self.pending.get_mut(&req_id) {
+                        p.resolved[i] = Some(r);
+                    }
+                }
+                None => self.fill(req_id, i, Err(OpcError::ItemUnknown)),
+            }
+        }
+        let channels: HashMap<usize, Arc<str>> = by_channel
+            .iter()
+            .flat_map(|(c, (pos, _))| pos.iter().map(move |p| (*p, c.clone())))
+            .collect();
+        self.read_channels.insert(req_id, channels);
+        for (channel, (positions, keys)) in by_channel {
+            match self.client(&channel) {
+                Some(c) => {
+                    let id = c.read(keys, ReadSource::Device);
+                    self.parts.insert((channel, id), (req_id, positions));
+                }
+                None => {
+                    for p in positions {
+                        self.fill(req_id, p, Err(OpcError::NetInit));
+                    }
+                }
+            }
+        }
+        self.finish(req_id);
+    }
+
+    fn finish(&mut self, req_id: SourceReqId) {
+        if self.pending.get(&req_id).is_some_and(|p| p.remaining == 0) {
+            let channels = self.read_channels.remove(&req_id).unwrap_or_default();
+            self.finish_if_done(req_id, &channels);
+        }
+    }
+
+    fn write(&mut self, req_id: SourceReqId, items: Vec<(SourceItem, ItemVqt)>, now: Timestamp) {
+        self.start_request(req_id, Kind::Write, items.len());
+        type Parts = (
+            Vec<usize>,
+            Vec<(ItemKey, Value)>,
+            Vec<usize>,
+            Vec<(ItemKey, Vqt)>,
+        );
+        let mut by_channel: BTreeMap<Arc<str>, Parts> = BTreeMap::new();
+        for (i, (item, v)) in items.into_iter().enumerate() {
+            let Some(r) = self.resolver.resolve(&item) else {
+                self.fill(req_id, i, Err(OpcError::ItemUnknown));
+                continue;
+            };
+            // Derived items (formatted, percent, bars) cannot be written; values must be
+            // integers or reals.
+            if r.derivation != Derivation::Value {
+                self.fill(req_id, i, Err(OpcError::BadRights));
+                continue;
+            }
+            if let Err(e) = check_write_value(&v.value) {
+                self.fill(req_id, i, Err(e));
+                continue;
+            }
+            let e = by_channel.entry(item.channel.clone()).or_default();
+            if v.quality.is_none() && v.timestamp.is_none() {
+                e.0.push(i);
+                e.1.push((r.key, v.value));
+            } else {
+                // Extended write: what the client left out is good quality, now.
+                e.2.push(i);
+                let vqt = Vqt::new(
+                    v.value,
+                    v.quality.unwrap_or(Quality::GOOD),
+                    v.timestamp.unwrap_or(now),
+                );
+                e.3.push((r.key, vqt));
+            }
+        }
+        for (channel, (pos_simple, simple, pos_ext, ext)) in by_channel {
+            let Some(c) = self.client(&channel) else {
+                for p in pos_simple.into_iter().chain(pos_ext) {
+                    self.fill(req_id, p, Err(OpcError::WriteErrorNetworkServerNotFound));
+                }
+                continue;
+            };
+            let mut ids = Vec::new();
+            if !simple.is_empty() {
+                ids.push((c.write(simple), pos_simple));
+            }
+            if !ext.is_empty() {
+                ids.push((c.write_vqt(ext), pos_ext));
+            }
+            for (id, positions) in ids {
+                self.parts
+                    .insert((channel.clone(), id), (req_id, positions));
+            }
+        }
+        self.finish(req_id);
+    }
+
+    fn event(&mut self, channel: Arc<str>, ev: ClientEvent, out: &mut SourceOutput) {
+        match ev {
+            ClientEvent::Updates(ups) => {
+                for (key, vqt) in ups {
+                    let fan = (channel.clone(), key);
+                    if self.controls.contains_key(&fan) {
+                        self.control_values.insert(fan.clone(), vqt.value.clone());
+                    }
+                    let Some(list) = self.fanout.get(&fan) else {
+                        continue;
+                    };
+                    for sk in list {
+                        let Some(m) = self.items.get(sk) else {
+                            continue;
+                        };
+                        out.updates
+                            .push((*sk, self.item_vqt(&channel, &m.r, vqt.clone())));
+                    }
+                }
+            }
+            ClientEvent::ReadDone { id, results } => {
+                let Some((req, positions)) = self.parts.remove(&(channel, id)) else {
+                    return;
+                };
+                for (p, (_, r)) in positions.into_iter().zip(results) {
+                    self.fill(req, p, r);
+                }
+                self.finish(req);
+            }
+            ClientEvent::WriteDone { id, results } => {
+                let Some((req, positions)) = self.parts.remove(&(channel, id)) else {
+                    return;
+                };
+                for (p, (_, r)) in positions.into_iter().zip(results) {
+                    self.fill(req, p, r.map(|()| Vqt::default()));
+                }
+                self.finish(req);
+            }
+            ClientEvent::ChannelUp { channel: c, server } => {
+                info!(%channel, asix_channel = %c, %server, "linked")
+            }
+            ClientEvent::ChannelDown { channel: c, error } => {
+                warn!(%channel, asix_channel = %c, %error, "no link")
+            }
+            ClientEvent::ItemFailed { key, error } => {
+                warn!(%channel, item = %key, %error, "item refused")
+            }
+            ClientEvent::ServerStatus {
+                server,
+                flags,
+                clients,
+            } => {
+                info!(%channel, %server, flags = flags.0, clients, "server status")
+            }
+        }
+    }
+}
+
+impl<R: Resolver> Drop for AsixSource<R> {
+    fn drop(&mut self) {
+        // Clients first (they ask their tasks to close the links), then the runtime, without
+        // blocking the dropping thread.
+        self.clients.clear();
+        if let Some(rt) = self.own_rt.take() {
+            rt.shutdown_background();
+        }
+    }
+}
+
+/// Applies a derivation to a sample; a value that cannot be derived is BAD Config Error.
+fn derive(d: &Derivation, v: Vqt) -> Vqt {
+    if matches!(d, Derivation::Value) || v.value == Value::Empty {
+        return v;
+    }
+    match d.apply(&v.value) {
+        Some(value) => Vqt::new(value, v.quality, v.timestamp),
+        None => Vqt::new(Value::Empty, Quality::BAD_CONFIG_ERROR, v.timestamp),
+    }
+}
+
+impl<R: Resolver> Backend for AsixSource<R> {
+    fn request(&mut self, now: Timestamp, req: SourceRequest) {
+        match req {
+            SourceRequest::Subscribe(subs) => self.subscribe(
+                subs.into_iter()
+                    .map(|s| (s.item, s.sampling_rate_ms))
+                    .collect(),
+            ),
+            SourceRequest::SetSamplingRate(rates) => self.set_rates(rates),
+            SourceRequest::Unsubscribe(keys) => self.unsubscribe(keys),
+            SourceRequest::Read { req_id, items } => self.read(req_id, items),
+            SourceRequest::Write { req_id, items } => {
+                let items = items
+                    .into_iter()
+                    .map(|(i, v)| (i, ItemVqt::value(v)))
+                    .collect();
+                self.write(req_id, items, now)
+            }
+            SourceRequest::WriteVqt { req_id, items } => self.write(req_id, items, now),
+        }
+    }
+
+    fn poll(&mut self, _now: Timestamp, out: &mut SourceOutput) {
+        let mut more = false;
+        for i in 0..=POLL_BATCH {
+            match self.rx.try_recv() {
+                Ok((ch, ev)) if i < POLL_BATCH => self.event(ch, ev, out),
+                Ok((ch, ev)) => {
+                    self.event(ch, ev, out);
+                    more = true;
+                }
+                Err(_) => break,
+            }
+        }
+        out.read_results.append(&mut self.ready_reads);
+        out.write_results.append(&mut self.ready_writes);
+        if more {
+            self.wake.wake();
+        }
+    }
+
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        None
+    }
+}

@@ -1,0 +1,1089 @@
+//! A deterministic simulated plant: variables that evolve in fixed ticks from a seed.
+//!
+//! The state after `n` ticks depends only on the seed, the variable list and the writes
+//! applied (and the ticks they were applied at), never on wall-clock timing.
+
+use std::collections::HashMap;
+
+use ctopc_core::{Quality, Timestamp, Value, VarType};
+
+use crate::Vqt;
+
+/// A variable as a simple list describes it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VarSpec {
+    pub name: String,
+    /// One of the asix types: R4, I2, UI2, I4, UI4, UI1 (R8 and BOOL are accepted too).
+    pub var_type: VarType,
+    pub low: f64,
+    pub high: f64,
+    pub writable: bool,
+}
+
+impl VarSpec {
+    pub fn new(name: &str, var_type: VarType, low: f64, high: f64, writable: bool) -> Self {
+        VarSpec {
+            name: name.to_owned(),
+            var_type,
+            low,
+            high,
+            writable,
+        }
+    }
+}
+
+/// How a variable evolves. References to other variables are by name, within the channel.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Behaviour {
+    /// Changes only when written (set points; every variable of a channel on driver NONE).
+    Constant,
+    /// As `Constant`, starting at `value` (control variables: 0 = healthy).
+    Steady { value: f64 },
+    /// Mean-reverting random walk; `step` is the noise per tick as a fraction of the range.
+    Noise { step: f64 },
+    /// Sine wave over the range with a period in ticks, plus noise (fraction of range).
+    Wave { period: u32, noise: f64 },
+    /// Sawtooth from low to high over `period` ticks.
+    Ramp { period: u32 },
+    /// A tank level: rises by `fill` (fraction of range per tick) while the inlet pump runs,
+    /// falls by `drain` while the outlet pump runs. Without pumps it fills and drains by
+    /// itself between 10 % and 90 %.
+    Tank {
+        fill: f64,
+        drain: f64,
+        inlet: Option<String>,
+        outlet: Option<String>,
+    },
+    /// A pump (0/1) switched by a tank level with hysteresis: an inlet pump starts below
+    /// `on_below` (fraction of the tank range) and stops above `off_above`; an outlet pump
+    /// the other way round. Without a tank it toggles every `period` ticks (± jitter).
+    Pump {
+        tank: Option<String>,
+        inlet: bool,
+        low_mark: f64,
+        high_mark: f64,
+    },
+    /// A flow that follows a pump: `nominal` (fraction of range) while it runs, plus noise.
+    Flow { pump: String, nominal: f64 },
+    /// A totaliser integrating another variable (`scale` per tick per unit).
+    Counter { source: String, scale: f64 },
+}
+
+impl Behaviour {
+    /// A plausible behaviour for a variable known only by its spec.
+    pub fn guess(spec: &VarSpec) -> Behaviour {
+        let n = spec.name.to_ascii_uppercase();
+        let integral = !matches!(spec.var_type, VarType::R4 | VarType::R8);
+        if spec.writable {
+            return Behaviour::Constant;
+        }
+        if integral && spec.low == 0.0 && spec.high == 1.0 {
+            return Behaviour::Pump {
+                tank: None,
+                inlet: true,
+                low_mark: 0.0,
+                high_mark: 0.0,
+            };
+        }
+        if n.contains("POZIOM") || n.contains("LEVEL") || n.contains("LVL") {
+            return Behaviour::Tank {
+                fill: 0.004,
+                drain: 0.003,
+                inlet: None,
+                outlet: None,
+            };
+        }
+        if n.contains("LICZNIK") || n.contains("COUNT") || n.contains("TOTAL") {
+            return Behaviour::Ramp { period: 6000 };
+        }
+        match fnv(&n) % 3 {
+            0 => Behaviour::Noise { step: 0.01 },
+            1 => Behaviour::Wave {
+                period: 300 + (fnv(&n) % 900) as u32,
+                noise: 0.005,
+            },
+            _ => Behaviour::Noise { step: 0.02 },
+        }
+    }
+}
+
+impl Behaviour {
+    /// A plausible behaviour from an ISA-style instrument tag (`LI101`, `MS105A`, `TI201`,
+    /// `FQ106`...) when there is one, else from the spec ([`Behaviour::guess`]).
+    pub fn guess_tagged(spec: &VarSpec, tag: &str) -> Behaviour {
+        let t = tag.trim().to_ascii_uppercase();
+        let binary = !matches!(spec.var_type, VarType::R4 | VarType::R8)
+            && spec.low == 0.0
+            && spec.high == 1.0;
+        if spec.writable {
+            return Behaviour::Constant;
+        }
+        if binary
+            || ["MS", "XS", "BS", "LS", "ZS"]
+                .iter()
+                .any(|p| t.starts_with(p))
+        {
+            return Behaviour::Pump {
+                tank: None,
+                inlet: true,
+                low_mark: 0.0,
+                high_mark: 0.0,
+            };
+        }
+        if t.is_empty() {
+            return Behaviour::guess(spec);
+        }
+        if t.starts_with('L') {
+            return Behaviour::Tank {
+                fill: 0.002,
+                drain: 0.0015,
+                inlet: None,
+                outlet: None,
+            };
+        }
+        if t.starts_with("FQ") || t.starts_with("JQ") {
+            return Behaviour::Ramp { period: 36_000 };
+        }
+        if t.starts_with('T') {
+            return Behaviour::Wave {
+                period: 600 + (fnv(&t) % 1800) as u32,
+                noise: 0.003,
+            };
+        }
+        if t.starts_with('S') || t.starts_with('Z') {
+            return Behaviour::Noise { step: 0.003 };
+        }
+        Behaviour::Noise { step: 0.01 }
+    }
+}
+
+/// The channels of an asix variable database (such as the demo database `demo/`): variables
+/// grouped by their `Channel` attribute (`default_channel` when empty), typed and ranged as
+/// the database says (0..100 without a range), behaviours guessed from the `Alias` tag;
+/// control variables hold 0 (healthy) until written or forced.
+pub fn channels_from_database(
+    db: &ctopc_core::asix::VarDatabase,
+    default_channel: &str,
+) -> Vec<ChannelDef> {
+    let controls: std::collections::HashSet<&str> = db
+        .variables
+        .iter()
+        .filter_map(|v| v.control_variable.as_deref())
+        .collect();
+    let mut by_channel: Vec<ChannelDef> = Vec::new();
+    for var in &db.variables {
+        let channel = db
+            .attribute(var, "Channel")
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .unwrap_or(default_channel);
+        let (low, high) = var.range.unwrap_or((0.0, 100.0));
+        let spec = VarSpec::new(
+            &var.name,
+            var.data_type,
+            low.min(high),
+            high.max(low),
+            var.writable,
+        );
+        let tag = db.attribute(var, "Alias").unwrap_or("");
+        let b = if controls.contains(var.name.as_str()) {
+            Behaviour::Steady { value: 0.0 }
+        } else {
+            Behaviour::guess_tagged(&spec, tag)
+        };
+        match by_channel.iter_mut().find(|c| c.name == channel) {
+            Some(c) => c.vars.push((spec, b)),
+            None => by_channel.push(ChannelDef {
+                name: channel.to_owned(),
+                vars: vec![(spec, b)],
+            }),
+        }
+    }
+    by_channel
+}
+
+/// A channel: its name and variables with their behaviours.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelDef {
+    pub name: String,
+    pub vars: Vec<(VarSpec, Behaviour)>,
+}
+
+impl ChannelDef {
+    /// A channel from a simple list, behaviours guessed from names, types and ranges.
+    pub fn from_specs(name: &str, specs: Vec<VarSpec>) -> Self {
+        let vars = specs
+            .into_iter()
+            .map(|s| (s.clone(), Behaviour::guess(&s)))
+            .collect();
+        ChannelDef {
+            name: name.to_owned(),
+            vars,
+        }
+    }
+
+    /// `n` noisy R4 variables `V00000`.. (benchmarks).
+    pub fn noisy(name: &str, n: usize) -> Self {
+        let vars = (0..n)
+            .map(|i| {
+                (
+                    VarSpec::new(&format!("V{i:05}"), VarType::R4, 0.0, 100.0, true),
+                    Behaviour::Noise { step: 0.01 },
+                )
+            })
+            .collect();
+        ChannelDef {
+            name: name.to_owned(),
+            vars,
+        }
+    }
+}
+
+/// splitmix64: small, fast, good enough, and stable across platforms and versions.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform in [-1, 1).
+    pub fn signed(&mut self) -> f64 {
+        self.unit() * 2.0 - 1.0
+    }
+}
+
+fn fnv(s: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in s.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x100_0000_01b3);
+    }
+    h
+}
+
+#[derive(Debug, Clone)]
+enum Kind {
+    Constant,
+    Noise {
+        step: f64,
+    },
+    Wave {
+        period: u32,
+        noise: f64,
+        phase: f64,
+    },
+    Ramp {
+        period: u32,
+    },
+    Tank {
+        fill: f64,
+        drain: f64,
+        inlet: Option<usize>,
+        outlet: Option<usize>,
+        rising: bool,
+    },
+    Pump {
+        tank: Option<usize>,
+        inlet: bool,
+        low: f64,
+        high: f64,
+        next_toggle: u64,
+    },
+    Flow {
+        pump: usize,
+        nominal: f64,
+    },
+    Counter {
+        source: usize,
+        scale: f64,
+    },
+}
+
+/// One variable's state.
+#[derive(Debug, Clone)]
+pub struct PlantVar {
+    pub channel: usize,
+    pub spec: VarSpec,
+    kind: Kind,
+    /// Engineering value.
+    pub value: f64,
+    pub quality: Quality,
+    pub timestamp: Timestamp,
+    /// Bumped whenever the VQT changes (lets subscribers send only changes).
+    pub version: u64,
+}
+
+/// The plant.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    channels: Vec<String>,
+    vars: Vec<PlantVar>,
+    index: HashMap<(String, String), usize>,
+    by_name: HashMap<String, usize>,
+    rng: Rng,
+    tick: u64,
+    tick_ms: u64,
+    epoch: Timestamp,
+}
+
+/// At most this many ticks are computed in one `advance_to`; a plant further behind skips
+/// ahead (time moves on, the simulation resumes from its state).
+pub const MAX_CATCH_UP_TICKS: u64 = 10_000;
+
+impl Plant {
+    /// Builds the plant; `epoch` is the timestamp of tick 0.
+    pub fn new(channels: &[ChannelDef], seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
+        let mut rng = Rng::new(seed);
+        let mut vars = Vec::new();
+        let mut index = HashMap::new();
+        let mut by_name = HashMap::new();
+        let mut names = Vec::new();
+        for (ci, ch) in channels.iter().enumerate() {
+            names.push(ch.name.clone());
+            let base = vars.len();
+            let local: HashMap<&str, usize> = ch
+                .vars
+                .iter()
+                .enumerate()
+                .map(|(i, (s, _))| (s.name.as_str(), base + i))
+                .collect();
+            let find = |n: &Option<String>| n.as_deref().and_then(|n| local.get(n).copied());
+            for (spec, b) in &ch.vars {
+                let (lo, hi) = (spec.low, spec.high.max(spec.low));
+                let kind = match b {
+                    Behaviour::Constant | Behaviour::Steady { .. } => Kind::Constant,
+                    Behaviour::Noise { step } => Kind::Noise { step: *step },
+                    Behaviour::Wave { period, noise } => Kind::Wave {
+                        period: (*period).max(2),
+                        noise: *noise,
+                        phase: rng.unit(),
+                    },
+                    Behaviour::Ramp { period } => Kind::Ramp {
+                        period: (*period).max(2),
+                    },
+                    Behaviour::Tank {
+                        fill,
+                        drain,
+                        inlet,
+                        outlet,
+                    } => Kind::Tank {
+                        fill: *fill,
+                        drain: *drain,
+                        inlet: find(inlet),
+                        outlet: find(outlet),
+                        rising: rng.unit() < 0.5,
+                    },
+                    Behaviour::Pump {
+                        tank,
+                        inlet,
+                        low_mark,
+                        high_mark,
+                    } => Kind::Pump {
+                        tank: find(tank),
+                        inlet: *inlet,
+                        low: *low_mark,
+                        high: *high_mark,
+                        next_toggle: 50 + rng.next_u64() % 200,
+                    },
+                    Behaviour::Flow { pump, nominal } => match local.get(pump.as_str()) {
+                        Some(&p) => Kind::Flow {
+                            pump: p,
+                            nominal: *nominal,
+                        },
+                        None => Kind::Noise { step: 0.01 },
+                    },
+                    Behaviour::Counter { source, scale } => match local.get(source.as_str()) {
+                        Some(&s) => Kind::Counter {
+                            source: s,
+                            scale: *scale,
+                        },
+                        None => Kind::Ramp { period: 6000 },
+                    },
+                };
+                let value = match (b, &kind) {
+                    (Behaviour::Steady { value }, _) => value.clamp(lo, hi),
+                    (_, kind) => match kind {
+                        Kind::Pump { .. } => f64::from(rng.unit() < 0.5),
+                        Kind::Counter { .. } | Kind::Ramp { .. } => lo,
+                        Kind::Tank { .. } => lo + (hi - lo) * (0.3 + 0.4 * rng.unit()),
+                        _ => lo + (hi - lo) * (0.4 + 0.2 * rng.unit()),
+                    },
+                };
+                index.insert((ch.name.clone(), spec.name.clone()), vars.len());
+                by_name.entry(spec.name.clone()).or_insert(vars.len());
+                vars.push(PlantVar {
+                    channel: ci,
+                    spec: spec.clone(),
+                    kind,
+                    value,
+                    quality: Quality::GOOD,
+                    timestamp: epoch,
+                    version: 1,
+                });
+            }
+        }
+        Plant {
+            channels: names,
+            vars,
+            index,
+            by_name,
+            rng,
+            tick: 0,
+            tick_ms: tick_ms.max(1),
+            epoch,
+        }
+    }
+
+    pub fn channels(&self) -> &[String] {
+        &self.channels
+    }
+    pub fn vars(&self) -> &[PlantVar] {
+        &self.vars
+    }
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+    pub fn tick_ms(&self) -> u64 {
+        self.tick_ms
+    }
+    /// A variable by channel and name; an empty channel finds the name in any channel (the
+    /// first channel defining it).
+    pub fn lookup(&self, channel: &str, variable: &str) -> Option<usize> {
+        if channel.is_empty() {
+            return self.by_name.get(variable).copied();
+        }
+        self.index
+            .get(&(channel.to_owned(), variable.to_owned()))
+            .copied()
+    }
+
+    /// The timestamp of tick `t`.
+    pub fn time_of(&self, t: u64) -> Timestamp {
+        self.epoch.add_millis(t.saturating_mul(self.tick_ms))
+    }
+
+    /// Runs the simulation up to tick `t` (bounded, see [`MAX_CATCH_UP_TICKS`]).
+    pub fn advance_to(&mut self, t: u64) {
+        if t > self.tick + MAX_CATCH_UP_TICKS {
+            self.tick = t - MAX_CATCH_UP_TICKS;
+        }
+        while self.tick < t {
+            self.step();
+        }
+    }
+
+    /// One tick.
+    pub fn step(&mut self) {
+        self.tick += 1;
+        let now = self.time_of(self.tick);
+        let tick = self.tick;
+        for i in 0..self.vars.len() {
+            let (lo, hi) = (
+                self.vars[i].spec.low,
+                self.vars[i].spec.high.max(self.vars[i].spec.low),
+            );
+            let span = (hi - lo).max(f64::EPSILON);
+            let old = self.vars[i].value;
+            let mut kind = self.vars[i].kind.clone();
+            let new = match &mut kind {
+                Kind::Constant => old,
+                Kind::Noise { step } => {
+                    let mid = lo + span / 2.0;
+                    let v = old + self.rng.signed() * *step * span + (mid - old) * 0.01;
+                    v.clamp(lo, hi)
+                }
+                Kind::Wave {
+                    period,
+                    noise,
+                    phase,
+                } => {
+                    let x = (tick as f64 / *period as f64 + *phase) * std::f64::consts::TAU;
+                    let v = lo + span * (0.5 + 0.4 * x.sin()) + self.rng.signed() * *noise * span;
+                    v.clamp(lo, hi)
+                }
+                Kind::Ramp { period } => {
+                    lo + span * ((tick % *period as u64) as f64 / *period as f64)
+                }
+                Kind::Tank {
+                    fill,
+                    drain,
+                    inlet,
+                    outlet,
+                    rising,
+                } => {
+                    let on = |p: &Option<usize>, vars: &[PlantVar]| {
+                        p.is_some_and(|p| vars[p].value >= 0.5)
+                    };
+                    let mut v = old;
+                    if inlet.is_none() && outlet.is_none() {
+                        let f = (old - lo) / span;
+                        if f >= 0.9 {
+                            *rising = false;
+                        } else if f <= 0.1 {
+                            *rising = true;
+                        }
+                        v += if *rising { *fill } else { -*drain } * span;
+                    } else {
+                        if on(inlet, &self.vars) {
+                            v += *fill * span;
+                        }
+                        if on(outlet, &self.vars) {
+                            v -= *drain * span;
+                        }
+                    }
+                    v += self.rng.signed() * 0.0005 * span;
+                    v.clamp(lo, hi)
+                }
+                Kind::Pump {
+                    tank,
+                    inlet,
+                    low,
+                    high,
+                    next_toggle,
+                } => match tank {
+                    Some(t) => {
+                        let tv = &self.vars[*t];
+                        let f = (tv.value - tv.spec.low)
+                            / (tv.spec.high - tv.spec.low).max(f64::EPSILON);
+                        let running = old >= 0.5;
+                        let (start, stop) = if *inlet {
+                            (f < *low, f > *high)
+                        } else {
+                            (f > *high, f < *low)
+                        };
+                        f64::from(if running { !stop } else { start })
+                    }
+                    None => {
+                        if tick >= *next_toggle {
+                            *next_toggle = tick + 100 + self.rng.next_u64() % 300;
+                            1.0 - old.round().clamp(0.0, 1.0)
+                        } else {
+                            old
+                        }
+                    }
+                },
+                Kind::Flow { pump, nominal } => {
+                    if self.vars[*pump].value >= 0.5 {
+                        (lo + span * *nominal + self.rng.signed() * 0.01 * span).clamp(lo, hi)
+                    } else {
+                        lo
+                    }
+                }
+                Kind::Counter { source, scale } => {
+                    let v = old + self.vars[*source].value.max(0.0) * *scale;
+                    if v > hi {
+                        lo
+                    } else {
+                        v
+                    }
+                }
+            };
+            let var = &mut self.vars[i];
+            var.kind = kind;
+            // Integral types change only when their rounded value does.
+            let changed = if is_integral(var.spec.var_type) {
+                new.round() != old.round()
+            } else {
+                new != old
+            };
+            var.value = new;
+            if changed || !var.quality.is_good() && !matches!(var.kind, Kind::Constant) {
+                var.quality = Quality::GOOD;
+                var.timestamp = now;
+                var.version += 1;
+            }
+        }
+    }
+
+    /// The VQT of variable `i`, in its type.
+    pub fn vqt(&self, i: usize) -> Vqt {
+        let v = &self.vars[i];
+        Vqt {
+            value: typed(v.spec.var_type, v.value),
+            quality: v.quality,
+            timestamp: v.timestamp,
+        }
+    }
+
+    /// Sets a variable (a write). `None` quality/timestamp: good, now.
+    pub fn set(
+        &mut self,
+        i: usize,
+        value: f64,
+        quality: Option<Quality>,
+        timestamp: Option<Timestamp>,
+    ) {
+        let now = self.time_of(self.tick);
+        let v = &mut self.vars[i];
+        v.value = value;
+        v.quality = quality.unwrap_or(Quality::GOOD);
+        v.timestamp = timestamp.unwrap_or(now);
+        v.version += 1;
+    }
+}
+
+fn is_integral(t: VarType) -> bool {
+    !matches!(t, VarType::R4 | VarType::R8)
+}
+
+/// An engineering value in the variable's type (integers rounded and saturated).
+pub fn typed(t: VarType, v: f64) -> Value {
+    let r = v.round();
+    match t {
+        VarType::R8 => Value::R8(v),
+        VarType::I2 => Value::I2(r.clamp(i16::MIN as f64, i16::MAX as f64) as i16),
+        VarType::UI2 => Value::UI2(r.clamp(0.0, u16::MAX as f64) as u16),
+        VarType::I4 => Value::I4(r.clamp(i32::MIN as f64, i32::MAX as f64) as i32),
+        VarType::UI4 => Value::UI4(r.clamp(0.0, u32::MAX as f64) as u32),
+        VarType::UI1 => Value::UI1(r.clamp(0.0, 255.0) as u8),
+        VarType::I1 => Value::I1(r.clamp(-128.0, 127.0) as i8),
+        VarType::BOOL => Value::Bool(v >= 0.5),
+        _ => Value::R4(v as f32),
+    }
+}
+
+/// A written value as a number, if it is an integer or a real (the only kinds asix accepts).
+pub fn numeric(v: &Value) -> Option<f64> {
+    Some(match v {
+        Value::I1(x) => *x as f64,
+        Value::UI1(x) => *x as f64,
+        Value::I2(x) => *x as f64,
+        Value::UI2(x) => *x as f64,
+        Value::I4(x) => *x as f64,
+        Value::UI4(x) => *x as f64,
+        Value::I8(x) => *x as f64,
+        Value::UI8(x) => *x as f64,
+        Value::R4(x) if x.is_finite() => *x as f64,
+        Value::R8(x) if x.is_finite() => *x,
+        _ => return None,
+    })
+}
+
+/// Name of the demo application's channel.
+pub const ACID_PLANT_CHANNEL: &str = "Demo_Wytwornia_Kwasu";
+
+/// The built-in acid plant (Wytwornia_Kwasu): sulphur burning, a four-bed converter,
+/// absorption, and an acid tank farm with pumps — 32 variables.
+pub fn acid_plant() -> ChannelDef {
+    use Behaviour::*;
+    let r4 = VarType::R4;
+    let i2 = VarType::I2;
+    let ui4 = VarType::UI4;
+    let s = |n: &str| Some(n.to_owned());
+    let v = |name: &str, t: VarType, lo: f64, hi: f64, w: bool, b: Behaviour| {
+        (VarSpec::new(name, t, lo, hi, w), b)
+    };
+    let vars = vec![
+        v(
+            "PIEC_TEMP",
+            r4,
+            950.0,
+            1150.0,
+            false,
+            Wave {
+                period: 1800,
+                noise: 0.004,
+            },
+        ),
+        v("PIEC_TEMP_ZADANA", r4, 950.0, 1150.0, true, Constant),
+        v("SIARKA_DOZOWANIE", r4, 0.0, 20.0, true, Constant),
+        v(
+            "SIARKA_PRZEPLYW",
+            r4,
+            0.0,
+            20.0,
+            false,
+            Noise { step: 0.01 },
+        ),
+        v(
+            "POWIETRZE_PRZEPLYW",
+            r4,
+            0.0,
+            60000.0,
+            false,
+            Noise { step: 0.005 },
+        ),
+        v(
+            "DMUCHAWA_OBROTY",
+            r4,
+            0.0,
+            3000.0,
+            false,
+            Wave {
+                period: 2400,
+                noise: 0.002,
+            },
+        ),
+        v("DMUCHAWA_PRACA", i2, 0.0, 1.0, true, Constant),
+        v("SO2_STEZENIE", r4, 8.0, 12.0, false, Noise { step: 0.01 }),
+        v("O2_STEZENIE", r4, 8.0, 13.0, false, Noise { step: 0.008 }),
+        v(
+            "KONW_T1",
+            r4,
+            420.0,
+            620.0,
+            false,
+            Wave {
+                period: 1200,
+                noise: 0.003,
+            },
+        ),
+        v(
+            "KONW_T2",
+            r4,
+            440.0,
+            560.0,
+            false,
+            Wave {
+                period: 1500,
+                noise: 0.003,
+            },
+        ),
+        v(
+            "KONW_T3",
+            r4,
+            430.0,
+            500.0,
+            false,
+            Wave {
+                period: 1700,
+                noise: 0.003,
+            },
+        ),
+        v(
+            "KONW_T4",
+            r4,
+            410.0,
+            460.0,
+            false,
+            Wave {
+                period: 1900,
+                noise: 0.003,
+            },
+        ),
+        v(
+            "KONW_SPRAWNOSC",
+            r4,
+            98.0,
+            99.9,
+            false,
+            Noise { step: 0.005 },
+        ),
+        v(
+            "ABS_KWAS_STEZENIE",
+            r4,
+            97.5,
+            99.5,
+            false,
+            Noise { step: 0.004 },
+        ),
+        v(
+            "ABS_KWAS_TEMP",
+            r4,
+            60.0,
+            90.0,
+            false,
+            Wave {
+                period: 900,
+                noise: 0.005,
+            },
+        ),
+        v("ABS_WODA_DOZOWANIE", r4, 0.0, 10.0, true, Constant),
+        v(
+            "ZB1_POZIOM",
+            r4,
+            0.0,
+            100.0,
+            false,
+            Tank {
+                fill: 0.003,
+                drain: 0.002,
+                inlet: s("P1_PRACA"),
+                outlet: s("P2_PRACA"),
+            },
+        ),
+        v(
+            "ZB2_POZIOM",
+            r4,
+            0.0,
+            100.0,
+            false,
+            Tank {
+                fill: 0.002,
+                drain: 0.0025,
+                inlet: s("P2_PRACA"),
+                outlet: s("P3_PRACA"),
+            },
+        ),
+        v(
+            "ZB3_POZIOM",
+            r4,
+            0.0,
+            100.0,
+            false,
+            Tank {
+                fill: 0.004,
+                drain: 0.003,
+                inlet: None,
+                outlet: None,
+            },
+        ),
+        v(
+            "P1_PRACA",
+            i2,
+            0.0,
+            1.0,
+            false,
+            Pump {
+                tank: s("ZB1_POZIOM"),
+                inlet: true,
+                low_mark: 0.2,
+                high_mark: 0.85,
+            },
+        ),
+        v(
+            "P2_PRACA",
+            i2,
+            0.0,
+            1.0,
+            false,
+            Pump {
+                tank: s("ZB2_POZIOM"),
+                inlet: true,
+                low_mark: 0.25,
+                high_mark: 0.8,
+            },
+        ),
+        v(
+            "P3_PRACA",
+            i2,
+            0.0,
+            1.0,
+            false,
+            Pump {
+                tank: s("ZB2_POZIOM"),
+                inlet: false,
+                low_mark: 0.3,
+                high_mark: 0.7,
+            },
+        ),
+        v(
+            "P4_PRACA",
+            i2,
+            0.0,
+            1.0,
+            false,
+            Pump {
+                tank: None,
+                inlet: true,
+                low_mark: 0.0,
+                high_mark: 0.0,
+            },
+        ),
+        v(
+            "P1_PRZEPLYW",
+            r4,
+            0.0,
+            50.0,
+            false,
+            Flow {
+                pump: "P1_PRACA".into(),
+                nominal: 0.7,
+            },
+        ),
+        v(
+            "P2_PRZEPLYW",
+            r4,
+            0.0,
+            50.0,
+            false,
+            Flow {
+                pump: "P2_PRACA".into(),
+                nominal: 0.6,
+            },
+        ),
+        v(
+            "P3_PRZEPLYW",
+            r4,
+            0.0,
+            50.0,
+            false,
+            Flow {
+                pump: "P3_PRACA".into(),
+                nominal: 0.65,
+            },
+        ),
+        v(
+            "CHLODNICA_T_WE",
+            r4,
+            20.0,
+            40.0,
+            false,
+            Noise { step: 0.01 },
+        ),
+        v(
+            "CHLODNICA_T_WY",
+            r4,
+            15.0,
+            30.0,
+            false,
+            Noise { step: 0.01 },
+        ),
+        v(
+            "CISNIENIE_KOMORA",
+            r4,
+            90.0,
+            130.0,
+            false,
+            Noise { step: 0.01 },
+        ),
+        v(
+            "PRODUKCJA_LICZNIK",
+            ui4,
+            0.0,
+            4_000_000_000.0,
+            false,
+            Counter {
+                source: "P3_PRZEPLYW".into(),
+                scale: 1.0,
+            },
+        ),
+        v(
+            "ALARM_ZBIORCZY",
+            i2,
+            0.0,
+            1.0,
+            false,
+            Pump {
+                tank: s("ZB3_POZIOM"),
+                inlet: false,
+                low_mark: 0.12,
+                high_mark: 0.88,
+            },
+        ),
+    ];
+    ChannelDef {
+        name: ACID_PLANT_CHANNEL.to_owned(),
+        vars,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn same_seed_same_history_different_seed_different_history() {
+        let chs = [acid_plant()];
+        let mut a = Plant::new(&chs, 42, 100, Timestamp(0));
+        let mut b = Plant::new(&chs, 42, 100, Timestamp(0));
+        let mut c = Plant::new(&chs, 43, 100, Timestamp(0));
+        a.advance_to(500);
+        b.advance_to(250);
+        b.advance_to(500);
+        c.advance_to(500);
+        let va: Vec<_> = (0..a.vars().len()).map(|i| a.vqt(i)).collect();
+        let vb: Vec<_> = (0..b.vars().len()).map(|i| b.vqt(i)).collect();
+        let vc: Vec<_> = (0..c.vars().len()).map(|i| c.vqt(i)).collect();
+        assert_eq!(va, vb);
+        assert_ne!(va, vc);
+        assert_eq!(a.time_of(500), Timestamp(500 * 100 * 10_000));
+    }
+
+    #[test]
+    fn tanks_fill_and_drain_and_pumps_switch_within_ranges() {
+        let chs = [acid_plant()];
+        let mut p = Plant::new(&chs, 7, 100, Timestamp(0));
+        let lvl = p.lookup(ACID_PLANT_CHANNEL, "ZB1_POZIOM").unwrap();
+        let pump = p.lookup(ACID_PLANT_CHANNEL, "P1_PRACA").unwrap();
+        let (mut lo, mut hi, mut switches, mut last) =
+            (f64::MAX, f64::MIN, 0, p.vars()[pump].value);
+        for _ in 0..5000 {
+            p.step();
+            let v = p.vars()[lvl].value;
+            lo = lo.min(v);
+            hi = hi.max(v);
+            if p.vars()[pump].value != last {
+                switches += 1;
+                last = p.vars()[pump].value;
+            }
+            for var in p.vars() {
+                assert!(
+                    var.value >= var.spec.low && var.value <= var.spec.high,
+                    "{} = {}",
+                    var.spec.name,
+                    var.value
+                );
+            }
+        }
+        assert!(hi - lo > 40.0, "level only moved between {lo} and {hi}");
+        assert!(switches >= 2, "pump switched {switches} times");
+    }
+
+    #[test]
+    fn the_demo_database_becomes_a_plant_by_channel() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        let Ok((db, _)) = ctopc_core::asix::load_database_file(&path, None) else {
+            panic!("demo database at {}", path.display());
+        };
+        let chs = channels_from_database(&db, ACID_PLANT_CHANNEL);
+        let names: Vec<&str> = chs.iter().map(|c| c.name.as_str()).collect();
+        assert!(
+            names.contains(&"SIARKA") && names.contains(&"PIEC"),
+            "{names:?}"
+        );
+        assert_eq!(
+            chs.iter().map(|c| c.vars.len()).sum::<usize>(),
+            db.variables.len()
+        );
+        let mut p = Plant::new(&chs, 3, 100, Timestamp(0));
+        let lvl = p.lookup("SIARKA", "KW_A000").unwrap();
+        let first = p.vars()[lvl].value;
+        p.advance_to(600);
+        assert_ne!(p.vars()[lvl].value, first, "a level moves");
+        for v in p.vars() {
+            assert!(
+                v.value >= v.spec.low && v.value <= v.spec.high,
+                "{} = {}",
+                v.spec.name,
+                v.value
+            );
+        }
+        let sp = chs
+            .iter()
+            .flat_map(|c| &c.vars)
+            .find(|(s, _)| s.name == "KW_A110")
+            .unwrap();
+        assert_eq!(sp.1, Behaviour::Constant);
+        // Control variables report healthy.
+        let k = p.lookup("DIAGNOSTYKA", "KW_K001").unwrap();
+        assert_eq!(p.vqt(k).value, Value::I2(0));
+    }
+
+    #[test]
+    fn writes_hold_on_constants_and_integral_values_are_typed() {
+        let chs = [acid_plant()];
+        let mut p = Plant::new(&chs, 1, 100, Timestamp(0));
+        let sp = p.lookup(ACID_PLANT_CHANNEL, "PIEC_TEMP_ZADANA").unwrap();
+        p.set(sp, 1000.5, None, None);
+        p.advance_to(100);
+        assert_eq!(p.vqt(sp).value, Value::R4(1000.5));
+        let pump = p.lookup(ACID_PLANT_CHANNEL, "P1_PRACA").unwrap();
+        assert!(matches!(p.vqt(pump).value, Value::I2(0 | 1)));
+        assert_eq!(numeric(&Value::Bstr("1".into())), None);
+        assert_eq!(numeric(&Value::UI2(7)), Some(7.0));
+    }
+}

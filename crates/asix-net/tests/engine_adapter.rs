@@ -1,0 +1,317 @@
+//! End to end below COM: the core's engine with the asix namespace of the shipped example
+//! configuration and demo database, the `AsixSource` backend, and a simulator serving the
+//! demo database on loopback. Bounded in time and iterations.
+
+mod common;
+
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use asix_net::client::wall_now;
+use asix_net::datasource::{client_config_from_server_options, AsixSource, NamespaceResolver};
+use asix_net::sim::plant::{channels_from_database, ACID_PLANT_CHANNEL};
+use common::*;
+use ctopc_core::asix::namespace::AsixNamespace;
+use ctopc_core::asix::{load_config_file, load_database_file, ServerOptions};
+use ctopc_core::model::{
+    DataSource as ReadFrom, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition,
+    SyncOutcome, SyncResult,
+};
+use ctopc_core::namespace::Namespace;
+use ctopc_core::source::{Backend, SourceOutput, Wake};
+use ctopc_core::{Quality, Value, VarType};
+
+struct CountingWake(AtomicU64);
+
+impl Wake for CountingWake {
+    fn wake(&self) {
+        self.0.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// The driver loop of the COM runtime, in miniature.
+struct Driver {
+    e: Engine,
+    src: AsixSource<NamespaceResolver>,
+}
+
+impl Driver {
+    fn step(&mut self) {
+        let now = wall_now();
+        while let Some(r) = self.e.poll_source_request() {
+            self.src.request(now, r);
+        }
+        let mut out = SourceOutput::default();
+        self.src.poll(now, &mut out);
+        self.e.handle_source_updates(now, out.updates);
+        for (id, r) in out.read_results {
+            self.e.handle_source_read_result(now, id, r);
+        }
+        for (id, r) in out.write_results {
+            self.e.handle_source_write_result(now, id, r);
+        }
+        while self.e.poll_timeout().is_some_and(|t| t <= now) {
+            self.e.handle_timeout(now);
+        }
+    }
+
+    /// Steps (every 10 ms, at most `limit`) until `f` gives an answer.
+    async fn until<T>(
+        &mut self,
+        limit: Duration,
+        what: &str,
+        mut f: impl FnMut(&mut Engine) -> Option<T>,
+    ) -> T {
+        let t0 = Instant::now();
+        while t0.elapsed() < limit {
+            self.step();
+            if let Some(r) = f(&mut self.e) {
+                return r;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        panic!("timed out waiting for {what}");
+    }
+
+    async fn sync<T>(
+        &mut self,
+        what: &str,
+        outcome: SyncOutcome<T>,
+        unwrap: impl Fn(SyncResult) -> T,
+    ) -> T {
+        match outcome {
+            SyncOutcome::Ready(r) => r,
+            SyncOutcome::Pending(id) => {
+                let r = self
+                    .until(Duration::from_secs(10), what, |e| e.take_sync_result(id))
+                    .await;
+                unwrap(r)
+            }
+        }
+    }
+}
+
+fn repo() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn engine_items_get_values_reads_and_writes_through_the_asix_network() {
+    tokio::time::timeout(TEST_LIMIT, async {
+        let (db, _) = load_database_file(
+            &repo().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
+            None,
+        )
+        .unwrap();
+        // The simulator runs on this computer: writes are allowed without a permission entry.
+        let sim = sim_with("DEMO", |c| {
+            c.channels = channels_from_database(&db, ACID_PLANT_CHANNEL);
+            c.host_name = CLIENT_HOST.into();
+            c.tick_ms = 200;
+        })
+        .await;
+        let (config, _) = load_config_file(&repo().join("asixconnect.ini.example")).unwrap();
+        let (ns, warnings) = AsixNamespace::load(config);
+        assert!(warnings.is_empty(), "{warnings:?}");
+        let ns = Arc::new(ns);
+        let wake = Arc::new(CountingWake(AtomicU64::new(0)));
+        let src = AsixSource::new(
+            NamespaceResolver::new(ns.clone(), client_cfg(&[sim.discovery_addr()])),
+            tokio::runtime::Handle::current(),
+            wake.clone(),
+        );
+        let mut d = Driver {
+            e: Engine::new(EngineConfig::default(), ns.clone() as Arc<dyn Namespace>),
+            src,
+        };
+
+        let now = wall_now();
+        let session = d.e.open_session();
+        let group: GroupHandle =
+            d.e.add_group(
+                now,
+                session,
+                &GroupParams {
+                    name: "g",
+                    active: true,
+                    update_rate: 1000,
+                    ..GroupParams::default()
+                },
+            )
+            .unwrap()
+            .group;
+        let ids = [
+            "KW_A000",
+            "KW_A000.PercentageCV",
+            "asmen.SIARKA.KW_A001.R4",
+            "KW_A110",
+        ];
+        let defs: Vec<ItemDefinition> = ids
+            .iter()
+            .enumerate()
+            .map(|(i, id)| ItemDefinition {
+                item_id: id,
+                access_path: "",
+                active: true,
+                client_handle: i as u32,
+                requested_type: VarType::EMPTY,
+            })
+            .collect();
+        let handles: Vec<u32> =
+            d.e.add_items(now, group, &defs)
+                .unwrap()
+                .into_iter()
+                .map(|r| r.expect("item added").server_handle)
+                .collect();
+
+        // Subscribed through the network: the cache fills with GOOD values.
+        let states = d
+            .until(Duration::from_secs(10), "good values in the cache", |e| {
+                let SyncOutcome::Ready(r) =
+                    e.read(wall_now(), group, ReadFrom::Cache, &handles).ok()?
+                else {
+                    return None;
+                };
+                let all: Vec<_> = r.into_iter().collect::<Result<Vec<_>, _>>().ok()?;
+                all.iter().all(|s| s.quality.is_good()).then_some(all)
+            })
+            .await;
+        assert!(
+            matches!(states[0].value, Value::R4(x) if (0.0..=8.0).contains(&x)),
+            "{:?}",
+            states[0]
+        );
+        let Value::R8(pct) = states[1].value else {
+            panic!("{:?}", states[1])
+        };
+        let Value::R4(level) = states[0].value else {
+            unreachable!()
+        };
+        assert!((0.0..=100.0).contains(&pct));
+        // Same variable, same sample (the engine may have taken them a tick apart).
+        assert!(
+            (pct - f64::from(level) / 8.0 * 100.0).abs() < 10.0,
+            "{pct} vs {level}"
+        );
+        assert!(matches!(states[2].value, Value::R4(_)));
+        assert!(
+            wake.0.load(Ordering::Relaxed) > 0,
+            "the backend woke the driver"
+        );
+
+        // A device read goes over the network.
+        let outcome =
+            d.e.read(wall_now(), group, ReadFrom::Device, &handles[..1])
+                .unwrap();
+        let r = d
+            .sync("device read", outcome, |r| match r {
+                SyncResult::Read(r) => r,
+                other => panic!("{other:?}"),
+            })
+            .await;
+        assert!(r[0].as_ref().unwrap().quality.is_good());
+
+        // A write reaches the simulator (KW_A110, a writable set point on channel PIEC).
+        let outcome =
+            d.e.write(wall_now(), group, &[(handles[3], Value::R8(12.5))])
+                .unwrap();
+        let w = d
+            .sync("write", outcome, |r| match r {
+                SyncResult::Write(w) => w,
+                other => panic!("{other:?}"),
+            })
+            .await;
+        assert_eq!(w, vec![Ok(())]);
+        assert_eq!(sim.vqt("PIEC", "KW_A110").unwrap().value, Value::R4(12.5));
+
+        // Channel Demo_Wytwornia_Kwasu checks limits and control variables (example ini):
+        // KW_A000's control variable is KW_K001, its alarm high limit 7.5.
+        let def = ItemDefinition {
+            item_id: "KW_A000",
+            access_path: "Demo_Wytwornia_Kwasu",
+            active: true,
+            client_handle: 99,
+            requested_type: VarType::EMPTY,
+        };
+        let checked = d.e.add_items(wall_now(), group, &[def]).unwrap()[0]
+            .as_ref()
+            .unwrap()
+            .server_handle;
+        let cache = |e: &mut Engine| -> Option<ctopc_core::model::ItemState> {
+            let SyncOutcome::Ready(r) = e
+                .read(wall_now(), group, ReadFrom::Cache, &[checked])
+                .ok()?
+            else {
+                return None;
+            };
+            r.into_iter().next()?.ok()
+        };
+        assert!(sim.force("DIAGNOSTYKA", "KW_K001", 1.0) || sim.force("", "KW_K001", 1.0));
+        d.until(
+            Duration::from_secs(10),
+            "sensor failure from the control variable",
+            |e| cache(e).filter(|s| s.quality == Quality::BAD_SENSOR_FAILURE),
+        )
+        .await;
+        assert!(sim.force("", "KW_K001", 0.0));
+        sim.force("SIARKA", "KW_A000", 7.9);
+        let s = d
+            .until(Duration::from_secs(10), "the high limit", |e| {
+                cache(e).filter(|s| s.quality.is_good() && s.quality.limit() == Quality::LIMIT_HIGH)
+            })
+            .await;
+        assert!(matches!(s.value, Value::R4(x) if x > 7.5), "{s:?}");
+        // The same variable on the basic channel (no checks) stays plain GOOD.
+        let plain = d
+            .until(Duration::from_secs(10), "plain good", |e| {
+                let SyncOutcome::Ready(r) = e
+                    .read(wall_now(), group, ReadFrom::Cache, &handles[..1])
+                    .ok()?
+                else {
+                    return None;
+                };
+                r.into_iter()
+                    .next()?
+                    .ok()
+                    .filter(|s| matches!(s.value, Value::R4(x) if x > 7.5))
+            })
+            .await;
+        assert_eq!(plain.quality, Quality::GOOD);
+
+        // The simulator dies: the cache shows BAD Last Known Value with the last values.
+        sim.shutdown().await;
+        let states = d
+            .until(Duration::from_secs(10), "LKV in the cache", |e| {
+                let SyncOutcome::Ready(r) = e
+                    .read(wall_now(), group, ReadFrom::Cache, &handles[..1])
+                    .ok()?
+                else {
+                    return None;
+                };
+                let s = r.into_iter().next()?.ok()?;
+                (s.quality == Quality::BAD_LAST_KNOWN_VALUE).then_some(s)
+            })
+            .await;
+        assert!(matches!(states.value, Value::R4(_)));
+    })
+    .await
+    .expect("test exceeded its time limit");
+}
+
+#[test]
+fn server_options_give_the_client_name_and_discovery_targets() {
+    let mut o = ServerOptions::default();
+    let c = client_config_from_server_options(&o, "CLI");
+    assert_eq!(c.client_name, "CLI.");
+    assert_eq!(c.discovery_targets.len(), 2);
+    assert_eq!(c.discovery_targets[0].port(), 48100);
+    o.client_name = Some("KE2".into());
+    o.broadcast_address = Some("192.168.1.255".into());
+    o.discovery_port = Some(5000);
+    let c = client_config_from_server_options(&o, "CLI");
+    assert_eq!(c.client_name, "KE2");
+    assert_eq!(c.discovery_targets[0].to_string(), "192.168.1.255:5000");
+    assert_eq!(c.discovery_targets[1].to_string(), "127.0.0.1:5000");
+}
