@@ -2,9 +2,21 @@
 
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
+use crate::context::{self, ConfigSource, Context};
+use crate::runtime::{self, Runtime};
 use crate::{factory::ClassFactory, lifetime, server};
+use ctopc_core::asix::AsixNamespace;
+use ctopc_core::model::{Engine, EngineConfig};
+use ctopc_core::namespace::Namespace;
+use ctopc_core::source::{Backend, Wake};
+use ctopc_core::Lang;
+use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
-use windows::core::GUID;
+use windows::core::{BOOL, GUID};
+use windows::Win32::Foundation::E_FAIL;
+use windows::Win32::Globalization::GetUserDefaultUILanguage;
+use windows::Win32::System::Console::SetConsoleCtrlHandler;
 use windows::Win32::System::Com::{
     CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CoUninitialize,
     CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
@@ -83,9 +95,64 @@ pub fn unregister() -> windows::core::Result<()> {
     Ok(())
 }
 
-/// `-Embedding`: register the class object for multiple use, serve until the last client
-/// has gone, then revoke it and exit.
-pub fn serve() -> windows::core::Result<()> {
+/// Makes the data source for a namespace (the server binary decides: the in-process
+/// simulation or the asix network client). Gets the waker to call when data arrives.
+pub type MakeBackend<'a> = dyn FnOnce(&Arc<AsixNamespace>, Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
+
+/// The default language: the configured one, else Polish on Polish Windows, else English.
+fn default_lang(ns: &AsixNamespace) -> Lang {
+    if let Some(l) = ns.config().server.default_language.fixed() {
+        return l;
+    }
+    // SAFETY: no arguments; returns the user's UI language.
+    let ui = unsafe { GetUserDefaultUILanguage() };
+    Lang::default_for_system(u32::from(ui))
+}
+
+/// Loads the configuration, starts the runtime and installs the process context.
+pub fn start(make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
+    let dir = exe.parent().map(PathBuf::from).unwrap_or_default();
+    let loaded = context::load(&dir)?;
+    match &loaded.source {
+        ConfigSource::File(p) => tracing::info!("configuration: {}", p.display()),
+        ConfigSource::EmbeddedDemo => tracing::info!("configuration: none found next to the executable; running the embedded demo plant (simulated)"),
+    }
+    for w in &loaded.warnings {
+        tracing::warn!("{w}");
+    }
+    let ns = Arc::new(loaded.namespace);
+    let simulation = ns.config().server.simulate_current_data;
+    let (state, reason) = Context::state_for(&ns, simulation);
+    if let Some(r) = &reason {
+        tracing::error!("OPC_STATUS_NOCONFIG: {r}");
+    }
+    let engine_config = EngineConfig { min_update_rate_ms: ns.config().server.min_update_rate_ms, ..EngineConfig::default() };
+    let engine = Engine::new(engine_config, Arc::clone(&ns) as Arc<dyn Namespace>);
+    let ns_for_backend = Arc::clone(&ns);
+    let rt = Runtime::start(engine, move |wake| make_backend(&ns_for_backend, wake))?;
+    let rt = runtime::install(rt);
+    let ctx = Context {
+        runtime: rt,
+        address_space: Context::address_space_for(&ns),
+        default_lang: default_lang(&ns),
+        namespace: ns,
+        state,
+        no_config_reason: reason,
+        source: loaded.source,
+    };
+    context::install(ctx)
+}
+
+unsafe extern "system" fn on_console_ctrl(_ctrl: u32) -> BOOL {
+    lifetime::request_stop();
+    BOOL(1)
+}
+
+/// `-Embedding`: start, register the class object for multiple use, serve until the last
+/// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
+/// stop every connected client first gets IOPCShutdown::ShutdownRequest.
+pub fn serve(make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     // Authentication level NONE and identify-level impersonation: the usual OPC setting,
     // so that callbacks into clients on other machines work without a shared domain;
@@ -94,12 +161,22 @@ pub fn serve() -> windows::core::Result<()> {
     let _ = unsafe {
         CoInitializeSecurity(None, -1, None, None, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY, None, EOAC_NONE, None)
     };
+    let ctx = start(make_backend).map_err(|e| {
+        tracing::error!("cannot start: {e}");
+        windows::core::Error::new(E_FAIL, e)
+    })?;
+    // SAFETY: a plain function pointer with the handler signature, valid for the process.
+    let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };
     let factory = ClassFactory::new(server::create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe { CoRegisterClassObject(&CLSID_SERVERCTOPC, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
+    tracing::info!("serving {PROGID}");
     let reason = lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
-    eprintln!("ServerCTOPC: exiting ({reason:?})");
+    if reason == lifetime::ExitReason::StopRequested {
+        ctx.runtime.shutdown("ServerCTOPC is stopping");
+    }
+    tracing::info!("exiting ({reason:?})");
     Ok(())
 }

@@ -8,6 +8,7 @@
 
 pub mod client;
 pub mod connpoint;
+pub mod context;
 pub mod enums;
 pub mod factory;
 pub mod host;
@@ -17,5 +18,6 @@ pub mod mem;
 #[cfg(feature = "marshal-probe")]
 pub mod probe;
 pub mod registry;
+pub mod runtime;
 pub mod server;
 pub mod variant;

@@ -1,34 +1,18 @@
 //! The OPC server object: one per client (CreateInstance of the multiple-use class object).
 
 use crate::interfaces::*;
+use crate::context::{self, Context};
 use crate::lifetime::ObjectGuard;
 use crate::mem::{self, TaskMem};
 use ctopc_core::lang::Lang;
-use ctopc_core::{OpcError, Timestamp};
-use std::sync::{Mutex, OnceLock};
+use ctopc_core::model::SessionHandle;
+use ctopc_core::OpcError;
+use std::sync::Mutex;
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL};
+use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_NOTIMPL};
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
 pub const VENDOR_INFO: &str = "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
-
-/// Process-wide facts every server object reports.
-pub struct ProcessInfo {
-    pub start_time: Timestamp,
-    pub state: OPCSERVERSTATE,
-    pub default_lang: Lang,
-}
-
-static PROCESS: OnceLock<ProcessInfo> = OnceLock::new();
-
-/// Sets the process facts once, at start-up (later calls are ignored).
-pub fn init_process(info: ProcessInfo) {
-    let _ = PROCESS.set(info);
-}
-
-fn process() -> &'static ProcessInfo {
-    PROCESS.get_or_init(|| ProcessInfo { start_time: mem::now(), state: OPC_STATUS_NOCONFIG, default_lang: Lang::English })
-}
 
 struct Session {
     lcid: u32,
@@ -37,15 +21,29 @@ struct Session {
 
 #[implement(IOPCServer, IOPCCommon)]
 pub struct OpcServer {
+    ctx: &'static Context,
+    handle: SessionHandle,
     session: Mutex<Session>,
     _guard: ObjectGuard,
 }
 
-/// The class factory's constructor: a new server object for one client.
+/// The class factory's constructor: a new server object (and engine session) for one client.
 pub fn create_instance() -> windows::core::Result<IUnknown> {
-    let lang = process().default_lang;
-    let server = OpcServer { session: Mutex::new(Session { lcid: lang.lcid(), client_name: None }), _guard: ObjectGuard::new() };
+    let ctx = context::get().ok_or_else(|| windows::core::Error::new(E_FAIL, "the server has not started"))?;
+    let handle = ctx.runtime.open_session();
+    let server = OpcServer {
+        ctx,
+        handle,
+        session: Mutex::new(Session { lcid: ctx.default_lang.lcid(), client_name: None }),
+        _guard: ObjectGuard::new(),
+    };
     Ok(server.into())
+}
+
+impl Drop for OpcServer {
+    fn drop(&mut self) {
+        self.ctx.runtime.close_session(self.handle);
+    }
 }
 
 impl OpcServer {
@@ -57,7 +55,7 @@ impl OpcServer {
 /// The language for an LCID a client passes: Polish, any English, or the system/user
 /// default and neutral locales (the server's default language). Others are not available.
 fn lang_for(lcid: u32) -> Option<Lang> {
-    Lang::from_lcid(lcid, process().default_lang)
+    Lang::from_lcid(lcid, context::get().map_or(Lang::English, |c| c.default_lang))
 }
 
 /// The text of `code` in `lang`: our own codes from the core table, else the system's.
@@ -113,7 +111,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let lang = lang_for(self.session().lcid).unwrap_or(process().default_lang);
+        let lang = lang_for(self.session().lcid).unwrap_or(self.ctx.default_lang);
         let text = mem::alloc_wstr(&error_text(code, lang)?)?;
         write_out(pstring, text)
     }
@@ -164,18 +162,21 @@ impl IOPCServer_Impl for OpcServer_Impl {
         if pstatus.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let p = process();
+        let ctx = self.ctx;
+        let (groups, last_update) = ctx.runtime.with_engine(|e, _| {
+            (e.groups(self.handle).map(|g| g.len()).unwrap_or(0), e.last_update_time(self.handle).ok())
+        });
         let version = |i: usize| env!("CARGO_PKG_VERSION").split('.').nth(i).and_then(|s| s.parse::<u16>().ok()).unwrap_or(0);
         let now = mem::now();
         let mut block = TaskMem::<OPCSERVERSTATUS>::zeroed(1)?;
         let vendor = mem::alloc_wstr(VENDOR_INFO)?;
         block.as_mut_slice()[0] = OPCSERVERSTATUS {
-            ftStartTime: mem::filetime(p.start_time),
+            ftStartTime: mem::filetime(ctx.runtime.start_time),
             ftCurrentTime: mem::filetime(now),
-            // No data callbacks are sent yet at this stage: the last update is the start.
-            ftLastUpdateTime: mem::filetime(p.start_time),
-            dwServerState: p.state,
-            dwGroupCount: 0,
+            // The last data callback sent to this client (the start time before the first).
+            ftLastUpdateTime: mem::filetime(last_update.filter(|t| t.0 > 0).unwrap_or(ctx.runtime.start_time)),
+            dwServerState: ctx.state,
+            dwGroupCount: groups as u32,
             dwBandWidth: u32::MAX,
             wMajorVersion: version(0),
             wMinorVersion: version(1),

@@ -21,12 +21,15 @@ fn main() -> ExitCode {
 }
 
 #[cfg(windows)]
+mod backend;
+
+#[cfg(windows)]
 fn run(cmd: cli::Command) -> ExitCode {
     use ctopc_com::host;
     let result = match cmd {
         cli::Command::RegServer => host::register(),
         cli::Command::UnregServer => host::unregister(),
-        cli::Command::Embedding => host::serve(),
+        cli::Command::Embedding => host::serve(Box::new(backend::make)),
         cli::Command::Help => Ok(()),
     };
     match result {

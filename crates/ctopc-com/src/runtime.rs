@@ -1,0 +1,408 @@
+//! The server's runtime: the engine (shared by every client of the process), the data
+//! source, one driver thread that runs the scheduler and moves data between them, and one
+//! callback worker per client so that a slow or dead client never stalls another.
+//!
+//! Locks: `state` (engine + source) is held only for short, non-blocking sections; no
+//! client is ever called while it is held. Callbacks are queued to the client's worker,
+//! which re-checks the sink before calling it.
+
+use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
+use crate::{connpoint::SinkSlot, mem, variant};
+use ctopc_core::model::{Engine, Event, GroupHandle, SessionHandle};
+use ctopc_core::source::{Backend, SourceOutput, Wake};
+use ctopc_core::{OpcError, Timestamp};
+use std::collections::HashMap;
+use std::sync::mpsc;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
+use std::time::Duration;
+use windows::core::{HRESULT, PCWSTR};
+use windows::Win32::Foundation::FILETIME;
+use windows::Win32::System::Variant::VARIANT;
+
+/// An interface pointer used from MTA threads other than the one that received it.
+pub struct Mta<T>(pub T);
+// SAFETY: the server process lives in the multithreaded apartment; every thread that
+// uses these pointers (RPC threads, the driver, the callback workers) joined the MTA, and
+// MTA proxies and our own free-threaded objects may be called from any MTA thread.
+unsafe impl<T> Send for Mta<T> {}
+// SAFETY: as above.
+unsafe impl<T> Sync for Mta<T> {}
+
+pub struct State {
+    pub engine: Engine,
+    pub source: Box<dyn Backend>,
+    stop: bool,
+}
+
+impl State {
+    /// Moves everything the source has ready into the engine.
+    fn pull_source(&mut self, now: Timestamp) {
+        let mut out = SourceOutput::default();
+        self.source.poll(now, &mut out);
+        if !out.updates.is_empty() {
+            self.engine.handle_source_updates(now, out.updates);
+        }
+        for (id, results) in out.read_results {
+            self.engine.handle_source_read_result(now, id, results);
+        }
+        for (id, results) in out.write_results {
+            self.engine.handle_source_write_result(now, id, results);
+        }
+    }
+
+    /// One step of the driver: source in, timers, requests out, source in again (an
+    /// in-process source answers at once). Returns the events to deliver and when to run next.
+    fn step(&mut self, now: Timestamp) -> (Vec<Event>, Option<Timestamp>) {
+        self.pull_source(now);
+        if self.engine.poll_timeout().is_some_and(|t| t <= now) {
+            self.engine.handle_timeout(now);
+        }
+        let mut asked = false;
+        while let Some(req) = self.engine.poll_source_request() {
+            self.source.request(now, req);
+            asked = true;
+        }
+        if asked {
+            self.pull_source(now);
+        }
+        // Synchronous callers wait on `Runtime::stepped` and take their own results.
+        while self.engine.poll_sync_completion().is_some() {}
+        let mut events = Vec::new();
+        while let Some(e) = self.engine.poll_event() {
+            events.push(e);
+        }
+        let next = match (self.engine.poll_timeout(), self.source.poll_timeout()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+        (events, next)
+    }
+}
+
+#[derive(Default)]
+struct Signal {
+    woken: Mutex<bool>,
+    cv: Condvar,
+}
+
+impl Signal {
+    fn wake(&self) {
+        *self.woken.lock().unwrap_or_else(|p| p.into_inner()) = true;
+        self.cv.notify_all();
+    }
+    fn wait(&self, limit: Duration) {
+        let mut w = self.woken.lock().unwrap_or_else(|p| p.into_inner());
+        if !*w {
+            w = self.cv.wait_timeout(w, limit).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+        }
+        *w = false;
+    }
+}
+
+struct SourceWaker(Weak<Signal>);
+
+impl Wake for SourceWaker {
+    fn wake(&self) {
+        if let Some(s) = self.0.upgrade() {
+            s.wake();
+        }
+    }
+}
+
+type Job = Box<dyn FnOnce() + Send>;
+
+/// A client's callback worker: a thread in the MTA running queued deliveries in order.
+struct Worker {
+    tx: mpsc::Sender<Job>,
+}
+
+impl Worker {
+    fn spawn(session: SessionHandle) -> Option<Worker> {
+        let (tx, rx) = mpsc::channel::<Job>();
+        let name = format!("callbacks-{}", session.0);
+        std::thread::Builder::new()
+            .name(name)
+            .spawn(move || {
+                let _com = crate::client::ComThread::mta();
+                while let Ok(job) = rx.recv() {
+                    job();
+                }
+            })
+            .ok()?;
+        Some(Worker { tx })
+    }
+}
+
+/// Process-wide runtime (one per server process).
+pub struct Runtime {
+    state: Mutex<State>,
+    /// Notified after every driver step, for synchronous calls waiting on the source.
+    stepped: Condvar,
+    signal: Arc<Signal>,
+    sinks: Mutex<HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>>,
+    shutdown_sinks: Mutex<HashMap<SessionHandle, Arc<SinkSlot<IOPCShutdown>>>>,
+    workers: Mutex<HashMap<SessionHandle, Worker>>,
+    pub start_time: Timestamp,
+}
+
+/// How long a synchronous call waits for the data source at most, beyond the engine's own
+/// source timeout (which completes such requests with ASKOM_E_NetAnswerTimeout).
+pub const SYNC_WAIT_MARGIN: Duration = Duration::from_secs(2);
+
+impl Runtime {
+    /// Starts the runtime and its driver thread. `make_source` gets the waker to call
+    /// when data arrives from another thread.
+    pub fn start(
+        engine: Engine,
+        make_source: impl FnOnce(Arc<dyn Wake>) -> Result<Box<dyn Backend>, String>,
+    ) -> Result<Arc<Runtime>, String> {
+        let signal = Arc::new(Signal::default());
+        let waker: Arc<dyn Wake> = Arc::new(SourceWaker(Arc::downgrade(&signal)));
+        let source = make_source(waker)?;
+        let rt = Arc::new(Runtime {
+            state: Mutex::new(State { engine, source, stop: false }),
+            stepped: Condvar::new(),
+            signal,
+            sinks: Mutex::new(HashMap::new()),
+            shutdown_sinks: Mutex::new(HashMap::new()),
+            workers: Mutex::new(HashMap::new()),
+            start_time: mem::now(),
+        });
+        let weak = Arc::downgrade(&rt);
+        let spawned = std::thread::Builder::new().name("driver".into()).spawn(move || driver(weak));
+        spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
+        Ok(rt)
+    }
+
+    /// The engine and source, locked (keep the section short; never call a client inside).
+    pub fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Runs `f` on the engine with the current time, then wakes the driver so that what
+    /// `f` queued (source requests, events) is handled at once.
+    pub fn with_engine<R>(&self, f: impl FnOnce(&mut Engine, Timestamp) -> R) -> R {
+        let r = {
+            let mut g = self.lock();
+            f(&mut g.engine, mem::now())
+        };
+        self.signal.wake();
+        r
+    }
+
+    /// Waits until `poll` returns Some (checked after every driver step), at most `limit`.
+    pub fn wait_for<R>(&self, limit: Duration, mut poll: impl FnMut(&mut Engine) -> Option<R>) -> Option<R> {
+        let deadline = std::time::Instant::now() + limit;
+        let mut g = self.lock();
+        loop {
+            if let Some(r) = poll(&mut g.engine) {
+                return Some(r);
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return None;
+            }
+            g = self.stepped.wait_timeout(g, left).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+        }
+    }
+
+    pub fn wake(&self) {
+        self.signal.wake();
+    }
+
+    /// Registers a new client session and its callback worker.
+    pub fn open_session(&self) -> SessionHandle {
+        let s = self.with_engine(|e, _| e.open_session());
+        if let Some(w) = Worker::spawn(s) {
+            self.workers.lock().unwrap_or_else(|p| p.into_inner()).insert(s, w);
+        }
+        s
+    }
+
+    /// Ends a session: its groups go, its worker finishes what is queued and exits.
+    pub fn close_session(&self, s: SessionHandle) {
+        let _ = self.with_engine(|e, now| e.close_session(now, s));
+        self.workers.lock().unwrap_or_else(|p| p.into_inner()).remove(&s);
+        self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).remove(&s);
+    }
+
+    pub fn set_group_sink(&self, group: GroupHandle, slot: Arc<SinkSlot<IOPCDataCallback>>) {
+        self.sinks.lock().unwrap_or_else(|p| p.into_inner()).insert(group, slot);
+    }
+
+    pub fn remove_group_sink(&self, group: GroupHandle) {
+        self.sinks.lock().unwrap_or_else(|p| p.into_inner()).remove(&group);
+    }
+
+    pub fn set_shutdown_sink(&self, session: SessionHandle, slot: Arc<SinkSlot<IOPCShutdown>>) {
+        self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).insert(session, slot);
+    }
+
+    /// Sends IOPCShutdown::ShutdownRequest(reason) to every connected client and waits
+    /// (bounded) for the calls to return. Then stops the driver.
+    pub fn shutdown(&self, reason: &str) {
+        let slots: Vec<Arc<SinkSlot<IOPCShutdown>>> =
+            self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).values().cloned().collect();
+        let mut done = Vec::new();
+        for slot in slots {
+            let Some(sink) = slot.get() else { continue };
+            let sink = Mta(sink);
+            let reason: Vec<u16> = reason.encode_utf16().chain(std::iter::once(0)).collect();
+            let (tx, rx) = mpsc::channel::<()>();
+            let spawned = std::thread::Builder::new().name("shutdown-request".into()).spawn(move || {
+                let _com = crate::client::ComThread::mta();
+                let sink = sink;
+                // SAFETY: `reason` is a NUL-terminated UTF-16 string alive for the call.
+                let r = unsafe { sink.0.ShutdownRequest(PCWSTR(reason.as_ptr())) };
+                if let Err(e) = r {
+                    tracing::warn!("ShutdownRequest failed: {e}");
+                }
+                let _ = tx.send(());
+            });
+            if spawned.is_ok() {
+                done.push(rx);
+            }
+        }
+        for rx in done {
+            let _ = rx.recv_timeout(Duration::from_secs(5));
+        }
+        self.lock().stop = true;
+        self.signal.wake();
+    }
+
+    fn deliver(&self, events: Vec<Event>) {
+        let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        for event in events {
+            let Some(slot) = sinks.get(&event.group()).cloned() else { continue };
+            let Some(worker) = workers.get(&event.session()) else { continue };
+            let group = event.group();
+            let weak_rt = self.self_weak();
+            let job: Job = Box::new(move || deliver_one(weak_rt, group, &slot, event));
+            let _ = worker.tx.send(job);
+        }
+    }
+
+    fn self_weak(&self) -> Weak<Runtime> {
+        RUNTIME.get().map(Arc::downgrade).unwrap_or_default()
+    }
+}
+
+static RUNTIME: std::sync::OnceLock<Arc<Runtime>> = std::sync::OnceLock::new();
+
+/// Installs the process runtime (once, at start-up).
+pub fn install(rt: Arc<Runtime>) -> Arc<Runtime> {
+    let _ = RUNTIME.set(Arc::clone(&rt));
+    RUNTIME.get().cloned().unwrap_or(rt)
+}
+
+/// The process runtime, if started.
+pub fn get() -> Option<Arc<Runtime>> {
+    RUNTIME.get().cloned()
+}
+
+fn driver(rt: Weak<Runtime>) {
+    let _com = crate::client::ComThread::mta();
+    loop {
+        let Some(rt) = rt.upgrade() else { return };
+        let (events, next) = {
+            let mut g = rt.lock();
+            if g.stop {
+                return;
+            }
+            g.step(mem::now())
+        };
+        rt.stepped.notify_all();
+        if !events.is_empty() {
+            rt.deliver(events);
+        }
+        let wait = match next {
+            Some(t) => Duration::from_millis(t.millis_since(mem::now()).clamp(1, 1000)),
+            None => Duration::from_millis(1000),
+        };
+        let signal = Arc::clone(&rt.signal);
+        drop(rt);
+        signal.wait(wait);
+    }
+}
+
+/// True for the errors that mean the client is gone.
+pub fn is_disconnected(hr: HRESULT) -> bool {
+    const CODES: [u32; 6] = [
+        0x80010108, // RPC_E_DISCONNECTED
+        0x800706BA, // RPC_S_SERVER_UNAVAILABLE
+        0x800706BF, // RPC_S_CALL_FAILED_DNE
+        0x80010012, // RPC_E_SERVER_DIED_DNE
+        0x80010007, // RPC_E_SERVER_DIED
+        0x800401FD, // CO_E_OBJNOTCONNECTED
+    ];
+    CODES.contains(&(hr.0 as u32))
+}
+
+fn hr_of(e: Option<OpcError>) -> HRESULT {
+    e.map_or(HRESULT(0), mem::hresult)
+}
+
+/// Delivers one event to a group's sink on the client's worker thread.
+fn deliver_one(rt: Weak<Runtime>, group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) {
+    let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else { return };
+    let result = match &event {
+        Event::DataChange(d) => call_values(&sink, true, d.transaction_id, d.client_group, d.master_quality, d.master_error, &d.items),
+        Event::ReadComplete(d) => call_values(&sink, false, d.transaction_id, d.client_group, d.master_quality, d.master_error, &d.items),
+        Event::WriteComplete(d) => {
+            let handles: Vec<u32> = d.items.iter().map(|i| i.client_handle).collect();
+            let errors: Vec<HRESULT> = d.items.iter().map(|i| hr_of(i.error)).collect();
+            // SAFETY: the arrays hold `handles.len()` elements and live for the call.
+            unsafe {
+                sink.OnWriteComplete(d.transaction_id, d.client_group, hr_of(d.master_error), handles.len() as u32, handles.as_ptr(), errors.as_ptr())
+            }
+        }
+        // SAFETY: plain values.
+        Event::CancelComplete(d) => unsafe { sink.OnCancelComplete(d.transaction_id, d.client_group) },
+    };
+    if let Err(e) = result {
+        if is_disconnected(e.code()) {
+            tracing::warn!("group {}: the client's IOPCDataCallback is gone ({e}); dropping it", group.0);
+            if slot.drop_if(cookie) {
+                if let Some(rt) = rt.upgrade() {
+                    let _ = rt.with_engine(|eng, now| eng.set_callback_connected(now, group, false));
+                }
+            }
+        } else {
+            tracing::debug!("group {}: callback returned {e}", group.0);
+        }
+    }
+}
+
+fn call_values(
+    sink: &IOPCDataCallback,
+    data_change: bool,
+    transaction: u32,
+    client_group: u32,
+    master_quality: Option<OpcError>,
+    master_error: Option<OpcError>,
+    items: &[ctopc_core::model::ItemValue],
+) -> windows::core::Result<()> {
+    let handles: Vec<u32> = items.iter().map(|i| i.client_handle).collect();
+    let qualities: Vec<u16> = items.iter().map(|i| i.quality.0).collect();
+    let times: Vec<FILETIME> = items.iter().map(|i| mem::filetime(i.timestamp)).collect();
+    let errors: Vec<HRESULT> = items.iter().map(|i| hr_of(i.error)).collect();
+    let mut values: Vec<VARIANT> = Vec::with_capacity(items.len());
+    for i in items {
+        values.push(variant::to_variant(&i.value).unwrap_or_default());
+    }
+    let n = items.len() as u32;
+    // SAFETY: every array holds `n` elements and lives for the call; the VARIANTs are
+    // cleared below.
+    let r = unsafe {
+        if data_change {
+            sink.OnDataChange(transaction, client_group, hr_of(master_quality), hr_of(master_error), n, handles.as_ptr(), values.as_ptr(), qualities.as_ptr(), times.as_ptr(), errors.as_ptr())
+        } else {
+            sink.OnReadComplete(transaction, client_group, hr_of(master_quality), hr_of(master_error), n, handles.as_ptr(), values.as_ptr(), qualities.as_ptr(), times.as_ptr(), errors.as_ptr())
+        }
+    };
+    for v in values.iter_mut() {
+        variant::clear(v);
+    }
+    r
+}

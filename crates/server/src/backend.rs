@@ -1,0 +1,18 @@
+//! Which data source the server uses: the in-process simulation of the plant when
+//! `SimulateCurrentData` is on (the embedded default), else the asix network client.
+
+use asix_net::inproc::InProcessSim;
+use ctopc_core::asix::AsixNamespace;
+use ctopc_core::source::{Backend, Wake};
+use std::sync::Arc;
+
+/// Seed of the simulated plant (deterministic values from start-up on).
+const SIM_SEED: u64 = 0x5EED_A51C;
+
+pub fn make(ns: &Arc<AsixNamespace>, _wake: Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> {
+    if ns.config().server.simulate_current_data {
+        tracing::info!("data source: simulation of current data (OPC_STATUS_TEST)");
+        return Ok(Box::new(InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::mem::now())));
+    }
+    Err("SimulateCurrentData is off, and the asix network data source is not wired in yet; set SimulateCurrentData = tak in ASIXConnect.ini".into())
+}
