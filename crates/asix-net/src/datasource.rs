@@ -730,3 +730,13 @@ impl<R: Resolver> Backend for AsixSource<R> {
         None
     }
 }
+
+/// The asix network backend for a loaded namespace, ready for the server's driver loop:
+/// client settings from the `[Server]` options ([`client_config_from_server_options`]) and
+/// this computer's name, per-channel discovery options from the channels, and a tokio
+/// runtime of its own. Callable from any thread (no tokio context needed).
+pub fn network_backend(ns: Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> std::io::Result<Box<dyn Backend>> {
+    let base = client_config_from_server_options(&ns.config().server, &crate::naming::computer_name());
+    let source = AsixSource::with_own_runtime(NamespaceResolver::new(ns, base), wake)?;
+    Ok(Box::new(source))
+}

@@ -120,7 +120,7 @@ impl InProcessSim {
         }
         check_write_value(&vqt.value)?;
         let var = self.find_var(live.asmen_channel.as_deref(), &live.variable).ok_or(OpcError::ItemUnknown)?;
-        let writable = live.definition.as_ref().map_or(true, |d: &Variable| d.writable) && self.plant.vars()[var].spec.writable;
+        let writable = live.definition.as_ref().is_none_or(|d: &Variable| d.writable) && self.plant.vars()[var].spec.writable;
         if !writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
         }

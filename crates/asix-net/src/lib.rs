@@ -4,7 +4,10 @@
 //!   documented for gateway writers in `docs/asix-net-protocol.md`.
 //! - [`client`]: the discovery-and-failover client ([`AsixClient`], a non-blocking handle
 //!   over a sans-IO [`client::ClientCore`]).
-//! - [`sim`]: `asix-sim`, a simulated asix data server serving a plant.
+//! - [`datasource`]: the client as the engine's data-source `Backend` ([`datasource::network_backend`]).
+//! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant
+//!   (also the model of [`inproc`], the in-process simulation backend).
+//! - [`discovery`]: choosing a server from the announcements (ranking, variants).
 //! - [`naming`], [`config`], [`ini`]: the client's asix name, channel options, INI reading.
 #![forbid(unsafe_code)]
 

@@ -315,3 +315,53 @@ fn server_options_give_the_client_name_and_discovery_targets() {
     assert_eq!(c.discovery_targets[0].to_string(), "192.168.1.255:5000");
     assert_eq!(c.discovery_targets[1].to_string(), "127.0.0.1:5000");
 }
+
+/// What the server's driver thread does: no tokio context, `network_backend` from the
+/// namespace alone (discovery target from `[Server] BroadcastAddress` / `DiscoveryPort`).
+#[test]
+fn the_network_backend_runs_from_a_plain_thread() {
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build().unwrap();
+    let sim = rt.block_on(sim("PLAIN"));
+    let db = repo().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+    let ini = format!(
+        "[Server]\nBroadcastAddress = 127.0.0.1\nDiscoveryPort = {}\n[Channel:*]\nItemsDatabase = {}\n",
+        sim.discovery_addr().port(),
+        db.display()
+    );
+    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let (ns, _) = AsixNamespace::load(config);
+    let ns = Arc::new(ns);
+    let wake = Arc::new(CountingWake(AtomicU64::new(0)));
+    let mut backend = asix_net::datasource::network_backend(ns.clone(), wake.clone()).unwrap();
+    let mut e = Engine::new(EngineConfig::default(), ns as Arc<dyn Namespace>);
+    let session = e.open_session();
+    let group = e.add_group(wall_now(), session, &GroupParams { name: "g", active: true, ..GroupParams::default() }).unwrap().group;
+    // The simulator serves the built-in plant: a descriptive ID of its channel.
+    let id = format!("asmen.{CH}.ZB1_POZIOM.R4");
+    let def = ItemDefinition { item_id: &id, access_path: "", active: true, client_handle: 1, requested_type: VarType::EMPTY };
+    let h = e.add_items(wall_now(), group, &[def]).unwrap()[0].as_ref().unwrap().server_handle;
+    let t0 = Instant::now();
+    let state = loop {
+        assert!(t0.elapsed() < Duration::from_secs(10), "no value through the network backend");
+        let now = wall_now();
+        while let Some(r) = e.poll_source_request() {
+            backend.request(now, r);
+        }
+        let mut out = SourceOutput::default();
+        backend.poll(now, &mut out);
+        e.handle_source_updates(now, out.updates);
+        if let Ok(SyncOutcome::Ready(r)) = e.read(now, group, ReadFrom::Cache, &[h]) {
+            if let Some(Ok(s)) = r.into_iter().next() {
+                if s.quality.is_good() {
+                    break s;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert!(matches!(state.value, Value::R4(_)));
+    drop(backend); // shuts its runtime down without blocking or panicking
+    drop(sim);
+    rt.shutdown_timeout(Duration::from_secs(1));
+}

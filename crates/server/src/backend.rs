@@ -9,10 +9,12 @@ use std::sync::Arc;
 /// Seed of the simulated plant (deterministic values from start-up on).
 const SIM_SEED: u64 = 0x5EED_A51C;
 
-pub fn make(ns: &Arc<AsixNamespace>, _wake: Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> {
+pub fn make(ns: &Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> {
     if ns.config().server.simulate_current_data {
         tracing::info!("data source: simulation of current data (OPC_STATUS_TEST)");
         return Ok(Box::new(InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::mem::now())));
     }
-    Err("SimulateCurrentData is off, and the asix network data source is not wired in yet; set SimulateCurrentData = tak in ASIXConnect.ini".into())
+    tracing::info!("data source: the asix network");
+    asix_net::datasource::network_backend(Arc::clone(ns), wake)
+        .map_err(|e| format!("cannot start the asix network client: {e}"))
 }
