@@ -51,6 +51,9 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "DiscoveryPort",
     "DataPort",
     "ReconnectInterval",
+    "LogLevel",
+    "LogMaxFileSizeMB",
+    "LogKeepFiles",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -117,6 +120,24 @@ pub struct ServerOptions {
     pub data_port: Option<u16>,
     /// `ReconnectInterval`, ms (default 5000): retry period of failed asix subscriptions.
     pub reconnect_interval_ms: u32,
+    /// `LogLevel`: `info` (default: start, stop, configuration, asix connections, serious
+    /// errors) or `debug` (also per-call detail), `warn`, `error`.
+    pub log_level: LogLevel,
+    /// `LogMaxFileSizeMB` (default 10): a day's log file over this size is closed and the
+    /// day continues in `ServerCTOPC.<YYYYMMDD>.<n>.log`.
+    pub log_max_file_size_mb: u32,
+    /// `LogKeepFiles` (default 30): older log files beyond this count are deleted.
+    pub log_keep_files: u32,
+}
+
+/// `LogLevel`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LogLevel {
+    Error,
+    Warn,
+    #[default]
+    Info,
+    Debug,
 }
 
 impl Default for ServerOptions {
@@ -132,6 +153,9 @@ impl Default for ServerOptions {
             discovery_port: None,
             data_port: None,
             reconnect_interval_ms: 5000,
+            log_level: LogLevel::Info,
+            log_max_file_size_mb: 10,
+            log_keep_files: 30,
         }
     }
 }
@@ -467,6 +491,17 @@ fn apply_server_option(
         "discoveryport" => o.discovery_port = number(file, e, 1, 65535)?.map(|v| v as u16),
         "dataport" => o.data_port = number(file, e, 1, 65535)?.map(|v| v as u16),
         "reconnectinterval" => set_number(&mut o.reconnect_interval_ms, file, e, 1, u32::MAX)?,
+        "loglevel" => {
+            o.log_level = match e.value.trim().to_ascii_lowercase().as_str() {
+                "" | "info" => LogLevel::Info,
+                "debug" => LogLevel::Debug,
+                "warn" | "warning" => LogLevel::Warn,
+                "error" => LogLevel::Error,
+                _ => return Err(invalid(file, e, "error, warn, info or debug")),
+            }
+        }
+        "logmaxfilesizemb" => set_number(&mut o.log_max_file_size_mb, file, e, 1, 4096)?,
+        "logkeepfiles" => set_number(&mut o.log_keep_files, file, e, 1, 100_000)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -804,6 +839,9 @@ mod tests {
             ("ReconnectInterval", "10000", |o| {
                 o.reconnect_interval_ms == 10000
             }),
+            ("LogLevel", "debug", |o| o.log_level == LogLevel::Debug),
+            ("LogMaxFileSizeMB", "5", |o| o.log_max_file_size_mb == 5),
+            ("LogKeepFiles", "7", |o| o.log_keep_files == 7),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();

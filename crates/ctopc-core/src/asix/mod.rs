@@ -24,7 +24,7 @@ mod demo_tests;
 
 pub use config::{
     load_config_file, parse_config, AsixConfig, ChannelOptions, ConfigError, ConfigErrorKind,
-    DefaultLanguage, ServerOptions, ServerSelection, BASIC_CHANNEL,
+    DefaultLanguage, LogLevel, ServerOptions, ServerSelection, BASIC_CHANNEL,
 };
 pub use format::FormatSpec;
 pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarItem};
