@@ -137,3 +137,21 @@ fn the_server_object_answers_queryinterface_for_its_interfaces() {
     assert!(unk.cast::<IOPCServer>().is_ok());
     assert!(unk.cast::<IOPCCommon>().is_ok());
 }
+
+#[test]
+fn the_server_logs_its_start_to_the_days_log_file_in_the_install_folder() {
+    let (_com, server) = connect();
+    assert_alive(&server);
+    let (y, m, d) = ctopc_com::mem::local_date();
+    let log = e2e_tests::artifact(&format!("Log/ServerCTOPC.{y:04}{m:02}{d:02}.log"));
+    // The writer thread flushes asynchronously: give it a moment.
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        if text.contains("ServerCTOPC starting") && text.contains("configuration") {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "no start lines in {}: {text}", log.display());
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}

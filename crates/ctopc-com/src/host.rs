@@ -109,11 +109,14 @@ fn default_lang(ns: &AsixNamespace) -> Lang {
     Lang::default_for_system(u32::from(ui))
 }
 
-/// Loads the configuration, starts the runtime and installs the process context.
-pub fn start(make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
+/// The folder of ServerCTOPC.exe (the install folder: ASIXConnect.ini, Log\).
+pub fn install_dir() -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
-    let dir = exe.parent().map(PathBuf::from).unwrap_or_default();
-    let loaded = context::load(&dir)?;
+    Ok(exe.parent().map(PathBuf::from).unwrap_or_default())
+}
+
+/// Starts the runtime over a loaded configuration and installs the process context.
+pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
     match &loaded.source {
         ConfigSource::File(p) => tracing::info!("configuration: {}", p.display()),
         ConfigSource::EmbeddedDemo => tracing::info!("configuration: none found next to the executable; running the embedded demo plant (simulated)"),
@@ -152,7 +155,7 @@ unsafe extern "system" fn on_console_ctrl(_ctrl: u32) -> BOOL {
 /// `-Embedding`: start, register the class object for multiple use, serve until the last
 /// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
 /// stop every connected client first gets IOPCShutdown::ShutdownRequest.
-pub fn serve(make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
+pub fn serve(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     // Authentication level NONE and identify-level impersonation: the usual OPC setting,
     // so that callbacks into clients on other machines work without a shared domain;
@@ -161,7 +164,7 @@ pub fn serve(make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
     let _ = unsafe {
         CoInitializeSecurity(None, -1, None, None, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY, None, EOAC_NONE, None)
     };
-    let ctx = start(make_backend).map_err(|e| {
+    let ctx = start(loaded, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
         windows::core::Error::new(E_FAIL, e)
     })?;

@@ -97,3 +97,10 @@ impl AddMicros for Timestamp {
         Timestamp(self.0.saturating_add(ticks))
     }
 }
+
+/// Today's local date (year, month, day), for the names of the log files.
+pub fn local_date() -> (i32, u32, u32) {
+    // SAFETY: no arguments; fills and returns a SYSTEMTIME.
+    let t = unsafe { windows::Win32::System::SystemInformation::GetLocalTime() };
+    (i32::from(t.wYear), u32::from(t.wMonth), u32::from(t.wDay))
+}

@@ -2,6 +2,7 @@
 //! COM layer (`ctopc_com::host`).
 
 mod cli;
+mod logging;
 
 use std::process::ExitCode;
 
@@ -29,13 +30,43 @@ fn run(cmd: cli::Command) -> ExitCode {
     let result = match cmd {
         cli::Command::RegServer => host::register(),
         cli::Command::UnregServer => host::unregister(),
-        cli::Command::Embedding => host::serve(Box::new(backend::make)),
+        cli::Command::Embedding => return embedding(),
         cli::Command::Help => Ok(()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("ServerCTOPC: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `-Embedding`: configuration, then logging as configured, then serve.
+#[cfg(windows)]
+fn embedding() -> ExitCode {
+    use ctopc_com::{context, host};
+    let loaded = host::install_dir().and_then(|dir| context::load(&dir).map(|l| (dir, l)));
+    let (dir, loaded) = match loaded {
+        Ok(x) => x,
+        Err(e) => {
+            // No log directory is known yet: stderr, and the log folder of the install dir.
+            eprintln!("ServerCTOPC: {e}");
+            if let Ok(dir) = host::install_dir() {
+                logging::emergency(&dir, &e);
+            }
+            return ExitCode::FAILURE;
+        }
+    };
+    let _guard = logging::init(&dir, &loaded.namespace.config().server);
+    tracing::info!(version = env!("CARGO_PKG_VERSION"), "ServerCTOPC starting");
+    match host::serve(loaded, Box::new(backend::make)) {
+        Ok(()) => {
+            tracing::info!("ServerCTOPC stopped");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            tracing::error!("ServerCTOPC failed: {e}");
             ExitCode::FAILURE
         }
     }
