@@ -58,7 +58,7 @@ fn exe_path() -> windows::core::Result<String> {
     Ok(exe.to_string_lossy().into_owned())
 }
 
-fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
+fn with_registration<R>(service: Option<&str>, f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
     let exe = exe_path()?;
     let categories = [
         Category { catid: CATID_OPCDAServer20, description: "OPC Data Access Servers Version 2.0" },
@@ -72,7 +72,7 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
         description: DESCRIPTION,
         exe_path: &exe,
         exe_name: EXE_NAME,
-        service_name: None,
+        service_name: service,
         categories: &categories,
         opc_key_vendor: Some(server::VENDOR_INFO),
     };
@@ -82,15 +82,27 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
-    with_registration(registry::register)??;
+    with_registration(None, registry::register)??;
     println!("ServerCTOPC: registered {PROGID} ({})", registry::guid_string(&CLSID_SERVERCTOPC));
+    Ok(())
+}
+
+/// `/Service`: the COM registration with AppID `LocalService`, and the NT service
+/// (on demand, as LocalService): COM starts the service when a client activates the server.
+pub fn register_service() -> windows::core::Result<()> {
+    let _com = ComInit::mta()?;
+    let exe = exe_path()?;
+    crate::service::install(std::path::Path::new(&exe)).map_err(|e| windows::core::Error::new(E_FAIL, e))?;
+    with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
+    println!("ServerCTOPC: registered {PROGID} as the NT service {}", crate::service::SERVICE_NAME);
     Ok(())
 }
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
-    with_registration(registry::unregister)??;
+    with_registration(None, registry::unregister)??;
+    crate::service::uninstall().map_err(|e| windows::core::Error::new(E_FAIL, e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
 }
@@ -147,8 +159,10 @@ pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Res
     context::install(ctx)
 }
 
-unsafe extern "system" fn on_console_ctrl(_ctrl: u32) -> BOOL {
-    lifetime::request_stop();
+unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
+    // CTRL_LOGOFF_EVENT (5) and CTRL_SHUTDOWN_EVENT (6): the system is going down.
+    let reason = if ctrl >= 5 { "the system is shutting down" } else { "ServerCTOPC was stopped from its console" };
+    lifetime::request_stop_with(reason);
     BOOL(1)
 }
 
@@ -156,6 +170,20 @@ unsafe extern "system" fn on_console_ctrl(_ctrl: u32) -> BOOL {
 /// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
 /// stop every connected client first gets IOPCShutdown::ShutdownRequest.
 pub fn serve(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
+    serve_as(loaded, make_backend, ServeMode::UntilUnused)
+}
+
+/// How long the server process serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServeMode {
+    /// Started by COM: exit after the last client has gone (or a stop request).
+    UntilUnused,
+    /// The NT service: serve until the service control manager stops it.
+    UntilStopped,
+}
+
+/// Serves in the given mode (see [`serve`]).
+pub fn serve_as(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>, mode: ServeMode) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     // Authentication level NONE and identify-level impersonation: the usual OPC setting,
     // so that callbacks into clients on other machines work without a shared domain;
@@ -174,11 +202,17 @@ pub fn serve(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> win
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe { CoRegisterClassObject(&CLSID_SERVERCTOPC, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
     tracing::info!("serving {PROGID}");
-    let reason = lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
+    let reason = match mode {
+        ServeMode::UntilUnused => lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
+        ServeMode::UntilStopped => {
+            lifetime::wait_for_stop();
+            lifetime::ExitReason::StopRequested
+        }
+    };
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
     if reason == lifetime::ExitReason::StopRequested {
-        ctx.runtime.shutdown("ServerCTOPC is stopping");
+        ctx.runtime.shutdown(lifetime::stop_reason());
     }
     tracing::info!("exiting ({reason:?})");
     Ok(())

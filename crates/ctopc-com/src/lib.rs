@@ -20,4 +20,5 @@ pub mod probe;
 pub mod registry;
 pub mod runtime;
 pub mod server;
+pub mod service;
 pub mod variant;

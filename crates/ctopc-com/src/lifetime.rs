@@ -62,9 +62,30 @@ pub fn live_objects() -> usize {
     with(|c| c.objects)
 }
 
+static STOP_REASON: Mutex<Option<&'static str>> = Mutex::new(None);
+
 /// Asks the main loop to stop (console Ctrl+C, service stop).
 pub fn request_stop() {
+    request_stop_with("ServerCTOPC is stopping");
+}
+
+/// Asks the main loop to stop; `reason` is what clients get in IOPCShutdown.
+pub fn request_stop_with(reason: &'static str) {
+    *STOP_REASON.lock().unwrap_or_else(|p| p.into_inner()) = Some(reason);
     with(|c| c.stop_requested = true);
+}
+
+/// The reason of a requested stop.
+pub fn stop_reason() -> &'static str {
+    STOP_REASON.lock().unwrap_or_else(|p| p.into_inner()).unwrap_or("ServerCTOPC is stopping")
+}
+
+/// Blocks until a stop is requested (the NT service serves until the SCM stops it).
+pub fn wait_for_stop() {
+    let mut g = COUNTS.lock().unwrap_or_else(|p| p.into_inner());
+    while !g.stop_requested {
+        g = CHANGED.wait(g).unwrap_or_else(|p| p.into_inner());
+    }
 }
 
 /// Why `wait_until_unused` returned.

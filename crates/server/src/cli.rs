@@ -11,6 +11,10 @@ pub enum Command {
     UnregServer,
     /// Started by COM to serve clients.
     Embedding,
+    /// Register as an NT service (on demand, LocalService), with AppID LocalService.
+    Service,
+    /// Started by the service control manager.
+    ServiceRun,
     /// Print usage and exit 0.
     Help,
 }
@@ -21,8 +25,11 @@ ServerCTOPC - OPC DA 2.05a/3.0 server for asix (ProgID ServerCTOPC.App)
 usage: ServerCTOPC.exe <switch>
   /RegServer     register the server (CLSID, ProgID, AppID, OPC DA 2.0/3.0 categories)
   /UnregServer   remove the registration
+  /Service       register as the NT service ServerCTOPC (on demand, as LocalService;
+                 COM starts it when a client connects); /UnregServer removes it
   -Embedding     (used by COM) serve OPC clients; the server exits when the last
                  client has gone
+  -ServiceRun    (used by the service control manager) run as the NT service
   /?             this text
 Switches are case-insensitive and may start with / or -.
 ";
@@ -44,6 +51,8 @@ where
         "regserver" => Command::RegServer,
         "unregserver" => Command::UnregServer,
         "embedding" | "automation" => Command::Embedding,
+        "service" => Command::Service,
+        "servicerun" => Command::ServiceRun,
         "?" | "h" | "help" => Command::Help,
         _ => return Err(format!("unknown switch `{first}`")),
     };
@@ -69,6 +78,9 @@ mod tests {
             ("-Embedding", Command::Embedding),
             ("/embedding", Command::Embedding),
             ("/?", Command::Help),
+            ("/Service", Command::Service),
+            ("-service", Command::Service),
+            ("-ServiceRun", Command::ServiceRun),
         ] {
             assert_eq!(parse([arg]), Ok(cmd), "{arg}");
         }

@@ -30,7 +30,20 @@ fn run(cmd: cli::Command) -> ExitCode {
     let result = match cmd {
         cli::Command::RegServer => host::register(),
         cli::Command::UnregServer => host::unregister(),
-        cli::Command::Embedding => return embedding(),
+        cli::Command::Embedding => return embedding(host::ServeMode::UntilUnused),
+        cli::Command::Service => host::register_service(),
+        cli::Command::ServiceRun => {
+            return match ctopc_com::service::run(Box::new(|| match embedding(host::ServeMode::UntilStopped) {
+                code if code == ExitCode::SUCCESS => Ok(()),
+                _ => Err("the server stopped with an error (see the log)".into()),
+            })) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("ServerCTOPC: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         cli::Command::Help => Ok(()),
     };
     match result {
@@ -42,9 +55,9 @@ fn run(cmd: cli::Command) -> ExitCode {
     }
 }
 
-/// `-Embedding`: configuration, then logging as configured, then serve.
+/// `-Embedding` (and the service): configuration, then logging as configured, then serve.
 #[cfg(windows)]
-fn embedding() -> ExitCode {
+fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
     use ctopc_com::{context, host};
     let loaded = host::install_dir().and_then(|dir| context::load(&dir).map(|l| (dir, l)));
     let (dir, loaded) = match loaded {
@@ -60,7 +73,7 @@ fn embedding() -> ExitCode {
     };
     let _guard = logging::init(&dir, &loaded.namespace.config().server);
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "ServerCTOPC starting");
-    match host::serve(loaded, Box::new(backend::make)) {
+    match host::serve_as(loaded, Box::new(backend::make), mode) {
         Ok(()) => {
             tracing::info!("ServerCTOPC stopped");
             ExitCode::SUCCESS
