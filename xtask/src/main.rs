@@ -2,6 +2,7 @@
 //! std only, so that it compiles in seconds on a fresh machine.
 
 mod build;
+mod dist;
 mod proxy;
 mod setup;
 mod test;
@@ -21,6 +22,8 @@ commands:
           target/x86_64-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
   proxy   build only the proxy/stub DLL from idl/
+  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag, example
+          configuration, demo database, deployment guide and docs
 ";
 
 fn main() -> ExitCode {
@@ -34,6 +37,7 @@ fn main() -> ExitCode {
         "setup" => setup::run(rest),
         "build" => build::run(rest).map(|_| ()),
         "test" => test::run(rest),
+        "dist" => dist::run(rest),
         "proxy" => {
             let root = util::root();
             let out = root.join("target/x86_64-pc-windows-gnu/release");
