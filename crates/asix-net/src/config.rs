@@ -5,7 +5,9 @@ use std::collections::HashMap;
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
-use crate::ini::{split_list, Ini};
+use ctopc_core::asix::ini::split_list;
+use ctopc_core::asix::AsixConfig;
+
 use crate::proto::discovery::{Announce, Resource, ResourceKind};
 use crate::proto::DEFAULT_DISCOVERY_PORT;
 
@@ -74,28 +76,25 @@ impl Default for ConnectOptions {
 
 /// The external server lists of `ASIXConnect.ini` (`[AsixCTServers]` by channel,
 /// `[AsixHTServers]` by archive, `[AsixALServers]` by alarm-server network name), used only
-/// when a channel names no server.
+/// when a channel names no server. Resource names are matched case-insensitively, as the
+/// INI API does.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ExternalServerLists {
     lists: HashMap<(ResourceKind, String), Vec<String>>,
 }
 
 impl ExternalServerLists {
-    /// Reads the three sections from the text of `ASIXConnect.ini`. Resource names are
-    /// matched case-insensitively, as the INI API does.
-    pub fn parse(asixconnect_ini: &str) -> Self {
-        let ini = Ini::parse(asixconnect_ini);
+    /// The three lists as the core read them from `ASIXConnect.ini`
+    /// ([`AsixConfig::ct_servers`], [`AsixConfig::ht_servers`], [`AsixConfig::al_servers`]).
+    pub fn from_config(config: &AsixConfig) -> Self {
         let mut lists = HashMap::new();
-        for (section, kind) in [
-            ("AsixCTServers", ResourceKind::Channel),
-            ("AsixHTServers", ResourceKind::Archive),
-            ("AsixALServers", ResourceKind::AlarmServer),
+        for (map, kind) in [
+            (&config.ct_servers, ResourceKind::Channel),
+            (&config.ht_servers, ResourceKind::Archive),
+            (&config.al_servers, ResourceKind::AlarmServer),
         ] {
-            for (k, v) in ini.entries(section) {
-                let servers = split_list(v);
-                if !servers.is_empty() {
-                    lists.insert((kind, k.to_ascii_uppercase()), servers);
-                }
+            for (name, servers) in map {
+                lists.insert((kind, name.to_ascii_uppercase()), servers.clone());
             }
         }
         ExternalServerLists { lists }
@@ -195,9 +194,12 @@ mod tests {
     #[test]
     fn external_list_applies_only_when_no_server_is_named() {
         let mut cfg = ClientConfig::new("CLI.", "CLI");
-        cfg.external = ExternalServerLists::parse(
-            "[AsixCTServers]\nKANAL1 = S1, S2\n[AsixHTServers]\nARCH = S3\n",
-        );
+        let (config, _) = ctopc_core::asix::parse_config(
+            b"[AsixCTServers]\nKANAL1 = S1, S2\n[AsixHTServers]\nARCH = S3\n[AsixALServers]\nAlarmy = S4\n",
+            "ASIXConnect.ini",
+        )
+        .unwrap();
+        cfg.external = ExternalServerLists::from_config(&config);
         let k1 = Resource::channel("kanal1");
         assert_eq!(
             cfg.choice_for(&k1),
@@ -207,14 +209,20 @@ mod tests {
             cfg.choice_for(&Resource::channel("OTHER")),
             ServerChoice::Any
         );
-        let arch = Resource {
-            kind: ResourceKind::Archive,
-            name: "ARCH".into(),
-        };
-        assert_eq!(
-            cfg.choice_for(&arch),
-            ServerChoice::Names(vec!["S3".into()])
-        );
+        for (kind, name, server) in [
+            (ResourceKind::Archive, "ARCH", "S3"),
+            (ResourceKind::AlarmServer, "ALARMY", "S4"),
+        ] {
+            let resource = Resource {
+                kind,
+                name: name.into(),
+            };
+            assert_eq!(
+                cfg.choice_for(&resource),
+                ServerChoice::Names(vec![server.into()]),
+                "{name}"
+            );
+        }
         cfg.options.asix_server_name = "LOCAL".into();
         assert_eq!(cfg.choice_for(&k1), ServerChoice::Local);
     }

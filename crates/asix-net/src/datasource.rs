@@ -24,7 +24,7 @@ use tokio::runtime::{Handle, Runtime};
 use tracing::{info, warn};
 
 use crate::client::{AsixClient, ClientEvent, ItemKey, RequestId};
-use crate::config::{ClientConfig, ConnectOptions};
+use crate::config::{ClientConfig, ConnectOptions, ExternalServerLists};
 use crate::naming::asix_client_name;
 use crate::proto::frame::ReadSource;
 use crate::proto::DEFAULT_DISCOVERY_PORT;
@@ -93,7 +93,8 @@ pub const CHANNEL_ATTRIBUTE: &str = "Channel";
 pub struct NamespaceResolver {
     ns: Arc<AsixNamespace>,
     /// Client name, host, discovery targets and timings; the discovery options come from
-    /// each channel.
+    /// each channel, the external server lists from the configuration (replacing the
+    /// base's).
     base: ClientConfig,
 }
 
@@ -152,6 +153,7 @@ impl Resolver for NamespaceResolver {
     fn client_config(&self, channel: &str) -> ClientConfig {
         let mut c = self.base.clone();
         let cfg = self.ns.config();
+        c.external = ExternalServerLists::from_config(cfg);
         if let Ok(rc) = cfg.resolve_channel(channel) {
             let o = rc.options;
             c.options = ConnectOptions {
@@ -733,7 +735,8 @@ impl<R: Resolver> Backend for AsixSource<R> {
 
 /// The asix network backend for a loaded namespace, ready for the server's driver loop:
 /// client settings from the `[Server]` options ([`client_config_from_server_options`]) and
-/// this computer's name, per-channel discovery options from the channels, and a tokio
+/// this computer's name, per-channel discovery options from the channels, the external
+/// server lists of `ASIXConnect.ini` ([`ExternalServerLists::from_config`]), and a tokio
 /// runtime of its own. Callable from any thread (no tokio context needed).
 pub fn network_backend(ns: Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> std::io::Result<Box<dyn Backend>> {
     let base = client_config_from_server_options(&ns.config().server, &crate::naming::computer_name());

@@ -8,14 +8,14 @@
 //! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant
 //!   (also the model of [`inproc`], the in-process simulation backend).
 //! - [`discovery`]: choosing a server from the announcements (ranking, variants).
-//! - [`naming`], [`config`], [`ini`]: the client's asix name, channel options, INI reading.
+//! - [`naming`], [`config`]: the client's asix name, channel options and external server
+//!   lists (INI files are read by the core's reader, [`ctopc_core::asix::ini`]).
 #![forbid(unsafe_code)]
 
 pub mod client;
 pub mod config;
 pub mod datasource;
 pub mod discovery;
-pub mod ini;
 pub mod inproc;
 pub mod naming;
 pub mod proto;

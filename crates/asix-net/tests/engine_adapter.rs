@@ -316,6 +316,36 @@ fn server_options_give_the_client_name_and_discovery_targets() {
     assert_eq!(c.discovery_targets[1].to_string(), "127.0.0.1:5000");
 }
 
+/// The resolver hands each channel's client the external server lists the core read from
+/// `ASIXConnect.ini` (resource names case-insensitive), used when the channel names no server.
+#[test]
+fn the_resolver_takes_the_external_server_lists_from_the_configuration() {
+    use asix_net::datasource::Resolver;
+    use asix_net::proto::discovery::{Resource, ResourceKind};
+    use asix_net::{ClientConfig, ServerChoice};
+    let ini = "[Channel:*]\n[Channel:Named]\nAsixServerName = S9\n\
+        [AsixCTServers]\nKanal1 = S1, S2\n[AsixHTServers]\nARCH = S3\n";
+    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let (ns, _) = AsixNamespace::load(config);
+    let r = NamespaceResolver::new(Arc::new(ns), ClientConfig::new("CLI.", "CLI"));
+    let c = r.client_config("*");
+    let names = |v: &[&str]| ServerChoice::Names(v.iter().map(|s| s.to_string()).collect());
+    assert_eq!(
+        c.choice_for(&Resource::channel("KANAL1")),
+        names(&["S1", "S2"])
+    );
+    assert_eq!(c.choice_for(&Resource::channel("OTHER")), ServerChoice::Any);
+    let arch = Resource {
+        kind: ResourceKind::Archive,
+        name: "arch".into(),
+    };
+    assert_eq!(c.choice_for(&arch), names(&["S3"]));
+    // A channel that names its server does not use the lists.
+    let c = r.client_config("Named");
+    assert_eq!(c.choice_for(&Resource::channel("KANAL1")), names(&["S9"]));
+}
+
 /// What the server's driver thread does: no tokio context, `network_backend` from the
 /// namespace alone (discovery target from `[Server] BroadcastAddress` / `DiscoveryPort`).
 #[test]

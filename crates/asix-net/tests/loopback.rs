@@ -169,7 +169,10 @@ async fn external_server_list_applies_when_the_channel_names_no_server() {
         let a = sim("A").await;
         let b = sim("B").await;
         let mut cfg = client_cfg(&[a.discovery_addr(), b.discovery_addr()]);
-        cfg.external = ExternalServerLists::parse(&format!("[AsixCTServers]\n{CH} = B\n"));
+        let ini = format!("[AsixCTServers]\n{CH} = B\n");
+        let (config, _) =
+            ctopc_core::asix::parse_config(ini.as_bytes(), "ASIXConnect.ini").unwrap();
+        cfg.external = ExternalServerLists::from_config(&config);
         let (c, mut ev) = client(cfg.clone());
         c.subscribe(vec![key("PIEC_TEMP")], 50);
         assert_eq!(ev.channel_up(SHORT).await, "B");
@@ -435,8 +438,11 @@ const APP_INI: &str = "[ASMEN]\n\
 
 fn with_rights(c: &mut asix_net::sim::SimConfig) {
     use asix_net::sim::plant::{ChannelDef, VarSpec};
+    use asix_net::sim::rights::WriteRights;
     use ctopc_core::VarType;
-    c.app_ini = Some(APP_INI.into());
+    let (rights, warnings) = WriteRights::from_app_ini(APP_INI.as_bytes(), "app.ini");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    c.write_rights = rights;
     let specs = || {
         vec![
             VarSpec::new("WART1", VarType::R4, 0.0, 100.0, true),

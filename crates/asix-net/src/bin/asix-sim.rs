@@ -13,6 +13,7 @@ use asix_net::proto::{DEFAULT_DISCOVERY_PORT, DEFAULT_TCP_PORT};
 use asix_net::sim::plant::{
     acid_plant, channels_from_database, ChannelDef, VarSpec, ACID_PLANT_CHANNEL,
 };
+use asix_net::sim::rights::WriteRights;
 use asix_net::sim::{self, SimConfig};
 use ctopc_core::VarType;
 
@@ -145,7 +146,12 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
             "--tick-ms" => cfg.tick_ms = num(val()?)?,
             "--app-ini" => {
                 let f = val()?;
-                cfg.app_ini = Some(std::fs::read_to_string(&f).map_err(|e| format!("{f}: {e}"))?);
+                let bytes = std::fs::read(&f).map_err(|e| format!("{f}: {e}"))?;
+                let (rights, warnings) = WriteRights::from_app_ini(&bytes, &f);
+                for w in warnings {
+                    eprintln!("asix-sim: {w}");
+                }
+                cfg.write_rights = rights;
             }
             "--bridge" => cfg.bridge = true,
             "--source-failed" => cfg.source_failed = true,

@@ -56,8 +56,9 @@ pub struct SimConfig {
     pub source_failed: bool,
     /// Added to the announced client count (other clients, simulated).
     pub extra_clients: u32,
-    /// Text of the asix application ini (`[ASMEN] ZEZWOLENIE_ZAPISU`, drivers, sections).
-    pub app_ini: Option<String>,
+    /// Write rights and channel drivers, from the asix application ini
+    /// ([`WriteRights::from_app_ini`]); the default grants remote clients nothing.
+    pub write_rights: WriteRights,
     /// Extra delay of reads from the driver.
     pub driver_delay: Duration,
     /// Shorter sampling periods are raised to this.
@@ -79,7 +80,7 @@ impl SimConfig {
             bridge: false,
             source_failed: false,
             extra_clients: 0,
-            app_ini: None,
+            write_rights: WriteRights::default(),
             driver_delay: Duration::from_millis(20),
             min_sampling_ms: 10,
         }
@@ -159,11 +160,7 @@ pub async fn start(cfg: SimConfig) -> io::Result<SimHandle> {
     let tcp = TcpListener::bind(cfg.tcp_addr).await?;
     let discovery_addr = udp.local_addr()?;
     let tcp_addr = tcp.local_addr()?;
-    let rights = cfg
-        .app_ini
-        .as_deref()
-        .map(WriteRights::from_app_ini)
-        .unwrap_or_default();
+    let rights = cfg.write_rights;
     // Channels on driver NONE have no driver: their variables change only when written.
     let channels: Vec<ChannelDef> = cfg
         .channels

@@ -9,11 +9,14 @@
 //! ```
 //!
 //! Names compare case-insensitively (INI rules). `ZEZWOLENIE_ZAPISU` may repeat, and one
-//! line may name several clients after the channel (`= KANAL1, KE2, KE3`).
+//! line may name several clients after the channel (`= KANAL1, KE2, KE3`). The file is read
+//! as the asix side writes it ([`parse_ini_tolerant`]).
 
 use std::collections::{HashMap, HashSet};
 
-use crate::ini::{parse_bool, split_list, Ini};
+use ctopc_core::asix::ini::{parse_ini_tolerant, split_list};
+use ctopc_core::asix::text::parse_bool;
+use ctopc_core::asix::Warning;
 
 /// Why a write is refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,12 +41,14 @@ pub struct WriteRights {
 const PERMIT_KEY: &str = "ZEZWOLENIE_ZAPISU";
 
 impl WriteRights {
-    pub fn from_app_ini(text: &str) -> WriteRights {
-        let ini = Ini::parse(text);
+    /// Reads the rights from the bytes of an asix application ini; `file` names it in the
+    /// warnings about lines that could not be read (which are skipped).
+    pub fn from_app_ini(bytes: &[u8], file: &str) -> (WriteRights, Vec<Warning>) {
+        let (ini, warnings) = parse_ini_tolerant(bytes, file);
         let mut r = WriteRights::default();
-        for (k, v) in ini.entries("ASMEN") {
-            let list = split_list(v);
-            if k.eq_ignore_ascii_case(PERMIT_KEY) {
+        for e in ini.section("ASMEN").iter().flat_map(|s| &s.entries) {
+            let list = split_list(&e.value);
+            if e.key.eq_ignore_ascii_case(PERMIT_KEY) {
                 if let Some((channel, clients)) = list.split_first() {
                     for c in clients {
                         r.permits
@@ -52,17 +57,17 @@ impl WriteRights {
                 }
             } else if let Some(driver) = list.first() {
                 // Any other [ASMEN] line is read as a channel definition: `<channel> = <driver>, ...`.
-                r.drivers.insert(k.to_ascii_uppercase(), driver.clone());
+                r.drivers.insert(e.key.to_ascii_uppercase(), driver.clone());
             }
         }
         for s in &ini.sections {
-            if let Some(v) = ini.get(&s.name, "ZAPIS_CZASU_I_STATUSU") {
-                if parse_bool(v) == Some(true) {
+            if let Some(e) = s.get("ZAPIS_CZASU_I_STATUSU") {
+                if parse_bool(&e.value) == Some(true) {
                     r.time_and_status.insert(s.name.to_ascii_uppercase());
                 }
             }
         }
-        r
+        (r, warnings)
     }
 
     /// The driver of a channel, if the ini defines it.
@@ -117,9 +122,15 @@ mod tests {
         ZEZWOLENIE_ZAPISU = KANAL3, KE2\n[KANAL1]\nZAPIS_CZASU_I_STATUSU = TAK\n\
         [KANAL2]\nZAPIS_CZASU_I_STATUSU = TAK\n[KANAL3]\nZAPIS_CZASU_I_STATUSU = NIE\n";
 
+    fn rights(text: &str) -> WriteRights {
+        let (r, warnings) = WriteRights::from_app_ini(text.as_bytes(), "app.ini");
+        assert!(warnings.is_empty(), "{warnings:?}");
+        r
+    }
+
     #[test]
     fn manual_example_and_many_entries() {
-        let r = WriteRights::from_app_ini(INI);
+        let r = rights(INI);
         assert_eq!(r.check_write("KANAL1", "KE2", false), Ok(()));
         assert_eq!(r.check_write("kanal1", "ke2", false), Ok(()));
         assert_eq!(
@@ -133,7 +144,7 @@ mod tests {
 
     #[test]
     fn extended_write_needs_permission_driver_none_and_the_section_flag() {
-        let r = WriteRights::from_app_ini(INI);
+        let r = rights(INI);
         assert_eq!(r.check_write_extended("KANAL1", "KE2", false), Ok(()));
         assert_eq!(
             r.check_write_extended("KANAL1", "X.", false),
@@ -152,5 +163,22 @@ mod tests {
             WriteRights::default().check_write_extended("KANAL1", "X.", true),
             Err(Denied::NoExtendedWrite)
         );
+    }
+
+    #[test]
+    fn windows_1250_file_and_unreadable_lines() {
+        // Channel `PIEC_Ł` in Windows-1250; an unreadable line and an unterminated header
+        // are skipped with warnings, and the flag under that header does not count.
+        let bytes = b"[ASMEN]\nPIEC_\xA3 = NONE\n???\nZEZWOLENIE_ZAPISU = PIEC_\xA3, KE2\n\
+            [PIEC_\xA3\nZAPIS_CZASU_I_STATUSU = TAK\n";
+        let (r, warnings) = WriteRights::from_app_ini(bytes, "app.ini");
+        assert_eq!(r.driver("PIEC_Ł"), Some("NONE"));
+        assert_eq!(r.check_write("PIEC_Ł", "KE2", false), Ok(()));
+        assert_eq!(
+            r.check_write_extended("PIEC_Ł", "KE2", false),
+            Err(Denied::NoExtendedWrite)
+        );
+        let lines: Vec<usize> = warnings.iter().map(|w| w.line).collect();
+        assert_eq!(lines, [3, 5, 6], "{warnings:?}");
     }
 }

@@ -32,7 +32,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use super::ini::{parse_ini, IniEntry, IniSection};
+use super::ini::{parse_ini, split_list, IniEntry, IniSection};
 use super::text::{parse_bool, Warning};
 use crate::{OpcError, OpcResult};
 
@@ -242,12 +242,7 @@ impl ServerSelection {
         if t.eq_ignore_ascii_case("LOCAL") {
             return ServerSelection::Local;
         }
-        let names: Vec<String> = t
-            .split(',')
-            .map(str::trim)
-            .filter(|s| !s.is_empty())
-            .map(str::to_owned)
-            .collect();
+        let names = split_list(t);
         if names.is_empty() {
             ServerSelection::Any
         } else {
@@ -553,13 +548,7 @@ fn server_list(
 ) -> BTreeMap<String, Vec<String>> {
     let mut map = BTreeMap::new();
     for e in &section.entries {
-        let names: Vec<String> = e
-            .value
-            .split(',')
-            .map(str::trim)
-            .filter(|s| !s.is_empty())
-            .map(str::to_owned)
-            .collect();
+        let names = split_list(&e.value);
         if names.is_empty() {
             warnings.push(Warning::new(
                 file,
