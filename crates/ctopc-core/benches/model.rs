@@ -10,8 +10,6 @@
 //!   value last sent to its group and builds the OnDataChange callbacks;
 //! - scheduler cost of one tick with 100,000 changed items, and with none.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicIsize, Ordering::Relaxed};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -19,50 +17,15 @@ use ctopc_core::model::*;
 use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
 use ctopc_core::{OpcError, OpcResult, Quality, Timestamp, Value, VarType, Vqt};
 
-/// Counts live heap bytes.
-struct Counting;
-
-static LIVE: AtomicIsize = AtomicIsize::new(0);
-
-// SAFETY: every method forwards to the system allocator with the caller's arguments
-// unchanged and only adjusts a counter; the GlobalAlloc contract is System's.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's layout.
-        let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            LIVE.fetch_add(layout.size() as isize, Relaxed);
-        }
-        p
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's layout.
-        let p = unsafe { System.alloc_zeroed(layout) };
-        if !p.is_null() {
-            LIVE.fetch_add(layout.size() as isize, Relaxed);
-        }
-        p
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` was allocated by this allocator (System) with `layout`.
-        unsafe { System.dealloc(ptr, layout) };
-        LIVE.fetch_sub(layout.size() as isize, Relaxed);
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        // SAFETY: `ptr` was allocated by System with `layout`; forwarded unchanged.
-        let q = unsafe { System.realloc(ptr, layout, new_size) };
-        if !q.is_null() {
-            LIVE.fetch_add(new_size as isize - layout.size() as isize, Relaxed);
-        }
-        q
-    }
-}
-
+/// Counts live heap bytes (stats_alloc wraps the system allocator, so the bench needs no
+/// `unsafe` of its own: that lives only in the COM crate).
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
 fn live() -> isize {
-    LIVE.load(Relaxed)
+    let s = GLOBAL.stats();
+    // Reallocation deltas are already counted in bytes_allocated / bytes_deallocated.
+    s.bytes_allocated as isize - s.bytes_deallocated as isize
 }
 
 /// Every `V<n>` is an analog R8 item with EU 0..100 on the basic channel.
