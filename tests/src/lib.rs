@@ -6,6 +6,8 @@
 //! that is what they test.
 #![cfg(windows)]
 
+pub mod io_support;
+
 pub use ctopc_com::client::{ComThread, Server};
 pub use ctopc_com::interfaces;
 use std::path::PathBuf;
@@ -40,3 +42,47 @@ pub fn assert_alive(server: &Server) {
     let status = server.status().expect("server still answers GetStatus");
     assert!(status.vendor_info.is_some());
 }
+
+/// The process IDs of the ServerCTOPC.exe processes of this Wine prefix other than `mine`.
+pub fn other_servers(mine: u32) -> Vec<u32> {
+    use windows::Win32::Foundation::CloseHandle;
+    use windows::Win32::System::Diagnostics::ToolHelp::{CreateToolhelp32Snapshot, Process32FirstW, Process32NextW, PROCESSENTRY32W, TH32CS_SNAPPROCESS};
+    let mut out = Vec::new();
+    // SAFETY: a process snapshot, walked with a correctly sized PROCESSENTRY32W and closed.
+    unsafe {
+        let Ok(snap) = CreateToolhelp32Snapshot(TH32CS_SNAPPROCESS, 0) else { return out };
+        let mut e = PROCESSENTRY32W { dwSize: std::mem::size_of::<PROCESSENTRY32W>() as u32, ..Default::default() };
+        let mut ok = Process32FirstW(snap, &mut e).is_ok();
+        while ok {
+            let len = e.szExeFile.iter().position(|&c| c == 0).unwrap_or(e.szExeFile.len());
+            let name = String::from_utf16_lossy(&e.szExeFile[..len]);
+            if name.eq_ignore_ascii_case("ServerCTOPC.exe") && e.th32ProcessID != mine {
+                out.push(e.th32ProcessID);
+            }
+            ok = Process32NextW(snap, &mut e).is_ok();
+        }
+        let _ = CloseHandle(snap);
+    }
+    out
+}
+
+/// Waits (without connecting: a connection would restart their linger time) until no
+/// other ServerCTOPC.exe runs. Wine hands activations to the first server that registered
+/// the class, so the test's own server must be the only one. A server that does not go
+/// away holds references of a client that died without releasing them (Wine has no DCOM
+/// ping): that is a leak in an earlier test, reported here.
+pub fn wait_for_no_other_server() {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let others = other_servers(0);
+        if others.is_empty() {
+            return;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "other ServerCTOPC.exe processes {others:?} still run after 60 s (a client leaked references?)"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(500));
+    }
+}
+

@@ -1,7 +1,10 @@
 //! Project automation, reached as `cargo xtask <command>` (alias in .cargo/config.toml).
-//! std only, so that it compiles in seconds on a fresh machine.
+//! std only (plus the small `ctrlc` crate for the demo's Ctrl+C), so that it compiles in
+//! seconds on a fresh machine.
 
+mod bench;
 mod build;
+mod demo;
 mod dist;
 mod proxy;
 mod setup;
@@ -21,9 +24,16 @@ commands:
   build   build the Windows artifacts (ServerCTOPC.exe, opc_ps.dll, clients) into
           target/x86_64-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
+  demo    the server with the demo plant Wytwornia_Kwasu, read over the asix network from
+          the asix simulator, watched with `opcdiag demo` (status, plant tree, live
+          values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
+          stops after SECONDS
   proxy   build only the proxy/stub DLL from idl/
   dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag, example
           configuration, demo database, deployment guide and docs
+  bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
+          prefix of its own; prints figures (medians, ratios to a null round trip,
+          goals) and never fails on speed; `--quick` for a short run
 ";
 
 fn main() -> ExitCode {
@@ -37,7 +47,9 @@ fn main() -> ExitCode {
         "setup" => setup::run(rest),
         "build" => build::run(rest).map(|_| ()),
         "test" => test::run(rest),
+        "demo" => demo::run(rest),
         "dist" => dist::run(rest),
+        "bench" => bench::run(rest),
         "proxy" => {
             let root = util::root();
             let out = root.join("target/x86_64-pc-windows-gnu/release");

@@ -137,6 +137,30 @@ fn the_com_crate_does_not_unwrap_outside_tests() {
     assert!(bad.is_empty(), "unwrap/expect in the COM crate (a panic would cross COM):\n{}", bad.join("\n"));
 }
 
+/// `windows::core::Error::new(code, message)` calls RoOriginateErrorW, which Wine 8 only
+/// stubs: the process aborts. Errors with a message go through `ctopc_com::mem::error`.
+#[test]
+fn com_errors_with_messages_go_through_mem_error() {
+    let root = root();
+    let mut files = Vec::new();
+    rust_files(&root.join("crates/ctopc-com/src"), &mut files);
+    rust_files(&root.join("crates/server/src"), &mut files);
+    let mut bad = Vec::new();
+    for f in files {
+        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().into_owned();
+        if rel.ends_with("ctopc-com/src/mem.rs") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (n, code, in_test) in code_lines(&text) {
+            if !in_test && code.contains("Error::new(") {
+                bad.push(format!("{rel}:{n}: {code}"));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "use ctopc_com::mem::error (Error::new aborts under Wine):\n{}", bad.join("\n"));
+}
+
 #[test]
 fn the_core_forbids_unsafe_and_does_not_depend_on_windows() {
     let root = root();

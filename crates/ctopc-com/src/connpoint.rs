@@ -49,13 +49,16 @@ impl<I: Interface + Clone> SinkSlot<I> {
     }
     /// Drops the sink if it is still the one with `cookie` (after a failed callback).
     pub fn drop_if(&self, cookie: u32) -> bool {
-        let mut g = self.lock();
-        if g.as_ref().is_some_and(|(c, _)| *c == cookie) {
-            *g = None;
-            true
-        } else {
-            false
-        }
+        let taken = {
+            let mut g = self.lock();
+            if g.as_ref().is_some_and(|(c, _)| *c == cookie) {
+                g.take()
+            } else {
+                None
+            }
+        };
+        // Released after the lock: releasing a proxy is a call to the client.
+        taken.is_some()
     }
     fn advise(&self, unk: &IUnknown) -> windows::core::Result<u32> {
         let sink: I = unk.cast().map_err(|_| windows::core::Error::from(CONNECT_E_CANNOTCONNECT))?;

@@ -54,7 +54,7 @@ impl Drop for ComInit {
 }
 
 fn exe_path() -> windows::core::Result<String> {
-    let exe = std::env::current_exe().map_err(|e| windows::core::Error::new(windows::Win32::Foundation::E_FAIL, e.to_string()))?;
+    let exe = std::env::current_exe().map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())
 }
 
@@ -92,7 +92,7 @@ pub fn register() -> windows::core::Result<()> {
 pub fn register_service() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     let exe = exe_path()?;
-    crate::service::install(std::path::Path::new(&exe)).map_err(|e| windows::core::Error::new(E_FAIL, e))?;
+    crate::service::install(std::path::Path::new(&exe)).map_err(|e| crate::mem::error(E_FAIL, &e))?;
     with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
     println!("ServerCTOPC: registered {PROGID} as the NT service {}", crate::service::SERVICE_NAME);
     Ok(())
@@ -102,7 +102,7 @@ pub fn register_service() -> windows::core::Result<()> {
 pub fn unregister() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     with_registration(None, registry::unregister)??;
-    crate::service::uninstall().map_err(|e| windows::core::Error::new(E_FAIL, e))?;
+    crate::service::uninstall().map_err(|e| crate::mem::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
 }
@@ -194,7 +194,7 @@ pub fn serve_as(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>, mod
     };
     let ctx = start(loaded, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
-        windows::core::Error::new(E_FAIL, e)
+        crate::mem::error(E_FAIL, &e)
     })?;
     // SAFETY: a plain function pointer with the handler signature, valid for the process.
     let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };

@@ -11,6 +11,7 @@ pub mod connpoint;
 pub mod context;
 pub mod enums;
 pub mod factory;
+pub mod group;
 pub mod host;
 pub mod interfaces;
 pub mod lifetime;

@@ -13,7 +13,30 @@ use windows::Win32::System::Com::{CoTaskMemAlloc, CoTaskMemFree};
 
 /// Maps a core error to a COM error (the single mapping point).
 pub fn to_com(e: OpcError) -> windows::core::Error {
-    windows::core::Error::new(windows::core::HRESULT(e.hresult()), e.symbol())
+    error(windows::core::HRESULT(e.hresult()), e.symbol())
+}
+
+/// A COM error with a message, carried by an `IErrorInfo` from oleaut32's
+/// `CreateErrorInfo` (set on the thread, so that the error also reaches a client whose COM
+/// runtime transmits error objects).
+///
+/// Not `windows::core::Error::new`: with a message it calls combase's
+/// `RoOriginateErrorW`, which Wine 8 exports only as an unimplemented stub, and calling
+/// that aborts the whole server process.
+pub fn error(code: windows::core::HRESULT, message: &str) -> windows::core::Error {
+    use windows::core::Interface;
+    let text = windows::core::HSTRING::from(message);
+    // SAFETY: plain COM calls on a new error object; `text` lives for the call.
+    unsafe {
+        if let Ok(info) = windows::Win32::System::Ole::CreateErrorInfo() {
+            let _ = info.SetDescription(windows::core::PCWSTR(text.as_ptr()));
+            if let Ok(info) = info.cast::<windows::Win32::System::Com::IErrorInfo>() {
+                let _ = windows::Win32::System::Com::SetErrorInfo(0, &info);
+            }
+        }
+    }
+    // Takes the thread's error object (the one just set).
+    windows::core::Error::from(code)
 }
 
 pub fn hresult(e: OpcError) -> windows::core::HRESULT {

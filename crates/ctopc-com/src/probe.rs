@@ -1063,7 +1063,7 @@ impl Drop for ComInit {
 
 fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
     let exe =
-        std::env::current_exe().map_err(|e| windows::core::Error::new(windows::Win32::Foundation::E_FAIL, e.to_string()))?;
+        std::env::current_exe().map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     let exe = exe.to_string_lossy();
     let reg = ServerRegistration {
         clsid: CLSID_MARSHAL_PROBE,

@@ -50,7 +50,7 @@ fn check(err: WIN32_ERROR, what: &str) -> windows::core::Result<()> {
     if err == ERROR_SUCCESS {
         Ok(())
     } else {
-        Err(windows::core::Error::new(err.to_hresult(), format!("registry: {what}: error {}", err.0)))
+        Err(crate::mem::error(err.to_hresult(), &format!("registry: {what}: error {}", err.0)))
     }
 }
 

@@ -1,15 +1,50 @@
 //! The OPC server object: one per client (CreateInstance of the multiple-use class object).
+//!
+//! Interfaces: IOPCCommon, IOPCServer (groups, status, error strings),
+//! IOPCBrowseServerAddressSpace and IOPCBrowse (`server/browse.rs`), IOPCItemProperties
+//! (`server/props.rs`), IOPCItemIO (`server/itemio.rs`) and IConnectionPointContainer with
+//! the IOPCShutdown connection point (`server/shutdown.rs`).
+//!
+//! # Argument rules (every method)
+//!
+//! - **NULL pointers are E_INVALIDARG**: out-parameters, required `[in]` pointers (strings,
+//!   arrays with a non-zero count, REFIIDs) alike. The OPC specifications list E_INVALIDARG
+//!   for bad arguments of every method and the OPC Foundation sample server answers NULLs
+//!   with it; E_POINTER is kept for the COM-defined methods whose contracts name it
+//!   (QueryInterface, IEnum*::Next, IConnectionPoint*). Through the proxy a NULL `[ref]`
+//!   pointer mostly never reaches the server: the proxy answers RPC_X_NULL_REF_POINTER
+//!   (Wine's proxy lets some NULL `[out]` pointers through; the stub then hands the server
+//!   storage of its own and the proxy fails on the way back). `[in, unique]` pointers
+//!   (AddGroup's pTimeBias and pPercentDeadband) may be NULL and mean "the default".
+//! - A count of 0 is E_INVALIDARG; enumeration values outside the IDL's are E_INVALIDARG.
+//! - Out-parameters are cleared first (NULL / 0), then filled only after everything of the
+//!   call has succeeded (`server/out.rs`): all or nothing.
+//! - Per-item operations return S_FALSE when any item failed, with per-item codes.
+//! - Core errors become HRESULTs only through `mem::hresult` (`out::com_err`: without
+//!   the message object `mem::to_com` would originate, which aborts under Wine 8).
+//! - No client is called and no COM object is created while the engine lock is held
+//!   (`ctx.runtime.with_engine` sections are short, pure engine calls).
 
-use crate::interfaces::*;
+mod browse;
+mod groups;
+mod itemio;
+pub(crate) mod out;
+mod props;
+mod shutdown;
+
+use crate::connpoint::SinkSlot;
 use crate::context::{self, Context};
+use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
 use crate::mem::{self, TaskMem};
+use ctopc_core::browse::BrowseCursor;
 use ctopc_core::lang::Lang;
 use ctopc_core::model::SessionHandle;
 use ctopc_core::OpcError;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_NOTIMPL};
+use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG};
+use windows::Win32::System::Com::IConnectionPointContainer;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
 pub const VENDOR_INFO: &str = "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
@@ -19,22 +54,43 @@ struct Session {
     client_name: Option<String>,
 }
 
-#[implement(IOPCServer, IOPCCommon)]
+#[implement(
+    IOPCServer,
+    IOPCCommon,
+    IOPCBrowseServerAddressSpace,
+    IOPCItemProperties,
+    IOPCBrowse,
+    IOPCItemIO,
+    IConnectionPointContainer
+)]
 pub struct OpcServer {
     ctx: &'static Context,
     handle: SessionHandle,
     session: Mutex<Session>,
+    /// IOPCBrowseServerAddressSpace's position (per client, as the spec requires).
+    browse: Mutex<BrowseCursor>,
+    /// The IOPCShutdown connection (registered with the runtime, which calls it on a stop).
+    shutdown: Arc<SinkSlot<IOPCShutdown>>,
     _guard: ObjectGuard,
 }
 
 /// The class factory's constructor: a new server object (and engine session) for one client.
 pub fn create_instance() -> windows::core::Result<IUnknown> {
-    let ctx = context::get().ok_or_else(|| windows::core::Error::new(E_FAIL, "the server has not started"))?;
+    let Some(ctx) = context::get() else {
+        // (No message object: windows-rs would originate it with RoOriginateErrorW, which
+        // aborts under Wine 8; see `out::com_err`.)
+        tracing::error!("a server object was asked for before the server started");
+        return Err(windows::core::Error::from_hresult(E_FAIL));
+    };
     let handle = ctx.runtime.open_session();
+    let shutdown = Arc::new(SinkSlot::<IOPCShutdown>::default());
+    ctx.runtime.set_shutdown_sink(handle, Arc::clone(&shutdown));
     let server = OpcServer {
         ctx,
         handle,
         session: Mutex::new(Session { lcid: ctx.default_lang.lcid(), client_name: None }),
+        browse: Mutex::new(BrowseCursor::new(Arc::clone(&ctx.address_space))),
+        shutdown,
         _guard: ObjectGuard::new(),
     };
     Ok(server.into())
@@ -47,8 +103,12 @@ impl Drop for OpcServer {
 }
 
 impl OpcServer {
-    fn session(&self) -> std::sync::MutexGuard<'_, Session> {
+    fn session(&self) -> MutexGuard<'_, Session> {
         self.session.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn cursor(&self) -> MutexGuard<'_, BrowseCursor> {
+        self.browse.lock().unwrap_or_else(|p| p.into_inner())
     }
 }
 
@@ -130,19 +190,20 @@ impl IOPCCommon_Impl for OpcServer_Impl {
 impl IOPCServer_Impl for OpcServer_Impl {
     unsafe fn AddGroup(
         &self,
-        _name: PCWSTR,
-        _active: BOOL,
-        _rate: u32,
-        _client: u32,
-        _bias: *const i32,
-        _deadband: *const f32,
-        _lcid: u32,
-        _server: *mut u32,
-        _revised: *mut u32,
-        _riid: *const GUID,
-        _unk: *mut Option<IUnknown>,
+        name: PCWSTR,
+        active: BOOL,
+        rate: u32,
+        client: u32,
+        bias: *const i32,
+        deadband: *const f32,
+        lcid: u32,
+        server: *mut u32,
+        revised: *mut u32,
+        riid: *const GUID,
+        unk: *mut Option<IUnknown>,
     ) -> HRESULT {
-        E_NOTIMPL
+        let args = groups::AddGroupArgs { name, active, rate, client, bias, deadband, lcid };
+        out::hresult(self.add_group(&args, server, revised, riid, unk))
     }
 
     unsafe fn GetErrorString(&self, code: HRESULT, lcid: u32, pstring: *mut PWSTR) -> windows::core::Result<()> {
@@ -154,8 +215,8 @@ impl IOPCServer_Impl for OpcServer_Impl {
         write_out(pstring, text)
     }
 
-    unsafe fn GetGroupByName(&self, _name: PCWSTR, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
-        Err(E_NOTIMPL.into())
+    unsafe fn GetGroupByName(&self, name: PCWSTR, riid: *const GUID, unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+        self.group_by_name(name, riid, unk)
     }
 
     unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
@@ -189,11 +250,11 @@ impl IOPCServer_Impl for OpcServer_Impl {
         Ok(())
     }
 
-    unsafe fn RemoveGroup(&self, _server_group: u32, _force: BOOL) -> HRESULT {
-        E_NOTIMPL
+    unsafe fn RemoveGroup(&self, server_group: u32, force: BOOL) -> HRESULT {
+        out::hresult(self.remove_group(server_group, force))
     }
 
-    unsafe fn CreateGroupEnumerator(&self, _scope: OPCENUMSCOPE, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> HRESULT {
-        E_NOTIMPL
+    unsafe fn CreateGroupEnumerator(&self, scope: OPCENUMSCOPE, riid: *const GUID, unk: *mut Option<IUnknown>) -> HRESULT {
+        out::hresult(self.group_enumerator(scope, riid, unk))
     }
 }

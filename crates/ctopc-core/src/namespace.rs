@@ -40,4 +40,12 @@ pub struct ItemDef {
 /// OPC_E_UNKNOWNITEMID (no such item) or OPC_E_UNKNOWNPATH (no such access path).
 pub trait Namespace: Send + Sync {
     fn resolve(&self, item_id: &str, access_path: &str) -> OpcResult<ItemDef>;
+
+    /// Checks a value a client writes to a writable item, as the client sent it (before
+    /// the conversion to the canonical type; for the asix extended write, the value
+    /// element). The default accepts every value; asix accepts only integers and reals
+    /// (OPC_E_BADTYPE otherwise).
+    fn check_write_value(&self, _value: &Value) -> OpcResult<()> {
+        Ok(())
+    }
 }

@@ -548,4 +548,9 @@ impl Namespace for AsixNamespace {
         self.resolve_with_attributes(item_id, access_path)
             .map(|(def, _)| def)
     }
+
+    /// AsixConnect §5: values written must be integer or real.
+    fn check_write_value(&self, value: &Value) -> OpcResult<()> {
+        super::quality_rules::check_write_value(value)
+    }
 }

@@ -29,6 +29,7 @@ use super::item::SENT;
 use super::util::IntMap;
 use super::MAX_AGE_CACHE;
 use crate::convert::Locale;
+use crate::namespace::Namespace;
 use crate::{OpcError, Quality, Timestamp, Value, VarType};
 
 /// OPCDATASOURCE.
@@ -232,8 +233,10 @@ fn conversion_error_for_write(e: OpcError) -> OpcError {
 }
 
 /// Checks and converts a value to write. A 1-D 3-element array written to a scalar item is
-/// the asix extended write [value, quality (I4), timestamp (DATE)].
-fn prepare_write(e: &SourceEntry, w: &ItemVqt, locale: Locale) -> Result<PreparedWrite, OpcError> {
+/// the asix extended write [value, quality (I4), timestamp (DATE)]. The value as the
+/// client sent it must pass the namespace's [`Namespace::check_write_value`] (asix:
+/// integers and reals only) before it is converted to the canonical type.
+fn prepare_write(ns: &dyn Namespace, e: &SourceEntry, w: &ItemVqt, locale: Locale) -> Result<PreparedWrite, OpcError> {
     if !e.writable() {
         return Err(OpcError::BadRights);
     }
@@ -252,6 +255,7 @@ fn prepare_write(e: &SourceEntry, w: &ItemVqt, locale: Locale) -> Result<Prepare
     if matches!(value, Value::Empty) {
         return Err(OpcError::BadType);
     }
+    ns.check_write_value(value)?;
     let value = if value.var_type() == e.canonical {
         value.clone()
     } else {
@@ -564,7 +568,7 @@ impl Engine {
                     s.client = it.client;
                     s.source = it.source;
                     s.source_gen = e.generation;
-                    match prepare_write(e, w, txn.locale) {
+                    match prepare_write(&*self.ns, e, w, txn.locale) {
                         Ok(p) => writes.push((n as u32, p)),
                         Err(err) => s.out = SlotOut::Err(err),
                     }
@@ -696,7 +700,7 @@ impl Engine {
         for (n, (id, w)) in items.iter().enumerate() {
             let mut slot = self.item_io_slot(now, id);
             if slot.source != u32::MAX {
-                match prepare_write(&self.sources.entries[slot.source as usize], w, txn.locale) {
+                match prepare_write(&*self.ns, &self.sources.entries[slot.source as usize], w, txn.locale) {
                     Ok(p) => writes.push((n as u32, p)),
                     Err(e) => slot.out = SlotOut::Err(e),
                 }
@@ -785,7 +789,7 @@ impl Engine {
             };
             let it = &g.items[i];
             let e = &self.sources.entries[it.source as usize];
-            match prepare_write(e, w, txn.locale) {
+            match prepare_write(&*self.ns, e, w, txn.locale) {
                 Err(err) => results.push(Err(err)),
                 Ok(p) => {
                     results.push(Ok(()));

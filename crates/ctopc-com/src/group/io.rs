@@ -1,0 +1,537 @@
+//! Sync and async I/O of the group: IOPCSyncIO, IOPCSyncIO2, IOPCAsyncIO2, IOPCAsyncIO3.
+//!
+//! Every method has the same shape: check the arguments (NULL required pointers and a
+//! zero count are E_INVALIDARG; out-pointers are set to NULL first), one engine call
+//! through `Runtime::with_engine` (the engine is locked once per call), `?` on the
+//! whole-call error (mapped in `mem::to_com`), then the out-parameters are filled
+//! all-or-nothing: CoTaskMem arrays are owned by `TaskMem` / [`VariantArray`] until every
+//! allocation of the call has succeeded, and VARIANTs already written are cleared when a
+//! later allocation fails. Per-item failures are written to `ppErrors` and the call
+//! returns S_FALSE.
+//!
+//! Synchronous calls that need the data source (DEVICE reads, MaxAge reads of stale
+//! items, every write) get `SyncOutcome::Pending` from the engine and wait, with the
+//! engine unlocked, for the driver thread to complete them: at most the engine's own
+//! source timeout plus [`SYNC_WAIT_MARGIN`]. The engine answers a silent source with
+//! ASKOM_E_NetAnswerTimeout per item at its source timeout; should even that not come
+//! (the driver stuck), the call abandons the transaction and answers the same code per
+//! item.
+//!
+//! Writes: the value is converted to the item's canonical type by the engine
+//! (OPC_E_BADTYPE when impossible, OPC_E_RANGE on overflow), read-only items answer
+//! OPC_E_BADRIGHTS, and the data source accepts only integers and reals (OPC_E_BADTYPE).
+//! A 1-D array of 3 elements written to a scalar item is the asix extended write
+//! `[value, quality, timestamp]` (AsixConnect §6.6); the engine sends it to the data
+//! source as a value-quality-timestamp write.
+
+use super::Group_Impl;
+use crate::interfaces::*;
+use crate::mem::{self, TaskMem};
+use crate::runtime::SYNC_WAIT_MARGIN;
+use crate::variant;
+use ctopc_core::model::{
+    AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
+};
+use ctopc_core::{OpcError, Quality, Timestamp, Value};
+use std::time::Duration;
+use windows::core::{BOOL, HRESULT};
+use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, FILETIME, S_FALSE, S_OK};
+use windows::Win32::System::Variant::VARIANT;
+
+type ComResult<T> = windows::core::Result<T>;
+
+// ---- argument checks --------------------------------------------------------------
+
+/// An `[in, size_is(count)]` array; E_INVALIDARG for a NULL pointer or a zero count.
+fn in_array<'a, T>(p: *const T, count: u32) -> ComResult<&'a [T]> {
+    if p.is_null() || count == 0 {
+        return Err(E_INVALIDARG.into());
+    }
+    // SAFETY: a non-null [in, size_is(count)] array of the call: `count` initialised
+    // elements that stay valid (and unchanged) for the duration of the call.
+    Ok(unsafe { std::slice::from_raw_parts(p, count as usize) })
+}
+
+/// Sets a required out-pointer's target to NULL (so that a failed call leaves nothing
+/// behind); E_INVALIDARG when the out-pointer itself is NULL.
+fn null_out<T>(pp: *mut *mut T) -> ComResult<()> {
+    if pp.is_null() {
+        return Err(E_INVALIDARG.into());
+    }
+    // SAFETY: checked non-null; an out-parameter points at caller storage for a pointer.
+    unsafe { pp.write(std::ptr::null_mut()) };
+    Ok(())
+}
+
+/// Writes a plain out-value; E_INVALIDARG for a NULL pointer.
+fn write_out<T>(p: *mut T, value: T) -> ComResult<()> {
+    if p.is_null() {
+        return Err(E_INVALIDARG.into());
+    }
+    // SAFETY: checked non-null; an out-parameter points at caller storage for one T.
+    unsafe { p.write(value) };
+    Ok(())
+}
+
+/// Hands a finished CoTaskMem array to a (checked, non-null) out-pointer.
+fn hand_out<T>(pp: *mut *mut T, p: *mut T) {
+    // SAFETY: every caller passed `pp` through `null_out` first (non-null, writable).
+    unsafe { pp.write(p) };
+}
+
+fn data_source(s: OPCDATASOURCE) -> ComResult<DataSource> {
+    match s {
+        OPC_DS_CACHE => Ok(DataSource::Cache),
+        OPC_DS_DEVICE => Ok(DataSource::Device),
+        _ => Err(E_INVALIDARG.into()),
+    }
+}
+
+/// The HRESULT of a COM method that returns S_OK / S_FALSE or a failure.
+fn hr(r: ComResult<HRESULT>) -> HRESULT {
+    r.unwrap_or_else(|e| e.code())
+}
+
+fn item_hr(r: &Result<impl Sized, OpcError>) -> HRESULT {
+    match r {
+        Ok(_) => S_OK,
+        Err(e) => mem::hresult(*e),
+    }
+}
+
+fn s_ok_or_false(any_failed: bool) -> HRESULT {
+    if any_failed {
+        S_FALSE
+    } else {
+        S_OK
+    }
+}
+
+// ---- out-arrays holding VARIANTs ----------------------------------------------------
+
+/// A zeroed CoTaskMem array of elements that contain a VARIANT: until handed out, drop
+/// clears every VARIANT (zeroed ones are VT_EMPTY: clearing them is a no-op) and frees
+/// the block.
+struct VariantArray<T> {
+    mem: Option<TaskMem<T>>,
+    var: fn(&mut T) -> &mut VARIANT,
+}
+
+impl<T> VariantArray<T> {
+    fn zeroed(len: usize, var: fn(&mut T) -> &mut VARIANT) -> ComResult<Self> {
+        Ok(VariantArray { mem: Some(TaskMem::zeroed(len)?), var })
+    }
+    fn as_mut_slice(&mut self) -> &mut [T] {
+        match self.mem.as_mut() {
+            Some(m) => m.as_mut_slice(),
+            None => &mut [],
+        }
+    }
+    fn into_raw(mut self) -> *mut T {
+        self.mem.take().map_or(std::ptr::null_mut(), TaskMem::into_raw)
+    }
+}
+
+impl<T> Drop for VariantArray<T> {
+    fn drop(&mut self) {
+        let var = self.var;
+        if let Some(m) = self.mem.as_mut() {
+            for e in m.as_mut_slice() {
+                variant::clear(var(e));
+            }
+        }
+    }
+}
+
+/// The VARIANT for a value read. A value that cannot be represented (an array element
+/// type VARIANTs cannot hold) becomes a per-item error; only memory exhaustion fails the
+/// whole call.
+fn value_variant(v: &Value) -> ComResult<Result<VARIANT, OpcError>> {
+    match variant::to_variant(v) {
+        Ok(var) => Ok(Ok(var)),
+        Err(e) if e.code() == E_OUTOFMEMORY => Err(e),
+        Err(e) => Ok(Err(OpcError::from_hresult(e.code().0).unwrap_or(OpcError::BadType))),
+    }
+}
+
+// ---- synchronous completion ---------------------------------------------------------
+
+/// Waits for a pending synchronous operation (engine unlocked while waiting).
+fn complete<T>(
+    g: &Group_Impl,
+    outcome: SyncOutcome<T>,
+    source_timeout_ms: u32,
+    n: usize,
+    pick: fn(SyncResult) -> Option<T>,
+    timed_out: fn(usize) -> T,
+) -> ComResult<T> {
+    let id: SyncId = match outcome {
+        SyncOutcome::Ready(r) => return Ok(r),
+        SyncOutcome::Pending(id) => id,
+    };
+    let limit = Duration::from_millis(u64::from(source_timeout_ms)) + SYNC_WAIT_MARGIN;
+    match g.ctx.runtime.wait_for(limit, |e| e.take_sync_result(id)) {
+        Some(r) => pick(r).ok_or_else(|| mem::error(E_FAIL, "synchronous result of the wrong kind")),
+        None => {
+            g.ctx.runtime.with_engine(|e, _| e.abandon_sync(id));
+            tracing::warn!("group {}: a synchronous operation got no answer in {} ms; abandoned", g.handle.0, limit.as_millis());
+            Ok(timed_out(n))
+        }
+    }
+}
+
+fn pick_read(r: SyncResult) -> Option<ReadResults> {
+    match r {
+        SyncResult::Read(r) => Some(r),
+        SyncResult::Write(_) => None,
+    }
+}
+
+fn pick_write(r: SyncResult) -> Option<WriteResults> {
+    match r {
+        SyncResult::Write(r) => Some(r),
+        SyncResult::Read(_) => None,
+    }
+}
+
+fn read_timed_out(n: usize) -> ReadResults {
+    vec![Err(OpcError::NetAnswerTimeout); n]
+}
+
+fn write_timed_out(n: usize) -> WriteResults {
+    vec![Err(OpcError::NetAnswerTimeout); n]
+}
+
+// ---- shared bodies ---------------------------------------------------------------------
+
+/// Per-item conversion failures of the values to write, recorded before the engine call
+/// (the engine gets VT_EMPTY for them, which it rejects with OPC_E_BADTYPE after checking
+/// the handle and the access rights; those more basic errors win).
+#[derive(Default)]
+struct PreErrors(Vec<(usize, OpcError)>);
+
+impl PreErrors {
+    fn value(&mut self, i: usize, v: &VARIANT) -> Value {
+        match variant::from_variant(v) {
+            Ok(v) => v,
+            Err(e) => {
+                let e = if e == OpcError::Overflow { OpcError::Range } else { e };
+                self.0.push((i, e));
+                Value::Empty
+            }
+        }
+    }
+    fn apply(&self, results: &mut WriteResults) {
+        for &(i, e) in &self.0 {
+            if let Some(r) = results.get_mut(i) {
+                if *r == Err(OpcError::BadType) {
+                    *r = Err(e);
+                }
+            }
+        }
+    }
+}
+
+fn vqt_timestamp(ft: FILETIME) -> Timestamp {
+    Timestamp::from_filetime_parts(ft.dwLowDateTime, ft.dwHighDateTime)
+}
+
+/// The items of a WriteVQT call.
+fn vqt_items(handles: &[u32], vqts: &[OPCITEMVQT], pre: &mut PreErrors) -> Vec<(u32, ItemVqt)> {
+    handles
+        .iter()
+        .zip(vqts)
+        .enumerate()
+        .map(|(i, (&h, q))| {
+            let value = pre.value(i, &q.vDataValue);
+            let quality = q.bQualitySpecified.as_bool().then_some(Quality(q.wQuality));
+            let timestamp = q.bTimeStampSpecified.as_bool().then(|| vqt_timestamp(q.ftTimeStamp));
+            (h, ItemVqt { value, quality, timestamp })
+        })
+        .collect()
+}
+
+/// The items of a Write call (value only; a 3-element array is the extended write).
+fn value_items(handles: &[u32], values: &[VARIANT], pre: &mut PreErrors) -> Vec<(u32, ItemVqt)> {
+    handles.iter().zip(values).enumerate().map(|(i, (&h, v))| (h, ItemVqt::value(pre.value(i, v)))).collect()
+}
+
+/// Fills ppErrors from per-item results; returns S_OK or S_FALSE.
+fn errors_out<R>(pp_errors: *mut *mut HRESULT, results: &[Result<R, OpcError>]) -> ComResult<HRESULT> {
+    let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
+    let mut failed = false;
+    for (dst, r) in errors.as_mut_slice().iter_mut().zip(results) {
+        *dst = item_hr(r);
+        failed |= r.is_err();
+    }
+    hand_out(pp_errors, errors.into_raw());
+    Ok(s_ok_or_false(failed))
+}
+
+impl Group_Impl {
+    /// A synchronous write (Write, WriteVQT): one engine call, then the wait.
+    fn sync_write(&self, items: Vec<(u32, ItemVqt)>, pre: PreErrors, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        let n = items.len();
+        let (outcome, timeout) =
+            self.ctx.runtime.with_engine(|e, now| (e.write_vqt(now, self.handle, &items), e.config().source_timeout_ms));
+        drop(items);
+        let mut results = complete(self, outcome.map_err(mem::to_com)?, timeout, n, pick_write, write_timed_out)?;
+        pre.apply(&mut results);
+        errors_out(pp_errors, &results)
+    }
+
+    /// A synchronous read (Read, ReadMaxAge): one engine call, then the wait.
+    fn sync_read(&self, n: usize, call: impl FnOnce(&mut Engine, Timestamp) -> Result<SyncOutcome<ReadResults>, OpcError>) -> ComResult<ReadResults> {
+        let (outcome, timeout) = self.ctx.runtime.with_engine(|e, now| (call(e, now), e.config().source_timeout_ms));
+        complete(self, outcome.map_err(mem::to_com)?, timeout, n, pick_read, read_timed_out)
+    }
+
+    /// An asynchronous call: writes the cancel ID and the per-item errors.
+    fn async_out(&self, started: Result<AsyncStarted, OpcError>, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        let started = started.map_err(mem::to_com)?;
+        let hr = errors_out(pp_errors, &started.results)?;
+        // SAFETY: checked non-null by the caller before the engine call.
+        unsafe { p_cancel.write(started.cancel_id) };
+        Ok(hr)
+    }
+}
+
+/// Checks the cancel-ID out-pointer of an asynchronous call and zeroes it.
+fn cancel_out(p: *mut u32) -> ComResult<()> {
+    write_out(p, 0)
+}
+
+// ---- IOPCSyncIO -------------------------------------------------------------------------
+
+impl Group_Impl {
+    fn read_impl(&self, source: OPCDATASOURCE, count: u32, ph_server: *const OPCHANDLE, pp_values: *mut *mut OPCITEMSTATE, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_values)?;
+        null_out(pp_errors)?;
+        let handles = in_array(ph_server, count)?;
+        let source = data_source(source)?;
+        let results = self.sync_read(handles.len(), |e, now| e.read(now, self.handle, source, handles))?;
+
+        let mut states = VariantArray::<OPCITEMSTATE>::zeroed(results.len(), |s| &mut s.vDataValue)?;
+        let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
+        let mut failed = false;
+        for ((st, err), r) in states.as_mut_slice().iter_mut().zip(errors.as_mut_slice()).zip(&results) {
+            let outcome = match r {
+                Ok(ItemState { client_handle, value, quality, timestamp }) => value_variant(value)?.map(|v| {
+                    st.hClient = *client_handle;
+                    st.ftTimeStamp = mem::filetime(*timestamp);
+                    st.wQuality = quality.0;
+                    st.vDataValue = v;
+                }),
+                Err(e) => Err(*e),
+            };
+            if let Err(e) = outcome {
+                *err = mem::hresult(e);
+                failed = true;
+            }
+        }
+        hand_out(pp_values, states.into_raw());
+        hand_out(pp_errors, errors.into_raw());
+        Ok(s_ok_or_false(failed))
+    }
+
+    fn write_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        let handles = in_array(ph_server, count)?;
+        let values = in_array(p_values, count)?;
+        let mut pre = PreErrors::default();
+        let items = value_items(handles, values, &mut pre);
+        self.sync_write(items, pre, pp_errors)
+    }
+}
+
+impl IOPCSyncIO_Impl for Group_Impl {
+    unsafe fn Read(&self, source: OPCDATASOURCE, count: u32, ph_server: *const OPCHANDLE, pp_values: *mut *mut OPCITEMSTATE, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.read_impl(source, count, ph_server, pp_values, pp_errors))
+    }
+
+    unsafe fn Write(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.write_impl(count, ph_server, p_values, pp_errors))
+    }
+}
+
+// ---- IOPCSyncIO2 ------------------------------------------------------------------------
+
+impl Group_Impl {
+    #[allow(clippy::too_many_arguments)]
+    fn read_max_age_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_max_age: *const u32,
+        pp_values: *mut *mut VARIANT,
+        pp_qualities: *mut *mut u16,
+        pp_times: *mut *mut FILETIME,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
+        null_out(pp_values)?;
+        null_out(pp_qualities)?;
+        null_out(pp_times)?;
+        null_out(pp_errors)?;
+        let handles = in_array(ph_server, count)?;
+        let ages = in_array(p_max_age, count)?;
+        let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
+        let results = self.sync_read(items.len(), |e, now| e.read_max_age(now, self.handle, &items))?;
+        drop(items);
+
+        let n = results.len();
+        let mut values = VariantArray::<VARIANT>::zeroed(n, |v| v)?;
+        let mut qualities = TaskMem::<u16>::zeroed(n)?;
+        let mut times = TaskMem::<FILETIME>::zeroed(n)?;
+        let mut errors = TaskMem::<HRESULT>::zeroed(n)?;
+        let mut failed = false;
+        let outs = values.as_mut_slice().iter_mut().zip(qualities.as_mut_slice()).zip(times.as_mut_slice()).zip(errors.as_mut_slice());
+        for ((((v, q), t), err), r) in outs.zip(&results) {
+            let outcome = match r {
+                Ok(s) => value_variant(&s.value)?.map(|var| {
+                    *v = var;
+                    *q = s.quality.0;
+                    *t = mem::filetime(s.timestamp);
+                }),
+                Err(e) => Err(*e),
+            };
+            if let Err(e) = outcome {
+                // A failed item reads VT_EMPTY with quality BAD (OPC DA 3.0 ReadMaxAge).
+                *q = Quality::BAD.0;
+                *err = mem::hresult(e);
+                failed = true;
+            }
+        }
+        hand_out(pp_values, values.into_raw());
+        hand_out(pp_qualities, qualities.into_raw());
+        hand_out(pp_times, times.into_raw());
+        hand_out(pp_errors, errors.into_raw());
+        Ok(s_ok_or_false(failed))
+    }
+
+    fn write_vqt_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        let handles = in_array(ph_server, count)?;
+        let vqts = in_array(p_vqt, count)?;
+        let mut pre = PreErrors::default();
+        let items = vqt_items(handles, vqts, &mut pre);
+        self.sync_write(items, pre, pp_errors)
+    }
+}
+
+impl IOPCSyncIO2_Impl for Group_Impl {
+    unsafe fn ReadMaxAge(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_max_age: *const u32,
+        pp_values: *mut *mut VARIANT,
+        pp_qualities: *mut *mut u16,
+        pp_times: *mut *mut FILETIME,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
+        hr(self.read_max_age_impl(count, ph_server, p_max_age, pp_values, pp_qualities, pp_times, pp_errors))
+    }
+
+    unsafe fn WriteVQT(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
+    }
+}
+
+// ---- IOPCAsyncIO2 -----------------------------------------------------------------------
+
+impl Group_Impl {
+    fn async_read_impl(&self, count: u32, ph_server: *const OPCHANDLE, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        cancel_out(p_cancel)?;
+        let handles = in_array(ph_server, count)?;
+        let started = self.ctx.runtime.with_engine(|e, now| e.async_read(now, self.handle, transaction, handles));
+        self.async_out(started, p_cancel, pp_errors)
+    }
+
+    fn async_write_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        cancel_out(p_cancel)?;
+        let handles = in_array(ph_server, count)?;
+        let values = in_array(p_values, count)?;
+        let mut pre = PreErrors::default();
+        let items = value_items(handles, values, &mut pre);
+        let started = self.ctx.runtime.with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        self.async_out(started.map(|mut s| { pre.apply(&mut s.results); s }), p_cancel, pp_errors)
+    }
+
+    fn refresh_impl(&self, p_cancel: *mut u32, call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>) -> ComResult<()> {
+        cancel_out(p_cancel)?;
+        let cancel_id = self.ctx.runtime.with_engine(call).map_err(mem::to_com)?;
+        write_out(p_cancel, cancel_id)
+    }
+}
+
+impl IOPCAsyncIO2_Impl for Group_Impl {
+    unsafe fn Read(&self, count: u32, ph_server: *const OPCHANDLE, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
+    }
+
+    unsafe fn Write(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.async_write_impl(count, ph_server, p_values, transaction, p_cancel, pp_errors))
+    }
+
+    unsafe fn Refresh2(&self, source: OPCDATASOURCE, transaction: u32, p_cancel: *mut u32) -> windows::core::Result<()> {
+        let source = data_source(source)?;
+        self.refresh_impl(p_cancel, |e, now| e.refresh2(now, self.handle, source, transaction))
+    }
+
+    unsafe fn Cancel2(&self, cancel_id: u32) -> windows::core::Result<()> {
+        self.ctx.runtime.with_engine(|e, _| e.cancel2(self.handle, cancel_id)).map_err(mem::to_com)
+    }
+
+    unsafe fn SetEnable(&self, enable: BOOL) -> windows::core::Result<()> {
+        self.ctx.runtime.with_engine(|e, now| e.set_enable(now, self.handle, enable.as_bool())).map_err(mem::to_com)
+    }
+
+    unsafe fn GetEnable(&self, p_enable: *mut BOOL) -> windows::core::Result<()> {
+        if p_enable.is_null() {
+            return Err(E_INVALIDARG.into());
+        }
+        let enabled = self.ctx.runtime.with_engine(|e, _| e.get_enable(self.handle)).map_err(mem::to_com)?;
+        write_out(p_enable, BOOL::from(enabled))
+    }
+}
+
+// ---- IOPCAsyncIO3 -----------------------------------------------------------------------
+
+impl Group_Impl {
+    fn async_read_max_age_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_max_age: *const u32, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        cancel_out(p_cancel)?;
+        let handles = in_array(ph_server, count)?;
+        let ages = in_array(p_max_age, count)?;
+        let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
+        let started = self.ctx.runtime.with_engine(|e, now| e.async_read_max_age(now, self.handle, transaction, &items));
+        self.async_out(started, p_cancel, pp_errors)
+    }
+
+    fn async_write_vqt_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+        null_out(pp_errors)?;
+        cancel_out(p_cancel)?;
+        let handles = in_array(ph_server, count)?;
+        let vqts = in_array(p_vqt, count)?;
+        let mut pre = PreErrors::default();
+        let items = vqt_items(handles, vqts, &mut pre);
+        let started = self.ctx.runtime.with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        self.async_out(started.map(|mut s| { pre.apply(&mut s.results); s }), p_cancel, pp_errors)
+    }
+}
+
+impl IOPCAsyncIO3_Impl for Group_Impl {
+    unsafe fn ReadMaxAge(&self, count: u32, ph_server: *const OPCHANDLE, p_max_age: *const u32, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.async_read_max_age_impl(count, ph_server, p_max_age, transaction, p_cancel, pp_errors))
+    }
+
+    unsafe fn WriteVQT(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+        hr(self.async_write_vqt_impl(count, ph_server, p_vqt, transaction, p_cancel, pp_errors))
+    }
+
+    unsafe fn RefreshMaxAge(&self, max_age: u32, transaction: u32, p_cancel: *mut u32) -> windows::core::Result<()> {
+        self.refresh_impl(p_cancel, |e, now| e.refresh_max_age(now, self.handle, max_age, transaction))
+    }
+}

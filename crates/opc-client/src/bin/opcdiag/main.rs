@@ -1,0 +1,61 @@
+//! `opcdiag`: a diagnostic OPC DA client shipped with ServerCTOPC, usable against any
+//! OPC DA 2.05a/3.0 server on the same computer: status, browse, properties, read, write,
+//! subscribe, and the demo plant tour. `opcdiag --help` lists the commands.
+//!
+//! The command line and every formatting rule are plain Rust (`cli`, `text`: tested
+//! natively); the COM calls (`win`, `demo`) exist on Windows only and go through the safe
+//! client wrapper `ctopc_com::client`.
+
+/// `println!` that does not panic when stdout is gone (piped into `head`, say): the
+/// line is dropped and [`out::closed`] turns true, which ends a subscription.
+#[cfg(windows)]
+macro_rules! say {
+    () => { $crate::out::line(format_args!("")) };
+    ($($t:tt)*) => { $crate::out::line(format_args!($($t)*)) };
+}
+
+mod cli;
+#[cfg(windows)]
+mod out;
+mod text;
+#[cfg(windows)]
+mod demo;
+#[cfg(windows)]
+mod win;
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match cli::parse(&args) {
+        Ok(cli::Parsed::Help(text)) => {
+            print!("{text}");
+            ExitCode::from(cli::EXIT_OK)
+        }
+        Ok(cli::Parsed::Run(global, command)) => run(global, command),
+        Err(e) => {
+            eprintln!("opcdiag: {}\n\n{}", e.message, e.help);
+            ExitCode::from(cli::EXIT_USAGE)
+        }
+    }
+}
+
+#[cfg(windows)]
+fn run(global: cli::Global, command: cli::Command) -> ExitCode {
+    match win::run(&global, command) {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("opcdiag: error: {e}");
+            ExitCode::from(cli::EXIT_FAILED)
+        }
+    }
+}
+
+#[cfg(not(windows))]
+fn run(_global: cli::Global, _command: cli::Command) -> ExitCode {
+    eprintln!(
+        "opcdiag: OPC DA is COM, which exists on Windows only: run opcdiag.exe on Windows \
+         (or under Wine, as `cargo xtask demo` does)."
+    );
+    ExitCode::from(cli::EXIT_FAILED)
+}

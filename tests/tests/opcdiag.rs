@@ -1,0 +1,217 @@
+//! opcdiag.exe (the diagnostic client we ship) against the test server: the embedded demo
+//! plant, simulated (state TEST). Each case runs the real executable, as a person would,
+//! and checks what it prints and its exit code.
+#![cfg(windows)]
+
+use e2e_tests::artifact;
+use std::io::Read;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// What one opcdiag run printed.
+struct Run {
+    code: i32,
+    stdout: String,
+    stderr: String,
+}
+
+impl std::fmt::Debug for Run {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "exit code {}\n--- stdout ---\n{}--- stderr ---\n{}", self.code, self.stdout, self.stderr)
+    }
+}
+
+/// Runs opcdiag.exe with `args` (English texts unless `args` says otherwise), killed after
+/// `limit`.
+fn opcdiag_for(args: &[&str], limit: Duration) -> Run {
+    let exe = artifact("opcdiag.exe");
+    let mut child = Command::new(&exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("start {}: {e} (built by `cargo xtask build`)", exe.display()));
+    let mut out = child.stdout.take().expect("stdout");
+    let mut err = child.stderr.take().expect("stderr");
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = out.read_to_string(&mut s);
+        s
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = err.read_to_string(&mut s);
+        s
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait for opcdiag") {
+            break status;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("opcdiag {args:?} did not finish within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    Run { code: status.code().unwrap_or(-1), stdout: reader.join().expect("stdout reader"), stderr: err_reader.join().expect("stderr reader") }
+}
+
+fn opcdiag(args: &[&str]) -> Run {
+    opcdiag_for(args, Duration::from_secs(60))
+}
+
+#[test]
+fn status_shows_the_vendor_and_the_test_state() {
+    let r = opcdiag(&["status"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    let state = r.stdout.lines().find(|l| l.starts_with("State")).unwrap_or_else(|| panic!("no State line: {r:?}"));
+    assert!(state.contains("TEST"), "{r:?}");
+    let vendor = r.stdout.lines().find(|l| l.starts_with("Vendor")).unwrap_or_else(|| panic!("no Vendor line: {r:?}"));
+    assert!(vendor.contains("ServerCTOPC"), "{r:?}");
+    assert!(r.stdout.contains("Server        ServerCTOPC.App"), "{r:?}");
+}
+
+#[test]
+fn browse_shows_the_plant_tree_indented() {
+    let r = opcdiag(&["browse"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    let lines: Vec<&str> = r.stdout.lines().collect();
+    let top = lines.iter().position(|l| *l == "Magazyn siarki/").unwrap_or_else(|| panic!("no top branch Magazyn siarki: {r:?}"));
+    assert!(lines[top + 1].starts_with("  ") && lines[top + 1].ends_with('/'), "a second-level branch follows: {r:?}");
+    assert!(lines.iter().any(|l| l.trim() == "KW_A000" && l.starts_with("    ")), "KW_A000 as a third-level leaf: {r:?}");
+
+    let flat = opcdiag(&["browse", "--flat"]);
+    assert_eq!(flat.code, 0, "{flat:?}");
+    assert!(flat.stdout.lines().any(|l| l == "KW_A000"), "{flat:?}");
+    assert!(flat.stdout.lines().count() > 100, "every variable: {flat:?}");
+
+    let branch = opcdiag(&["browse", "--branch", "Magazyn siarki/Zbiornik siarki ciekłej Z101"]);
+    assert_eq!(branch.code, 0, "{branch:?}");
+    assert_eq!(branch.stdout.lines().collect::<Vec<_>>(), ["KW_A000", "KW_A001", "KW_A002"], "{branch:?}");
+}
+
+#[test]
+fn props_lists_id_description_and_value() {
+    let r = opcdiag(&["--lang", "en", "props", "KW_A000"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    let line = |id: &str| {
+        r.stdout.lines().find(|l| l.split_whitespace().next() == Some(id)).unwrap_or_else(|| panic!("no property {id}: {r:?}")).to_string()
+    };
+    assert!(line("1").contains("Item Canonical Data Type") && line("1").contains("R4 (4)"), "{r:?}");
+    assert!(line("3").contains("GOOD"), "{r:?}");
+    assert!(line("100").contains("\"m\""), "{r:?}");
+    assert!(line("101").contains("Liquid sulphur level in tank Z101"), "{r:?}");
+}
+
+#[test]
+fn read_prints_value_type_quality_and_local_time() {
+    let r = opcdiag(&["read", "KW_A000"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    let line = r.stdout.lines().find(|l| l.starts_with("KW_A000")).unwrap_or_else(|| panic!("{r:?}"));
+    let f: Vec<&str> = line.split_whitespace().collect();
+    assert!(f[1].parse::<f32>().is_ok(), "a number: {r:?}");
+    assert_eq!(f[2], "R4", "{r:?}");
+    assert_eq!(f[3], "GOOD", "{r:?}");
+    assert!(f[4].len() == "2026-01-05T13:04:05.120+01:00".len() && f[4].contains('T'), "ISO local time: {r:?}");
+
+    let d = opcdiag(&["read", "KW_A000", "KW_A001", "--device"]);
+    assert_eq!(d.code, 0, "{d:?}");
+    assert_eq!(d.stdout.lines().filter(|l| l.contains(" GOOD ")).count(), 2, "{d:?}");
+}
+
+#[test]
+fn read_of_an_unknown_item_fails_with_the_servers_text() {
+    let r = opcdiag(&["--lang", "en", "read", "KW_A000", "KW_NO_SUCH"]);
+    assert_eq!(r.code, 1, "{r:?}");
+    assert!(r.stdout.lines().any(|l| l.starts_with("KW_A000") && l.contains("GOOD")), "the good item is still read: {r:?}");
+    let bad = r.stdout.lines().find(|l| l.starts_with("KW_NO_SUCH")).unwrap_or_else(|| panic!("{r:?}"));
+    assert!(bad.contains("0xC0040007 OPC_E_UNKNOWNITEMID: The item ID is not defined"), "{r:?}");
+}
+
+#[test]
+fn write_then_read_back() {
+    // Keeps the server process up between the runs, so that it keeps the written value.
+    let (_com, _server) = e2e_tests::connect();
+    let before = opcdiag(&["read", "KW_A110"]);
+    let original = before.stdout.split_whitespace().nth(1).unwrap_or_else(|| panic!("{before:?}")).to_string();
+    let w = opcdiag(&["write", "KW_A110", "12.5"]);
+    assert_eq!(w.code, 0, "{w:?}");
+    assert!(w.stdout.contains("KW_A110: written 12.5 (R4): OK"), "{w:?}");
+    let r = opcdiag(&["read", "KW_A110"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    let f: Vec<&str> = r.stdout.lines().find(|l| l.starts_with("KW_A110")).unwrap_or_else(|| panic!("{r:?}")).split_whitespace().collect();
+    assert_eq!((f[1], f[3]), ("12.5", "GOOD"), "{r:?}");
+
+    // --type: the value goes as I4 and the server converts it.
+    let w = opcdiag(&["write", "KW_A110", "7", "--type", "I4"]);
+    assert_eq!(w.code, 0, "{w:?}");
+    assert!(w.stdout.contains("written 7 (I4): OK"), "{w:?}");
+
+    // The setpoint back as it was, for the tests that run after this one.
+    let w = opcdiag(&["write", "KW_A110", &original]);
+    assert_eq!(w.code, 0, "{w:?}");
+}
+
+#[test]
+fn write_to_a_read_only_item_fails_readably() {
+    let r = opcdiag(&["--lang", "en", "write", "KW_A000", "1"]);
+    assert_eq!(r.code, 1, "{r:?}");
+    assert!(
+        r.stdout.contains("KW_A000: write 1 (R4) failed: 0xC0040006 OPC_E_BADRIGHTS: The item's access rights do not allow the operation."),
+        "{r:?}"
+    );
+    // In Polish, from the server's GetErrorString.
+    let pl = opcdiag(&["--lang", "pl", "write", "KW_A000", "1"]);
+    assert_eq!(pl.code, 1, "{pl:?}");
+    assert!(pl.stdout.contains("0xC0040006 OPC_E_BADRIGHTS: Prawa dostępu do elementu nie pozwalają na tę operację."), "{pl:?}");
+    // A value that does not fit the type is a usage error, found before writing.
+    let bad = opcdiag(&["write", "KW_A110", "abc"]);
+    assert_eq!(bad.code, 2, "{bad:?}");
+    assert!(bad.stderr.contains("\"abc\" is not a valid value for R4"), "{bad:?}");
+}
+
+#[test]
+fn subscribe_prints_changes_as_they_arrive() {
+    let r = opcdiag_for(&["subscribe", "KW_A000", "--for", "5"], Duration::from_secs(90));
+    assert_eq!(r.code, 0, "{r:?}");
+    let changes: Vec<&str> = r.stdout.lines().filter(|l| l.contains("KW_A000") && l.ends_with("GOOD")).collect();
+    assert!(changes.len() >= 2, "at least two changes in 5 s: {r:?}");
+    // hh:mm:ss.mmm  KW_A000  value  GOOD
+    let f: Vec<&str> = changes[1].split_whitespace().collect();
+    assert_eq!(f[0].len(), "13:04:05.120".len(), "{r:?}");
+    assert!(f[2].parse::<f32>().is_ok(), "{r:?}");
+    assert!(r.stdout.lines().last().is_some_and(|l| l.contains("change(s) in")), "{r:?}");
+}
+
+#[test]
+fn help_usage_errors_and_a_missing_server() {
+    let h = opcdiag(&["--help"]);
+    assert_eq!(h.code, 0, "{h:?}");
+    for c in ["status", "browse", "props", "read", "write", "subscribe", "demo"] {
+        assert!(h.stdout.contains(c), "{c}: {h:?}");
+        let ch = opcdiag(&[c, "--help"]);
+        assert_eq!(ch.code, 0, "{ch:?}");
+        assert!(ch.stdout.starts_with(&format!("usage: opcdiag [--server PROGID] {c}")), "{ch:?}");
+    }
+    let u = opcdiag(&["read"]);
+    assert_eq!(u.code, 2, "{u:?}");
+    assert!(u.stderr.contains("read needs at least one ITEMID"), "{u:?}");
+
+    let m = opcdiag(&["--server", "No.Such.Server", "status"]);
+    assert_eq!(m.code, 1, "{m:?}");
+    assert!(m.stderr.contains("cannot connect to No.Such.Server: 0x800401F3 CO_E_CLASSSTRING"), "{m:?}");
+}
+
+#[test]
+fn demo_shows_status_tree_and_live_values() {
+    let r = opcdiag_for(&["--lang", "en", "demo", "--for", "3"], Duration::from_secs(90));
+    assert_eq!(r.code, 0, "{r:?}");
+    assert!(r.stdout.contains("State         TEST"), "{r:?}");
+    assert!(r.stdout.lines().any(|l| l == "  Magazyn siarki/"), "the plant tree: {r:?}");
+    assert!(r.stdout.contains("KW_A000  Liquid sulphur level in tank Z101 [m]"), "the legend: {r:?}");
+    let live = r.stdout.lines().filter(|l| l.contains(" KW_A") && (l.ends_with("GOOD") || l.contains("GOOD ["))).count();
+    assert!(live >= 8, "a value of every variable at least: {r:?}");
+}

@@ -1,0 +1,184 @@
+//! The server object's IConnectionPointContainer (one connection point: IOPCShutdown) and
+//! IOPCShutdown::ShutdownRequest on a requested stop, end to end.
+//!
+//! The stop is requested the way an operator does it: Ctrl+C on the console of a
+//! ServerCTOPC.exe started by hand. The test starts `ServerCTOPC.exe -Embedding` itself
+//! with a console of its own (CREATE_NEW_CONSOLE; COM then hands new clients to its class
+//! object), connects, advises a sink, and has a helper process (this test binary, running
+//! the ignored test `ctrl_c_helper`) attach to the server's console and send CTRL_C_EVENT
+//! there. Under Wine 8 this works without a display; the test process itself stays out of
+//! that console (a process that calls FreeConsole loses its Wine console output). Wine
+//! routes activations to the first registered server, so the test first waits until no
+//! other ServerCTOPC.exe runs (servers of earlier tests exit 3 s after their last client).
+#![cfg(windows)]
+
+use ctopc_com::client::Server;
+use ctopc_core::Timestamp;
+use e2e_tests::{assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID};
+use std::os::windows::process::CommandExt;
+use std::sync::mpsc;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+use windows::core::{implement, Interface, IUnknown, PCWSTR};
+use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints};
+use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
+
+/// A client's IOPCShutdown: forwards every reason to the test.
+#[implement(IOPCShutdown)]
+struct Sink {
+    tx: Mutex<mpsc::Sender<Option<String>>>,
+}
+
+impl IOPCShutdown_Impl for Sink_Impl {
+    unsafe fn ShutdownRequest(&self, reason: PCWSTR) -> windows::core::Result<()> {
+        // SAFETY: a non-null [in, string] is a NUL-terminated UTF-16 string for the call.
+        let reason = if reason.is_null() { None } else { unsafe { reason.to_string() }.ok() };
+        let _ = self.tx.lock().map(|tx| tx.send(reason));
+        Ok(())
+    }
+}
+
+fn sink() -> (IOPCShutdown, mpsc::Receiver<Option<String>>) {
+    let (tx, rx) = mpsc::channel();
+    (Sink { tx: Mutex::new(tx) }.into(), rx)
+}
+
+fn container(server: &Server) -> IConnectionPointContainer {
+    server.unknown.cast().expect("the server object is an IConnectionPointContainer")
+}
+
+#[test]
+fn one_connection_point_for_iopcshutdown() {
+    let (_com, server) = connect();
+    let cpc = container(&server);
+    // SAFETY: valid IID pointers for the calls.
+    let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.expect("FindConnectionPoint(IOPCShutdown)");
+    // SAFETY: no arguments.
+    assert_eq!(unsafe { cp.GetConnectionInterface() }.unwrap(), IID_IOPCShutdown);
+    // SAFETY: valid IID pointer.
+    assert_eq!(code(&unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback) }), CONNECT_E_NOCONNECTION);
+    // SAFETY: no arguments.
+    let e: IEnumConnectionPoints = unsafe { cpc.EnumConnectionPoints() }.expect("EnumConnectionPoints");
+    let mut points = Vec::new();
+    loop {
+        let mut one: [Option<IConnectionPoint>; 1] = Default::default();
+        // SAFETY: room for the one element asked for. (Under Wine the HRESULT of a call
+        // that returned an interface is not reliable: look at the element.)
+        let _ = unsafe { e.Next(&mut one, std::ptr::null_mut()) };
+        match one[0].take() {
+            Some(p) => points.push(p),
+            None => break,
+        }
+        assert!(points.len() < 10);
+    }
+    assert_eq!(points.len(), 1);
+    // SAFETY: no arguments.
+    assert_eq!(unsafe { points[0].GetConnectionInterface() }.unwrap(), IID_IOPCShutdown);
+}
+
+#[test]
+fn advise_rules_of_the_shutdown_point() {
+    let (_com, server) = connect();
+    let (s, _rx) = sink();
+    let cookie = server.advise_shutdown(&s).expect("Advise");
+    assert_ne!(cookie, 0);
+    let (s2, _rx2) = sink();
+    assert_eq!(code(&server.advise_shutdown(&s2)), CONNECT_E_ADVISELIMIT, "one connection per point");
+    assert_eq!(code(&server.unadvise_shutdown(cookie.wrapping_add(1000))), CONNECT_E_NOCONNECTION);
+    server.unadvise_shutdown(cookie).expect("Unadvise");
+    assert_eq!(code(&server.unadvise_shutdown(cookie)), CONNECT_E_NOCONNECTION, "already unadvised");
+    // An object that is no IOPCShutdown cannot connect.
+    let cpc = container(&server);
+    // SAFETY: valid IID pointer.
+    let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.unwrap();
+    let not_a_sink: IUnknown = server.unknown.clone();
+    // SAFETY: a live interface pointer.
+    assert_eq!(code(&unsafe { cp.Advise(&not_a_sink) }), CONNECT_E_CANNOTCONNECT);
+    // Connect again after the unadvise.
+    let cookie = server.advise_shutdown(&s2).expect("Advise again");
+    server.unadvise_shutdown(cookie).unwrap();
+    assert_alive(&server);
+}
+
+fn now() -> Timestamp {
+    let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_millis();
+    Timestamp::from_unix_millis(ms as i64)
+}
+
+/// Connects to the server process the test started (started at or after `since`).
+fn connect_to_new_server(since: Timestamp) -> Server {
+    let server = Server::connect(PROGID).expect("CoCreateInstance(ServerCTOPC.App)");
+    assert!(server.status().unwrap().start_time >= since, "connected to another server than the test's");
+    server
+}
+
+fn wait_exit(child: &mut std::process::Child, limit: Duration) -> Option<std::process::ExitStatus> {
+    let deadline = Instant::now() + limit;
+    while Instant::now() < deadline {
+        if let Ok(Some(status)) = child.try_wait() {
+            return Some(status);
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    None
+}
+
+#[test]
+fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
+    use windows::Win32::System::Threading::CREATE_NEW_CONSOLE;
+    let _com = ctopc_com::client::ComThread::mta().unwrap();
+    wait_for_no_other_server();
+    let since = now();
+    let mut server_process = std::process::Command::new(e2e_tests::artifact("ServerCTOPC.exe"))
+        .arg("-Embedding")
+        .creation_flags(CREATE_NEW_CONSOLE.0)
+        .spawn()
+        .expect("start ServerCTOPC.exe -Embedding");
+    assert_eq!(other_servers(server_process.id()), Vec::<u32>::new(), "another server started meanwhile");
+    let server = connect_to_new_server(since);
+    let (s, rx) = sink();
+    server.advise_shutdown(&s).expect("Advise IOPCShutdown");
+
+    let mut helper = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "ctrl_c_helper", "--ignored", "--test-threads=1"])
+        .env(HELPER_PID_VAR, server_process.id().to_string())
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("start the Ctrl+C helper");
+    if wait_exit(&mut helper, Duration::from_secs(30)).is_none() {
+        let _ = helper.kill();
+    }
+
+    let reason = rx.recv_timeout(Duration::from_secs(20));
+    let exit = wait_exit(&mut server_process, Duration::from_secs(20));
+    if exit.is_none() {
+        let _ = server_process.kill();
+    }
+    let reason = reason.expect("IOPCShutdown::ShutdownRequest within 20 s of Ctrl+C");
+    let reason = reason.expect("a reason, not NULL");
+    assert!(reason.contains("ServerCTOPC") && reason.len() > 12, "a readable reason: {reason:?}");
+    let exit = exit.expect("the server exits after the shutdown request");
+    assert!(exit.success(), "{exit:?}");
+    drop(server);
+}
+
+const HELPER_PID_VAR: &str = "CTOPC_TEST_CTRL_C_TO_PID";
+
+/// Not a test: the helper process of `ctrl_c_sends_shutdown_request_to_a_connected_client`
+/// (runs only with that test's environment variable). Attaches to the server's console and
+/// sends Ctrl+C to every process on it, ignoring it itself.
+#[test]
+#[ignore = "helper process of ctrl_c_sends_shutdown_request_to_a_connected_client"]
+fn ctrl_c_helper() {
+    use windows::Win32::System::Console::{AttachConsole, FreeConsole, GenerateConsoleCtrlEvent, SetConsoleCtrlHandler, CTRL_C_EVENT};
+    let Some(pid) = std::env::var(HELPER_PID_VAR).ok().and_then(|p| p.parse::<u32>().ok()) else { return };
+    // SAFETY: plain Win32 console calls on this process's console attachment.
+    unsafe {
+        let _ = FreeConsole();
+        AttachConsole(pid).expect("AttachConsole(server)");
+        SetConsoleCtrlHandler(None, true).expect("ignore Ctrl+C in the helper");
+        GenerateConsoleCtrlEvent(CTRL_C_EVENT, 0).expect("GenerateConsoleCtrlEvent");
+    }
+}

@@ -1,0 +1,82 @@
+//! `cargo xtask bench`: the COM benchmark (tests/src/bin/bench-com.rs) under Wine.
+//!
+//! Builds the Windows artifacts and bench-com.exe, registers the proxy/stub DLL and the
+//! server in a Wine prefix of the benchmark's own (target/wine/bench-prefix, made like
+//! the test prefix on first use), so that a benchmark run neither disturbs nor is
+//! disturbed by end-to-end tests in the test prefix; runs bench-com.exe with a timeout
+//! (extra arguments are passed on, e.g. `--quick`) and ends every Wine process of the
+//! benchmark prefix (wineserver -k) at the end. Prints figures; never fails on speed.
+
+use crate::{build, setup, util, wine};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+const LIMIT: Duration = Duration::from_secs(20 * 60);
+
+fn prefix() -> PathBuf {
+    util::root().join("target/wine/bench-prefix")
+}
+
+/// A command in the benchmark prefix.
+fn wine_in(pfx: &Path, program: impl AsRef<std::ffi::OsStr>) -> Command {
+    let mut c = wine::wine(program);
+    c.env("WINEPREFIX", pfx);
+    c
+}
+
+fn wineserver(pfx: &Path, arg: &str, limit: Duration) {
+    let mut c = Command::new(wine::WINESERVER);
+    wine::env(&mut c);
+    c.env("WINEPREFIX", pfx).arg(arg);
+    let _ = util::run_with_timeout(c.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()), limit);
+}
+
+/// Creates the benchmark prefix (as `setup` does the test prefix) and installs the shim.
+fn ensure_prefix(pfx: &Path) -> Result<(), String> {
+    if !pfx.join("system.reg").exists() {
+        println!("bench: creating Wine prefix {}", pfx.display());
+        std::fs::create_dir_all(pfx).map_err(|e| e.to_string())?;
+        let status = util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
+        if !status.success() {
+            return Err(format!("wineboot -i failed: {status}"));
+        }
+        wineserver(pfx, "-w", Duration::from_secs(120));
+    }
+    let shim = util::root().join("target/wine/bcryptprimitives.dll");
+    let dest = pfx.join("drive_c/windows/system32/bcryptprimitives.dll");
+    if !util::up_to_date(&dest, std::slice::from_ref(&shim)) {
+        std::fs::copy(&shim, &dest).map_err(|e| format!("copy shim to {}: {e}", dest.display()))?;
+    }
+    Ok(())
+}
+
+pub fn run(args: &[String]) -> Result<(), String> {
+    setup::run(&[])?;
+    let artifacts = build::run(&[])?;
+    util::run(util::cargo().args(["build", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "--bin", "bench-com"]))?;
+    let exe = artifacts.dir.join("bench-com.exe");
+    let pfx = prefix();
+    ensure_prefix(&pfx)?;
+    wineserver(&pfx, "-k", Duration::from_secs(20));
+    let result = (|| {
+        let limit = Duration::from_secs(120);
+        let status = util::run_with_timeout(wine_in(&pfx, "regsvr32").arg("/s").arg(&artifacts.proxy), limit)?;
+        if !status.success() {
+            return Err(format!("regsvr32 {} failed: {status}", artifacts.proxy.display()));
+        }
+        let status = util::run_with_timeout(wine_in(&pfx, &artifacts.server).arg("/RegServer"), limit)?;
+        if !status.success() {
+            return Err(format!("{} /RegServer failed: {status}", artifacts.server.display()));
+        }
+        println!("bench: running {} under Wine (prefix {})", exe.display(), pfx.display());
+        let status = util::run_with_timeout(wine_in(&pfx, &exe).args(args), LIMIT)?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("bench-com.exe failed: {status}"))
+        }
+    })();
+    wineserver(&pfx, "-k", Duration::from_secs(20));
+    result
+}

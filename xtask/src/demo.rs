@@ -1,0 +1,328 @@
+//! `cargo xtask demo`: ServerCTOPC serving the demo plant Wytwornia_Kwasu over the asix
+//! network, watched with `opcdiag demo`.
+//!
+//! 1. setup (idempotent), the Windows build (ServerCTOPC.exe, opc_ps.dll, opcdiag.exe)
+//!    and the native asix simulator `asix-sim`;
+//! 2. a demo install folder target/demo/ServerCTOPC/ as a plant engineer would have it:
+//!    the server, the proxy/stub DLL, opcdiag, the demo database and an ASIXConnect.ini
+//!    that takes current data from the asix network (SimulateCurrentData = nie), finding
+//!    asix-sim on loopback;
+//! 3. in a Wine prefix of the demo's own (target/wine/demo-prefix, made on first use):
+//!    `regsvr32 opc_ps.dll` and `ServerCTOPC.exe /RegServer` of the staged server;
+//! 4. asix-sim in the background serving the demo database; `opcdiag demo` in the
+//!    foreground: status, plant tree, live values;
+//! 5. on Ctrl+C (or when opcdiag exits, or after `--for SECONDS`): opcdiag is asked to
+//!    stop (it removes its group), asix-sim quits (killed if it does not), and
+//!    `wineserver -k` ends every Wine process of the demo prefix (the server too).
+//!
+//! Why a prefix of its own: the demo registers the *staged* server (with its network
+//! ASIXConnect.ini) as ServerCTOPC.App and ends with `wineserver -k`; in the test prefix
+//! that would swap the server under a running `cargo xtask test` and kill it. (`cargo
+//! xtask test` registers the build's own exe before its end-to-end tests anyway, so even
+//! there a leftover demo registration would not matter; only a concurrent run would.)
+
+use crate::{build, setup, util, wine};
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+/// The asix network ports of the demo (UDP discovery, TCP data), on loopback only; not
+/// the asix defaults (48100/48101), so that a real asix server on this machine does not
+/// answer, nor the demo disturb it.
+const DISCOVERY_PORT: u16 = 48170;
+const DATA_PORT: u16 = 48171;
+
+const USAGE: &str = "\
+usage: cargo xtask demo [--for SECONDS]
+
+Builds everything, stages target/demo/ServerCTOPC/ (server, opc_ps.dll, opcdiag, the demo
+database, an ASIXConnect.ini reading the plant over the asix network), registers it in the
+Wine prefix target/wine/demo-prefix, starts the asix simulator (asix-sim) on loopback and
+runs `opcdiag demo`: the server status, the plant tree and live values. Ctrl+C stops
+everything; --for SECONDS stops after SECONDS (for a non-interactive run).
+";
+
+pub fn prefix() -> PathBuf {
+    util::root().join("target/wine/demo-prefix")
+}
+
+/// Options: `--for SECONDS`.
+fn parse(args: &[String]) -> Result<Option<u64>, String> {
+    let mut for_secs = None;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--for" => {
+                let v = it.next().ok_or("--for needs a number of seconds")?;
+                for_secs = Some(v.parse::<u64>().ok().filter(|s| *s > 0).ok_or_else(|| format!("--for: expected whole seconds > 0, got {v:?}"))?);
+            }
+            "-h" | "--help" => {
+                print!("{USAGE}");
+                std::process::exit(0);
+            }
+            other => return Err(format!("demo: unknown argument {other:?}\n{USAGE}")),
+        }
+    }
+    Ok(for_secs)
+}
+
+/// The ASIXConnect.ini of the demo install folder.
+pub fn ini_text() -> String {
+    format!(
+        "\
+; ASIXConnect.ini written by `cargo xtask demo`: the demo plant Wytwornia_Kwasu, read over
+; the asix network from the asix simulator (asix-sim) on this computer.
+; Every option: asixconnect.ini.example. Relative paths are relative to this folder.
+[Server]
+SimulateCurrentData = nie
+LogLevel = info
+; Discovery goes to loopback only, on the simulator's ports.
+BroadcastAddress = 127.0.0.1
+DiscoveryPort = {DISCOVERY_PORT}
+DataPort = {DATA_PORT}
+ReconnectInterval = 1000
+
+[Channel:*]
+ItemsDatabase = demo/wytwornia_kwasu/wytwornia_kwasu.zez
+CheckLimits = tak
+CheckControlVariables = tak
+"
+    )
+}
+
+fn copy(from: &Path, to: &Path) -> Result<(), String> {
+    if let Some(dir) = to.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::copy(from, to).map(|_| ()).map_err(|e| format!("copy {} to {}: {e}", from.display(), to.display()))
+}
+
+/// Stages the demo install folder; returns it.
+fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
+    let root = util::root();
+    let dir = root.join("target/demo/ServerCTOPC");
+    copy(&a.server, &dir.join("ServerCTOPC.exe"))?;
+    copy(&a.proxy, &dir.join("opc_ps.dll"))?;
+    copy(&a.dir.join("opcdiag.exe"), &dir.join("opcdiag.exe"))?;
+    for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
+        copy(&root.join("demo/wytwornia_kwasu").join(f), &dir.join("demo/wytwornia_kwasu").join(f))?;
+    }
+    let ini = dir.join("ASIXConnect.ini");
+    std::fs::write(&ini, ini_text()).map_err(|e| format!("{}: {e}", ini.display()))?;
+    println!("demo: staged {}", dir.display());
+    Ok(dir)
+}
+
+/// Registers the proxy/stub DLL and the staged server in the demo prefix.
+fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
+    let limit = Duration::from_secs(120);
+    let dll = dir.join("opc_ps.dll");
+    let status = util::run_with_timeout(wine::wine_in(pfx, "regsvr32").arg("/s").arg(&dll), limit)?;
+    if !status.success() {
+        return Err(format!("regsvr32 {} failed: {status}", dll.display()));
+    }
+    let exe = dir.join("ServerCTOPC.exe");
+    let status = util::run_with_timeout(wine::wine_in(pfx, &exe).arg("/RegServer").stdout(Stdio::null()), limit)?;
+    if !status.success() {
+        return Err(format!("{} /RegServer failed: {status}", exe.display()));
+    }
+    println!("demo: registered opc_ps.dll and {} in {}", exe.display(), pfx.display());
+    Ok(())
+}
+
+/// asix-sim running in the background; stopped (quit, else killed) on drop.
+struct Sim(Child);
+
+impl Sim {
+    fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
+        let mut child = Command::new(exe)
+            .arg("--demo-db")
+            .arg(db)
+            .args(["--udp", &format!("127.0.0.1:{DISCOVERY_PORT}"), "--tcp", &format!("127.0.0.1:{DATA_PORT}")])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            // Its own process group: Ctrl+C in the terminal reaches xtask and opcdiag, not
+            // the simulator, which must keep serving until opcdiag has left.
+            .process_group(0)
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
+        let (tx, rx) = mpsc::channel();
+        if let Some(out) = child.stdout.take() {
+            std::thread::spawn(move || {
+                for line in BufReader::new(out).lines() {
+                    let Ok(line) = line else { break };
+                    let _ = tx.send(line);
+                }
+            });
+        }
+        let sim = Sim(child);
+        // asix-sim prints one line once it listens: "asix-sim NAME udp=... tcp=...".
+        match rx.recv_timeout(Duration::from_secs(30)) {
+            Ok(line) => {
+                println!("demo: {line}");
+                Ok(sim)
+            }
+            Err(_) => Err("asix-sim did not start (no ready line in 30 s; is the port in use?)".into()),
+        }
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        if let Some(stdin) = self.0.stdin.as_mut() {
+            let _ = stdin.write_all(b"quit\n");
+            let _ = stdin.flush();
+        }
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            match self.0.try_wait() {
+                Ok(Some(_)) => return,
+                Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(50)),
+                _ => break,
+            }
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Asks a process to stop as Ctrl+C would (SIGINT; Wine turns it into CTRL_C_EVENT).
+fn interrupt(child: &Child) {
+    let _ = Command::new("kill").args(["-INT", &child.id().to_string()]).stderr(Stdio::null()).status();
+}
+
+/// Runs `opcdiag demo` in the foreground until it exits; on Ctrl+C (the flag) or after
+/// `limit` it is interrupted, and killed if it has not left 10 s later.
+fn run_opcdiag(pfx: &Path, dir: &Path, for_secs: Option<u64>, stop: &AtomicBool) -> Result<(), String> {
+    let exe = dir.join("opcdiag.exe");
+    let mut cmd = wine::wine_in(pfx, &exe);
+    cmd.arg("demo");
+    if let Some(s) = for_secs {
+        cmd.args(["--for", &s.to_string()]);
+    }
+    let mut child = cmd.spawn().map_err(|e| format!("cannot start opcdiag.exe: {e}"))?;
+    let started = Instant::now();
+    // With --for: its time plus Wine's and the server's start (and some slack).
+    let limit = for_secs.map(|s| Duration::from_secs(s + 90));
+    let mut interrupted_at: Option<Instant> = None;
+    loop {
+        match child.try_wait() {
+            // After Ctrl+C its exit code is no verdict (it may have been stopped early).
+            Ok(Some(status)) if status.success() || interrupted_at.is_some() || stop.load(Ordering::SeqCst) => return Ok(()),
+            Ok(Some(status)) => return Err(format!("opcdiag demo failed: {status}")),
+            Ok(None) => {}
+            Err(e) => return Err(format!("waiting for opcdiag: {e}")),
+        }
+        let overtime = limit.is_some_and(|l| started.elapsed() > l);
+        match interrupted_at {
+            None if stop.load(Ordering::SeqCst) || overtime => {
+                println!("\ndemo: stopping");
+                interrupt(&child);
+                interrupted_at = Some(Instant::now());
+                if overtime {
+                    let _ = child.wait();
+                    return Err(format!("opcdiag demo did not end within {} s", limit.map_or(0, |l| l.as_secs())));
+                }
+            }
+            Some(t) if t.elapsed() > Duration::from_secs(10) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err("opcdiag did not stop within 10 s of Ctrl+C and was killed".into());
+            }
+            _ => {}
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+pub fn run(args: &[String]) -> Result<(), String> {
+    let for_secs = parse(args)?;
+    // Ctrl+C must not end xtask before it has cleaned up: it only raises this flag (the
+    // terminal's SIGINT reaches opcdiag too, which stops by itself).
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).map_err(|e| format!("cannot catch Ctrl+C: {e}"))?;
+
+    setup::run(&[])?;
+    let artifacts = build::run(&[])?;
+    util::run(util::cargo().args(["build", "--release", "-p", "asix-net", "--bin", "asix-sim"]))?;
+    let sim_exe = util::root().join("target/release/asix-sim");
+
+    let pfx = prefix();
+    wine::ensure_prefix(&pfx)?;
+    // A clean start: nothing of an earlier demo may hold the staged files or the ports.
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    let dir = stage(&artifacts)?;
+    if stop.load(Ordering::SeqCst) {
+        return Err("interrupted".into());
+    }
+
+    let mut sim = None;
+    let result = (|| {
+        register(&pfx, &dir)?;
+        sim = Some(Sim::start(&sim_exe, &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"))?);
+        println!("demo: starting `opcdiag demo` under Wine{}\n", if for_secs.is_none() { " (Ctrl+C to stop)" } else { "" });
+        run_opcdiag(&pfx, &dir, for_secs, &stop)
+    })();
+    // The server leaves by itself 3 s after its last client (and logs it); Wine's own
+    // services follow. Whatever is still there after 10 s is ended. The simulator goes
+    // last, so that the server never sees its asix links drop.
+    wine::wineserver_in(&pfx, "-w", Duration::from_secs(10));
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    drop(sim);
+    println!("demo: stopped (Wine processes of {} ended, asix-sim ended)", pfx.display());
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ini_reads_the_demo_database_over_the_loopback_asix_network() {
+        let ini = ini_text();
+        for line in [
+            "SimulateCurrentData = nie",
+            "BroadcastAddress = 127.0.0.1",
+            "DiscoveryPort = 48170",
+            "DataPort = 48171",
+            "[Channel:*]",
+            "ItemsDatabase = demo/wytwornia_kwasu/wytwornia_kwasu.zez",
+        ] {
+            assert!(ini.lines().any(|l| l == line), "missing {line:?} in\n{ini}");
+        }
+    }
+
+    #[test]
+    fn the_server_loads_the_staged_configuration_without_a_complaint() {
+        let dir = std::env::temp_dir().join(format!("xtask-demo-ini-{}", std::process::id()));
+        let db = dir.join("demo/wytwornia_kwasu");
+        std::fs::create_dir_all(&db).unwrap();
+        for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
+            std::fs::copy(util::root().join("demo/wytwornia_kwasu").join(f), db.join(f)).unwrap();
+        }
+        std::fs::write(dir.join("ASIXConnect.ini"), ini_text()).unwrap();
+        let loaded = ctopc_core::asix::load_config_file(&dir.join("ASIXConnect.ini"));
+        let (cfg, warnings) = loaded.unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert!(!cfg.server.simulate_current_data);
+        assert_eq!(cfg.server.broadcast_address.as_deref(), Some("127.0.0.1"));
+        assert_eq!((cfg.server.discovery_port, cfg.server.data_port), (Some(DISCOVERY_PORT), Some(DATA_PORT)));
+        let (ns, _) = ctopc_core::asix::AsixNamespace::load(cfg);
+        assert_eq!(ns.no_config_reason(), None, "the demo database loads");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn for_takes_whole_seconds() {
+        assert_eq!(parse(&[]), Ok(None));
+        assert_eq!(parse(&["--for".into(), "15".into()]), Ok(Some(15)));
+        assert!(parse(&["--for".into(), "0".into()]).is_err());
+        assert!(parse(&["--for".into()]).is_err());
+        assert!(parse(&["--bogus".into()]).is_err());
+    }
+}
