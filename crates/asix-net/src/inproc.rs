@@ -20,15 +20,24 @@ pub const TICK_MS: u64 = 250;
 /// The plant channel of database variables that name no `Channel` attribute.
 pub const DEFAULT_PLANT_CHANNEL: &str = "*";
 
-struct Sub {
+/// A source item resolved once: its asix item, plant variable, control variable and rules.
+struct Resolved {
     /// Plant variable index; `None` for a variable the plant does not know.
     var: Option<usize>,
     live: Option<LiveItem>,
     control: Option<usize>,
     rules: RuleOptions,
+}
+
+struct Sub {
+    r: Arc<Resolved>,
     rate_ms: u32,
     next_due: Timestamp,
 }
+
+/// Resolutions kept at most (keys carry a generation, so a stale entry never matches a
+/// reused slot; the cache is simply cleared when it grows beyond this).
+const MAX_RESOLVED: usize = 1_000_000;
 
 /// The in-process simulated data source.
 pub struct InProcessSim {
@@ -36,6 +45,7 @@ pub struct InProcessSim {
     epoch: Timestamp,
     ns: Arc<AsixNamespace>,
     subs: HashMap<SourceKey, Sub>,
+    resolved: HashMap<SourceKey, Arc<Resolved>>,
     ready: SourceOutput,
 }
 
@@ -52,7 +62,7 @@ impl InProcessSim {
                 }
             }
         }
-        InProcessSim { plant: Plant::new(&channels, seed, TICK_MS, now), epoch: now, ns, subs: HashMap::new(), ready: SourceOutput::default() }
+        InProcessSim { plant: Plant::new(&channels, seed, TICK_MS, now), epoch: now, ns, subs: HashMap::new(), resolved: HashMap::new(), ready: SourceOutput::default() }
     }
 
     fn advance(&mut self, now: Timestamp) {
@@ -76,7 +86,12 @@ impl InProcessSim {
         }
     }
 
-    fn subscribe(&mut self, now: Timestamp, item: &SourceItem, rate_ms: u32) {
+    /// The item's resolution, computed on first use (parsing the item ID and looking the
+    /// variables up costs far more than the simulation itself).
+    fn resolve(&mut self, item: &SourceItem) -> Arc<Resolved> {
+        if let Some(r) = self.resolved.get(&item.key) {
+            return Arc::clone(r);
+        }
         let live = self.ns.live_item(&item.channel, &item.item_id);
         let var = live.as_ref().and_then(|l| self.find_var(l.asmen_channel.as_deref(), &l.variable));
         let control = live
@@ -84,8 +99,17 @@ impl InProcessSim {
             .and_then(|l| l.definition.as_ref())
             .and_then(|d| d.control_variable.as_deref())
             .and_then(|c| self.find_var(None, c));
-        let rules = self.rules_for(&item.channel);
-        self.subs.insert(item.key, Sub { var, live, control, rules, rate_ms: rate_ms.max(1), next_due: now });
+        let r = Arc::new(Resolved { var, live, control, rules: self.rules_for(&item.channel) });
+        if self.resolved.len() >= MAX_RESOLVED {
+            self.resolved.clear();
+        }
+        self.resolved.insert(item.key, Arc::clone(&r));
+        r
+    }
+
+    fn subscribe(&mut self, now: Timestamp, item: &SourceItem, rate_ms: u32) {
+        let r = self.resolve(item);
+        self.subs.insert(item.key, Sub { r, rate_ms: rate_ms.max(1), next_due: now });
     }
 
     /// The item's current VQT: the plant variable's, derived and with the quality rules.
@@ -106,20 +130,22 @@ impl InProcessSim {
         }
     }
 
-    fn read(&self, item: &SourceItem) -> Result<Vqt, OpcError> {
-        let live = self.ns.live_item(&item.channel, &item.item_id).ok_or(OpcError::ItemUnknown)?;
-        let var = self.find_var(live.asmen_channel.as_deref(), &live.variable).ok_or(OpcError::ItemUnknown)?;
-        let control = live.definition.as_ref().and_then(|d| d.control_variable.as_deref()).and_then(|c| self.find_var(None, c));
-        Ok(self.sample(Some(var), Some(&live), control, self.rules_for(&item.channel)))
+    fn read(&mut self, item: &SourceItem) -> Result<Vqt, OpcError> {
+        let r = self.resolve(item);
+        if r.live.is_none() || r.var.is_none() {
+            return Err(OpcError::ItemUnknown);
+        }
+        Ok(self.sample(r.var, r.live.as_ref(), r.control, r.rules))
     }
 
     fn write(&mut self, item: &SourceItem, vqt: &ItemVqt) -> Result<(), OpcError> {
-        let live = self.ns.live_item(&item.channel, &item.item_id).ok_or(OpcError::ItemUnknown)?;
+        let r = self.resolve(item);
+        let live = r.live.as_ref().ok_or(OpcError::ItemUnknown)?;
         if live.derivation != Derivation::Value {
             return Err(OpcError::BadRights);
         }
         check_write_value(&vqt.value)?;
-        let var = self.find_var(live.asmen_channel.as_deref(), &live.variable).ok_or(OpcError::ItemUnknown)?;
+        let var = r.var.ok_or(OpcError::ItemUnknown)?;
         let writable = live.definition.as_ref().is_none_or(|d: &Variable| d.writable) && self.plant.vars()[var].spec.writable;
         if !writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
@@ -149,10 +175,11 @@ impl Backend for InProcessSim {
             SourceRequest::Unsubscribe(keys) => {
                 for k in keys {
                     self.subs.remove(&k);
+                    self.resolved.remove(&k);
                 }
             }
             SourceRequest::Read { req_id, items } => {
-                let results = items.iter().map(|i| self.read(i)).collect();
+                let results = items.iter().map(|i| self.read(i)).collect::<Vec<_>>();
                 self.ready.read_results.push((req_id, results));
             }
             SourceRequest::Write { req_id, items } => {
@@ -180,7 +207,7 @@ impl Backend for InProcessSim {
         }
         for key in due {
             if let Some(s) = self.subs.get(&key) {
-                let vqt = self.sample(s.var, s.live.as_ref(), s.control, s.rules);
+                let vqt = self.sample(s.r.var, s.r.live.as_ref(), s.r.control, s.r.rules);
                 out.updates.push((key, vqt));
             }
         }
