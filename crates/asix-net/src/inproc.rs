@@ -8,7 +8,7 @@
 //! reads a clock or blocks.
 
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
-use ctopc_core::asix::{apply_quality_rules, check_write_value, AsixNamespace, Derivation, LiveItem, RuleOptions, Variable};
+use ctopc_core::asix::{apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, LiveItem, RuleOptions, Variable};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -121,7 +121,10 @@ impl InProcessSim {
         let raw = self.plant.vqt(i);
         let control_value = control.map(|c| self.plant.vqt(c).value);
         let quality = match &live.definition {
-            Some(def) => apply_quality_rules(def, &raw.value, raw.quality, control_value.as_ref(), rules),
+            // Limits held as variable names (asix limit variables) read the plant's values.
+            Some(def) => apply_quality_rules_with(def, &raw.value, raw.quality, control_value.as_ref(), rules, &|name| {
+                self.find_var(None, name).and_then(|v| self.plant.vqt(v).value.as_f64())
+            }),
             None => raw.quality,
         };
         match live.derivation.apply(&raw.value) {

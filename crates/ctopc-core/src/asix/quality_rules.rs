@@ -51,12 +51,28 @@ pub fn control_failure(control_value: &Value) -> Option<bool> {
 
 /// Applies the rules (see the module documentation) to the quality of `value`, a current
 /// value of `var`. `control_value` is the current value of `var`'s control variable.
+/// Limits held as another variable's name are not checked here: see
+/// [`apply_quality_rules_with`].
 pub fn apply_quality_rules(
     var: &Variable,
     value: &Value,
     quality: Quality,
     control_value: Option<&Value>,
     options: RuleOptions,
+) -> Quality {
+    apply_quality_rules_with(var, value, quality, control_value, options, &|_| None)
+}
+
+/// [`apply_quality_rules`], with `limit_of(name)` giving the current value of a limit held
+/// as a variable name (an asix limit variable such as `KW_L002`); `None` when unknown (that
+/// limit is then not checked).
+pub fn apply_quality_rules_with(
+    var: &Variable,
+    value: &Value,
+    quality: Quality,
+    control_value: Option<&Value>,
+    options: RuleOptions,
+    limit_of: &dyn Fn(&str) -> Option<f64>,
 ) -> Quality {
     if quality.is_bad() {
         return quality;
@@ -77,7 +93,10 @@ pub fn apply_quality_rules(
     let is_r4 = matches!(value, Value::R4(_));
     let limit = |l: &Option<super::vardb::Limit>| {
         l.as_ref()
-            .and_then(|l| l.value())
+            .and_then(|l| match l {
+                super::vardb::Limit::Value(x) => Some(*x),
+                super::vardb::Limit::Variable(name) => limit_of(name),
+            })
             .map(|x| if is_r4 { x as f32 as f64 } else { x })
     };
     let (wl, wh, al, ah) = (
@@ -457,3 +476,50 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod variable_limit_tests {
+    use super::*;
+    use crate::asix::vardb::{Limit, Variable};
+    use crate::VarType;
+
+    fn var_with_alarm_high_variable() -> Variable {
+        Variable {
+            name: "T".into(),
+            public_name: "T".into(),
+            line: 2,
+            description: String::new(),
+            description_en: String::new(),
+            unit: "°C".into(),
+            range: Some((0.0, 200.0)),
+            data_type: VarType::R4,
+            format_text: String::new(),
+            format: None,
+            warn_low: None,
+            warn_high: Some(Limit::Value(100.0)),
+            alarm_low: None,
+            alarm_high: Some(Limit::Variable("T_ALARM".into())),
+            control_variable: None,
+            bar_base: None,
+            writable: false,
+            cells: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_limit_held_as_a_variable_name_is_checked_with_that_variables_value() {
+        let var = var_with_alarm_high_variable();
+        let opts = RuleOptions { check_limits: true, check_control_variables: false };
+        let lookup = |name: &str| (name == "T_ALARM").then_some(150.0);
+        // Above the warning limit only.
+        let q = apply_quality_rules_with(&var, &Value::R4(120.0), Quality::GOOD, None, opts, &lookup);
+        assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH));
+        // Above the alarm limit read from T_ALARM: high and Second Limit.
+        let q = apply_quality_rules_with(&var, &Value::R4(160.0), Quality::GOOD, None, opts, &lookup);
+        assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH).with_vendor(Quality::VENDOR_SECOND_LIMIT));
+        // Without a lookup (or an unknown limit variable) that limit is not checked.
+        let q = apply_quality_rules(&var, &Value::R4(160.0), Quality::GOOD, None, opts);
+        assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH));
+    }
+}
+
