@@ -2,9 +2,8 @@
 //! that records (or only counts) what the server calls back, and small helpers that make
 //! a group with items through IOPCServer::AddGroup and IOPCItemMgt::AddItems.
 
-use ctopc_com::client::{timestamp, Server};
+use ctopc_com::client::Server;
 use ctopc_com::interfaces::*;
-use ctopc_core::{Timestamp, Value};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -13,16 +12,8 @@ use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::CoTaskMemFree;
 use windows::Win32::System::Variant::VARIANT;
 
-/// One item of an OnDataChange / OnReadComplete.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CbItem {
-    pub client: u32,
-    pub vt: u16,
-    pub value: Value,
-    pub quality: u16,
-    pub timestamp: Timestamp,
-    pub error: HRESULT,
-}
+/// One item of an OnDataChange / OnReadComplete (the client library's owned copy).
+pub type CbItem = ctopc_com::client::ReadItem;
 
 /// One call the server made on the sink.
 #[derive(Debug, Clone, PartialEq)]
@@ -109,36 +100,7 @@ impl TestSink {
     }
 }
 
-/// Copies the [in] arrays of OnDataChange / OnReadComplete.
-///
-/// # Safety
-/// Every pointer holds `n` elements (or is null when `n` is 0).
-unsafe fn items(n: u32, h: *const u32, v: *const VARIANT, q: *const u16, t: *const FILETIME, e: *const HRESULT) -> Vec<CbItem> {
-    if n == 0 || h.is_null() || v.is_null() || q.is_null() || t.is_null() || e.is_null() {
-        return Vec::new();
-    }
-    let n = n as usize;
-    // SAFETY: guaranteed by the caller (the stub's [in, size_is(dwCount)] arrays).
-    let (h, v, q, t, e) = unsafe {
-        (
-            std::slice::from_raw_parts(h, n),
-            std::slice::from_raw_parts(v, n),
-            std::slice::from_raw_parts(q, n),
-            std::slice::from_raw_parts(t, n),
-            std::slice::from_raw_parts(e, n),
-        )
-    };
-    (0..n)
-        .map(|i| CbItem {
-            client: h[i],
-            vt: ctopc_com::variant::var_type(&v[i]).0,
-            value: ctopc_com::variant::from_variant(&v[i]).unwrap_or(Value::Empty),
-            quality: q[i],
-            timestamp: timestamp(t[i]),
-            error: e[i],
-        })
-        .collect()
-}
+use ctopc_com::client::diag::callback_items as items;
 
 impl IOPCDataCallback_Impl for TestSink_Impl {
     unsafe fn OnDataChange(

@@ -63,7 +63,7 @@ fn wait_tx(p: &Plant, transaction: u32) -> Callback {
 }
 
 fn clients(items: &[CbItem]) -> Vec<u32> {
-    let mut v: Vec<u32> = items.iter().map(|i| i.client).collect();
+    let mut v: Vec<u32> = items.iter().map(|i| i.client_handle).collect();
     v.sort_unstable();
     v
 }

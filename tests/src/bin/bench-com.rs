@@ -283,7 +283,7 @@ mod bench {
             .all()
             .into_iter()
             .filter_map(|c| match c {
-                Callback::DataChange { transaction: 0, items, .. } => Some(items.iter().map(|i| i.client).collect()),
+                Callback::DataChange { transaction: 0, items, .. } => Some(items.iter().map(|i| i.client_handle).collect()),
                 _ => None,
             })
             .collect();

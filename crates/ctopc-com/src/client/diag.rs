@@ -38,8 +38,12 @@ pub fn data_change_sink(tx: Sender<DataChange>) -> IOPCDataCallback {
     ChangeSink { tx: Mutex::new(tx) }.into()
 }
 
-/// Copies the `[in, size_is(n)]` arrays of a callback.
-fn callback_items(
+/// Copies the `[in, size_is(n)]` arrays of an OnDataChange / OnReadComplete into owned
+/// items (for any IOPCDataCallback implementation: opcdiag's sink, the tests' sink).
+///
+/// # Safety
+/// Each non-null pointer must point at `n` elements, as the stub passes them.
+pub unsafe fn callback_items(
     n: u32,
     h: *const u32,
     v: *const VARIANT,
@@ -51,8 +55,8 @@ fn callback_items(
         return Vec::new();
     }
     let n = n as usize;
-    // SAFETY: the stub passes `n`-element arrays for the duration of the call (checked
-    // non-null above); they are only read here and copied out.
+    // SAFETY: the caller guarantees `n`-element arrays (checked non-null above); they are
+    // only read here and copied out.
     let (h, v, q, t, e) = unsafe {
         (
             std::slice::from_raw_parts(h, n),
@@ -88,7 +92,9 @@ impl IOPCDataCallback_Impl for ChangeSink_Impl {
         t: *const FILETIME,
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
-        let change = DataChange { transaction, group, master_quality, master_error, items: callback_items(n, h, v, q, t, e) };
+        // SAFETY: the stub passes `n`-element arrays for the duration of the call.
+        let items = unsafe { callback_items(n, h, v, q, t, e) };
+        let change = DataChange { transaction, group, master_quality, master_error, items };
         if let Ok(tx) = self.tx.lock() {
             let _ = tx.send(change);
         }
