@@ -58,16 +58,7 @@ pub fn lock_server(lock: bool) {
     });
 }
 
-pub fn live_objects() -> usize {
-    with(|c| c.objects)
-}
-
 static STOP_REASON: Mutex<Option<&'static str>> = Mutex::new(None);
-
-/// Asks the main loop to stop (console Ctrl+C, service stop).
-pub fn request_stop() {
-    request_stop_with("ServerCTOPC is stopping");
-}
 
 /// Asks the main loop to stop; `reason` is what clients get in IOPCShutdown.
 pub fn request_stop_with(reason: &'static str) {
