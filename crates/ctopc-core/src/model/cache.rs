@@ -126,10 +126,11 @@ pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// One source item in the cache (104 bytes; its key string is the only other allocation).
+/// One source item in the cache (104 bytes; its key string is the only other allocation,
+/// shared with every [`SourceItem`] sent to the data source).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
-    pub key: Box<str>,
+    pub key: Arc<str>,
     pub value: CachedValue,
     pub timestamp: Timestamp,
     /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
@@ -286,6 +287,11 @@ impl SourceTable {
                 idx
             }
             None => {
+                if self.entries.len() == self.entries.capacity() {
+                    // Grow by a quarter, not double: the entries are most of the memory of
+                    // a large configuration, and doubling would leave up to half unused.
+                    self.entries.reserve_exact((self.entries.len() / 4).max(1024));
+                }
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
             }
@@ -315,7 +321,7 @@ impl SourceTable {
         SourceItem {
             key: SourceKey::new(idx, e.generation),
             channel: self.paths.get(e.channel).clone(),
-            item_id: Arc::from(&*e.key),
+            item_id: Arc::clone(&e.key),
             canonical_type: e.canonical,
         }
     }
@@ -502,7 +508,7 @@ impl SourceTable {
         }
         let e = &mut self.entries[idx as usize];
         self.index.remove(key_hash(e.channel, &e.key), idx);
-        e.key = Box::from("");
+        e.key = Arc::from("");
         e.value = CachedValue::EMPTY;
         e.set_rates(RateSet::Empty);
         e.flags = 0;

@@ -114,7 +114,14 @@ pub(crate) struct Group {
 impl Group {
     pub fn find(&self, handle: u32) -> Option<usize> {
         let i = if self.sorted {
-            self.items.binary_search_by_key(&handle, |it| it.handle).ok()?
+            // Items added in one call get consecutive handles, so the handle's distance
+            // from the first item's is usually its index: check that slot first (O(1) for
+            // the bulk of a 10,000-item Read or Write), else search.
+            let guess = handle.wrapping_sub(self.items.first()?.handle) as usize;
+            match self.items.get(guess) {
+                Some(it) if it.handle == handle => guess,
+                _ => self.items.binary_search_by_key(&handle, |it| it.handle).ok()?,
+            }
         } else {
             self.items.iter().position(|it| it.handle == handle)?
         };

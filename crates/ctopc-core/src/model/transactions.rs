@@ -556,7 +556,8 @@ impl Engine {
         }
         let slot = self.live_slot(group)?;
         let mut txn = self.txn_header(TxnKind::SyncWrite, slot, 0);
-        let mut writes = Vec::new();
+        txn.slots.reserve_exact(items.len());
+        let mut writes = Vec::with_capacity(items.len());
         let g = self.group(slot);
         for (n, (h, w)) in items.iter().enumerate() {
             let mut s = Slot { item: *h, client: 0, source: u32::MAX, source_gen: 0, req_type: VarType::EMPTY, out: SlotOut::Pending };
@@ -696,7 +697,8 @@ impl Engine {
             return Err(OpcError::Fail);
         }
         let mut txn = self.item_io_header(TxnKind::SyncWrite, session);
-        let mut writes = Vec::new();
+        txn.slots.reserve_exact(items.len());
+        let mut writes = Vec::with_capacity(items.len());
         for (n, (id, w)) in items.iter().enumerate() {
             let mut slot = self.item_io_slot(now, id);
             if slot.source != u32::MAX {
@@ -781,7 +783,7 @@ impl Engine {
         let mut txn = self.txn_header(TxnKind::Write, slot, transaction_id);
         let g = self.group(slot);
         let mut results = Vec::with_capacity(items.len());
-        let mut writes = Vec::new();
+        let mut writes = Vec::with_capacity(items.len());
         for (h, w) in items {
             let Some(i) = g.find(*h) else {
                 results.push(Err(OpcError::InvalidHandle));
