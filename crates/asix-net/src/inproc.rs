@@ -8,11 +8,10 @@
 //! reads a clock or blocks.
 
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
-use ctopc_core::asix::{apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, LiveItem, RuleOptions, Variable};
+use ctopc_core::asix::{apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
-use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Plant tick of the in-process simulation.
@@ -20,32 +19,64 @@ pub const TICK_MS: u64 = 250;
 /// The plant channel of database variables that name no `Channel` attribute.
 pub const DEFAULT_PLANT_CHANNEL: &str = "*";
 
-/// A source item resolved once: its asix item, plant variable, control variable and rules.
+/// A source item resolved once: its plant variable, control variable, rules and what the
+/// namespace made of it. Items the plant cannot serve share one of three constant
+/// resolutions (see [`Unserved`]), so that many distinct unknown items cost only their
+/// [`Slot`].
 struct Resolved {
     /// Plant variable index; `None` for a variable the plant does not know.
-    var: Option<usize>,
-    live: Option<LiveItem>,
-    control: Option<usize>,
+    var: Option<u32>,
+    control: Option<u32>,
     rules: RuleOptions,
+    /// `None`: not a live asix item (the namespace does not know it).
+    live: Option<Live>,
 }
 
-struct Sub {
-    r: Arc<Resolved>,
+/// The parts of a [`ctopc_core::asix::LiveItem`] the simulation uses.
+struct Live {
+    derivation: Derivation,
+    definition: Option<Variable>,
+}
+
+/// The shared resolutions of items without a plant variable: they differ only in how a
+/// write is refused (unknown item, or a derived item that is never writable).
+struct Unserved {
+    not_live: Arc<Resolved>,
+    value: Arc<Resolved>,
+    derived: Arc<Resolved>,
+}
+
+impl Unserved {
+    fn new() -> Unserved {
+        let r = |live: Option<Live>| Arc::new(Resolved { var: None, control: None, rules: RuleOptions::default(), live });
+        Unserved {
+            not_live: r(None),
+            value: r(Some(Live { derivation: Derivation::Value, definition: None })),
+            derived: r(Some(Live { derivation: Derivation::Formatted(None), definition: None })),
+        }
+    }
+}
+
+/// One source item known to the simulation, at its [`SourceKey::index`].
+struct Slot {
+    key: SourceKey,
+    /// Sampling rate in ms; 0 when not subscribed (resolved for a read or write only).
     rate_ms: u32,
     next_due: Timestamp,
+    r: Arc<Resolved>,
 }
-
-/// Resolutions kept at most (keys carry a generation, so a stale entry never matches a
-/// reused slot; the cache is simply cleared when it grows beyond this).
-const MAX_RESOLVED: usize = 1_000_000;
 
 /// The in-process simulated data source.
 pub struct InProcessSim {
     plant: Plant,
     epoch: Timestamp,
     ns: Arc<AsixNamespace>,
-    subs: HashMap<SourceKey, Sub>,
-    resolved: HashMap<SourceKey, Arc<Resolved>>,
+    /// Indexed by [`SourceKey::index`] (dense: the engine reuses freed indices).
+    slots: Vec<Option<Slot>>,
+    unserved: Unserved,
+    /// No subscribed slot is due before this (the scan over the slots is skipped until
+    /// then; every change that could make a slot due earlier lowers it).
+    next_due: Option<Timestamp>,
     ready: SourceOutput,
 }
 
@@ -62,7 +93,15 @@ impl InProcessSim {
                 }
             }
         }
-        InProcessSim { plant: Plant::new(&channels, seed, TICK_MS, now), epoch: now, ns, subs: HashMap::new(), resolved: HashMap::new(), ready: SourceOutput::default() }
+        InProcessSim {
+            plant: Plant::new(&channels, seed, TICK_MS, now),
+            epoch: now,
+            ns,
+            slots: Vec::new(),
+            unserved: Unserved::new(),
+            next_due: None,
+            ready: SourceOutput::default(),
+        }
     }
 
     fn advance(&mut self, now: Timestamp) {
@@ -86,43 +125,65 @@ impl InProcessSim {
         }
     }
 
-    /// The item's resolution, computed on first use (parsing the item ID and looking the
-    /// variables up costs far more than the simulation itself).
-    fn resolve(&mut self, item: &SourceItem) -> Arc<Resolved> {
-        if let Some(r) = self.resolved.get(&item.key) {
-            return Arc::clone(r);
+    /// The item's slot, resolved on first use (parsing the item ID and looking the
+    /// variables up costs far more than the simulation itself); a slot left by an earlier
+    /// item at the same index (older generation) is replaced.
+    fn slot(&mut self, item: &SourceItem) -> &mut Slot {
+        let i = item.key.index() as usize;
+        if self.slots.len() <= i {
+            if self.slots.capacity() <= i {
+                // Grow by a quarter, not double (large configurations: see the engine's
+                // source table).
+                self.slots.reserve_exact((i + 1 - self.slots.len()).max(self.slots.len() / 4).max(1024));
+            }
+            self.slots.resize_with(i + 1, || None);
         }
-        let live = self.ns.live_item(&item.channel, &item.item_id);
-        let var = live.as_ref().and_then(|l| self.find_var(l.asmen_channel.as_deref(), &l.variable));
-        let control = live
-            .as_ref()
-            .and_then(|l| l.definition.as_ref())
-            .and_then(|d| d.control_variable.as_deref())
-            .and_then(|c| self.find_var(None, c));
-        let r = Arc::new(Resolved { var, live, control, rules: self.rules_for(&item.channel) });
-        if self.resolved.len() >= MAX_RESOLVED {
-            self.resolved.clear();
+        let key = item.key;
+        let r = match &self.slots[i] {
+            Some(s) if s.key == key => None,
+            _ => Some(self.resolve(item)),
+        };
+        let entry = &mut self.slots[i];
+        if let Some(r) = r {
+            return entry.insert(Slot { key, rate_ms: 0, next_due: Timestamp(0), r });
         }
-        self.resolved.insert(item.key, Arc::clone(&r));
-        r
+        entry.get_or_insert_with(|| Slot { key, rate_ms: 0, next_due: Timestamp(0), r: Arc::clone(&self.unserved.not_live) })
+    }
+
+    fn resolve(&self, item: &SourceItem) -> Arc<Resolved> {
+        let Some(live) = self.ns.live_item(&item.channel, &item.item_id) else {
+            return Arc::clone(&self.unserved.not_live);
+        };
+        let Some(var) = self.find_var(live.asmen_channel.as_deref(), &live.variable) else {
+            return Arc::clone(if live.derivation == Derivation::Value { &self.unserved.value } else { &self.unserved.derived });
+        };
+        let control = live.definition.as_ref().and_then(|d| d.control_variable.as_deref()).and_then(|c| self.find_var(None, c));
+        Arc::new(Resolved {
+            var: Some(var as u32),
+            control: control.map(|c| c as u32),
+            rules: self.rules_for(&item.channel),
+            live: Some(Live { derivation: live.derivation, definition: live.definition }),
+        })
     }
 
     fn subscribe(&mut self, now: Timestamp, item: &SourceItem, rate_ms: u32) {
-        let r = self.resolve(item);
-        self.subs.insert(item.key, Sub { r, rate_ms: rate_ms.max(1), next_due: now });
+        let s = self.slot(item);
+        s.rate_ms = rate_ms.max(1);
+        s.next_due = now;
+        self.next_due = Some(self.next_due.map_or(now, |t| t.min(now)));
     }
 
     /// The item's current VQT: the plant variable's, derived and with the quality rules.
-    fn sample(&self, var: Option<usize>, live: Option<&LiveItem>, control: Option<usize>, rules: RuleOptions) -> Vqt {
-        let (Some(i), Some(live)) = (var, live) else {
+    fn sample(&self, r: &Resolved) -> Vqt {
+        let (Some(i), Some(live)) = (r.var, r.live.as_ref()) else {
             // Not a variable of the plant: asix would answer "unknown item".
             return Vqt { value: Value::Empty, quality: Quality::BAD_CONFIG_ERROR, timestamp: self.plant.time_of(self.plant.tick()) };
         };
-        let raw = self.plant.vqt(i);
-        let control_value = control.map(|c| self.plant.vqt(c).value);
+        let raw = self.plant.vqt(i as usize);
+        let control_value = r.control.map(|c| self.plant.vqt(c as usize).value);
         let quality = match &live.definition {
             // Limits held as variable names (asix limit variables) read the plant's values.
-            Some(def) => apply_quality_rules_with(def, &raw.value, raw.quality, control_value.as_ref(), rules, &|name| {
+            Some(def) => apply_quality_rules_with(def, &raw.value, raw.quality, control_value.as_ref(), r.rules, &|name| {
                 self.find_var(None, name).and_then(|v| self.plant.vqt(v).value.as_f64())
             }),
             None => raw.quality,
@@ -134,21 +195,21 @@ impl InProcessSim {
     }
 
     fn read(&mut self, item: &SourceItem) -> Result<Vqt, OpcError> {
-        let r = self.resolve(item);
+        let r = Arc::clone(&self.slot(item).r);
         if r.live.is_none() || r.var.is_none() {
             return Err(OpcError::ItemUnknown);
         }
-        Ok(self.sample(r.var, r.live.as_ref(), r.control, r.rules))
+        Ok(self.sample(&r))
     }
 
     fn write(&mut self, item: &SourceItem, vqt: &ItemVqt) -> Result<(), OpcError> {
-        let r = self.resolve(item);
+        let r = Arc::clone(&self.slot(item).r);
         let live = r.live.as_ref().ok_or(OpcError::ItemUnknown)?;
         if live.derivation != Derivation::Value {
             return Err(OpcError::BadRights);
         }
         check_write_value(&vqt.value)?;
-        let var = r.var.ok_or(OpcError::ItemUnknown)?;
+        let var = r.var.ok_or(OpcError::ItemUnknown)? as usize;
         let writable = live.definition.as_ref().is_none_or(|d: &Variable| d.writable) && self.plant.vars()[var].spec.writable;
         if !writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
@@ -156,6 +217,11 @@ impl InProcessSim {
         let x = numeric(&vqt.value).ok_or(OpcError::BadType)?;
         self.plant.set(var, x, vqt.quality, vqt.timestamp);
         Ok(())
+    }
+
+    /// The slot of a key still current (same generation).
+    fn slot_of(&mut self, key: SourceKey) -> Option<&mut Slot> {
+        self.slots.get_mut(key.index() as usize)?.as_mut().filter(|s| s.key == key)
     }
 }
 
@@ -170,15 +236,16 @@ impl Backend for InProcessSim {
             }
             SourceRequest::SetSamplingRate(rates) => {
                 for (key, rate) in rates {
-                    if let Some(s) = self.subs.get_mut(&key) {
+                    if let Some(s) = self.slot_of(key).filter(|s| s.rate_ms != 0) {
                         s.rate_ms = rate.max(1);
                     }
                 }
             }
             SourceRequest::Unsubscribe(keys) => {
                 for k in keys {
-                    self.subs.remove(&k);
-                    self.resolved.remove(&k);
+                    if self.slot_of(k).is_some() {
+                        self.slots[k.index() as usize] = None;
+                    }
                 }
             }
             SourceRequest::Read { req_id, items } => {
@@ -199,20 +266,23 @@ impl Backend for InProcessSim {
     fn poll(&mut self, now: Timestamp, out: &mut SourceOutput) {
         self.advance(now);
         let mut due = Vec::new();
-        for (key, s) in self.subs.iter_mut() {
-            if s.next_due <= now {
-                due.push(*key);
-                // Keep the phase; skip missed periods instead of bursting.
-                while s.next_due <= now {
-                    s.next_due = s.next_due.add_millis(u64::from(s.rate_ms));
+        if self.next_due.is_some_and(|t| t <= now) {
+            let mut next: Option<Timestamp> = None;
+            for s in self.slots.iter_mut().flatten().filter(|s| s.rate_ms != 0) {
+                if s.next_due <= now {
+                    // Keep the phase; skip missed periods instead of bursting.
+                    while s.next_due <= now {
+                        s.next_due = s.next_due.add_millis(u64::from(s.rate_ms));
+                    }
+                    due.push((s.key, Arc::clone(&s.r)));
                 }
+                next = Some(next.map_or(s.next_due, |t| t.min(s.next_due)));
             }
+            self.next_due = next;
         }
-        for key in due {
-            if let Some(s) = self.subs.get(&key) {
-                let vqt = self.sample(s.r.var, s.r.live.as_ref(), s.r.control, s.r.rules);
-                out.updates.push((key, vqt));
-            }
+        out.updates.reserve(due.len());
+        for (key, r) in due {
+            out.updates.push((key, self.sample(&r)));
         }
         let ready = std::mem::take(&mut self.ready);
         out.updates.extend(ready.updates);
@@ -224,7 +294,7 @@ impl Backend for InProcessSim {
         if !self.ready.is_empty() {
             return Some(Timestamp(0));
         }
-        self.subs.values().map(|s| s.next_due).min()
+        self.next_due
     }
 
     fn is_simulation(&self) -> bool {
