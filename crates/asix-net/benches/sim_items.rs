@@ -154,7 +154,7 @@ fn main() {
         let g = d.e.add_group(d.now, s, &GroupParams { name: "", active: true, update_rate: 1000, ..Default::default() }).expect("group").group;
         d.e.set_callback_connected(d.now, g, true).expect("connect");
         let before = live();
-        let _ = d.add_engine_only(g, ids);
+        d.add_engine_only(g, ids);
         let engine = (live() - before) as f64 / MEMORY_ITEMS as f64;
         d.step();
         println!("  (engine alone {engine:.0} B/item)");

@@ -4,18 +4,22 @@
 //! configured from that channel's options; a source item maps to an asix variable
 //! ([`ItemKey`]: asix channel + variable) plus a [`Derivation`] (value, formatted, percent,
 //! bars) applied to every sample. Several source items may share one asix variable: it is
-//! subscribed once, at the fastest rate asked for, and its samples fan out.
+//! subscribed once, at the fastest rate asked for, and its samples fan out. The variables an
+//! item's quality rules read (its control variable, limits held in variables) are
+//! subscribed with it on the same client, without being items themselves, and let go with
+//! the last item needing them.
 //!
 //! Never blocks: requests go to the clients' queues; the clients' events come back through a
 //! channel and a [`Wake`], and [`Backend::poll`] drains them.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{btree_map, BTreeMap, HashMap};
 use std::sync::mpsc;
 use std::sync::Arc;
 
 use ctopc_core::asix::namespace::{AsixNamespace, Derivation};
 use ctopc_core::asix::{
-    apply_quality_rules, check_write_value, RuleOptions, ServerOptions, ServerSelection, Variable,
+    apply_quality_rules_with, check_write_value, Limit, RuleOptions, ServerOptions,
+    ServerSelection, Variable,
 };
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput, Wake};
@@ -44,6 +48,42 @@ pub struct Resolved {
     pub rules: RuleOptions,
     /// The control variable, when the rules check it.
     pub control: Option<ItemKey>,
+    /// The variables holding the definition's limits (`WarnLow` .. `AlarmHigh` cells that
+    /// name a variable, such as `KW_L002`), each once, when the rules check limits. Their
+    /// `variable` is the name as the limit gives it: the quality rules look limits up by it.
+    pub limits: Vec<ItemKey>,
+}
+
+impl Resolved {
+    /// The variables the item's quality rules read (control and limit variables), each
+    /// once: they are subscribed with the item.
+    pub fn rule_variables(&self) -> Vec<&ItemKey> {
+        let mut v: Vec<&ItemKey> = Vec::with_capacity(self.limits.len() + 1);
+        for k in self.control.iter().chain(&self.limits) {
+            if !v.contains(&k) {
+                v.push(k);
+            }
+        }
+        v
+    }
+}
+
+/// The names of the variables a definition's limits are held in, each once.
+pub fn limit_variables(def: &Variable) -> Vec<&str> {
+    let mut names: Vec<&str> = Vec::new();
+    for l in [
+        &def.warn_low,
+        &def.warn_high,
+        &def.alarm_low,
+        &def.alarm_high,
+    ] {
+        if let Some(Limit::Variable(name)) = l {
+            if !names.contains(&name.as_str()) {
+                names.push(name);
+            }
+        }
+    }
+    names
 }
 
 /// Maps source items onto the asix network.
@@ -130,16 +170,24 @@ impl Resolver for NamespaceResolver {
             .resolve_channel(&item.channel)
             .map(|r| RuleOptions::from(r.options))
             .unwrap_or_default();
+        // Control and limit variables are asix names of the item's database, on their own
+        // `Channel`.
+        let rule_key = |name: &str| {
+            let ch = self
+                .ns
+                .database(&item.channel)
+                .and_then(|db| db.find_real(name))
+                .map(|v| self.db_channel(&item.channel, v))
+                .unwrap_or_default();
+            ItemKey::new(&ch, name)
+        };
         let control = match (&live.definition, rules.check_control_variables) {
-            (Some(def), true) => def.control_variable.as_deref().map(|cv| {
-                let db = self.ns.database(&item.channel);
-                let ch = db
-                    .and_then(|db| db.find_real(cv))
-                    .map(|v| self.db_channel(&item.channel, v))
-                    .unwrap_or_default();
-                ItemKey::new(&ch, cv)
-            }),
+            (Some(def), true) => def.control_variable.as_deref().map(rule_key),
             _ => None,
+        };
+        let limits = match (&live.definition, rules.check_limits) {
+            (Some(def), true) => limit_variables(def).into_iter().map(rule_key).collect(),
+            _ => Vec::new(),
         };
         Some(Resolved {
             key: ItemKey::new(&channel, &live.variable),
@@ -147,6 +195,7 @@ impl Resolver for NamespaceResolver {
             definition: live.definition,
             rules,
             control,
+            limits,
         })
     }
 
@@ -172,6 +221,13 @@ impl Resolver for NamespaceResolver {
         c
     }
 }
+
+/// An asix variable on the client of an AsixConnect channel.
+type Fan = (Arc<str>, ItemKey);
+
+/// The asix variables a request touched, each with the rate it was subscribed at before
+/// the request (`None`: not subscribed).
+type Touched = BTreeMap<Fan, Option<u32>>;
 
 struct Mapped {
     channel: Arc<str>,
@@ -209,11 +265,16 @@ pub struct AsixSource<R: Resolver> {
     tx: mpsc::Sender<(Arc<str>, ClientEvent)>,
     rx: mpsc::Receiver<(Arc<str>, ClientEvent)>,
     items: HashMap<SourceKey, Mapped>,
-    fanout: HashMap<(Arc<str>, ItemKey), Vec<SourceKey>>,
-    /// Control variables subscribed for the quality rules: how many items need each.
-    controls: HashMap<(Arc<str>, ItemKey), usize>,
-    /// Last values of the control variables.
-    control_values: HashMap<(Arc<str>, ItemKey), Value>,
+    /// The items reading each asix variable.
+    fanout: HashMap<Fan, Vec<SourceKey>>,
+    /// Variables subscribed for the quality rules of items (control and limit variables):
+    /// the items whose rules read each (an item once per variable). They are not items
+    /// themselves unless they are also in `fanout`.
+    rule_vars: HashMap<Fan, Vec<SourceKey>>,
+    /// The last VQT of every subscribed variable: the values the quality rules read, and
+    /// the items' samples their qualities are computed again from when a control or limit
+    /// variable changes.
+    last: HashMap<Fan, Vqt>,
     /// (client channel, client request) -> (engine request, positions in it).
     parts: HashMap<(Arc<str>, RequestId), (SourceReqId, Vec<usize>)>,
     pending: HashMap<SourceReqId, Pending>,
@@ -240,8 +301,8 @@ impl<R: Resolver> AsixSource<R> {
             rx,
             items: HashMap::new(),
             fanout: HashMap::new(),
-            controls: HashMap::new(),
-            control_values: HashMap::new(),
+            rule_vars: HashMap::new(),
+            last: HashMap::new(),
             parts: HashMap::new(),
             pending: HashMap::new(),
             read_channels: HashMap::new(),
@@ -287,135 +348,61 @@ impl<R: Resolver> AsixSource<R> {
         self.clients.get(channel)
     }
 
-    /// The fastest rate any source item of an asix variable asks for.
-    fn rate_of(&self, fan: &(Arc<str>, ItemKey)) -> Option<u32> {
-        self.fanout
-            .get(fan)?
-            .iter()
+    /// The rate an asix variable is subscribed at: the fastest any source item reading it,
+    /// or whose quality rules read it, asks for; `None` when nothing wants it.
+    fn rate_of(&self, fan: &Fan) -> Option<u32> {
+        let items = self.fanout.get(fan).into_iter().flatten();
+        let rules = self.rule_vars.get(fan).into_iter().flatten();
+        items
+            .chain(rules)
             .filter_map(|k| self.items.get(k))
             .map(|m| m.rate)
             .min()
     }
 
-    /// Is the asix variable wanted by an item or as a control variable?
-    fn wanted(&self, fan: &(Arc<str>, ItemKey)) -> bool {
-        self.fanout.contains_key(fan) || self.controls.contains_key(fan)
+    /// Is the asix variable wanted by an item or by the quality rules of one?
+    fn wanted(&self, fan: &Fan) -> bool {
+        self.fanout.contains_key(fan) || self.rule_vars.contains_key(fan)
     }
 
-    fn subscribe(&mut self, subs: Vec<(SourceItem, u32)>) {
+    /// Notes the current rate of a variable a request is about to change (once: the first
+    /// note of a request is the state before it).
+    fn touch(&self, touched: &mut Touched, fan: Fan) {
+        if let btree_map::Entry::Vacant(e) = touched.entry(fan) {
+            let rate = self.rate_of(e.key());
+            e.insert(rate);
+        }
+    }
+
+    /// [`Self::touch`] for an item's variable and its rule variables.
+    fn touch_item(&self, touched: &mut Touched, m: &Mapped) {
+        self.touch(touched, (m.channel.clone(), m.key().clone()));
+        for k in m.r.rule_variables() {
+            self.touch(touched, (m.channel.clone(), k.clone()));
+        }
+    }
+
+    /// Brings the clients in line with the variables a request touched: unsubscribes those
+    /// nothing wants any more (forgetting their last values), subscribes those newly wanted
+    /// or wanted at another rate. Done once per request, from the state before and after
+    /// it, so that a variable let go and taken again in one request (an item subscribed
+    /// again, a limit variable passed from one item to another) is never unsubscribed, and
+    /// the rate asked for is the final one.
+    fn apply_touched(&mut self, touched: Touched) {
+        let mut gone: BTreeMap<Arc<str>, Vec<ItemKey>> = BTreeMap::new();
         let mut wanted: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
-        for (item, rate) in subs {
-            let Some(r) = self.resolver.resolve(&item) else {
-                warn!(item = %item.item_id, "not an asix item");
-                continue;
-            };
-            let channel = item.channel.clone();
-            let fan = (channel.clone(), r.key.clone());
-            let was_wanted = self.wanted(&fan);
-            let before = self.rate_of(&fan);
-            if let Some(old) = self.items.remove(&item.key) {
-                self.release_control(&old);
-            }
-            if let Some(c) = &r.control {
-                let cfan = (channel.clone(), c.clone());
-                if !self.wanted(&cfan) {
-                    wanted
-                        .entry((channel.clone(), rate))
-                        .or_default()
-                        .push(c.clone());
+        for (fan, before) in touched {
+            match self.rate_of(&fan) {
+                None => {
+                    self.last.remove(&fan);
+                    if before.is_some() {
+                        gone.entry(fan.0).or_default().push(fan.1);
+                    }
                 }
-                *self.controls.entry(cfan).or_default() += 1;
-            }
-            self.items.insert(
-                item.key,
-                Mapped {
-                    channel: channel.clone(),
-                    r,
-                    rate,
-                },
-            );
-            let keys = self.fanout.entry(fan.clone()).or_default();
-            if !keys.contains(&item.key) {
-                keys.push(item.key);
-            }
-            let after = self.rate_of(&fan);
-            if before != after || !was_wanted {
-                if let Some(r) = after {
-                    wanted.entry((channel, r)).or_default().push(fan.1);
+                Some(after) if before != Some(after) => {
+                    wanted.entry((fan.0, after)).or_default().push(fan.1)
                 }
-            }
-        }
-        for ((channel, rate), keys) in wanted {
-            if let Some(c) = self.client(&channel) {
-                c.subscribe(keys, rate);
-            }
-        }
-    }
-
-    /// One item less needs its control variable; unsubscribes it when nothing needs it.
-    fn release_control(&mut self, m: &Mapped) {
-        let Some(c) = &m.r.control else { return };
-        let cfan = (m.channel.clone(), c.clone());
-        let Some(n) = self.controls.get_mut(&cfan) else {
-            return;
-        };
-        *n -= 1;
-        if *n == 0 {
-            self.controls.remove(&cfan);
-            self.control_values.remove(&cfan);
-            if !self.fanout.contains_key(&cfan) {
-                if let Some(client) = self.clients.get(&m.channel) {
-                    client.unsubscribe(vec![c.clone()]);
-                }
-            }
-        }
-    }
-
-    fn set_rates(&mut self, rates: Vec<(SourceKey, u32)>) {
-        let mut wanted: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
-        for (k, rate) in rates {
-            let Some(m) = self.items.get(&k) else {
-                continue;
-            };
-            let fan = (m.channel.clone(), m.key().clone());
-            let before = self.rate_of(&fan);
-            if let Some(m) = self.items.get_mut(&k) {
-                m.rate = rate;
-            }
-            let after = self.rate_of(&fan);
-            if let (true, Some(r)) = (before != after, after) {
-                wanted.entry((fan.0.clone(), r)).or_default().push(fan.1);
-            }
-        }
-        for ((channel, rate), keys) in wanted {
-            if let Some(c) = self.client(&channel) {
-                c.subscribe(keys, rate);
-            }
-        }
-    }
-
-    fn unsubscribe(&mut self, keys: Vec<SourceKey>) {
-        let mut gone: HashMap<Arc<str>, Vec<ItemKey>> = HashMap::new();
-        let mut lowered: BTreeMap<(Arc<str>, u32), Vec<ItemKey>> = BTreeMap::new();
-        for k in keys {
-            let Some(m) = self.items.remove(&k) else {
-                continue;
-            };
-            self.release_control(&m);
-            let fan = (m.channel.clone(), m.key().clone());
-            let Some(list) = self.fanout.get_mut(&fan) else {
-                continue;
-            };
-            list.retain(|x| *x != k);
-            if list.is_empty() {
-                self.fanout.remove(&fan);
-                if !self.controls.contains_key(&fan) {
-                    gone.entry(fan.0).or_default().push(fan.1);
-                }
-            } else if let Some(r) = self.rate_of(&fan) {
-                if r != m.rate {
-                    lowered.entry((fan.0, r)).or_default().push(fan.1);
-                }
+                Some(_) => {}
             }
         }
         for (channel, keys) in gone {
@@ -423,11 +410,104 @@ impl<R: Resolver> AsixSource<R> {
                 c.unsubscribe(keys);
             }
         }
-        for ((channel, rate), keys) in lowered {
-            if let Some(c) = self.clients.get(&channel) {
+        for ((channel, rate), keys) in wanted {
+            if let Some(c) = self.client(&channel) {
                 c.subscribe(keys, rate);
             }
         }
+    }
+
+    fn subscribe(&mut self, subs: Vec<(SourceItem, u32)>) {
+        let mut touched = Touched::new();
+        for (item, rate) in subs {
+            let Some(r) = self.resolver.resolve(&item) else {
+                warn!(item = %item.item_id, "not an asix item");
+                continue;
+            };
+            let m = Mapped {
+                channel: item.channel.clone(),
+                r,
+                rate,
+            };
+            if let Some(old) = self.items.get(&item.key) {
+                self.touch_item(&mut touched, old);
+            }
+            self.touch_item(&mut touched, &m);
+            let fan = (m.channel.clone(), m.key().clone());
+            let rule_fans: Vec<Fan> =
+                m.r.rule_variables()
+                    .into_iter()
+                    .map(|k| (m.channel.clone(), k.clone()))
+                    .collect();
+            // The new mapping first, then the old one is let go: what both need stays.
+            let old = self.items.insert(item.key, m);
+            let keys = self.fanout.entry(fan.clone()).or_default();
+            if !keys.contains(&item.key) {
+                keys.push(item.key);
+            }
+            for f in rule_fans {
+                self.rule_vars.entry(f).or_default().push(item.key);
+            }
+            if let Some(old) = old {
+                self.release(item.key, &old, Some(&fan));
+            }
+        }
+        self.apply_touched(touched);
+    }
+
+    /// Takes item `k`, mapped as `m`, out of the fan-out of its variable (unless that is
+    /// `keep`, the variable it reads now) and out of the users of its rule variables.
+    fn release(&mut self, k: SourceKey, m: &Mapped, keep: Option<&Fan>) {
+        let fan = (m.channel.clone(), m.key().clone());
+        if keep != Some(&fan) {
+            if let Some(list) = self.fanout.get_mut(&fan) {
+                list.retain(|x| *x != k);
+                if list.is_empty() {
+                    self.fanout.remove(&fan);
+                }
+            }
+        }
+        for c in m.r.rule_variables() {
+            let f = (m.channel.clone(), c.clone());
+            let Some(list) = self.rule_vars.get_mut(&f) else {
+                continue;
+            };
+            // One use less (the item may be listed twice while it is subscribed again).
+            if let Some(i) = list.iter().position(|x| *x == k) {
+                list.swap_remove(i);
+            }
+            if list.is_empty() {
+                self.rule_vars.remove(&f);
+            }
+        }
+    }
+
+    fn set_rates(&mut self, rates: Vec<(SourceKey, u32)>) {
+        let mut touched = Touched::new();
+        for (k, rate) in rates {
+            let Some(m) = self.items.get(&k) else {
+                continue;
+            };
+            self.touch_item(&mut touched, m);
+            if let Some(m) = self.items.get_mut(&k) {
+                m.rate = rate;
+            }
+        }
+        self.apply_touched(touched);
+    }
+
+    fn unsubscribe(&mut self, keys: Vec<SourceKey>) {
+        let mut touched = Touched::new();
+        for k in keys {
+            let Some(m) = self.items.get(&k) else {
+                continue;
+            };
+            self.touch_item(&mut touched, m);
+            if let Some(m) = self.items.remove(&k) {
+                self.release(k, &m, None);
+            }
+        }
+        self.apply_touched(touched);
     }
 
     fn start_request(&mut self, req_id: SourceReqId, kind: Kind, n: usize) {
@@ -487,19 +567,87 @@ impl<R: Resolver> AsixSource<R> {
         }
     }
 
+    /// The last VQT of a variable of an AsixConnect channel's client.
+    fn last_of(&self, channel: &Arc<str>, k: &ItemKey) -> Option<&Vqt> {
+        self.last.get(&(channel.clone(), k.clone()))
+    }
+
     /// An item's VQT from its variable's: the quality rules, then the derivation.
+    ///
+    /// The rules read the last values of the item's control and limit variables, known
+    /// while some subscribed item needs them (a read of an item nothing subscribes finds
+    /// them unknown). A limit variable without a usable value (none yet, BAD quality, not
+    /// numeric) is an unknown limit: the rules then skip that limit.
     fn item_vqt(&self, channel: &Arc<str>, r: &Resolved, v: Vqt) -> Vqt {
         let quality = match &r.definition {
             Some(def) if r.rules.check_limits || r.rules.check_control_variables => {
                 let control = r
                     .control
                     .as_ref()
-                    .and_then(|c| self.control_values.get(&(channel.clone(), c.clone())));
-                apply_quality_rules(def, &v.value, v.quality, control, r.rules)
+                    .and_then(|c| self.last_of(channel, c))
+                    .map(|c| &c.value);
+                let limit_of = |name: &str| {
+                    let k = r.limits.iter().find(|k| &*k.variable == name)?;
+                    let l = self.last_of(channel, k)?;
+                    if l.quality.is_bad() {
+                        return None;
+                    }
+                    l.value.as_f64()
+                };
+                apply_quality_rules_with(def, &v.value, v.quality, control, r.rules, &limit_of)
             }
             _ => v.quality,
         };
         derive(&r.derivation, Vqt::new(v.value, quality, v.timestamp))
+    }
+
+    /// A subscribed item's VQT from the last sample of its variable; `None` before one.
+    fn current_vqt(&self, k: SourceKey) -> Option<Vqt> {
+        let m = self.items.get(&k)?;
+        let raw = self.last_of(&m.channel, m.key())?;
+        Some(self.item_vqt(&m.channel, &m.r, raw.clone()))
+    }
+
+    /// A new sample of a subscribed variable: fanned out to the items reading it, kept, and,
+    /// when it changes a control or limit variable, the items whose rules read it are
+    /// reported again if their quality changes. (Their next sample would use the new value
+    /// anyway, but an item sampled seldom, or only on changes, would keep showing a limit
+    /// state that no longer holds.) Such a report keeps the item's value and takes the
+    /// later of the two timestamps, the time the quality became what it is.
+    fn update(&mut self, fan: Fan, vqt: Vqt, out: &mut SourceOutput) {
+        if !self.wanted(&fan) {
+            // A late sample of a variable let go.
+            return;
+        }
+        if let Some(list) = self.fanout.get(&fan) {
+            for sk in list {
+                let Some(m) = self.items.get(sk) else {
+                    continue;
+                };
+                out.updates
+                    .push((*sk, self.item_vqt(&fan.0, &m.r, vqt.clone())));
+            }
+        }
+        // Only a new value or quality of a rule variable can change the rules' outcome.
+        let same = |l: &Vqt| l.value == vqt.value && l.quality == vqt.quality;
+        let users = match self.rule_vars.get(&fan) {
+            Some(users) if !self.last.get(&fan).is_some_and(same) => users.clone(),
+            _ => Vec::new(),
+        };
+        let before: Vec<(SourceKey, Quality)> = users
+            .into_iter()
+            .filter_map(|k| Some((k, self.current_vqt(k)?.quality)))
+            .collect();
+        let at = vqt.timestamp;
+        self.last.insert(fan, vqt);
+        for (k, q) in before {
+            if let Some(mut v) = self.current_vqt(k) {
+                if v.quality != q {
+                    v.timestamp = v.timestamp.max(at);
+                    out.updates.push((k, v));
+                }
+            }
+        }
     }
 
     fn read(&mut self, req_id: SourceReqId, items: Vec<SourceItem>) {
@@ -611,20 +759,7 @@ impl<R: Resolver> AsixSource<R> {
         match ev {
             ClientEvent::Updates(ups) => {
                 for (key, vqt) in ups {
-                    let fan = (channel.clone(), key);
-                    if self.controls.contains_key(&fan) {
-                        self.control_values.insert(fan.clone(), vqt.value.clone());
-                    }
-                    let Some(list) = self.fanout.get(&fan) else {
-                        continue;
-                    };
-                    for sk in list {
-                        let Some(m) = self.items.get(sk) else {
-                            continue;
-                        };
-                        out.updates
-                            .push((*sk, self.item_vqt(&channel, &m.r, vqt.clone())));
-                    }
+                    self.update((channel.clone(), key), vqt, out);
                 }
             }
             ClientEvent::ReadDone { id, results } => {

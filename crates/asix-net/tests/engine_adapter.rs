@@ -395,3 +395,215 @@ fn the_network_backend_runs_from_a_plain_thread() {
     drop(sim);
     rt.shutdown_timeout(Duration::from_secs(1));
 }
+
+/// The demo plant on the asix network for the limit tests, with `KW_A100 = 1000`,
+/// `KW_L001 = 990`, `KW_L002 = 950` (without channel DIAGNOSTYKA, where the limit and
+/// control variables are, unless `diagnostics`), and an engine reading it through an
+/// `AsixSource` on a channel checking limits and control variables.
+async fn limits_setup(diagnostics: bool) -> (asix_net::sim::SimHandle, Driver) {
+    use asix_net::sim::rights::WriteRights;
+    let db_path = repo().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+    let (db, _) = load_database_file(&db_path, None).unwrap();
+    // Channel PIEC on driver NONE: KW_A100 keeps the value forced (the limit variables are
+    // writable set values, constant anyway).
+    let (rights, warnings) = WriteRights::from_app_ini(b"[ASMEN]\nPIEC = NONE\n", "app.ini");
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let mut channels = channels_from_database(&db, ACID_PLANT_CHANNEL);
+    channels.retain(|c| diagnostics || c.name != "DIAGNOSTYKA");
+    let sim = sim_with("LIMITS", |c| {
+        c.channels = channels;
+        c.write_rights = rights;
+        c.tick_ms = 50;
+    })
+    .await;
+    assert!(sim.force("PIEC", "KW_A100", 1000.0));
+    if diagnostics {
+        assert!(sim.force("DIAGNOSTYKA", "KW_L001", 990.0));
+        assert!(sim.force("DIAGNOSTYKA", "KW_L002", 950.0));
+    }
+    let ini = format!(
+        "[Channel:*]\nItemsDatabase = {}\nCheckLimits = tak\nCheckControlVariables = tak\n",
+        db_path.display()
+    );
+    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let (ns, _) = AsixNamespace::load(config);
+    let ns = Arc::new(ns);
+    let src = AsixSource::new(
+        NamespaceResolver::new(ns.clone(), client_cfg(&[sim.discovery_addr()])),
+        tokio::runtime::Handle::current(),
+        Arc::new(CountingWake(AtomicU64::new(0))),
+    );
+    let d = Driver {
+        e: Engine::new(EngineConfig::default(), ns as Arc<dyn Namespace>),
+        src,
+    };
+    (sim, d)
+}
+
+/// A new active group of `rate` ms with the items `ids`: the group and the items' handles.
+fn add_group_items(d: &mut Driver, rate: u32, ids: &[&str]) -> (GroupHandle, Vec<u32>) {
+    let session = d.e.open_session();
+    let params = GroupParams {
+        name: "g",
+        active: true,
+        update_rate: rate,
+        ..GroupParams::default()
+    };
+    let group = d.e.add_group(wall_now(), session, &params).unwrap().group;
+    let defs: Vec<ItemDefinition> = ids
+        .iter()
+        .enumerate()
+        .map(|(i, id)| ItemDefinition {
+            item_id: id,
+            access_path: "",
+            active: true,
+            client_handle: i as u32,
+            requested_type: VarType::EMPTY,
+        })
+        .collect();
+    let handles =
+        d.e.add_items(wall_now(), group, &defs)
+            .unwrap()
+            .into_iter()
+            .map(|r| r.expect("item added").server_handle)
+            .collect();
+    (group, handles)
+}
+
+/// An item's state in the cache.
+fn cached(e: &mut Engine, group: GroupHandle, h: u32) -> Option<ctopc_core::model::ItemState> {
+    let SyncOutcome::Ready(r) = e.read(wall_now(), group, ReadFrom::Cache, &[h]).ok()? else {
+        return None;
+    };
+    r.into_iter().next()?.ok()
+}
+
+/// CheckLimits with limits held in variables, over the asix network: the demo's KW_A100 has
+/// `WarnHigh = KW_L001` and `AlarmHigh = KW_L002` (limit variables on channel DIAGNOSTYKA).
+/// The source subscribes the limit variables with the item (not as items), its quality
+/// follows their current values, a limit change is reported without waiting for the item's
+/// next sample, and a limit variable is let go with the last item needing it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_held_in_variables_follow_the_limit_variables_over_the_network() {
+    const HIGH: u16 = Quality::LIMIT_HIGH;
+    const SECOND: u16 = Quality::VENDOR_SECOND_LIMIT;
+    tokio::time::timeout(TEST_LIMIT, async {
+        let (sim, mut d) = limits_setup(true).await;
+        // KW_L002 is also an item, sampled every second; KW_A100 (twice: two source items
+        // of one variable) only every minute: after its first sample, its quality changes
+        // only through the source reporting it again on a limit change.
+        let (fast, fast_items) = add_group_items(&mut d, 1000, &["KW_L002"]);
+        let (slow, slow_items) =
+            add_group_items(&mut d, 60_000, &["KW_A100", "KW_A100.PercentageCV"]);
+        let (ha, hp) = (slow_items[0], slow_items[1]);
+        let wait_quality = |q: u16| {
+            move |e: &mut Engine| {
+                let a = cached(e, slow, ha)?;
+                let p = cached(e, slow, hp)?;
+                (a.quality == Quality(q) && p.quality == Quality(q)).then_some((a, p))
+            }
+        };
+
+        // 1000 above AlarmHigh = KW_L002 = 950: High + Second Limit.
+        let (a, p) = d
+            .until(
+                Duration::from_secs(10),
+                "the alarm limit from KW_L002",
+                wait_quality(0xC0 | HIGH | SECOND),
+            )
+            .await;
+        assert_eq!(a.value, Value::R4(1000.0));
+        assert!(
+            matches!(p.value, Value::R8(x) if (x - 1000.0 / 12.0).abs() < 1e-3),
+            "{p:?}"
+        );
+        // The limit and control variables are subscribed once, for the rules.
+        for v in ["KW_L001", "KW_L002", "KW_K002"] {
+            assert_eq!(sim.subscriptions("DIAGNOSTYKA", v), 1, "{v}");
+        }
+        assert_eq!(sim.subscriptions("PIEC", "KW_A100"), 1);
+
+        // The alarm limit rises above the value: only WarnHigh = KW_L001 = 990 is crossed.
+        assert!(sim.force("DIAGNOSTYKA", "KW_L002", 1150.0));
+        d.until(
+            Duration::from_secs(10),
+            "the warning limit from KW_L001",
+            wait_quality(0xC0 | HIGH),
+        )
+        .await;
+        // And back below it.
+        assert!(sim.force("DIAGNOSTYKA", "KW_L002", 950.0));
+        d.until(
+            Duration::from_secs(10),
+            "the alarm limit again",
+            wait_quality(0xC0 | HIGH | SECOND),
+        )
+        .await;
+
+        // One of the two items goes: the other still needs the limit variables.
+        d.e.remove_items(wall_now(), slow, &slow_items[..1])
+            .unwrap();
+        d.step();
+        // A device read over the same link after the removal: whatever the removal asked of
+        // the server was done before it answers.
+        let outcome =
+            d.e.read(wall_now(), fast, ReadFrom::Device, &fast_items)
+                .unwrap();
+        let r = d
+            .sync("device read", outcome, |r| match r {
+                SyncResult::Read(r) => r,
+                other => panic!("{other:?}"),
+            })
+            .await;
+        assert_eq!(r[0].as_ref().unwrap().value, Value::R4(950.0));
+        for v in ["KW_L001", "KW_L002", "KW_K002"] {
+            assert_eq!(sim.subscriptions("DIAGNOSTYKA", v), 1, "{v}");
+        }
+        assert_eq!(sim.subscriptions("PIEC", "KW_A100"), 1);
+
+        // The last one goes: KW_L001 and KW_K002 are let go; KW_L002 stays, an item itself.
+        d.e.remove_items(wall_now(), slow, &slow_items[1..])
+            .unwrap();
+        d.until(
+            Duration::from_secs(10),
+            "the limit variable unsubscribed",
+            |_| {
+                (sim.subscriptions("DIAGNOSTYKA", "KW_L001") == 0
+                    && sim.subscriptions("DIAGNOSTYKA", "KW_K002") == 0
+                    && sim.subscriptions("PIEC", "KW_A100") == 0)
+                    .then_some(())
+            },
+        )
+        .await;
+        assert_eq!(sim.subscriptions("DIAGNOSTYKA", "KW_L002"), 1);
+        d.e.remove_items(wall_now(), fast, &fast_items).unwrap();
+        d.until(Duration::from_secs(10), "KW_L002 unsubscribed", |_| {
+            (sim.subscriptions("DIAGNOSTYKA", "KW_L002") == 0).then_some(())
+        })
+        .await;
+    })
+    .await
+    .expect("test exceeded its time limit");
+}
+
+/// A limit variable without a value (here unknown to the server, so reported BAD Config
+/// Error) is an unknown limit, as the core's rules define it: skipped. KW_A100 = 1000 is
+/// then checked against its numeric limits only (WarnLow 900, AlarmLow 850): not limited,
+/// although its AlarmHigh names KW_L002.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_limit_variable_without_a_value_is_an_unknown_limit() {
+    tokio::time::timeout(TEST_LIMIT, async {
+        let (_sim, mut d) = limits_setup(false).await;
+        let (group, items) = add_group_items(&mut d, 1000, &["KW_A100"]);
+        let s = d
+            .until(Duration::from_secs(10), "KW_A100 good", |e| {
+                cached(e, group, items[0]).filter(|s| s.quality.is_good())
+            })
+            .await;
+        assert_eq!(s.value, Value::R4(1000.0));
+        assert_eq!(s.quality, Quality::GOOD);
+    })
+    .await
+    .expect("test exceeded its time limit");
+}

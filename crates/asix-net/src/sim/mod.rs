@@ -98,6 +98,8 @@ struct Shared {
     driver_delay: Duration,
     min_sampling_ms: u32,
     plant: Mutex<Plant>,
+    /// Plant variable -> how many link subscriptions it has (for [`SimHandle::subscriptions`]).
+    subscribed: Mutex<HashMap<usize, u32>>,
     start: Instant,
     answering: AtomicBool,
     failed: AtomicBool,
@@ -137,6 +139,15 @@ impl Shared {
             p.advance_to(tick);
         }
         p
+    }
+    /// One link subscription more (`up`) or less of plant variable `var`.
+    fn count_subscription(&self, var: usize, up: bool) {
+        let mut m = self.subscribed.lock().unwrap_or_else(|p| p.into_inner());
+        let n = m.entry(var).or_default();
+        *n = if up { *n + 1 } else { n.saturating_sub(1) };
+        if *n == 0 {
+            m.remove(&var);
+        }
     }
     fn offers(&self, r: &Resource) -> bool {
         r.name.is_empty() || self.resources.contains(r)
@@ -198,6 +209,7 @@ pub async fn start(cfg: SimConfig) -> io::Result<SimHandle> {
         driver_delay: cfg.driver_delay,
         min_sampling_ms: cfg.min_sampling_ms.max(1),
         plant: Mutex::new(plant),
+        subscribed: Mutex::new(HashMap::new()),
         start: Instant::now(),
         answering: AtomicBool::new(true),
         failed: AtomicBool::new(cfg.source_failed),
@@ -259,6 +271,20 @@ impl SimHandle {
         let p = self.shared.plant_now();
         let i = p.lookup(channel, variable)?;
         Some(p.vqt(i))
+    }
+
+    /// How many subscriptions of a variable the links hold (0 for an unknown variable):
+    /// lets tests see what a client subscribes and lets go.
+    pub fn subscriptions(&self, channel: &str, variable: &str) -> u32 {
+        let Some(i) = self.shared.lock().lookup(channel, variable) else {
+            return 0;
+        };
+        let m = self
+            .shared
+            .subscribed
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        m.get(&i).copied().unwrap_or(0)
     }
 
     /// Forces a variable's value (good quality, now) as if the process had changed it;
@@ -545,6 +571,9 @@ async fn serve_link(shared: Arc<Shared>, stream: TcpStream) {
         }
     }
     reader.abort();
+    for s in st.subs.values() {
+        shared.count_subscription(s.var, false);
+    }
     if st.counted {
         shared.links.fetch_sub(1, Ordering::SeqCst);
     }
@@ -664,10 +693,12 @@ fn handle_frame(
                             sent_version: 0,
                         },
                     ) {
+                        shared.count_subscription(old.var, false);
                         if let Some(g) = st.groups.get_mut(&old.sampling) {
                             g.handles.remove(&it.handle);
                         }
                     }
+                    shared.count_subscription(var, true);
                     let period = Duration::from_millis(u64::from(sampling));
                     st.groups
                         .entry(sampling)
@@ -692,6 +723,7 @@ fn handle_frame(
             for h in handles {
                 match st.subs.remove(&h) {
                     Some(s) => {
+                        shared.count_subscription(s.var, false);
                         if let Some(g) = st.groups.get_mut(&s.sampling) {
                             g.handles.remove(&h);
                         }

@@ -15,7 +15,10 @@
 //!   R4, so a value equal to the written limit does not cross it); crossing only a warning limit sets Low/High and
 //!   clears 0x0800; crossing none sets the limit field to OK and clears 0x0800. A
 //!   variable without any numeric limit keeps the data source's limit bits. Limits that
-//!   name another variable (indirect limits) are not evaluated here.
+//!   name another variable (asix limit variables) are compared with that variable's
+//!   current value by [`apply_quality_rules_with`] (both data sources, the in-process
+//!   simulation and the asix network, pass their lookup); a limit variable without a
+//!   numeric value yet is skipped, and [`apply_quality_rules`] alone skips them all.
 //! - Rules never touch a BAD quality, and non-numeric values get no limit check.
 //! - The control check comes first; when it fails the limits are not checked.
 
