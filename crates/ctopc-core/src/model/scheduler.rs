@@ -157,7 +157,10 @@ impl Engine {
         let locale = Locale::from_lcid(g.lcid, cfg.default_locale);
         let scanned = g.scanned_seq;
         let group_deadband = g.deadband;
-        let mut items = Vec::new();
+        // Room for every item at once: growing by doubling copies the values reported so
+        // far at each step (on Windows' heap a realloc of a large block always copies),
+        // and pages never written are never committed.
+        let mut items = Vec::with_capacity(g.items.len());
         for it in g.items.iter_mut() {
             if it.flags & ACTIVE == 0 {
                 continue;
