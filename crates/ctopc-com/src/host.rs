@@ -6,7 +6,7 @@ use crate::context::{self, ConfigSource, Context};
 use crate::runtime::{self, Runtime};
 use crate::{factory::ClassFactory, lifetime, server};
 use ctopc_core::asix::AsixNamespace;
-use ctopc_core::model::{Engine, EngineConfig};
+use ctopc_core::model::Engine;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
@@ -131,6 +131,7 @@ pub fn install_dir() -> Result<PathBuf, String> {
 pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
     match &loaded.source {
         ConfigSource::File(p) => tracing::info!("configuration: {}", p.display()),
+        ConfigSource::FromEnv(p) => tracing::info!("configuration: {} (from {})", p.display(), context::CONFIG_ENV),
         ConfigSource::EmbeddedDemo => tracing::info!("configuration: none found next to the executable; running the embedded demo plant (simulated)"),
     }
     for w in &loaded.warnings {
@@ -142,7 +143,10 @@ pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Res
     if let Some(r) = &reason {
         tracing::error!("OPC_STATUS_NOCONFIG: {r}");
     }
-    let engine_config = EngineConfig { min_update_rate_ms: ns.config().server.min_update_rate_ms, ..EngineConfig::default() };
+    let engine_config = ns.config().server.engine_config();
+    if engine_config.source_timeout_ms != ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS {
+        tracing::info!("data source timeout: {} ms (SourceTimeout)", engine_config.source_timeout_ms);
+    }
     let engine = Engine::new(engine_config, Arc::clone(&ns) as Arc<dyn Namespace>);
     let ns_for_backend = Arc::clone(&ns);
     let rt = Runtime::start(engine, move |wake| make_backend(&ns_for_backend, wake))?;

@@ -54,6 +54,8 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "LogLevel",
     "LogMaxFileSizeMB",
     "LogKeepFiles",
+    "SourceTimeout",
+    "SimulationDeviceDelay",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -128,6 +130,32 @@ pub struct ServerOptions {
     pub log_max_file_size_mb: u32,
     /// `LogKeepFiles` (default 30): older log files beyond this count are deleted.
     pub log_keep_files: u32,
+    /// `SourceTimeout`, ms (default [`crate::model::DEFAULT_SOURCE_TIMEOUT_MS`],
+    /// 100..=600000; the engine's [`crate::model::EngineConfig::source_timeout_ms`]): how
+    /// long the server waits for the data source to answer a device read or write before
+    /// failing its items with ASKOM_E_NetAnswerTimeout.
+    pub source_timeout_ms: u32,
+    /// `SimulationDeviceDelay`, ms (default 0, 0..=600000): with `SimulateCurrentData`,
+    /// the simulation answers device reads and writes only after this delay (a slow
+    /// device, for testing timeouts and cancellation). Subscriptions are not delayed.
+    pub simulation_device_delay_ms: u32,
+}
+
+/// Bounds of `SourceTimeout`, ms.
+const SOURCE_TIMEOUT_RANGE_MS: (u32, u32) = (100, 600_000);
+/// Largest `SimulationDeviceDelay`, ms.
+const MAX_SIMULATION_DEVICE_DELAY_MS: u32 = 600_000;
+
+impl ServerOptions {
+    /// The engine's configuration these options imply (`MinUpdateRate`, `SourceTimeout`;
+    /// the rest at the engine's defaults).
+    pub fn engine_config(&self) -> crate::model::EngineConfig {
+        crate::model::EngineConfig {
+            min_update_rate_ms: self.min_update_rate_ms,
+            source_timeout_ms: self.source_timeout_ms,
+            ..crate::model::EngineConfig::default()
+        }
+    }
 }
 
 /// `LogLevel`.
@@ -156,6 +184,8 @@ impl Default for ServerOptions {
             log_level: LogLevel::Info,
             log_max_file_size_mb: 10,
             log_keep_files: 30,
+            source_timeout_ms: crate::model::DEFAULT_SOURCE_TIMEOUT_MS,
+            simulation_device_delay_ms: 0,
         }
     }
 }
@@ -497,6 +527,17 @@ fn apply_server_option(
         }
         "logmaxfilesizemb" => set_number(&mut o.log_max_file_size_mb, file, e, 1, 4096)?,
         "logkeepfiles" => set_number(&mut o.log_keep_files, file, e, 1, 100_000)?,
+        "sourcetimeout" => {
+            let (min, max) = SOURCE_TIMEOUT_RANGE_MS;
+            set_number(&mut o.source_timeout_ms, file, e, min, max)?
+        }
+        "simulationdevicedelay" => set_number(
+            &mut o.simulation_device_delay_ms,
+            file,
+            e,
+            0,
+            MAX_SIMULATION_DEVICE_DELAY_MS,
+        )?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -687,6 +728,8 @@ mod tests {
         assert_eq!(c.server, ServerOptions::default());
         assert_eq!(c.server.min_update_rate_ms, 1000);
         assert!(!c.server.attributes_as_items);
+        assert_eq!(c.server.source_timeout_ms, crate::model::DEFAULT_SOURCE_TIMEOUT_MS);
+        assert_eq!(c.server.simulation_device_delay_ms, 0);
         assert_eq!(c.channels.len(), 1);
     }
 
@@ -831,6 +874,22 @@ mod tests {
             ("LogLevel", "debug", |o| o.log_level == LogLevel::Debug),
             ("LogMaxFileSizeMB", "5", |o| o.log_max_file_size_mb == 5),
             ("LogKeepFiles", "7", |o| o.log_keep_files == 7),
+            ("SourceTimeout", "1000", |o| o.source_timeout_ms == 1000),
+            ("SourceTimeout", "100", |o| o.source_timeout_ms == 100),
+            ("SourceTimeout", "600000", |o| o.source_timeout_ms == 600_000),
+            ("SourceTimeout", "", |o| {
+                o.source_timeout_ms == crate::model::DEFAULT_SOURCE_TIMEOUT_MS
+            }),
+            ("SimulationDeviceDelay", "1500", |o| {
+                o.simulation_device_delay_ms == 1500
+            }),
+            ("SimulationDeviceDelay", "0", |o| o.simulation_device_delay_ms == 0),
+            ("SimulationDeviceDelay", "600000", |o| {
+                o.simulation_device_delay_ms == 600_000
+            }),
+            ("simulationdevicedelay", " 20 ", |o| {
+                o.simulation_device_delay_ms == 20
+            }),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();
@@ -846,10 +905,36 @@ mod tests {
             ("DefaultLanguage", "de"),
             ("DiscoveryPort", "70000"),
             ("DataPort", "0"),
+            ("SourceTimeout", "99"),
+            ("SourceTimeout", "0"),
+            ("SourceTimeout", "600001"),
+            ("SourceTimeout", "1s"),
+            ("SimulationDeviceDelay", "600001"),
+            ("SimulationDeviceDelay", "-1"),
+            ("SimulationDeviceDelay", "1.5"),
         ] {
             let err = parse(&format!("[Server]\n{key}={value}\n")).unwrap_err();
             assert_eq!((err.line, err.option.as_deref()), (2, Some(key)));
         }
+    }
+
+    #[test]
+    fn server_options_reach_the_engine_config() {
+        use crate::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
+        let (c, _) = parse("").unwrap();
+        assert_eq!(c.server.engine_config(), EngineConfig::default());
+        assert_eq!(c.server.engine_config().source_timeout_ms, DEFAULT_SOURCE_TIMEOUT_MS);
+        let (c, _) = parse("[Server]\nSourceTimeout = 1000\nMinUpdateRate = 250\n").unwrap();
+        let e = c.server.engine_config();
+        assert_eq!((e.source_timeout_ms, e.min_update_rate_ms), (1000, 250));
+        assert_eq!(
+            e.max_transactions_per_group,
+            EngineConfig::default().max_transactions_per_group
+        );
+        // The engine keeps it.
+        let ns = std::sync::Arc::new(crate::asix::AsixNamespace::new(c));
+        let engine = crate::model::Engine::new(e, ns);
+        assert_eq!(engine.config().source_timeout_ms, 1000);
     }
 
     #[test]
