@@ -6,10 +6,16 @@
 //!
 //! Deterministic: the plant advances in fixed ticks computed from `now`; nothing here
 //! reads a clock or blocks.
+//!
+//! A slow device (`SimulationDeviceDelay`, [`InProcessSim::with_device_delay`]): device
+//! reads and writes are carried out when requested, but their answers are held until
+//! `now + delay` and only then handed out by `poll` (and announced by `poll_timeout`), so
+//! that the engine's source timeout and Cancel2 can be exercised. Subscriptions are not
+//! delayed.
 
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
 use ctopc_core::asix::{apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable};
-use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceRequest};
+use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
 use std::sync::Arc;
@@ -66,6 +72,12 @@ struct Slot {
     r: Arc<Resolved>,
 }
 
+/// A device answer held back until its due time (see [`InProcessSim::with_device_delay`]).
+enum Held {
+    Read(SourceReqId, Vec<Result<Vqt, OpcError>>),
+    Write(SourceReqId, Vec<Result<(), OpcError>>),
+}
+
 /// The in-process simulated data source.
 pub struct InProcessSim {
     plant: Plant,
@@ -78,6 +90,10 @@ pub struct InProcessSim {
     /// then; every change that could make a slot due earlier lowers it).
     next_due: Option<Timestamp>,
     ready: SourceOutput,
+    /// How long device reads and writes take to answer, ms (0: at once).
+    device_delay_ms: u64,
+    /// Answers not yet due, in request order, with their due times.
+    held: Vec<(Timestamp, Held)>,
 }
 
 impl InProcessSim {
@@ -101,6 +117,44 @@ impl InProcessSim {
             unserved: Unserved::new(),
             next_due: None,
             ready: SourceOutput::default(),
+            device_delay_ms: 0,
+            held: Vec::new(),
+        }
+    }
+
+    /// A slow device: answers of device reads and writes (`SourceRequest::Read`, `Write`,
+    /// `WriteVqt`) are released by `poll` only `delay_ms` after the request (0: at once,
+    /// the default). The operation itself happens at request time: a read samples the
+    /// plant then, a write sets the value then; only the answer is late.
+    pub fn with_device_delay(mut self, delay_ms: u32) -> InProcessSim {
+        self.device_delay_ms = u64::from(delay_ms);
+        self
+    }
+
+    /// Hands a device answer out at the next `poll`, or holds it until it is due.
+    fn answer(&mut self, now: Timestamp, answer: Held) {
+        if self.device_delay_ms > 0 {
+            self.held.push((now.add_millis(self.device_delay_ms), answer));
+            return;
+        }
+        match answer {
+            Held::Read(id, r) => self.ready.read_results.push((id, r)),
+            Held::Write(id, r) => self.ready.write_results.push((id, r)),
+        }
+    }
+
+    /// Moves the held answers due by `now` to `out`, in request order.
+    fn release_due(&mut self, now: Timestamp, out: &mut SourceOutput) {
+        if self.held.iter().all(|(due, _)| *due > now) {
+            return;
+        }
+        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.held).into_iter().partition(|(t, _)| *t <= now);
+        self.held = later;
+        for (_, answer) in due {
+            match answer {
+                Held::Read(id, r) => out.read_results.push((id, r)),
+                Held::Write(id, r) => out.write_results.push((id, r)),
+            }
         }
     }
 
@@ -250,15 +304,15 @@ impl Backend for InProcessSim {
             }
             SourceRequest::Read { req_id, items } => {
                 let results = items.iter().map(|i| self.read(i)).collect::<Vec<_>>();
-                self.ready.read_results.push((req_id, results));
+                self.answer(now, Held::Read(req_id, results));
             }
             SourceRequest::Write { req_id, items } => {
                 let results = items.iter().map(|(i, v)| self.write(i, &ItemVqt::value(v.clone()))).collect();
-                self.ready.write_results.push((req_id, results));
+                self.answer(now, Held::Write(req_id, results));
             }
             SourceRequest::WriteVqt { req_id, items } => {
                 let results = items.iter().map(|(i, v)| self.write(i, v)).collect();
-                self.ready.write_results.push((req_id, results));
+                self.answer(now, Held::Write(req_id, results));
             }
         }
     }
@@ -288,13 +342,18 @@ impl Backend for InProcessSim {
         out.updates.extend(ready.updates);
         out.read_results.extend(ready.read_results);
         out.write_results.extend(ready.write_results);
+        self.release_due(now, out);
     }
 
     fn poll_timeout(&self) -> Option<Timestamp> {
         if !self.ready.is_empty() {
             return Some(Timestamp(0));
         }
-        self.next_due
+        let held = self.held.iter().map(|(due, _)| *due).min();
+        match (held, self.next_due) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     fn is_simulation(&self) -> bool {

@@ -1,12 +1,15 @@
 //! The in-process simulation behind the engine, against the demo database: subscribed
 //! values arrive and change, device reads and writes reach the plant, read-only and
-//! derived items refuse writes.
+//! derived items refuse writes; a slow device (`SimulationDeviceDelay`) answers late,
+//! the engine times it out at `SourceTimeout`, and Cancel2 beats it.
 
 use asix_net::inproc::InProcessSim;
 use ctopc_core::asix::{parse_config, AsixNamespace};
-use ctopc_core::model::{DataSource, Engine, EngineConfig, GroupParams, ItemDefinition, SyncOutcome};
+use ctopc_core::model::{
+    DataSource, Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SourceRequest, SyncOutcome, SyncResult,
+};
 use ctopc_core::source::{Backend, SourceOutput};
-use ctopc_core::{Timestamp, Value, VarType};
+use ctopc_core::{OpcError, Timestamp, Value, VarType};
 use std::sync::Arc;
 
 fn demo() -> Arc<AsixNamespace> {
@@ -16,17 +19,8 @@ fn demo() -> Arc<AsixNamespace> {
     Arc::new(AsixNamespace::load(cfg).0)
 }
 
-/// One driver step, as the server's runtime does it.
-fn step(e: &mut Engine, s: &mut InProcessSim, now: Timestamp) {
-    let mut out = SourceOutput::default();
-    s.poll(now, &mut out);
-    e.handle_source_updates(now, out.updates);
-    if e.poll_timeout().is_some_and(|t| t <= now) {
-        e.handle_timeout(now);
-    }
-    while let Some(r) = e.poll_source_request() {
-        s.request(now, r);
-    }
+/// Moves everything the simulation has ready by `now` into the engine.
+fn pull(e: &mut Engine, s: &mut InProcessSim, now: Timestamp) {
     let mut out = SourceOutput::default();
     s.poll(now, &mut out);
     e.handle_source_updates(now, out.updates);
@@ -36,6 +30,19 @@ fn step(e: &mut Engine, s: &mut InProcessSim, now: Timestamp) {
     for (id, r) in out.write_results {
         e.handle_source_write_result(now, id, r);
     }
+}
+
+/// One driver step, as the server's runtime does it: source in (answers held by a slow
+/// device come out here), timers, requests out, source in again.
+fn step(e: &mut Engine, s: &mut InProcessSim, now: Timestamp) {
+    pull(e, s, now);
+    if e.poll_timeout().is_some_and(|t| t <= now) {
+        e.handle_timeout(now);
+    }
+    while let Some(r) = e.poll_source_request() {
+        s.request(now, r);
+    }
+    pull(e, s, now);
 }
 
 fn setup() -> (Engine, InProcessSim, Timestamp, ctopc_core::model::GroupHandle, Vec<u32>) {
@@ -122,4 +129,197 @@ fn device_write_reaches_the_plant_and_read_only_items_refuse() {
         }
     };
     assert_eq!(r[0].as_ref().unwrap().value.as_f64(), Some(12.5));
+}
+
+// ---- a slow device: SimulationDeviceDelay and SourceTimeout ---------------------------
+
+/// The demo plant with these `[Server]` options, built as the server builds it: the
+/// engine configured from the options, the simulation with their SimulationDeviceDelay.
+/// One group (inactive unless `active`: no subscriptions then, so the simulation's only
+/// timers are its held answers) with KW_A000 (read-only) and KW_A110 (writable).
+fn slow_setup(server_options: &str, active: bool) -> (Engine, InProcessSim, Timestamp, GroupHandle, Vec<u32>) {
+    let db = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+    let ini = format!("[Server]\nSimulateCurrentData = tak\n{server_options}\n[Channel:*]\nItemsDatabase = {db}\n");
+    let (cfg, w) = parse_config(ini.as_bytes(), "slow.ini").unwrap();
+    assert!(w.is_empty(), "{w:?}");
+    let delay = cfg.server.simulation_device_delay_ms;
+    let engine_config = cfg.server.engine_config();
+    let ns = Arc::new(AsixNamespace::load(cfg).0);
+    let t0 = Timestamp::from_unix_millis(1_700_000_000_000);
+    let mut e = Engine::new(engine_config, ns.clone());
+    let s = InProcessSim::new(ns, 7, t0).with_device_delay(delay);
+    let session = e.open_session();
+    let g = e
+        .add_group(t0, session, &GroupParams { name: "slow", active, update_rate: 1000, client_handle: 77, time_bias: 0, percent_deadband: 0.0, lcid: 0x409 })
+        .unwrap()
+        .group;
+    let defs: Vec<ItemDefinition> = ["KW_A000", "KW_A110"]
+        .iter()
+        .enumerate()
+        .map(|(i, id)| ItemDefinition { item_id: id, access_path: "", active: true, client_handle: i as u32 + 1, requested_type: VarType::EMPTY })
+        .collect();
+    let handles = e.add_items(t0, g, &defs).unwrap().into_iter().map(|r| r.unwrap().server_handle).collect();
+    e.set_callback_connected(t0, g, true).unwrap();
+    (e, s, t0, g, handles)
+}
+
+fn pending<T: std::fmt::Debug>(o: SyncOutcome<T>) -> ctopc_core::model::SyncId {
+    match o {
+        SyncOutcome::Pending(id) => id,
+        SyncOutcome::Ready(r) => panic!("a device operation answered without the source: {r:?}"),
+    }
+}
+
+/// The engine's device requests (and nothing else).
+fn device_requests(e: &mut Engine) -> Vec<SourceRequest> {
+    let mut v = Vec::new();
+    while let Some(r) = e.poll_source_request() {
+        assert!(matches!(r, SourceRequest::Read { .. } | SourceRequest::Write { .. } | SourceRequest::WriteVqt { .. }), "{r:?}");
+        v.push(r);
+    }
+    v
+}
+
+#[test]
+fn a_slow_device_holds_its_answers_until_due_and_says_when() {
+    let (mut e, mut s, t0, g, h) = slow_setup("SimulationDeviceDelay = 1500", false);
+    assert_eq!(s.poll_timeout(), None, "an inactive group subscribes nothing");
+    // A write at t0, then a device read of the same item at t0 + 10.
+    let write = pending(e.write(t0, g, &[(h[1], Value::R8(12.5))]).unwrap());
+    for r in device_requests(&mut e) {
+        s.request(t0, r);
+    }
+    let t1 = t0.add_millis(10);
+    let read = pending(e.read(t1, g, DataSource::Device, &h).unwrap());
+    for r in device_requests(&mut e) {
+        s.request(t1, r);
+    }
+    assert_eq!(s.poll_timeout(), Some(t0.add_millis(1500)), "the earliest due answer wakes the driver");
+
+    let mut out = SourceOutput::default();
+    s.poll(t0.add_millis(1499), &mut out);
+    assert!(out.is_empty(), "nothing before the delay: {out:?}");
+    s.poll(t0.add_millis(1500), &mut out);
+    assert_eq!((out.write_results.len(), out.read_results.len()), (1, 0));
+    assert_eq!(out.write_results[0].1, vec![Ok(())]);
+    assert_eq!(s.poll_timeout(), Some(t1.add_millis(1500)));
+    let mut late = SourceOutput::default();
+    s.poll(t1.add_millis(1499), &mut late);
+    assert!(late.is_empty());
+    s.poll(t1.add_millis(1500), &mut late);
+    assert_eq!((late.write_results.len(), late.read_results.len()), (0, 1));
+    assert_eq!(s.poll_timeout(), None, "nothing held any more");
+    // The write took effect when it was requested: the read made 10 ms later sees it.
+    let values: Vec<Option<f64>> = late.read_results[0].1.iter().map(|r| r.as_ref().unwrap().value.as_f64()).collect();
+    assert_eq!(values.len(), 2);
+    assert_eq!(values[1], Some(12.5));
+
+    // The engine takes the late answers as any others.
+    let now = t1.add_millis(1500);
+    for (id, r) in out.write_results {
+        e.handle_source_write_result(now, id, r);
+    }
+    for (id, r) in late.read_results {
+        e.handle_source_read_result(now, id, r);
+    }
+    assert_eq!(e.take_sync_result(write), Some(SyncResult::Write(vec![Ok(())])));
+    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else { panic!("no read result") };
+    assert_eq!(r[1].as_ref().unwrap().value.as_f64(), Some(12.5));
+}
+
+#[test]
+fn a_slow_device_with_the_same_inputs_answers_the_same() {
+    let run = || {
+        let (mut e, mut s, t0, g, h) = slow_setup("SimulationDeviceDelay = 700", false);
+        let mut answers = Vec::new();
+        for k in 0..4u64 {
+            let now = t0.add_millis(k * 300);
+            let _ = pending(e.read(now, g, DataSource::Device, &h).unwrap());
+            for r in device_requests(&mut e) {
+                s.request(now, r);
+            }
+            let mut out = SourceOutput::default();
+            s.poll(now, &mut out);
+            answers.push((now, s.poll_timeout(), out.read_results.into_iter().map(|(_, r)| r).collect::<Vec<_>>()));
+        }
+        let mut out = SourceOutput::default();
+        s.poll(t0.add_millis(10_000), &mut out);
+        answers.push((t0, s.poll_timeout(), out.read_results.into_iter().map(|(_, r)| r).collect()));
+        answers
+    };
+    let a = run();
+    assert_eq!(a, run());
+    // At 0, 300, 600, 900 ms: the first answer (due 700) comes out at the poll of 900.
+    let released: Vec<usize> = a.iter().map(|(_, _, r)| r.len()).collect();
+    assert_eq!(released, vec![0, 0, 0, 1, 3]);
+    assert_eq!(a[0].1, Some(a[0].0.add_millis(700)));
+    assert_eq!(a[4].1, None);
+}
+
+#[test]
+fn source_timeout_from_the_ini_fails_a_read_and_a_write_the_device_answers_too_late() {
+    let (mut e, mut s, t0, g, h) = slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 3000", false);
+    assert_eq!(e.config().source_timeout_ms, 1000, "SourceTimeout reaches the engine");
+    let read = pending(e.read(t0, g, DataSource::Device, &h).unwrap());
+    let write = pending(e.write(t0, g, &[(h[1], Value::R8(3.0))]).unwrap());
+    step(&mut e, &mut s, t0);
+    step(&mut e, &mut s, t0.add_millis(999));
+    assert_eq!(e.take_sync_result(read), None, "still waiting at 999 ms");
+    step(&mut e, &mut s, t0.add_millis(1000));
+    assert_eq!(e.take_sync_result(read), Some(SyncResult::Read(vec![Err(OpcError::NetAnswerTimeout); 2])));
+    assert_eq!(e.take_sync_result(write), Some(SyncResult::Write(vec![Err(OpcError::NetAnswerTimeout)])));
+    // The answers arriving at 3000 ms belong to nobody any more: dropped quietly.
+    for ms in [2999, 3000, 3001] {
+        step(&mut e, &mut s, t0.add_millis(ms));
+    }
+    assert_eq!(e.poll_event(), None);
+    assert_eq!(e.stats().pending_transactions, 0);
+
+    // Within the timeout the late answer is the answer.
+    let (mut e, mut s, t0, g, h) = slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 600", false);
+    let read = pending(e.read(t0, g, DataSource::Device, &h).unwrap());
+    step(&mut e, &mut s, t0);
+    step(&mut e, &mut s, t0.add_millis(599));
+    assert_eq!(e.take_sync_result(read), None);
+    step(&mut e, &mut s, t0.add_millis(600));
+    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else { panic!("no answer at 600 ms") };
+    assert!(r.iter().all(Result::is_ok), "{r:?}");
+}
+
+#[test]
+fn cancel2_beats_a_slow_device_and_no_read_complete_follows() {
+    let (mut e, mut s, t0, g, h) = slow_setup("SimulationDeviceDelay = 1500", false);
+    let started = e.async_read(t0, g, 7, &h).unwrap();
+    assert_ne!(started.cancel_id, 0);
+    step(&mut e, &mut s, t0);
+    step(&mut e, &mut s, t0.add_millis(100));
+    assert_eq!(e.poll_event(), None, "the device has not answered yet");
+    e.cancel2(g, started.cancel_id).unwrap();
+    match e.poll_event() {
+        Some(Event::CancelComplete(c)) => {
+            assert_eq!((c.transaction_id, c.client_group, c.group, c.cancel_id), (7, 77, g, started.cancel_id));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.cancel2(g, started.cancel_id), Err(OpcError::Fail), "cancelled already");
+    // The device's answer (1500 ms) and the engine's timeout (10 s) pass without a callback.
+    for ms in (200..=12_000).step_by(100) {
+        step(&mut e, &mut s, t0.add_millis(ms));
+        assert_eq!(e.poll_event(), None, "at {ms} ms");
+    }
+
+    // Not cancelled: OnReadComplete at the delay, not before.
+    let t1 = t0.add_millis(20_000);
+    let started = e.async_read(t1, g, 8, &h).unwrap();
+    step(&mut e, &mut s, t1);
+    step(&mut e, &mut s, t1.add_millis(1499));
+    assert_eq!(e.poll_event(), None);
+    step(&mut e, &mut s, t1.add_millis(1500));
+    match e.poll_event() {
+        Some(Event::ReadComplete(r)) => {
+            assert_eq!((r.transaction_id, r.cancel_id, r.items.len()), (8, started.cancel_id, 2));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.cancel2(g, started.cancel_id), Err(OpcError::Fail), "completed already");
 }

@@ -1,5 +1,6 @@
 //! Which data source the server uses: the in-process simulation of the plant when
-//! `SimulateCurrentData` is on (the embedded default), else the asix network client.
+//! `SimulateCurrentData` is on (the embedded default; `SimulationDeviceDelay` makes its
+//! device answers late), else the asix network client.
 
 use asix_net::inproc::InProcessSim;
 use ctopc_core::asix::AsixNamespace;
@@ -10,9 +11,15 @@ use std::sync::Arc;
 const SIM_SEED: u64 = 0x5EED_A51C;
 
 pub fn make(ns: &Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> {
-    if ns.config().server.simulate_current_data {
+    let server = &ns.config().server;
+    if server.simulate_current_data {
         tracing::info!("data source: simulation of current data (OPC_STATUS_TEST)");
-        return Ok(Box::new(InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::mem::now())));
+        let delay = server.simulation_device_delay_ms;
+        if delay > 0 {
+            tracing::info!("simulation: device reads and writes answer after {delay} ms (SimulationDeviceDelay)");
+        }
+        let sim = InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::mem::now()).with_device_delay(delay);
+        return Ok(Box::new(sim));
     }
     tracing::info!("data source: the asix network");
     asix_net::datasource::network_backend(Arc::clone(ns), wake)
