@@ -1,9 +1,14 @@
 //! The process context every COM object works in: the runtime (engine + data source), the
 //! asix namespace, the browse address space, the server state and the default language.
 //!
-//! Configuration: `ASIXConnect.ini` in the folder of ServerCTOPC.exe (as the original
-//! AsixConnect kept it in its install folder). Without that file the server runs the
-//! **embedded default**: the Wytwornia_Kwasu demo plant, simulated (OPC_STATUS_TEST).
+//! Configuration: the file the environment variable `SERVERCTOPC_INI` names (full path;
+//! for tests and special installations), else `ASIXConnect.ini` in the folder of
+//! ServerCTOPC.exe (as the original AsixConnect kept it in its install folder). Without
+//! either the server runs the **embedded default**: the Wytwornia_Kwasu demo plant,
+//! simulated (OPC_STATUS_TEST). A COM-activated server gets the environment of whoever
+//! starts it: under Wine the activating client process (so a test can set the variable
+//! before CoCreateInstance), on Windows the DCOM service control manager, i.e. the
+//! user's or the system's environment variables.
 
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
 use crate::runtime::Runtime;
@@ -17,6 +22,9 @@ use std::sync::{Arc, OnceLock};
 
 /// The configuration file's name, looked up next to the executable.
 pub const CONFIG_FILE: &str = "ASIXConnect.ini";
+/// The environment variable naming a configuration file to use instead of
+/// [`CONFIG_FILE`] next to the executable.
+pub const CONFIG_ENV: &str = "SERVERCTOPC_INI";
 
 const DEMO_INI: &str = "\
 ; The embedded default: the Wytwornia_Kwasu demo plant, simulated.
@@ -32,7 +40,10 @@ const DEMO_SET: &[u8] = include_bytes!("../../../demo/wytwornia_kwasu/wytwornia_
 /// Where the configuration came from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ConfigSource {
+    /// `ASIXConnect.ini` next to the executable.
     File(PathBuf),
+    /// The file named by `SERVERCTOPC_INI`.
+    FromEnv(PathBuf),
     EmbeddedDemo,
 }
 
@@ -44,18 +55,28 @@ pub struct Loaded {
     pub warnings: Vec<String>,
 }
 
-/// Reads `dir\ASIXConnect.ini`, or the embedded demo when there is none. An invalid file
-/// is an error (naming file, line and option): the server must not silently run without
-/// the configuration the engineer wrote.
+/// Reads the file `SERVERCTOPC_INI` names, else `dir\ASIXConnect.ini`, else the embedded
+/// demo. An invalid file is an error (naming file, line and option): the server must not
+/// silently run without the configuration the engineer wrote; so is a file named by
+/// `SERVERCTOPC_INI` that does not exist. An empty `SERVERCTOPC_INI` counts as not set.
 pub fn load(dir: &Path) -> Result<Loaded, String> {
+    let from_env = std::env::var_os(CONFIG_ENV).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(path) = from_env {
+        let loaded = load_file(&path, ConfigSource::FromEnv(path.clone()));
+        return loaded.map_err(|e| format!("{CONFIG_ENV}: {e}"));
+    }
     let path = dir.join(CONFIG_FILE);
     if path.exists() {
-        let (cfg, w) = ctopc_core::asix::load_config_file(&path).map_err(|e| e.to_string())?;
-        let (ns, dbw) = AsixNamespace::load(cfg);
-        let warnings = w.iter().chain(dbw.iter()).map(ToString::to_string).collect();
-        return Ok(Loaded { namespace: ns, source: ConfigSource::File(path), warnings });
+        return load_file(&path, ConfigSource::File(path.clone()));
     }
     embedded_demo()
+}
+
+fn load_file(path: &Path, source: ConfigSource) -> Result<Loaded, String> {
+    let (cfg, w) = ctopc_core::asix::load_config_file(path).map_err(|e| e.to_string())?;
+    let (ns, dbw) = AsixNamespace::load(cfg);
+    let warnings = w.iter().chain(dbw.iter()).map(ToString::to_string).collect();
+    Ok(Loaded { namespace: ns, source, warnings })
 }
 
 /// The embedded default configuration: the demo plant database in channel `*`, simulated.

@@ -71,7 +71,12 @@ fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let _guard = logging::init(&dir, &loaded.namespace.config().server);
+    // A relative LogDirectory is relative to the configuration file's folder, as every
+    // path in it (the same as the install folder, unless SERVERCTOPC_INI names the file).
+    let config = loaded.namespace.config();
+    let mut log_options = config.server.clone();
+    log_options.log_directory = log_options.log_directory.as_deref().map(|d| config.resolve_path(d).to_string_lossy().into_owned());
+    let _guard = logging::init(&dir, &log_options);
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "ServerCTOPC starting");
     match host::serve_as(loaded, Box::new(backend::make), mode) {
         Ok(()) => {
