@@ -1,7 +1,9 @@
 //! Asynchronous group I/O end to end (IOPCAsyncIO2, IOPCAsyncIO3) with a test
 //! IOPCDataCallback sink in this process: OnReadComplete, OnWriteComplete, OnDataChange
 //! for refreshes (with the client's transaction ID) and subscriptions, Cancel2 and
-//! OnCancelComplete, SetEnable/GetEnable, and the failure codes.
+//! OnCancelComplete, SetEnable/GetEnable, and the failure codes. The default simulation
+//! answers at once, so Cancel2 here races the completion; group_slow_source.rs cancels
+//! operations that certainly wait for a slow device.
 #![cfg(windows)]
 
 use ctopc_com::client;
@@ -225,7 +227,7 @@ fn cancel2_sends_on_cancel_complete_or_fails_once_completed() {
         }
     }
     // The simulated data source answers at once, so most transactions have completed
-    // before Cancel2 arrives.
+    // before Cancel2 arrives (group_slow_source.rs covers the certain cancellation).
     eprintln!("Cancel2: {cancelled} of 10 cancelled before completion");
     // Unknown cancel IDs, and one that completed long ago.
     // SAFETY (test): plain values.
