@@ -119,14 +119,14 @@ pub(crate) enum RateSet {
 pub(crate) const LIVE: u8 = 1;
 pub(crate) const CONSTANT: u8 = 2;
 pub(crate) const DIRTY: u8 = 4;
-/// EU type OPC_ANALOG: `eu_low..eu_high` hold the range.
+/// EU type OPC_ANALOG: `eu_range` names the range in `SourceTable::eu_ranges`.
 pub(crate) const ANALOG: u8 = 8;
 /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
 pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// One source item in the cache (104 bytes; its key string is the only other allocation,
+/// One source item in the cache (96 bytes; its key string is the only other allocation,
 /// shared with every [`SourceItem`] sent to the data source).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
@@ -137,9 +137,6 @@ pub(crate) struct SourceEntry {
     pub refreshed_at: Timestamp,
     /// `Engine::change_seq` when value or quality last changed.
     pub changed_seq: u64,
-    /// The EU range with [`ANALOG`].
-    pub eu_low: f64,
-    pub eu_high: f64,
     /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
     /// [`MANY_RATES`] an index into the side table.
     sub_rate: u32,
@@ -150,6 +147,8 @@ pub(crate) struct SourceEntry {
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
+    /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
+    eu_range: u32,
     pub quality: Quality,
     pub canonical: VarType,
     pub access: u8,
@@ -185,12 +184,12 @@ impl SourceEntry {
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
     }
+    /// EU type OPC_ANALOG (percent deadband applies).
+    pub fn is_analog(&self) -> bool {
+        self.flags & ANALOG != 0
+    }
     pub fn writable(&self) -> bool {
         u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
-    }
-    /// The EU range when the item is analog (percent deadband applies).
-    pub fn analog_range(&self) -> Option<(f64, f64)> {
-        (self.flags & ANALOG != 0).then_some((self.eu_low, self.eu_high))
     }
 
     /// Stores a sample; true when value or quality changed.
@@ -223,6 +222,11 @@ pub(crate) struct SourceTable {
     free_many: Vec<u32>,
     /// OPC_ENUMERATED texts by entry index.
     enum_texts: HashMap<u32, Vec<String>>,
+    /// The distinct EU ranges of analog entries (a plant has few: interning them keeps 12
+    /// bytes per entry out of the cache), by bit pattern; never shrinks, as the ranges come
+    /// from the configuration, not from clients.
+    eu_ranges: Vec<(f64, f64)>,
+    eu_range_ids: HashMap<(u64, u64), u32>,
 }
 
 impl SourceTable {
@@ -250,16 +254,16 @@ impl SourceTable {
             ),
             None => (CachedValue::EMPTY, Quality::BAD_WAITING_FOR_INITIAL_DATA, NEVER, LIVE),
         };
-        let (eu_low, eu_high) = match &def.eu {
+        let eu_range = match &def.eu {
             EuInfo::Analog { low, high } => {
                 flags |= ANALOG;
-                (*low, *high)
+                self.intern_range(*low, *high)
             }
             EuInfo::Enumerated(_) => {
                 flags |= ENUMERATED;
-                (0.0, 0.0)
+                0
             }
-            EuInfo::None => (0.0, 0.0),
+            EuInfo::None => 0,
         };
         let entry = SourceEntry {
             key: def.source_key.as_str().into(),
@@ -267,14 +271,13 @@ impl SourceTable {
             timestamp: now,
             refreshed_at,
             changed_seq: 0,
-            eu_low,
-            eu_high,
             sub_rate: 0,
             sub_count: 0,
             announced_rate: 0,
             generation: 0,
             refs: 0,
             channel,
+            eu_range,
             quality,
             canonical: def.canonical_type,
             access: (def.access_rights & (OPC_READABLE | OPC_WRITEABLE)) as u8,
@@ -302,6 +305,19 @@ impl SourceTable {
         self.index.insert(hash, idx);
         self.live += 1;
         idx
+    }
+
+    fn intern_range(&mut self, low: f64, high: f64) -> u32 {
+        let ranges = &mut self.eu_ranges;
+        *self.eu_range_ids.entry((low.to_bits(), high.to_bits())).or_insert_with(|| {
+            ranges.push((low, high));
+            (ranges.len() - 1) as u32
+        })
+    }
+
+    /// The EU range of an entry when it is analog (percent deadband applies).
+    pub fn analog_range(&self, e: &SourceEntry) -> Option<(f64, f64)> {
+        (e.flags & ANALOG != 0).then(|| self.eu_ranges[e.eu_range as usize])
     }
 
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
@@ -349,8 +365,8 @@ impl SourceTable {
     /// The EU information of an entry (OPCITEMATTRIBUTES).
     pub fn eu_info(&self, idx: u32) -> EuInfo {
         let e = &self.entries[idx as usize];
-        if e.flags & ANALOG != 0 {
-            EuInfo::Analog { low: e.eu_low, high: e.eu_high }
+        if let Some((low, high)) = self.analog_range(e) {
+            EuInfo::Analog { low, high }
         } else if e.flags & ENUMERATED != 0 {
             EuInfo::Enumerated(self.enum_texts.get(&idx).cloned().unwrap_or_default())
         } else {
@@ -690,8 +706,30 @@ mod tests {
     }
 
     #[test]
+    fn eu_ranges_are_shared_and_each_entry_keeps_its_own() {
+        let mut t = SourceTable::default();
+        let def = |key: &str, eu: EuInfo| ItemDef {
+            source_key: key.into(),
+            channel: "*".into(),
+            canonical_type: VarType::R4,
+            access_rights: 3,
+            eu,
+            constant: None,
+        };
+        let a = t.find_or_insert(&def("A", EuInfo::Analog { low: 0.0, high: 100.0 }), Timestamp(0));
+        let b = t.find_or_insert(&def("B", EuInfo::Analog { low: -5.0, high: 5.0 }), Timestamp(0));
+        let c = t.find_or_insert(&def("C", EuInfo::Analog { low: 0.0, high: 100.0 }), Timestamp(0));
+        let d = t.find_or_insert(&def("D", EuInfo::None), Timestamp(0));
+        let range = |i: u32| t.analog_range(&t.entries[i as usize]);
+        assert_eq!((range(a), range(b), range(c), range(d)), (Some((0.0, 100.0)), Some((-5.0, 5.0)), Some((0.0, 100.0)), None));
+        assert_eq!(t.eu_ranges.len(), 2);
+        assert!(matches!(t.eu_info(b), EuInfo::Analog { low, high } if (low, high) == (-5.0, 5.0)));
+        assert!(matches!(t.eu_info(d), EuInfo::None));
+    }
+
+    #[test]
     fn entries_stay_small() {
-        assert!(std::mem::size_of::<SourceEntry>() <= 104, "{}", std::mem::size_of::<SourceEntry>());
+        assert!(std::mem::size_of::<SourceEntry>() <= 96, "{}", std::mem::size_of::<SourceEntry>());
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
     }
 

@@ -475,7 +475,7 @@ impl Engine {
             let it = &mut g.items[i];
             if !valid_percent(arg.1) {
                 Err(OpcError::InvalidArg)
-            } else if sources.entries[it.source as usize].analog_range().is_none() {
+            } else if !sources.entries[it.source as usize].is_analog() {
                 Err(OpcError::DeadbandNotSupported)
             } else {
                 it.deadband = arg.1;
@@ -498,7 +498,7 @@ impl Engine {
             .iter()
             .map(|&h| {
                 let it = &g.items[g.find(h).ok_or(OpcError::InvalidHandle)?];
-                if self.sources.entries[it.source as usize].analog_range().is_none() {
+                if !self.sources.entries[it.source as usize].is_analog() {
                     return Err(OpcError::DeadbandNotSupported);
                 }
                 it.item_deadband().ok_or(OpcError::DeadbandNotSet)
@@ -511,7 +511,7 @@ impl Engine {
         let sources = &self.sources;
         let r = per_item!(self, group, handles, |g, i, _arg| {
             let it = &mut g.items[i];
-            if sources.entries[it.source as usize].analog_range().is_none() {
+            if !sources.entries[it.source as usize].is_analog() {
                 Err(OpcError::DeadbandNotSupported)
             } else if it.flags & DEADBAND == 0 {
                 Err(OpcError::DeadbandNotSet)

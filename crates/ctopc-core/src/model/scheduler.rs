@@ -169,7 +169,7 @@ impl Engine {
             if it.flags & SENT != 0
                 && (e.changed_seq <= scanned
                     || (e.quality == it.last_quality
-                        && !value_changed(&e.value, &it.last, band(it.item_deadband(), group_deadband, e.analog_range()))))
+                        && !value_changed(&e.value, &it.last, band(it.item_deadband(), group_deadband, sources.analog_range(e)))))
             {
                 continue;
             }
