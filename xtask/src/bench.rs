@@ -6,6 +6,9 @@
 //! disturbed by end-to-end tests in the test prefix; runs bench-com.exe with a timeout
 //! (extra arguments are passed on, e.g. `--quick`) and ends every Wine process of the
 //! benchmark prefix (wineserver -k) at the end. Prints figures; never fails on speed.
+//! bench-com.exe points the server at a configuration of its own (the demo plant with
+//! `MinUpdateRate = 250`, written as `bench-ServerCTOPC.ini` beside it, handed over in
+//! `SERVERCTOPC_INI`), so the registered server's own ini is not involved.
 
 use crate::{build, setup, util, wine};
 use std::path::{Path, PathBuf};

@@ -11,7 +11,13 @@
 //! once, and the server's memory per item at 80,000 items.
 //!
 //! Options: `--quick` (fewer runs and items), `--clients N`, `--items-per-client N`,
-//! `--one-client-items N`.
+//! `--one-client-items N`; `--loop read|write N` only repeats one call (for a profiler);
+//! `--loop callbacks N` only measures OnDataChange with N clients.
+//!
+//! The server runs the demo plant (simulated, limit and control checks on) from a
+//! configuration this program writes next to itself, `bench-ServerCTOPC.ini`, with
+//! `MinUpdateRate = 250` so that a subscription can offer four changes a second; it is
+//! handed over in `SERVERCTOPC_INI`, which the server started by COM inherits.
 
 #[cfg(not(windows))]
 fn main() -> std::process::ExitCode {
@@ -46,6 +52,26 @@ mod bench {
     const DEMO_TABLE: &str = include_str!("../../../demo/wytwornia_kwasu/atrybuty.csv");
     /// Items per call in the timed figures.
     const N: usize = 10_000;
+    /// Update rate of the subscription groups (and the bench configuration's
+    /// MinUpdateRate): the simulated plant moves every 250 ms.
+    const RATE_MS: u32 = 250;
+
+    /// The benchmark's configuration: the embedded demo's (the Wytwornia_Kwasu plant,
+    /// simulated, limit and control checks on) with `MinUpdateRate = 250`, written next to
+    /// bench-com.exe and handed to the server through `SERVERCTOPC_INI` (a local server
+    /// started by COM under Wine inherits the client's environment).
+    fn bench_config() -> Res<std::path::PathBuf> {
+        let exe = std::env::current_exe().map_err(|e| format!("current_exe: {e}"))?;
+        let dir = exe.parent().ok_or("no folder")?;
+        let db = dir.join("..").join("..").join("..").join("demo").join("wytwornia_kwasu").join("wytwornia_kwasu.zez");
+        let ini = format!(
+            "; Written by bench-com.exe: the embedded demo with a faster MinUpdateRate.\r\n[Server]\r\nSimulateCurrentData = tak\r\nMinUpdateRate = {RATE_MS}\r\nLogLevel = warn\r\n[Channel:*]\r\nItemsDatabase = {}\r\nCheckLimits = tak\r\nCheckControlVariables = tak\r\n",
+            db.display()
+        );
+        let path = dir.join("bench-ServerCTOPC.ini");
+        std::fs::write(&path, ini).map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(path)
+    }
 
     type Res<T> = Result<T, String>;
 
@@ -71,8 +97,8 @@ mod bench {
         Opts {
             runs: if quick { 5 } else { 15 },
             clients: num("--clients", 20),
-            items_per_client: num("--items-per-client", if quick { 10_000 } else { 60_000 }),
-            one_client_items: num("--one-client-items", if quick { 20_000 } else { 200_000 }),
+            items_per_client: num("--items-per-client", if quick { 5_000 } else { 20_000 }),
+            one_client_items: num("--one-client-items", if quick { 50_000 } else { 300_000 }),
             memory_items: 80_000,
             window: Duration::from_secs(2),
         }
@@ -270,15 +296,15 @@ mod bench {
         names.iter().cycle().take(n).cloned().collect()
     }
 
-    /// Which variables change at every update (1 s): watched for a few updates.
+    /// Which variables change at every update ([`RATE_MS`]): watched for a few updates.
     fn changing_vars(server: &Server, vars: &[Var]) -> Res<Vec<String>> {
-        let g = group(server, 1000)?;
+        let g = group(server, RATE_MS)?;
         let names: Vec<String> = vars.iter().map(|v| v.name.clone()).collect();
         add_all(&g, &names)?;
         let rec = Recorder::recording();
         let sink = TestSink::create(&rec);
         ctopc_com::client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
-        std::thread::sleep(Duration::from_millis(6_500));
+        std::thread::sleep(Duration::from_millis(u64::from(RATE_MS) * 8));
         let updates: Vec<Vec<u32>> = rec
             .all()
             .into_iter()
@@ -289,7 +315,7 @@ mod bench {
             .collect();
         let _ = remove_group(server, g.server_handle);
         if updates.len() < 3 {
-            return Err(format!("only {} OnDataChange callbacks in 6.5 s", updates.len()));
+            return Err(format!("only {} OnDataChange callbacks in 8 update periods", updates.len()));
         }
         let later = &updates[1..];
         let changing = names
@@ -411,7 +437,7 @@ mod bench {
         let mut recs = Vec::new();
         for _ in 0..clients {
             let server = Server::connect(PROGID).map_err(err("connect"))?;
-            let g = group(&server, 1000)?;
+            let g = group(&server, RATE_MS)?;
             add_all(&g, &ids)?;
             let rec = Recorder::counting();
             ctopc_com::client::advise_data_callback(&g.unknown, &TestSink::create(&rec)).map_err(err("Advise"))?;
@@ -441,10 +467,74 @@ mod bench {
 
     // ---- the run ----------------------------------------------------------------------------
 
+    /// `--loop read|write N`: only repeats one call N times (10,000 demo items from cache,
+    /// or 10,000 writes), for a profiler attached to the processes; prints the median.
+    /// After `read` it also prints the median cache read of 10 to 10,000 items, which shows
+    /// the per-item cost of the transport (linear under Wine, see the README).
+    fn profile_loop(what: &str, n: usize) -> Res<()> {
+        let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+        let main = Server::connect(PROGID).map_err(err("connect"))?;
+        let vars = demo_vars();
+        let ids: Vec<String> = match what {
+            "write" => vars.iter().filter(|v| v.writable && v.r4).map(|v| v.name.clone()).collect(),
+            _ => vars.iter().map(|v| v.name.clone()).collect(),
+        };
+        let g = group(&main, 1000)?;
+        let handles = add_all(&g, &cycle(&ids, N))?;
+        let sync: IOPCSyncIO = g.unknown.cast().map_err(err("IOPCSyncIO"))?;
+        let values: Vec<VARIANT> = (0..N).map(|i| ctopc_com::variant::to_variant(&ctopc_core::Value::R4((i % 10) as f32)).unwrap_or_default()).collect();
+        std::thread::sleep(Duration::from_secs(2));
+        let mut runs = Vec::with_capacity(n);
+        for _ in 0..n {
+            let t = Instant::now();
+            let (hr, failed) = match what {
+                "write" => write_raw(&sync, &handles, &values),
+                _ => read_raw(&sync, OPC_DS_CACHE, &handles),
+            };
+            runs.push(ms(t.elapsed()));
+            if hr.is_err() || failed > 0 {
+                return Err(format!("{what}: {hr:?}, {failed} failed"));
+            }
+        }
+        println!("{what} 10,000 x {n}: median {:.3} ms", median(runs));
+        if what != "read" {
+            return Ok(());
+        }
+        for k in [10usize, 100, 1000, 3000, 10_000] {
+            let runs: Vec<f64> = (0..50)
+                .map(|_| {
+                    let t = Instant::now();
+                    let _ = read_raw(&sync, OPC_DS_CACHE, &handles[..k]);
+                    ms(t.elapsed())
+                })
+                .collect();
+            println!("read {k}: median {:.3} ms", median(runs));
+        }
+        Ok(())
+    }
+
     pub fn run() -> Res<()> {
+        let ini = bench_config()?;
+        std::env::set_var("SERVERCTOPC_INI", &ini);
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        if let Some(i) = args.iter().position(|a| a == "--loop") {
+            let what = args.get(i + 1).map(String::as_str).unwrap_or("read");
+            let n = args.get(i + 2).and_then(|v| v.parse().ok()).unwrap_or(500);
+            if what == "callbacks" {
+                // N clients x --items-per-client items, 5 windows of 2 s.
+                let o = opts();
+                let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+                let main = Server::connect(PROGID).map_err(err("connect"))?;
+                let changing = changing_vars(&main, &demo_vars())?;
+                let (rates, cbs) = throughput(n, o.items_per_client, &changing, 5, o.window)?;
+                println!("OnDataChange {n} clients x {}: median {:.0} values/s ({cbs} callbacks)", o.items_per_client, median(rates));
+                return Ok(());
+            }
+            return profile_loop(what, n);
+        }
         let o = opts();
         let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
-        println!("ServerCTOPC COM benchmark (embedded demo plant, simulated; Wine; medians of {} runs unless noted)", o.runs);
+        println!("ServerCTOPC COM benchmark (demo plant, simulated, MinUpdateRate {RATE_MS} ms, config {}; Wine; medians of {} runs unless noted)", ini.display(), o.runs);
         let t = Instant::now();
         let main = Server::connect(PROGID).map_err(err("first CoCreateInstance"))?;
         println!("first activation (starts the server process): {:.0} ms", ms(t.elapsed()));
@@ -622,9 +712,12 @@ mod bench {
         // OnDataChange throughput.
         let changing = changing_vars(&main, &vars)?;
         rep.note(format!(
-            "  ({} of the demo's {} variables change at every 1 s update; the minimum update rate is 1 s, so values/s = changing items)",
+            "  ({} of the demo's {} variables change at every {RATE_MS} ms update; offered: 1 client {:.0} changed values/s, {} clients {:.0}/s)",
             changing.len(),
-            names.len()
+            names.len(),
+            o.one_client_items as f64 * 1000.0 / f64::from(RATE_MS),
+            o.clients,
+            (o.clients * o.items_per_client) as f64 * 1000.0 / f64::from(RATE_MS),
         ));
         if changing.is_empty() {
             return Err("no variable changes at every update".into());
