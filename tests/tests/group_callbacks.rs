@@ -1,6 +1,6 @@
 //! The group's IConnectionPointContainer and IOPCDataCallback end to end: subscription
 //! callbacks from the simulated demo plant, keep-alive callbacks, an STA client, Unadvise,
-//! the advise limit.
+//! the advise limit, a slow client next to a quick one.
 #![cfg(windows)]
 
 mod group_common;
@@ -214,4 +214,52 @@ fn releasing_an_advised_group_is_clean() {
     std::thread::sleep(Duration::from_secs(2));
     assert_eq!(log.count(), n, "callbacks after the group object was released");
     assert_alive(&server);
+}
+
+#[test]
+fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_another() {
+    // Two clients, each a group with a constant setpoint and a 1 s keep-alive: a callback
+    // is due every second for each. The slow one holds every OnDataChange for 3 s.
+    let (_com, slow_server) = connect();
+    let quick_server = Server::connect(PROGID).expect("second connection");
+    let mut logs = Vec::new();
+    let mut groups = Vec::new();
+    for (server, name) in [(&slow_server, "cb-slow"), (&quick_server, "cb-quick")] {
+        let g = add_group(server, name, true, GROUP_CLIENT);
+        add_ok(&g, &[item("KW_A110", 5)]);
+        assert_eq!(g.set_keep_alive(1000).unwrap(), (S_OK, 1000));
+        let log = Log::new();
+        if name == "cb-slow" {
+            log.hold_calls(Duration::from_secs(3));
+        }
+        let cookie = advise(&g, &Sink::create(&log)).unwrap();
+        logs.push(log);
+        groups.push((g, cookie));
+    }
+    let (slow, quick) = (&logs[0], &logs[1]);
+    let start = Instant::now();
+    std::thread::sleep(Duration::from_secs(10));
+    let (slow_n, quick_n) = (slow.count(), quick.count());
+    // The quick client is not held up by the slow one: about ten callbacks.
+    assert!(quick_n >= 7, "the quick client got {quick_n} callbacks in 10 s");
+    // The slow one gets a callback as soon as it returns from the previous one: about four.
+    assert!((2..=5).contains(&slow_n), "the slow client got {slow_n} callbacks in 10 s: {:?}", slow.changes());
+    let held = slow.changes();
+    for pair in held.windows(2) {
+        let gap = pair[1].at.duration_since(pair[0].at);
+        assert!(gap >= Duration::from_millis(2900), "a callback came while the previous one was held: {gap:?}");
+    }
+    // When it speeds up, no backlog of the missed updates arrives: the pending update
+    // (one callback at once), then one a second again.
+    slow.release();
+    std::thread::sleep(Duration::from_millis(700));
+    let burst = slow.count() - slow_n;
+    assert!(burst <= 2, "{burst} callbacks within 0.7 s of the client's return (a backlog): {:?}", &slow.changes()[slow_n..]);
+    let later = slow.wait(Duration::from_secs(5), slow_n + burst + 2, |_| true);
+    assert!(later.len() >= slow_n + burst + 2, "callbacks resume at the update rate: {:?}", start.elapsed());
+    for (g, cookie) in &groups {
+        unadvise(g, *cookie).unwrap();
+    }
+    assert_alive(&slow_server);
+    assert_alive(&quick_server);
 }

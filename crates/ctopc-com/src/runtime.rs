@@ -4,7 +4,9 @@
 //!
 //! Locks: `state` (engine + source) is held only for short, non-blocking sections; no
 //! client is ever called while it is held. Callbacks are queued to the client's worker,
-//! which re-checks the sink before calling it.
+//! which re-checks the sink before calling it. Subscription callbacks are paced by their
+//! delivery (at most one per group under way; see `EngineConfig::pace_data_changes`), so a
+//! slow or hung client costs the server one pending update per group, not a backlog.
 
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
 use crate::{connpoint::SinkSlot, mem, variant};
@@ -270,16 +272,44 @@ impl Runtime {
         self.signal.wake();
     }
 
+    /// Queues events to their clients' workers. The update scheduler's OnDataChange calls
+    /// are paced (`EngineConfig::pace_data_changes`): the engine hears when each one's
+    /// delivery ended, or at once when it cannot be queued, so that a slow client gets
+    /// coalesced updates instead of an unbounded queue.
     fn deliver(&self, events: Vec<Event>) {
-        let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
-        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
-        for event in events {
-            let Some(slot) = sinks.get(&event.group()).cloned() else { continue };
-            let Some(worker) = workers.get(&event.session()) else { continue };
-            let group = event.group();
-            let weak_rt = self.self_weak();
-            let job: Job = Box::new(move || deliver_one(weak_rt, group, &slot, event));
-            let _ = worker.tx.send(job);
+        let mut not_queued = Vec::new();
+        {
+            let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
+            let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+            for event in events {
+                let group = event.group();
+                let paced = matches!(&event, Event::DataChange(d) if d.kind.is_scheduled());
+                let (Some(slot), Some(worker)) = (sinks.get(&group).cloned(), workers.get(&event.session())) else {
+                    if paced {
+                        not_queued.push(group);
+                    }
+                    continue;
+                };
+                let weak_rt = self.self_weak();
+                let job: Job = Box::new(move || {
+                    deliver_one(weak_rt.clone(), group, &slot, event);
+                    if paced {
+                        if let Some(rt) = weak_rt.upgrade() {
+                            rt.with_engine(|e, now| e.data_change_delivered(now, group));
+                        }
+                    }
+                });
+                if worker.tx.send(job).is_err() && paced {
+                    not_queued.push(group);
+                }
+            }
+        }
+        if !not_queued.is_empty() {
+            self.with_engine(|e, now| {
+                for group in not_queued {
+                    e.data_change_delivered(now, group);
+                }
+            });
         }
     }
 

@@ -588,3 +588,124 @@ proptest! {
         }
     }
 }
+
+/// A server engine whose subscription callbacks wait for their delivery.
+fn paced() -> Sim {
+    Sim::with_config(EngineConfig { pace_data_changes: true, ..EngineConfig::default() })
+}
+
+#[test]
+fn paced_callbacks_coalesce_while_the_client_is_busy_and_resume_when_it_returns() {
+    let mut sim = paced();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1", "A2"]);
+    sim.push_good("A1", 1.0);
+    sim.push_good("A2", 2.0);
+    sim.tick();
+    assert_eq!(sim.data_changes().len(), 1);
+    let start = sim.now;
+    // The client takes 3.5 update periods over that callback; the values keep changing.
+    for i in 1..=35 {
+        sim.advance(100);
+        sim.push_good("A1", 1.0 + f64::from(i));
+        assert!(sim.data_changes().is_empty(), "nothing is queued while the callback is delivered");
+    }
+    sim.push_good("A2", 2.5);
+    sim.e.data_change_delivered(sim.now, g);
+    sim.tick();
+    // One callback at once, with the latest values only (no backlog of the missed updates).
+    let dc = sim.data_changes();
+    assert_eq!(dc.len(), 1);
+    assert_eq!(values(&dc[0]), vec![(100, Value::R8(36.0)), (101, Value::R8(2.5))]);
+    assert_eq!(sim.now.millis_since(start), 3500);
+    // Delivered at once this time: the next update keeps the update rate from then on.
+    sim.e.data_change_delivered(sim.now, g);
+    sim.push_good("A1", 40.0);
+    sim.advance(999);
+    assert!(sim.data_changes().is_empty(), "no callback sooner than the update rate");
+    sim.advance(1);
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(40.0))]);
+}
+
+#[test]
+fn paced_callbacks_wait_for_the_next_tick_when_the_delivery_was_quick() {
+    let mut sim = paced();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert_eq!(sim.data_changes().len(), 1);
+    sim.advance(300);
+    sim.push_good("A1", 2.0);
+    sim.e.data_change_delivered(sim.now, g);
+    sim.tick();
+    assert!(sim.data_changes().is_empty(), "an early return does not bring the update forward");
+    sim.advance(700);
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(2.0))]);
+}
+
+#[test]
+fn paced_keepalive_is_not_sent_while_a_callback_is_under_way() {
+    let mut sim = paced();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    sim.events();
+    sim.e.set_keep_alive(sim.now, g, 2000).unwrap();
+    // The data callback is never acknowledged: no keep-alive piles up behind it.
+    sim.advance(10_000);
+    assert!(sim.events().is_empty());
+    // Once it returns, keep-alives resume, one at a time, each after the previous returned.
+    sim.e.data_change_delivered(sim.now, g);
+    let start = sim.now;
+    let mut log = Vec::new();
+    for _ in 0..60 {
+        sim.advance(100);
+        for e in sim.events() {
+            if let Event::DataChange(d) = e {
+                log.push((sim.now.millis_since(start), d.kind));
+                sim.e.data_change_delivered(sim.now, g);
+            }
+        }
+    }
+    assert_eq!(log, vec![(2000, DataChangeKind::KeepAlive), (4000, DataChangeKind::KeepAlive), (6000, DataChangeKind::KeepAlive)]);
+}
+
+#[test]
+fn paced_acknowledgements_of_unknown_or_removed_groups_are_ignored() {
+    let mut sim = paced();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert_eq!(sim.data_changes().len(), 1);
+    sim.e.data_change_delivered(sim.now, GroupHandle(9999));
+    sim.advance(1000);
+    sim.push_good("A1", 2.0);
+    sim.advance(1000);
+    assert!(sim.data_changes().is_empty(), "another group's acknowledgement does not release this one");
+    sim.e.remove_group(sim.now, s, g, true).unwrap();
+    sim.e.data_change_delivered(sim.now, g);
+    sim.advance(2000);
+    assert!(sim.events().is_empty());
+}
+
+#[test]
+fn unpaced_engine_sends_at_every_update_without_acknowledgements() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    let mut n = 0;
+    for i in 0..5 {
+        sim.push_good("A1", f64::from(i));
+        sim.advance(1000);
+        n += sim.data_changes().len();
+    }
+    assert_eq!(n, 5);
+}

@@ -118,6 +118,10 @@ pub struct Change {
 pub struct Log {
     changes: Mutex<Vec<Change>>,
     cv: Condvar,
+    /// While set, OnDataChange records the call and then holds it (a slow client), up to
+    /// `hold_limit`.
+    hold: std::sync::atomic::AtomicBool,
+    hold_limit: Mutex<Duration>,
 }
 
 impl Log {
@@ -131,6 +135,18 @@ impl Log {
 
     pub fn count(&self) -> usize {
         self.changes.lock().unwrap().len()
+    }
+
+    /// Makes the sink a slow client: each OnDataChange returns only after `limit`, or at
+    /// once when [`Log::release`] is called.
+    pub fn hold_calls(&self, limit: Duration) {
+        *self.hold_limit.lock().unwrap() = limit;
+        self.hold.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// Ends [`Log::hold_calls`]: a held call returns now.
+    pub fn release(&self) {
+        self.hold.store(false, std::sync::atomic::Ordering::SeqCst);
     }
 
     /// Waits at most `limit` for `n` OnDataChange calls that `pred` accepts.
@@ -188,6 +204,10 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         let c = Change { transaction, group, master_quality, master_error, items, at: Instant::now() };
         self.0.changes.lock().unwrap().push(c);
         self.0.cv.notify_all();
+        let until = Instant::now() + *self.0.hold_limit.lock().unwrap();
+        while self.0.hold.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(20));
+        }
         Ok(())
     }
     unsafe fn OnReadComplete(

@@ -148,11 +148,12 @@ const MAX_SIMULATION_DEVICE_DELAY_MS: u32 = 600_000;
 
 impl ServerOptions {
     /// The engine's configuration these options imply (`MinUpdateRate`, `SourceTimeout`;
-    /// the rest at the engine's defaults).
+    /// subscription callbacks paced by their delivery; the rest at the engine's defaults).
     pub fn engine_config(&self) -> crate::model::EngineConfig {
         crate::model::EngineConfig {
             min_update_rate_ms: self.min_update_rate_ms,
             source_timeout_ms: self.source_timeout_ms,
+            pace_data_changes: true,
             ..crate::model::EngineConfig::default()
         }
     }
@@ -922,7 +923,7 @@ mod tests {
     fn server_options_reach_the_engine_config() {
         use crate::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
         let (c, _) = parse("").unwrap();
-        assert_eq!(c.server.engine_config(), EngineConfig::default());
+        assert_eq!(c.server.engine_config(), EngineConfig { pace_data_changes: true, ..EngineConfig::default() });
         assert_eq!(c.server.engine_config().source_timeout_ms, DEFAULT_SOURCE_TIMEOUT_MS);
         let (c, _) = parse("[Server]\nSourceTimeout = 1000\nMinUpdateRate = 250\n").unwrap();
         let e = c.server.engine_config();

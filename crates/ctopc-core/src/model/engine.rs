@@ -39,6 +39,15 @@ pub struct EngineConfig {
     /// The number format for conversions to and from strings when a group's LCID is a
     /// default/neutral LCID (the COM layer passes the system's).
     pub default_locale: Locale,
+    /// Pace subscription callbacks by their delivery: while a group's OnDataChange (or
+    /// keep-alive) from the update scheduler is still being delivered, that group produces
+    /// no other one; the caller reports each delivery's end with
+    /// [`Engine::data_change_delivered`](crate::model::Engine::data_change_delivered).
+    /// Changes meanwhile are coalesced: a slow client gets the latest values at the first
+    /// update after its previous callback returned, never a growing backlog (and the server
+    /// never holds more than one pending update per group). Off: events are produced at
+    /// every update regardless.
+    pub pace_data_changes: bool,
 }
 
 impl Default for EngineConfig {
@@ -48,6 +57,7 @@ impl Default for EngineConfig {
             max_transactions_per_group: DEFAULT_MAX_TRANSACTIONS_PER_GROUP,
             source_timeout_ms: DEFAULT_SOURCE_TIMEOUT_MS,
             default_locale: Locale::EnUs,
+            pace_data_changes: false,
         }
     }
 }

@@ -36,6 +36,14 @@ pub enum DataChangeKind {
     KeepAlive,
 }
 
+impl DataChangeKind {
+    /// Produced by the update scheduler (paced by delivery with
+    /// `EngineConfig::pace_data_changes`), not in answer to a client's request.
+    pub fn is_scheduled(self) -> bool {
+        matches!(self, DataChangeKind::Subscription | DataChangeKind::KeepAlive)
+    }
+}
+
 /// IOPCDataCallback::OnDataChange.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DataChange {

@@ -109,6 +109,11 @@ pub(crate) struct Group {
     /// Some item must be compared although no cache entry changed (new, reactivated,
     /// deadband changed).
     pub needs_scan: bool,
+    /// With `EngineConfig::pace_data_changes`: a subscription callback of this group is
+    /// being delivered ...
+    pub delivering: bool,
+    /// ... and an update fell due meanwhile (run it when the delivery ends).
+    pub update_missed: bool,
 }
 
 impl Group {
@@ -245,6 +250,8 @@ impl Engine {
             sched_seq: 0,
             scanned_seq: 0,
             needs_scan: true,
+            delivering: false,
+            update_missed: false,
         };
         self.insert_group(group);
         Ok(AddGroupResult { group: handle, update_rate: rate })
@@ -525,6 +532,8 @@ impl Engine {
             sched_seq: 0,
             scanned_seq: 0,
             needs_scan: true,
+            delivering: false,
+            update_missed: false,
         };
         let items: Vec<GroupItem> = src.items.clone();
         for mut it in items {
