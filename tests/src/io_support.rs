@@ -45,6 +45,8 @@ pub struct Recorder {
     pub data_changes: AtomicU64,
     pub data_change_items: AtomicU64,
     pub calls: AtomicU64,
+    /// Print each OnDataChange's size and time to stderr (`BENCH_TRACE` set).
+    trace: bool,
 }
 
 impl Recorder {
@@ -52,7 +54,7 @@ impl Recorder {
         Arc::new(Recorder { record: true, ..Default::default() })
     }
     pub fn counting() -> Arc<Recorder> {
-        Arc::new(Recorder::default())
+        Arc::new(Recorder { trace: std::env::var_os("BENCH_TRACE").is_some(), ..Default::default() })
     }
 
     fn push(&self, cb: impl FnOnce() -> Callback) {
@@ -119,6 +121,10 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
         if transaction == 0 {
             self.0.data_changes.fetch_add(1, Ordering::Relaxed);
             self.0.data_change_items.fetch_add(u64::from(n), Ordering::Relaxed);
+            if self.0.trace {
+                let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0);
+                eprintln!("OnDataChange group {group:#x}: {n} items at {t:.3}");
+            }
         }
         // SAFETY: the stub passes `n`-element arrays.
         self.0.push(|| Callback::DataChange { transaction, group, master_quality, master_error, items: unsafe { items(n, h, v, q, t, e) } });

@@ -249,12 +249,13 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
         let gap = pair[1].at.duration_since(pair[0].at);
         assert!(gap >= Duration::from_millis(2900), "a callback came while the previous one was held: {gap:?}");
     }
-    // When it speeds up, no backlog of the missed updates arrives: the pending update
-    // (one callback at once), then one a second again.
+    // When it speeds up, no backlog of the missed updates arrives: the callbacks pending
+    // for the group (at most two: one prepared while another travels, and the update
+    // that fell due meanwhile), then one a second again.
     slow.release();
     std::thread::sleep(Duration::from_millis(700));
     let burst = slow.count() - slow_n;
-    assert!(burst <= 2, "{burst} callbacks within 0.7 s of the client's return (a backlog): {:?}", &slow.changes()[slow_n..]);
+    assert!(burst <= 3, "{burst} callbacks within 0.7 s of the client's return (a backlog): {:?}", &slow.changes()[slow_n..]);
     let later = slow.wait(Duration::from_secs(5), slow_n + burst + 2, |_| true);
     assert!(later.len() >= slow_n + burst + 2, "callbacks resume at the update rate: {:?}", start.elapsed());
     for (g, cookie) in &groups {

@@ -5,8 +5,8 @@
 //! Locks: `state` (engine + source) is held only for short, non-blocking sections; no
 //! client is ever called while it is held. Callbacks are queued to the client's worker,
 //! which re-checks the sink before calling it. Subscription callbacks are paced by their
-//! delivery (at most one per group under way; see `EngineConfig::pace_data_changes`), so a
-//! slow or hung client costs the server one pending update per group, not a backlog.
+//! delivery (at most two per group under way; see `EngineConfig::max_pending_data_changes`),
+//! so a slow or hung client costs the server two pending updates per group, not a backlog.
 
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
 use crate::{connpoint::SinkSlot, mem, variant};
@@ -144,6 +144,9 @@ pub struct Runtime {
     sinks: Mutex<HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>>,
     shutdown_sinks: Mutex<HashMap<SessionHandle, Arc<SinkSlot<IOPCShutdown>>>>,
     workers: Mutex<HashMap<SessionHandle, Worker>>,
+    /// Groups whose scheduled OnDataChange finished delivering, for the driver to tell the
+    /// engine (a worker never waits for the engine's lock: it goes on with its next call).
+    delivered: Mutex<Vec<GroupHandle>>,
     pub start_time: Timestamp,
 }
 
@@ -168,6 +171,7 @@ impl Runtime {
             sinks: Mutex::new(HashMap::new()),
             shutdown_sinks: Mutex::new(HashMap::new()),
             workers: Mutex::new(HashMap::new()),
+            delivered: Mutex::new(Vec::new()),
             start_time: mem::now(),
         });
         let weak = Arc::downgrade(&rt);
@@ -273,7 +277,7 @@ impl Runtime {
     }
 
     /// Queues events to their clients' workers. The update scheduler's OnDataChange calls
-    /// are paced (`EngineConfig::pace_data_changes`): the engine hears when each one's
+    /// are paced (`EngineConfig::max_pending_data_changes`): the engine hears when each one's
     /// delivery ended, or at once when it cannot be queued, so that a slow client gets
     /// coalesced updates instead of an unbounded queue.
     fn deliver(&self, events: Vec<Event>) {
@@ -295,7 +299,8 @@ impl Runtime {
                     deliver_one(weak_rt.clone(), group, &slot, event);
                     if paced {
                         if let Some(rt) = weak_rt.upgrade() {
-                            rt.with_engine(|e, now| e.data_change_delivered(now, group));
+                            rt.delivered.lock().unwrap_or_else(|p| p.into_inner()).push(group);
+                            rt.signal.wake();
                         }
                     }
                 });
@@ -305,11 +310,8 @@ impl Runtime {
             }
         }
         if !not_queued.is_empty() {
-            self.with_engine(|e, now| {
-                for group in not_queued {
-                    e.data_change_delivered(now, group);
-                }
-            });
+            self.delivered.lock().unwrap_or_else(|p| p.into_inner()).extend(not_queued);
+            self.signal.wake();
         }
     }
 
@@ -335,12 +337,17 @@ fn driver(rt: Weak<Runtime>) {
     let _com = crate::client::ComThread::mta();
     loop {
         let Some(rt) = rt.upgrade() else { return };
+        let delivered = std::mem::take(&mut *rt.delivered.lock().unwrap_or_else(|p| p.into_inner()));
         let (events, next) = {
             let mut g = rt.lock();
             if g.stop {
                 return;
             }
-            g.step(mem::now())
+            let now = mem::now();
+            for group in delivered {
+                g.engine.data_change_delivered(now, group);
+            }
+            g.step(now)
         };
         rt.stepped.notify_all();
         if !events.is_empty() {

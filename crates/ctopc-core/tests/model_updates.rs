@@ -589,9 +589,9 @@ proptest! {
     }
 }
 
-/// A server engine whose subscription callbacks wait for their delivery.
+/// An engine whose subscription callbacks wait for their delivery, one at a time.
 fn paced() -> Sim {
-    Sim::with_config(EngineConfig { pace_data_changes: true, ..EngineConfig::default() })
+    Sim::with_config(EngineConfig { max_pending_data_changes: 1, ..EngineConfig::default() })
 }
 
 #[test]
@@ -708,4 +708,28 @@ fn unpaced_engine_sends_at_every_update_without_acknowledgements() {
         n += sim.data_changes().len();
     }
     assert_eq!(n, 5);
+}
+
+#[test]
+fn paced_with_two_pending_prepares_the_next_callback_while_one_travels() {
+    let mut sim = Sim::with_config(EngineConfig { max_pending_data_changes: SERVER_PENDING_DATA_CHANGES, ..EngineConfig::default() });
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    let mut sent = Vec::new();
+    for i in 0..6 {
+        sim.push_good("A1", f64::from(i));
+        sim.advance(1000);
+        sent.extend(sim.data_changes().iter().map(|d| values(d)[0].1.clone()));
+    }
+    // Nothing acknowledged: two callbacks were produced, then nothing more.
+    assert_eq!(sent, vec![Value::R8(0.0), Value::R8(1.0)]);
+    // One returns: the missed update at once, with the latest value.
+    sim.push_good("A1", 9.0);
+    sim.e.data_change_delivered(sim.now, g);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(9.0))]);
+    sim.push_good("A1", 10.0);
+    sim.advance(1000);
+    assert!(sim.data_changes().is_empty(), "two under way again");
 }

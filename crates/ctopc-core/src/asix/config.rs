@@ -153,7 +153,7 @@ impl ServerOptions {
         crate::model::EngineConfig {
             min_update_rate_ms: self.min_update_rate_ms,
             source_timeout_ms: self.source_timeout_ms,
-            pace_data_changes: true,
+            max_pending_data_changes: crate::model::SERVER_PENDING_DATA_CHANGES,
             ..crate::model::EngineConfig::default()
         }
     }
@@ -923,7 +923,7 @@ mod tests {
     fn server_options_reach_the_engine_config() {
         use crate::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
         let (c, _) = parse("").unwrap();
-        assert_eq!(c.server.engine_config(), EngineConfig { pace_data_changes: true, ..EngineConfig::default() });
+        assert_eq!(c.server.engine_config(), EngineConfig { max_pending_data_changes: 2, ..EngineConfig::default() });
         assert_eq!(c.server.engine_config().source_timeout_ms, DEFAULT_SOURCE_TIMEOUT_MS);
         let (c, _) = parse("[Server]\nSourceTimeout = 1000\nMinUpdateRate = 250\n").unwrap();
         let e = c.server.engine_config();

@@ -27,6 +27,10 @@ pub const DEFAULT_MAX_TRANSACTIONS_PER_GROUP: u32 = 256;
 /// more specific error normally arrives first.
 pub const DEFAULT_SOURCE_TIMEOUT_MS: u32 = 10_000;
 
+/// The server's [`EngineConfig::max_pending_data_changes`]: one callback travelling, the
+/// next one ready.
+pub const SERVER_PENDING_DATA_CHANGES: u32 = 2;
+
 /// Engine configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EngineConfig {
@@ -39,15 +43,16 @@ pub struct EngineConfig {
     /// The number format for conversions to and from strings when a group's LCID is a
     /// default/neutral LCID (the COM layer passes the system's).
     pub default_locale: Locale,
-    /// Pace subscription callbacks by their delivery: while a group's OnDataChange (or
-    /// keep-alive) from the update scheduler is still being delivered, that group produces
-    /// no other one; the caller reports each delivery's end with
+    /// Pace subscription callbacks by their delivery: a group has at most this many
+    /// OnDataChange (or keep-alive) calls from the update scheduler under way at once; the
+    /// caller reports each delivery's end with
     /// [`Engine::data_change_delivered`](crate::model::Engine::data_change_delivered).
-    /// Changes meanwhile are coalesced: a slow client gets the latest values at the first
-    /// update after its previous callback returned, never a growing backlog (and the server
-    /// never holds more than one pending update per group). Off: events are produced at
+    /// Updates that fall due meanwhile are coalesced: a slow client gets the latest values
+    /// as soon as it returns, never a growing backlog. 1 strictly alternates producing and
+    /// delivering; 2 lets the next callback be prepared while the previous one travels
+    /// (the server's setting, [`SERVER_PENDING_DATA_CHANGES`]). 0: no pacing, an event at
     /// every update regardless.
-    pub pace_data_changes: bool,
+    pub max_pending_data_changes: u32,
 }
 
 impl Default for EngineConfig {
@@ -57,7 +62,7 @@ impl Default for EngineConfig {
             max_transactions_per_group: DEFAULT_MAX_TRANSACTIONS_PER_GROUP,
             source_timeout_ms: DEFAULT_SOURCE_TIMEOUT_MS,
             default_locale: Locale::EnUs,
-            pace_data_changes: false,
+            max_pending_data_changes: 0,
         }
     }
 }

@@ -38,7 +38,7 @@ pub enum DataChangeKind {
 
 impl DataChangeKind {
     /// Produced by the update scheduler (paced by delivery with
-    /// `EngineConfig::pace_data_changes`), not in answer to a client's request.
+    /// `EngineConfig::max_pending_data_changes`), not in answer to a client's request.
     pub fn is_scheduled(self) -> bool {
         matches!(self, DataChangeKind::Subscription | DataChangeKind::KeepAlive)
     }

@@ -109,9 +109,9 @@ pub(crate) struct Group {
     /// Some item must be compared although no cache entry changed (new, reactivated,
     /// deadband changed).
     pub needs_scan: bool,
-    /// With `EngineConfig::pace_data_changes`: a subscription callback of this group is
-    /// being delivered ...
-    pub delivering: bool,
+    /// With `EngineConfig::max_pending_data_changes`: this group's scheduled callbacks
+    /// under way ...
+    pub delivering: u32,
     /// ... and an update fell due meanwhile (run it when the delivery ends).
     pub update_missed: bool,
 }
@@ -250,7 +250,7 @@ impl Engine {
             sched_seq: 0,
             scanned_seq: 0,
             needs_scan: true,
-            delivering: false,
+            delivering: 0,
             update_missed: false,
         };
         self.insert_group(group);
@@ -532,7 +532,7 @@ impl Engine {
             sched_seq: 0,
             scanned_seq: 0,
             needs_scan: true,
-            delivering: false,
+            delivering: 0,
             update_missed: false,
         };
         let items: Vec<GroupItem> = src.items.clone();

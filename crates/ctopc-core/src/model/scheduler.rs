@@ -112,16 +112,17 @@ impl Engine {
         Some(ev)
     }
 
-    /// With `EngineConfig::pace_data_changes`: the delivery of `group`'s last scheduled
-    /// OnDataChange (subscription or keep-alive) ended, whatever its outcome. An update that
-    /// fell due meanwhile runs now (it is at least one update period after the previous
-    /// one); otherwise the group waits for its next tick. Unknown groups are ignored (the
+    /// With `EngineConfig::max_pending_data_changes`: the delivery of one of `group`'s
+    /// scheduled OnDataChange calls (subscription or keep-alive) ended, whatever its
+    /// outcome. An update that fell due while the group was at its limit runs now (it is at
+    /// least one update period after the previous one); otherwise the group waits for its
+    /// next tick. Unknown groups are ignored (the
     /// group may have gone while its callback was under way).
     pub fn data_change_delivered(&mut self, now: Timestamp, group: super::GroupHandle) {
         let Some(&slot) = self.group_slots.get(&group.0) else { return };
         let slot = slot as usize;
         let Some(g) = self.groups[slot].as_mut() else { return };
-        g.delivering = false;
+        g.delivering = g.delivering.saturating_sub(1);
         if std::mem::take(&mut g.update_missed) {
             g.next_update = g.next_update.min(now);
         }
@@ -132,8 +133,9 @@ impl Engine {
         if !self.group(slot).ticking() {
             return;
         }
-        if self.group(slot).delivering {
-            // The client is still busy with the previous callback: nothing new is queued
+        let limit = self.cfg.max_pending_data_changes;
+        if limit > 0 && self.group(slot).delivering >= limit {
+            // The client is still busy with the previous callbacks: nothing new is queued
             // (no keep-alive either); the update runs when that delivery ends.
             let g = self.group_mut(slot);
             if now >= g.next_update {
@@ -156,11 +158,11 @@ impl Engine {
                 g.next_update = Timestamp(g.next_update.0 + (behind / period + 1) * period);
             }
         }
-        let pace = self.cfg.pace_data_changes;
+        let pace = u32::from(self.cfg.max_pending_data_changes > 0);
         let g = self.group_mut(slot);
         if !sent && g.keep_alive > 0 && now >= g.last_callback.add_millis(u64::from(g.keep_alive)) {
             g.last_callback = now;
-            g.delivering = pace;
+            g.delivering += pace;
             let ev = Event::DataChange(DataChange {
                 session: g.session,
                 group: g.handle,
@@ -228,7 +230,7 @@ impl Engine {
             items,
         }));
         g.last_callback = now;
-        g.delivering = cfg.pace_data_changes;
+        g.delivering += u32::from(cfg.max_pending_data_changes > 0);
         if let Some(s) = sessions.get_mut(&g.session.0) {
             s.last_update = now;
         }
