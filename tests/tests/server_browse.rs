@@ -256,7 +256,7 @@ fn browse_with_all_properties_and_values() {
     let a000 = &page.elements[0];
     assert_eq!(a000.properties.error, S_OK);
     let ids: Vec<u32> = a000.properties.properties.iter().map(|p| p.id).collect();
-    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103]);
+    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309, 310]);
     let prop = |id: u32| a000.properties.properties.iter().find(|p| p.id == id).unwrap();
     assert_eq!(prop(1).value, Value::I2(4), "canonical type VT_R4");
     assert_eq!(prop(2).vt, 4, "the value property has the item's canonical type");

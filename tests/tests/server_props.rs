@@ -37,12 +37,16 @@ fn available_properties_of_an_analog_item_with_unit() {
     let (_com, server) = english();
     let props = server.query_available_properties("KW_A000").expect("QueryAvailableProperties");
     let ids: Vec<u32> = props.iter().map(|p| p.0).collect();
-    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103]);
+    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309, 310]);
     let by_id = |id: u32| props.iter().find(|p| p.0 == id).unwrap();
     assert_eq!(by_id(1).1.as_deref(), Some("Item Canonical Data Type"));
     assert_eq!(by_id(101).1.as_deref(), Some("Item Description"));
     assert_eq!((by_id(1).2, by_id(2).2, by_id(3).2, by_id(4).2, by_id(5).2, by_id(6).2), (2, 4, 2, 7, 3, 4), "VARTYPEs");
     assert_eq!((by_id(100).2, by_id(102).2), (8, 5));
+    assert_eq!((by_id(307).1.as_deref(), by_id(307).2), (Some("HiHi Limit"), 5), "the asix alarm limit, VT_R8");
+    // Limits held in variables (KW_A100's high limits: KW_L001, KW_L002) are not properties.
+    let a100: Vec<u32> = server.query_available_properties("KW_A100").unwrap().iter().map(|p| p.0).collect();
+    assert_eq!(a100, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 309, 310]);
     // Without a unit: no EU Units; the same call with the same IDs otherwise.
     let d000: Vec<u32> = server.query_available_properties("KW_D000").unwrap().iter().map(|p| p.0).collect();
     assert_eq!(d000, [1, 2, 3, 4, 5, 6, 7, 101, 102, 103]);
@@ -82,6 +86,14 @@ fn item_property_values() {
     assert_eq!(v[6].0, Value::I4(OPC_ANALOG.0));
     assert_eq!(v[7].0, Value::Bstr("m".into()));
     assert_eq!((v[8].0.clone(), v[9].0.clone()), (Value::R8(8.0), Value::R8(0.0)));
+    // The asix limits: HiHi = AlarmHigh, Hi = WarnHigh, Lo = WarnLow, LoLo = AlarmLow.
+    let (hr, v) = server.get_item_properties("KW_A000", &[307, 308, 309, 310]).unwrap();
+    assert_eq!(hr, S_OK, "{v:?}");
+    let got: Vec<Value> = v.into_iter().map(|(x, _)| x).collect();
+    assert_eq!(got, [Value::R8(7.5), Value::R8(7.0), Value::R8(1.0), Value::R8(0.5)]);
+    // A limit held in a variable is no property of the item: OPC_E_INVALID_PID.
+    let (hr, v) = server.get_item_properties("KW_A100", &[308, 309]).unwrap();
+    assert_eq!((hr, v[0].1, v[1].clone()), (S_FALSE, OPC_E_INVALID_PID, (Value::R8(900.0), S_OK)));
     // A writable setpoint.
     let (_, v) = server.get_item_properties("KW_A110", &[5, 100, 102]).unwrap();
     assert_eq!(v, [(Value::I4((OPC_READABLE | OPC_WRITEABLE) as i32), S_OK), (Value::Bstr("t/h".into()), S_OK), (Value::R8(20.0), S_OK)]);
@@ -115,7 +127,7 @@ fn unknown_and_invalid_item_ids() {
 #[test]
 fn lookup_item_ids_of_attribute_properties() {
     let (_com, server) = english();
-    let (hr, v) = server.lookup_item_ids("KW_A000", &[1, 100, 101, 102, 103, 9999, 2]).expect("LookupItemIDs");
+    let (hr, v) = server.lookup_item_ids("KW_A000", &[1, 100, 101, 102, 103, 9999, 2, 307, 310]).expect("LookupItemIDs");
     assert_eq!(hr, S_FALSE);
     let want: Vec<(Option<String>, HRESULT)> = vec![
         (None, OPC_E_INVALID_PID),
@@ -125,15 +137,17 @@ fn lookup_item_ids_of_attribute_properties() {
         (Some("KW_A000.LO_EU".into()), S_OK),
         (None, OPC_E_INVALID_PID),
         (None, OPC_E_INVALID_PID),
+        (Some("KW_A000.AlarmHigh.CV".into()), S_OK),
+        (Some("KW_A000.AlarmLow.CV".into()), S_OK),
     ];
     assert_eq!(v, want);
     // `.CV` is the same item; its attribute IDs are the variable's.
     let (hr, v) = server.lookup_item_ids("KW_A000.CV", &[101]).unwrap();
     assert_eq!((hr, v[0].0.as_deref()), (S_OK, Some("KW_A000.DESC")));
     // The returned IDs are items: reading one gives the property's value.
-    let (hr, items) = server.item_read(&[("KW_A000.EU_UNIT", u32::MAX), ("KW_A000.HI_EU", u32::MAX)]).unwrap();
+    let (hr, items) = server.item_read(&[("KW_A000.EU_UNIT", u32::MAX), ("KW_A000.HI_EU", u32::MAX), ("KW_A000.AlarmHigh.CV", u32::MAX)]).unwrap();
     assert_eq!(hr, S_OK);
-    assert_eq!((items[0].value.clone(), items[1].value.clone()), (Value::Bstr("m".into()), Value::R8(8.0)));
+    assert_eq!((items[0].value.clone(), items[1].value.clone(), items[2].value.clone()), (Value::Bstr("m".into()), Value::R8(8.0), Value::R8(7.5)));
 }
 
 #[test]
@@ -177,7 +191,7 @@ fn get_properties_of_several_items_with_item_level_errors() {
     assert_eq!(errors, [S_OK, OPC_E_UNKNOWNITEMID, OPC_E_INVALIDITEMID, S_OK]);
     assert!(items[1].properties.is_empty() && items[2].properties.is_empty());
     let ids: Vec<u32> = items[0].properties.iter().map(|p| p.id).collect();
-    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103], "every property when none are named");
+    assert_eq!(ids, [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309, 310], "every property when none are named");
     let a110 = &items[3].properties;
     let get = |id: u32| a110.iter().find(|p| p.id == id).unwrap();
     assert_eq!(get(5).value, Value::I4(3));

@@ -2,7 +2,8 @@
 //!
 //! 1. setup (idempotent), 2. native `cargo test` of every host crate, 3. the Windows
 //! build, 4. registration of the proxy/stub DLL and the server in the project's Wine
-//! prefix, 5. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner),
+//! prefix, 5. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner)
+//! and the COM crate's unit tests (Windows-only),
 //! always ending every Wine process of the prefix, with timeouts on everything.
 
 use crate::{build, setup, util, wine};
@@ -27,7 +28,8 @@ pub fn run(args: &[String]) -> Result<(), String> {
         register(&artifacts)?;
         println!("test: end-to-end tests under Wine");
         let mut c = util::cargo();
-        c.args(["test", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "--", "--test-threads=1"]);
+        // The COM crate's own unit tests only build for Windows: they run here too.
+        c.args(["test", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "-p", "ctopc-com", "--", "--test-threads=1"]);
         c.env("CTOPC_BIN_DIR", &artifacts.dir);
         let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
         if !status.success() {

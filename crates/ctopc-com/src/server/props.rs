@@ -125,7 +125,27 @@ pub fn available_ids(info: &ItemInfo, lang: Lang) -> Vec<u32> {
         ids.push(p::OPC_PROPERTY_HIGH_EU);
         ids.push(p::OPC_PROPERTY_LOW_EU);
     }
+    for id in LIMIT_IDS {
+        if limit(info, id).is_some() {
+            ids.push(id);
+        }
+    }
     ids
+}
+
+/// HiHi, Hi, Lo, LoLo Limit, ascending.
+const LIMIT_IDS: [u32; 4] = [p::OPC_PROPERTY_HIHI_LIMIT, p::OPC_PROPERTY_HI_LIMIT, p::OPC_PROPERTY_LO_LIMIT, p::OPC_PROPERTY_LOLO_LIMIT];
+
+/// The asix limit behind a limit property (307-310), when the item has it as a number.
+fn limit(info: &ItemInfo, id: u32) -> Option<f64> {
+    let l = &info.attrs.limits;
+    match id {
+        p::OPC_PROPERTY_HIHI_LIMIT => l.hihi,
+        p::OPC_PROPERTY_HI_LIMIT => l.hi,
+        p::OPC_PROPERTY_LO_LIMIT => l.lo,
+        p::OPC_PROPERTY_LOLO_LIMIT => l.lolo,
+        _ => None,
+    }
 }
 
 /// True for the properties whose values come from a read (value, quality, timestamp).
@@ -162,6 +182,7 @@ fn static_value(info: &ItemInfo, id: u32, cx: &Ctx<'_>) -> Option<Value> {
             EuInfo::Analog { low, .. } => Value::R8(low),
             _ => return None,
         },
+        p::OPC_PROPERTY_HIHI_LIMIT..=p::OPC_PROPERTY_LOLO_LIMIT => Value::R8(limit(info, id)?),
         _ => return None,
     })
 }
@@ -173,6 +194,11 @@ pub fn property_item_id(info: &ItemInfo, id: u32, cx: &Ctx<'_>) -> Option<String
         p::OPC_PROPERTY_DESCRIPTION => "DESC",
         p::OPC_PROPERTY_HIGH_EU => "HI_EU",
         p::OPC_PROPERTY_LOW_EU => "LO_EU",
+        // The numeric attribute as an item (a constant).
+        p::OPC_PROPERTY_HIHI_LIMIT => "AlarmHigh.CV",
+        p::OPC_PROPERTY_HI_LIMIT => "WarnHigh.CV",
+        p::OPC_PROPERTY_LO_LIMIT => "WarnLow.CV",
+        p::OPC_PROPERTY_LOLO_LIMIT => "AlarmLow.CV",
         _ => return None,
     };
     // Only the value items of database variables: live, keyed by the bare asix name.
@@ -450,10 +476,11 @@ mod tests {
                 description_en: Some("Level".into()),
                 eu_units: Some("m".into()),
                 eu: EuInfo::Analog { low: 0.0, high: 8.0 },
+                limits: ctopc_core::asix::LimitProps { hihi: Some(7.5), hi: Some(7.0), lo: Some(1.0), lolo: None },
             };
             match item_id {
                 "V" | "V.CV" | "A" => Ok((var("V"), attrs)),
-                "V.DESC" | "V.EU_UNIT" | "V.HI_EU" | "V.LO_EU" | "A.DESC" => {
+                "V.DESC" | "V.EU_UNIT" | "V.HI_EU" | "V.LO_EU" | "A.DESC" | "V.AlarmHigh.CV" | "V.WarnLow.CV" => {
                     let mut d = var(item_id);
                     d.constant = Some(Value::Bstr("x".into()));
                     Ok((d, ItemAttributes::default()))
@@ -476,7 +503,7 @@ mod tests {
     fn available_properties_follow_the_item() {
         let c = cx(Lang::English);
         let v = resolve(&c, "V").unwrap();
-        assert_eq!(available_ids(&v, c.lang), [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103]);
+        assert_eq!(available_ids(&v, c.lang), [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309]);
         let pct = resolve(&c, "V.PercentageCV").unwrap();
         assert_eq!(available_ids(&pct, c.lang), [1, 2, 3, 4, 5, 6, 100]);
         assert_eq!(resolve(&c, "").err(), Some(OpcError::InvalidItemId));
@@ -493,6 +520,9 @@ mod tests {
         let d = property(&v, 101, true, &pl);
         assert_eq!((d.value, d.description), (Value::Bstr("Poziom".into()), "Opis elementu"));
         assert_eq!(property(&v, 102, true, &en).value, Value::R8(8.0));
+        assert_eq!((property(&v, 307, true, &en).value, property(&v, 307, true, &en).description), (Value::R8(7.5), "HiHi Limit"));
+        assert_eq!((property(&v, 308, true, &en).value, property(&v, 309, true, &en).value), (Value::R8(7.0), Value::R8(1.0)));
+        assert_eq!(property(&v, 310, true, &en).error, Some(OpcError::InvalidPid), "no LoLo limit");
         assert_eq!(property(&v, 1, true, &en).value, Value::I2(VarType::R4.0 as i16));
         assert_eq!(property(&v, 6, true, &en).value, Value::R4(1000.0));
         assert_eq!(property(&v, 2, true, &en).var_type, VarType::R4);
@@ -509,6 +539,9 @@ mod tests {
         assert_eq!(property_item_id(&v, 101, &c).as_deref(), Some("V.DESC"));
         assert_eq!(property_item_id(&v, 100, &c).as_deref(), Some("V.EU_UNIT"));
         assert_eq!(property_item_id(&v, 2, &c), None);
+        assert_eq!(property_item_id(&v, 307, &c).as_deref(), Some("V.AlarmHigh.CV"));
+        assert_eq!(property_item_id(&v, 309, &c).as_deref(), Some("V.WarnLow.CV"));
+        assert_eq!(property_item_id(&v, 308, &c), None, "V.WarnHigh.CV does not resolve here");
         let a = resolve(&c, "A").unwrap();
         assert_eq!(property_item_id(&a, 101, &c).as_deref(), Some("A.DESC"));
         assert_eq!(property_item_id(&a, 100, &c), None, "A.EU_UNIT does not resolve");

@@ -29,7 +29,7 @@ pub use config::{
 pub use format::FormatSpec;
 pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarItem};
 pub use namespace::{
-    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LiveItem,
+    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
 };
 pub use quality_rules::{apply_quality_rules, apply_quality_rules_with, check_write_value, RuleOptions};
 pub use text::Warning;

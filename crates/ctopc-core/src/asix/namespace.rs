@@ -67,6 +67,27 @@ pub struct ItemAttributes {
     pub eu_units: Option<String>,
     /// EU type with high/low EU (value items with a range; `PercentageCV`: 0..100).
     pub eu: EuInfo,
+    /// The variable's numeric warning and alarm limits (value items only), the item
+    /// properties 307-310. A limit held in a variable (`KW_Lnnn`) is not a property: it is
+    /// read as the item `<var>.<Attr>.CV`.
+    pub limits: LimitProps,
+}
+
+/// The OPC limit properties: HiHi (307, `AlarmHigh`), Hi (308, `WarnHigh`), Lo (309,
+/// `WarnLow`) and LoLo (310, `AlarmLow`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LimitProps {
+    pub hihi: Option<f64>,
+    pub hi: Option<f64>,
+    pub lo: Option<f64>,
+    pub lolo: Option<f64>,
+}
+
+impl LimitProps {
+    fn of(var: &Variable) -> LimitProps {
+        let n = |l: &Option<crate::asix::vardb::Limit>| l.as_ref().and_then(|l| l.value());
+        LimitProps { hihi: n(&var.alarm_high), hi: n(&var.warn_high), lo: n(&var.warn_low), lolo: n(&var.alarm_low) }
+    }
 }
 
 /// How a live item's value is computed from its asix variable's value.
@@ -436,6 +457,7 @@ impl Ctx<'_> {
             description_en: opt(&var.description_en),
             eu_units: None,
             eu: EuInfo::None,
+            limits: LimitProps::default(),
         }
     }
 
@@ -453,6 +475,7 @@ impl Ctx<'_> {
                 let eu = range.map_or(EuInfo::None, |(low, high)| EuInfo::Analog { low, high });
                 attrs.eu_units = (!var.unit.is_empty()).then(|| var.unit.clone());
                 attrs.eu = eu.clone();
+                attrs.limits = LimitProps::of(var);
                 let rights = if var.writable {
                     OPC_READABLE | OPC_WRITEABLE
                 } else {
