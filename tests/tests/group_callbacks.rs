@@ -11,7 +11,7 @@ use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
 use group_common::*;
 use std::time::{Duration, Instant};
 use windows::core::{Interface, IUnknown};
-use windows::Win32::Foundation::S_OK;
+use windows::Win32::Foundation::{S_FALSE, S_OK};
 use windows::Win32::System::Com::IConnectionPointContainer;
 use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
 use windows::Win32::UI::WindowsAndMessaging::{DispatchMessageW, PeekMessageW, TranslateMessage, MSG, PM_REMOVE};
@@ -147,6 +147,30 @@ fn one_connection_per_group_and_connection_point_rules() {
     let r = unsafe { cp.Advise(&server.unknown) };
     assert_eq!(code(&r), CONNECT_E_CANNOTCONNECT);
 
+    // EnumConnections lists the one connection (cookie and sink), and none without it.
+    let sink = Sink::create(&other);
+    let cookie3 = advise(&g, &sink).unwrap();
+    let listed = connections(&cp);
+    assert_eq!(listed.len(), 1, "one connection");
+    let sink_identity: IUnknown = sink.cast().unwrap();
+    assert_eq!((listed[0].0, listed[0].1.as_raw()), (cookie3, sink_identity.as_raw()), "its cookie and sink");
+    unadvise(&g, cookie3).unwrap();
+    assert!(connections(&cp).is_empty(), "no connection after Unadvise");
+    // The enumerator's Skip, Reset and Clone.
+    // SAFETY: plain calls on valid interfaces.
+    unsafe {
+        let cookie4 = advise(&g, &sink).unwrap();
+        let e = cp.EnumConnections().unwrap();
+        // Through the vtable: windows-rs turns S_FALSE into Ok.
+        let skip = |n: u32| (Interface::vtable(&e).Skip)(Interface::as_raw(&e), n);
+        assert_eq!(skip(1), S_OK);
+        assert_eq!(skip(1), S_FALSE, "nothing left to skip");
+        e.Reset().unwrap();
+        let c = e.Clone().unwrap();
+        assert_eq!(next_connection(&c).map(|x| x.0), Some(cookie4));
+        unadvise(&g, cookie4).unwrap();
+    }
+
     // The point's interface and container; no point for other interfaces.
     // SAFETY: plain calls on valid interfaces.
     assert_eq!(unsafe { cp.GetConnectionInterface() }.unwrap(), IOPCDataCallback::IID);
@@ -263,4 +287,27 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     }
     assert_alive(&slow_server);
     assert_alive(&quick_server);
+}
+
+/// The next element of an IEnumConnections. (Under Wine the HRESULT of a call that returns
+/// an interface is not reliable: look at the element.)
+fn next_connection(e: &windows::Win32::System::Com::IEnumConnections) -> Option<(u32, IUnknown)> {
+    let mut one = [windows::Win32::System::Com::CONNECTDATA::default()];
+    // SAFETY: room for the one element asked for; a NULL pceltFetched is allowed for one.
+    let _ = unsafe { e.Next(&mut one, std::ptr::null_mut()) };
+    let [cd] = one;
+    let unk = std::mem::ManuallyDrop::into_inner(cd.pUnk)?;
+    Some((cd.dwCookie, unk))
+}
+
+/// Every connection of a point, through EnumConnections.
+fn connections(cp: &windows::Win32::System::Com::IConnectionPoint) -> Vec<(u32, IUnknown)> {
+    // SAFETY: a valid interface pointer.
+    let e = unsafe { cp.EnumConnections() }.expect("EnumConnections");
+    let mut v = Vec::new();
+    while let Some(c) = next_connection(&e) {
+        v.push(c);
+        assert!(v.len() < 10, "an endless enumeration");
+    }
+    v
 }

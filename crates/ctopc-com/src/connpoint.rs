@@ -8,7 +8,7 @@ use crate::enums::ConnectionPointEnum;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, Interface, IUnknown, Ref, GUID};
-use windows::Win32::Foundation::{E_NOTIMPL, E_POINTER};
+use windows::Win32::Foundation::E_POINTER;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPoint_Impl, IConnectionPointContainer, IEnumConnections};
 use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
 
@@ -77,12 +77,17 @@ impl<I: Interface + Clone> SinkSlot<I> {
             Err(CONNECT_E_NOCONNECTION.into())
         }
     }
+    fn connections(&self) -> Vec<(u32, IUnknown)> {
+        self.lock().as_ref().and_then(|(c, s)| s.cast::<IUnknown>().ok().map(|u| (*c, u))).into_iter().collect()
+    }
 }
 
 /// Advise/Unadvise of one slot, type-erased for the connection point object.
 pub trait Slot: Send + Sync {
     fn advise(&self, unk: &IUnknown) -> windows::core::Result<u32>;
     fn unadvise(&self, cookie: u32) -> windows::core::Result<()>;
+    /// The current connections (at most one), for EnumConnections.
+    fn connections(&self) -> Vec<(u32, IUnknown)>;
 }
 
 impl<I: Interface + Clone> Slot for SinkSlot<I> {
@@ -91,6 +96,9 @@ impl<I: Interface + Clone> Slot for SinkSlot<I> {
     }
     fn unadvise(&self, cookie: u32) -> windows::core::Result<()> {
         SinkSlot::unadvise(self, cookie)
+    }
+    fn connections(&self) -> Vec<(u32, IUnknown)> {
+        SinkSlot::connections(self)
     }
 }
 
@@ -122,8 +130,7 @@ impl IConnectionPoint_Impl for ConnectionPoint_Impl {
         self.slot.unadvise(cookie)
     }
     fn EnumConnections(&self) -> windows::core::Result<IEnumConnections> {
-        // Allowed by the COM specification; OPC clients do not enumerate connections.
-        Err(E_NOTIMPL.into())
+        Ok(crate::enums::ConnectionEnum::create(self.slot.connections()))
     }
 }
 

@@ -1,13 +1,14 @@
-//! Snapshot enumerators (IEnumString, IEnumUnknown, IEnumConnectionPoints): the list is
-//! taken when the enumerator is created; clones share it and copy the position.
+//! Snapshot enumerators (IEnumString, IEnumUnknown, IEnumConnectionPoints,
+//! IEnumConnections): the list is taken when the enumerator is created; clones share it
+//! and copy the position.
 
 use crate::mem;
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IEnumConnectionPoints, IEnumConnectionPoints_Impl, IEnumString, IEnumString_Impl, IEnumUnknown,
-    IEnumUnknown_Impl,
+    IConnectionPoint, IEnumConnectionPoints, IEnumConnectionPoints_Impl, IEnumConnections, IEnumConnections_Impl, IEnumString,
+    IEnumString_Impl, IEnumUnknown, IEnumUnknown_Impl, CONNECTDATA,
 };
 
 /// A position in a shared snapshot.
@@ -56,6 +57,15 @@ impl<T> Cursor<T> {
         }
     }
 
+    /// Skip for the `Result`-returning IEnum*::Skip methods: S_FALSE travels as the error
+    /// (an `Ok` would become S_OK).
+    pub fn skip_result(&self, n: u32) -> windows::core::Result<()> {
+        match self.skip(n) {
+            S_OK => Ok(()),
+            hr => Err(hr.into()),
+        }
+    }
+
     pub fn reset(&self) {
         self.commit(0);
     }
@@ -83,6 +93,22 @@ fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
     } else {
         S_FALSE
     }
+}
+
+/// IEnum*::Next for elements that cannot fail to copy (interface pointers, AddRef'd by
+/// `make`): the next `celt` elements into `rgelt`.
+fn next_into<T, U>(cursor: &Cursor<T>, celt: u32, rgelt: *mut U, fetched: *mut u32, make: impl Fn(&T) -> U) -> HRESULT {
+    if let Err(hr) = check_next(celt, rgelt, fetched) {
+        return hr;
+    }
+    let (pos, end) = cursor.peek(celt);
+    for (i, item) in cursor.items()[pos..end].iter().enumerate() {
+        // SAFETY: rgelt has room for `celt` >= end - pos elements (COM contract); the
+        // elements are uninitialised out-storage, written without dropping.
+        unsafe { rgelt.add(i).write(make(item)) };
+    }
+    cursor.commit(end);
+    finish(fetched, end - pos, celt)
 }
 
 #[implement(IEnumString)]
@@ -140,19 +166,10 @@ impl UnknownEnum {
 
 impl IEnumUnknown_Impl for UnknownEnum_Impl {
     fn Next(&self, celt: u32, rgelt: *mut Option<IUnknown>, fetched: *mut u32) -> HRESULT {
-        if let Err(hr) = check_next(celt, rgelt, fetched) {
-            return hr;
-        }
-        let (pos, end) = self.0.peek(celt);
-        for (i, u) in self.0.items()[pos..end].iter().enumerate() {
-            // SAFETY: rgelt has room for `celt` elements; each receives an AddRef'd pointer.
-            unsafe { rgelt.add(i).write(Some(u.clone())) };
-        }
-        self.0.commit(end);
-        finish(fetched, end - pos, celt)
+        next_into(&self.0, celt, rgelt, fetched, |u| Some(u.clone()))
     }
     fn Skip(&self, celt: u32) -> windows::core::Result<()> {
-        self.0.skip(celt).ok()
+        self.0.skip_result(celt)
     }
     fn Reset(&self) -> windows::core::Result<()> {
         self.0.reset();
@@ -174,19 +191,10 @@ impl ConnectionPointEnum {
 
 impl IEnumConnectionPoints_Impl for ConnectionPointEnum_Impl {
     fn Next(&self, celt: u32, rgelt: *mut Option<IConnectionPoint>, fetched: *mut u32) -> HRESULT {
-        if let Err(hr) = check_next(celt, rgelt, fetched) {
-            return hr;
-        }
-        let (pos, end) = self.0.peek(celt);
-        for (i, cp) in self.0.items()[pos..end].iter().enumerate() {
-            // SAFETY: rgelt has room for `celt` elements.
-            unsafe { rgelt.add(i).write(Some(cp.clone())) };
-        }
-        self.0.commit(end);
-        finish(fetched, end - pos, celt)
+        next_into(&self.0, celt, rgelt, fetched, |cp| Some(cp.clone()))
     }
     fn Skip(&self, celt: u32) -> windows::core::Result<()> {
-        self.0.skip(celt).ok()
+        self.0.skip_result(celt)
     }
     fn Reset(&self) -> windows::core::Result<()> {
         self.0.reset();
@@ -194,5 +202,34 @@ impl IEnumConnectionPoints_Impl for ConnectionPointEnum_Impl {
     }
     fn Clone(&self) -> windows::core::Result<IEnumConnectionPoints> {
         Ok(ConnectionPointEnum(self.0.fork()).into())
+    }
+}
+
+/// IConnectionPoint::EnumConnections: (cookie, sink) pairs.
+#[implement(IEnumConnections)]
+pub struct ConnectionEnum(Cursor<(u32, IUnknown)>);
+
+impl ConnectionEnum {
+    pub fn create(items: Vec<(u32, IUnknown)>) -> IEnumConnections {
+        ConnectionEnum(Cursor::new(items)).into()
+    }
+}
+
+impl IEnumConnections_Impl for ConnectionEnum_Impl {
+    fn Next(&self, celt: u32, rgcd: *mut CONNECTDATA, fetched: *mut u32) -> HRESULT {
+        next_into(&self.0, celt, rgcd, fetched, |(cookie, unk)| CONNECTDATA {
+            pUnk: std::mem::ManuallyDrop::new(Some(unk.clone())),
+            dwCookie: *cookie,
+        })
+    }
+    fn Skip(&self, celt: u32) -> windows::core::Result<()> {
+        self.0.skip_result(celt)
+    }
+    fn Reset(&self) -> windows::core::Result<()> {
+        self.0.reset();
+        Ok(())
+    }
+    fn Clone(&self) -> windows::core::Result<IEnumConnections> {
+        Ok(ConnectionEnum(self.0.fork()).into())
     }
 }

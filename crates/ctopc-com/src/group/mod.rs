@@ -484,6 +484,10 @@ impl Slot for DataCallbackPoint {
         let _ = self.ctx.runtime.with_engine(|e, now| e.set_callback_connected(now, group, false));
         Ok(())
     }
+
+    fn connections(&self) -> Vec<(u32, IUnknown)> {
+        Slot::connections(&*self.slot)
+    }
 }
 
 impl Group_Impl {
