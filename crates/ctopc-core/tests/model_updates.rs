@@ -594,6 +594,19 @@ fn paced() -> Sim {
     Sim::with_config(EngineConfig { max_pending_data_changes: 1, ..EngineConfig::default() })
 }
 
+/// A paced engine with a 1 s group of one item, A1 (client handle 100), whose first
+/// OnDataChange (A1 = 1.0) was just produced and is still being delivered.
+fn paced_group_with_a_callback_under_way() -> (Sim, SessionHandle, GroupHandle) {
+    let mut sim = paced();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert_eq!(sim.data_changes().len(), 1);
+    (sim, s, g)
+}
+
 #[test]
 fn paced_callbacks_coalesce_while_the_client_is_busy_and_resume_when_it_returns() {
     let mut sim = paced();
@@ -630,13 +643,7 @@ fn paced_callbacks_coalesce_while_the_client_is_busy_and_resume_when_it_returns(
 
 #[test]
 fn paced_callbacks_wait_for_the_next_tick_when_the_delivery_was_quick() {
-    let mut sim = paced();
-    let s = sim.session();
-    let g = sim.group(s, "g", 1000, 0.0);
-    sim.items(g, &["A1"]);
-    sim.push_good("A1", 1.0);
-    sim.tick();
-    assert_eq!(sim.data_changes().len(), 1);
+    let (mut sim, _, g) = paced_group_with_a_callback_under_way();
     sim.advance(300);
     sim.push_good("A1", 2.0);
     sim.e.data_change_delivered(sim.now, g);
@@ -648,13 +655,7 @@ fn paced_callbacks_wait_for_the_next_tick_when_the_delivery_was_quick() {
 
 #[test]
 fn paced_keepalive_is_not_sent_while_a_callback_is_under_way() {
-    let mut sim = paced();
-    let s = sim.session();
-    let g = sim.group(s, "g", 1000, 0.0);
-    sim.items(g, &["A1"]);
-    sim.push_good("A1", 1.0);
-    sim.tick();
-    sim.events();
+    let (mut sim, _, g) = paced_group_with_a_callback_under_way();
     sim.e.set_keep_alive(sim.now, g, 2000).unwrap();
     // The data callback is never acknowledged: no keep-alive piles up behind it.
     sim.advance(10_000);
@@ -677,13 +678,7 @@ fn paced_keepalive_is_not_sent_while_a_callback_is_under_way() {
 
 #[test]
 fn paced_acknowledgements_of_unknown_or_removed_groups_are_ignored() {
-    let mut sim = paced();
-    let s = sim.session();
-    let g = sim.group(s, "g", 1000, 0.0);
-    sim.items(g, &["A1"]);
-    sim.push_good("A1", 1.0);
-    sim.tick();
-    assert_eq!(sim.data_changes().len(), 1);
+    let (mut sim, s, g) = paced_group_with_a_callback_under_way();
     sim.e.data_change_delivered(sim.now, GroupHandle(9999));
     sim.advance(1000);
     sim.push_good("A1", 2.0);
