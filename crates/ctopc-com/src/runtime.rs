@@ -299,8 +299,7 @@ impl Runtime {
                     deliver_one(weak_rt.clone(), group, &slot, event);
                     if paced {
                         if let Some(rt) = weak_rt.upgrade() {
-                            rt.delivered.lock().unwrap_or_else(|p| p.into_inner()).push(group);
-                            rt.signal.wake();
+                            rt.deliveries_ended([group]);
                         }
                     }
                 });
@@ -310,9 +309,15 @@ impl Runtime {
             }
         }
         if !not_queued.is_empty() {
-            self.delivered.lock().unwrap_or_else(|p| p.into_inner()).extend(not_queued);
-            self.signal.wake();
+            self.deliveries_ended(not_queued);
         }
+    }
+
+    /// Hands the groups whose scheduled OnDataChange is done with (delivered, failed or
+    /// never queued) to the driver, which tells the engine at its next step.
+    fn deliveries_ended(&self, groups: impl IntoIterator<Item = GroupHandle>) {
+        self.delivered.lock().unwrap_or_else(|p| p.into_inner()).extend(groups);
+        self.signal.wake();
     }
 
     fn self_weak(&self) -> Weak<Runtime> {

@@ -317,7 +317,7 @@ impl SourceTable {
 
     /// The EU range of an entry when it is analog (percent deadband applies).
     pub fn analog_range(&self, e: &SourceEntry) -> Option<(f64, f64)> {
-        (e.flags & ANALOG != 0).then(|| self.eu_ranges[e.eu_range as usize])
+        e.is_analog().then(|| self.eu_ranges[e.eu_range as usize])
     }
 
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {

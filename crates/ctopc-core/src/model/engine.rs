@@ -55,6 +55,13 @@ pub struct EngineConfig {
     pub max_pending_data_changes: u32,
 }
 
+impl EngineConfig {
+    /// Scheduled callbacks wait for their delivery ([`Self::max_pending_data_changes`]).
+    pub fn paces(&self) -> bool {
+        self.max_pending_data_changes > 0
+    }
+}
+
 impl Default for EngineConfig {
     fn default() -> Self {
         EngineConfig {

@@ -134,6 +134,14 @@ impl Group {
     }
 
     /// Callbacks are due: active, live, sink connected, enabled.
+    /// Moves `next_update` (due at or before `now`) to the first tick after `now`, keeping
+    /// the phase: missed periods are skipped, not sent in a burst.
+    pub fn skip_to_next_update(&mut self, now: Timestamp) {
+        let period = i64::from(self.update_rate) * Timestamp::TICKS_PER_MS;
+        let behind = now.0 - self.next_update.0;
+        self.next_update = Timestamp(self.next_update.0 + (behind / period + 1) * period);
+    }
+
     pub fn ticking(&self) -> bool {
         self.active && self.connected && self.enabled && !self.deleted
     }

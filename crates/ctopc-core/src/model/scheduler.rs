@@ -116,8 +116,8 @@ impl Engine {
     /// scheduled OnDataChange calls (subscription or keep-alive) ended, whatever its
     /// outcome. An update that fell due while the group was at its limit runs now (it is at
     /// least one update period after the previous one); otherwise the group waits for its
-    /// next tick. Unknown groups are ignored (the
-    /// group may have gone while its callback was under way).
+    /// next tick. Unknown groups are ignored (the group may have gone while its callback
+    /// was under way).
     pub fn data_change_delivered(&mut self, now: Timestamp, group: super::GroupHandle) {
         let Some(&slot) = self.group_slots.get(&group.0) else { return };
         let slot = slot as usize;
@@ -133,16 +133,13 @@ impl Engine {
         if !self.group(slot).ticking() {
             return;
         }
-        let limit = self.cfg.max_pending_data_changes;
-        if limit > 0 && self.group(slot).delivering >= limit {
+        if self.cfg.paces() && self.group(slot).delivering >= self.cfg.max_pending_data_changes {
             // The client is still busy with the previous callbacks: nothing new is queued
             // (no keep-alive either); the update runs when that delivery ends.
             let g = self.group_mut(slot);
             if now >= g.next_update {
                 g.update_missed = true;
-                let period = i64::from(g.update_rate) * Timestamp::TICKS_PER_MS;
-                let behind = now.0 - g.next_update.0;
-                g.next_update = Timestamp(g.next_update.0 + (behind / period + 1) * period);
+                g.skip_to_next_update(now);
             }
             g.last_callback = now;
             self.schedule_group(slot, now, false);
@@ -152,13 +149,11 @@ impl Engine {
         if now >= self.group(slot).next_update {
             sent = self.scan_group(slot, now);
             let g = self.group_mut(slot);
-            let period = i64::from(g.update_rate) * Timestamp::TICKS_PER_MS;
             if g.next_update <= now {
-                let behind = now.0 - g.next_update.0;
-                g.next_update = Timestamp(g.next_update.0 + (behind / period + 1) * period);
+                g.skip_to_next_update(now);
             }
         }
-        let pace = u32::from(self.cfg.max_pending_data_changes > 0);
+        let pace = u32::from(self.cfg.paces());
         let g = self.group_mut(slot);
         if !sent && g.keep_alive > 0 && now >= g.last_callback.add_millis(u64::from(g.keep_alive)) {
             g.last_callback = now;
@@ -230,7 +225,7 @@ impl Engine {
             items,
         }));
         g.last_callback = now;
-        g.delivering += u32::from(cfg.max_pending_data_changes > 0);
+        g.delivering += u32::from(cfg.paces());
         if let Some(s) = sessions.get_mut(&g.session.0) {
             s.last_update = now;
         }
