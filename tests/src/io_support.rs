@@ -35,6 +35,11 @@ impl Callback {
     }
 }
 
+/// Seconds since 1970, for progress lines that are compared across processes.
+pub fn unix_secs() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0)
+}
+
 /// What a sink saw. With `record` off it only counts (for the benchmark).
 #[derive(Default)]
 pub struct Recorder {
@@ -122,8 +127,7 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
             self.0.data_changes.fetch_add(1, Ordering::Relaxed);
             self.0.data_change_items.fetch_add(u64::from(n), Ordering::Relaxed);
             if self.0.trace {
-                let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0);
-                eprintln!("OnDataChange group {group:#x}: {n} items at {t:.3}");
+                eprintln!("OnDataChange group {group:#x}: {n} items at {:.3}", unix_secs());
             }
         }
         // SAFETY: the stub passes `n`-element arrays.

@@ -11,7 +11,7 @@ pub mod io_support;
 pub use ctopc_com::client::{ComThread, Server};
 pub use ctopc_com::interfaces;
 use std::path::PathBuf;
-use windows::core::HRESULT;
+use windows::core::{IUnknown, HRESULT};
 
 pub const PROGID: &str = "ServerCTOPC.App";
 
@@ -86,3 +86,25 @@ pub fn wait_for_no_other_server() {
     }
 }
 
+/// The next element of an IEnumConnections. (Under Wine the HRESULT of a call that returns
+/// an interface is not reliable: look at the element.)
+pub fn next_connection(e: &windows::Win32::System::Com::IEnumConnections) -> Option<(u32, IUnknown)> {
+    let mut one = [windows::Win32::System::Com::CONNECTDATA::default()];
+    // SAFETY: room for the one element asked for; a NULL pceltFetched is allowed for one.
+    let _ = unsafe { e.Next(&mut one, std::ptr::null_mut()) };
+    let [cd] = one;
+    let unk = std::mem::ManuallyDrop::into_inner(cd.pUnk)?;
+    Some((cd.dwCookie, unk))
+}
+
+/// Every connection of a point, through EnumConnections.
+pub fn connections(cp: &windows::Win32::System::Com::IConnectionPoint) -> Vec<(u32, IUnknown)> {
+    // SAFETY: a valid interface pointer.
+    let e = unsafe { cp.EnumConnections() }.expect("EnumConnections");
+    let mut v = Vec::new();
+    while let Some(c) = next_connection(&e) {
+        v.push(c);
+        assert!(v.len() < 10, "an endless enumeration");
+    }
+    v
+}

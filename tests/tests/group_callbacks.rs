@@ -7,7 +7,7 @@ mod group_common;
 
 use ctopc_com::client::{ComThread, GroupStateChange, Server};
 use ctopc_core::Value;
-use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
+use e2e_tests::{assert_alive, code, connect, connections, interfaces::*, next_connection, PROGID};
 use group_common::*;
 use std::time::{Duration, Instant};
 use windows::core::{Interface, IUnknown};
@@ -287,27 +287,4 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     }
     assert_alive(&slow_server);
     assert_alive(&quick_server);
-}
-
-/// The next element of an IEnumConnections. (Under Wine the HRESULT of a call that returns
-/// an interface is not reliable: look at the element.)
-fn next_connection(e: &windows::Win32::System::Com::IEnumConnections) -> Option<(u32, IUnknown)> {
-    let mut one = [windows::Win32::System::Com::CONNECTDATA::default()];
-    // SAFETY: room for the one element asked for; a NULL pceltFetched is allowed for one.
-    let _ = unsafe { e.Next(&mut one, std::ptr::null_mut()) };
-    let [cd] = one;
-    let unk = std::mem::ManuallyDrop::into_inner(cd.pUnk)?;
-    Some((cd.dwCookie, unk))
-}
-
-/// Every connection of a point, through EnumConnections.
-fn connections(cp: &windows::Win32::System::Com::IConnectionPoint) -> Vec<(u32, IUnknown)> {
-    // SAFETY: a valid interface pointer.
-    let e = unsafe { cp.EnumConnections() }.expect("EnumConnections");
-    let mut v = Vec::new();
-    while let Some(c) = next_connection(&e) {
-        v.push(c);
-        assert!(v.len() < 10, "an endless enumeration");
-    }
-    v
 }

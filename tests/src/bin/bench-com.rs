@@ -433,7 +433,7 @@ mod bench {
     /// A progress line on stderr when `BENCH_TRACE` is set (to see where a long run is).
     fn trace(what: &str) {
         if std::env::var_os("BENCH_TRACE").is_some() {
-            eprintln!("bench: {what} ({:.3} s)", std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0));
+            eprintln!("bench: {what} ({:.3} s)", unix_secs());
         }
     }
 
