@@ -7,7 +7,7 @@ use ctopc_com::interfaces::*;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
-use windows::core::{implement, Interface, IUnknown, BOOL, HRESULT, PWSTR};
+use windows::core::{implement, IUnknown, Interface, BOOL, HRESULT, PWSTR};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::CoTaskMemFree;
 use windows::Win32::System::Variant::VARIANT;
@@ -18,10 +18,30 @@ pub type CbItem = ctopc_com::client::ReadItem;
 /// One call the server made on the sink.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Callback {
-    DataChange { transaction: u32, group: u32, master_quality: HRESULT, master_error: HRESULT, items: Vec<CbItem> },
-    ReadComplete { transaction: u32, group: u32, master_quality: HRESULT, master_error: HRESULT, items: Vec<CbItem> },
-    WriteComplete { transaction: u32, group: u32, master_error: HRESULT, items: Vec<(u32, HRESULT)> },
-    CancelComplete { transaction: u32, group: u32 },
+    DataChange {
+        transaction: u32,
+        group: u32,
+        master_quality: HRESULT,
+        master_error: HRESULT,
+        items: Vec<CbItem>,
+    },
+    ReadComplete {
+        transaction: u32,
+        group: u32,
+        master_quality: HRESULT,
+        master_error: HRESULT,
+        items: Vec<CbItem>,
+    },
+    WriteComplete {
+        transaction: u32,
+        group: u32,
+        master_error: HRESULT,
+        items: Vec<(u32, HRESULT)>,
+    },
+    CancelComplete {
+        transaction: u32,
+        group: u32,
+    },
 }
 
 impl Callback {
@@ -37,7 +57,10 @@ impl Callback {
 
 /// Seconds since 1970, for progress lines that are compared across processes.
 pub fn unix_secs() -> f64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0)
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64())
+        .unwrap_or(0.0)
 }
 
 /// What a sink saw. With `record` off it only counts (for the benchmark).
@@ -56,10 +79,16 @@ pub struct Recorder {
 
 impl Recorder {
     pub fn recording() -> Arc<Recorder> {
-        Arc::new(Recorder { record: true, ..Default::default() })
+        Arc::new(Recorder {
+            record: true,
+            ..Default::default()
+        })
     }
     pub fn counting() -> Arc<Recorder> {
-        Arc::new(Recorder { trace: std::env::var_os("BENCH_TRACE").is_some(), ..Default::default() })
+        Arc::new(Recorder {
+            trace: std::env::var_os("BENCH_TRACE").is_some(),
+            ..Default::default()
+        })
     }
 
     fn push(&self, cb: impl FnOnce() -> Callback) {
@@ -125,13 +154,24 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
     ) -> windows::core::Result<()> {
         if transaction == 0 {
             self.0.data_changes.fetch_add(1, Ordering::Relaxed);
-            self.0.data_change_items.fetch_add(u64::from(n), Ordering::Relaxed);
+            self.0
+                .data_change_items
+                .fetch_add(u64::from(n), Ordering::Relaxed);
             if self.0.trace {
-                eprintln!("OnDataChange group {group:#x}: {n} items at {:.3}", unix_secs());
+                eprintln!(
+                    "OnDataChange group {group:#x}: {n} items at {:.3}",
+                    unix_secs()
+                );
             }
         }
         // SAFETY: the stub passes `n`-element arrays.
-        self.0.push(|| Callback::DataChange { transaction, group, master_quality, master_error, items: unsafe { items(n, h, v, q, t, e) } });
+        self.0.push(|| Callback::DataChange {
+            transaction,
+            group,
+            master_quality,
+            master_error,
+            items: unsafe { items(n, h, v, q, t, e) },
+        });
         Ok(())
     }
 
@@ -149,23 +189,49 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the stub passes `n`-element arrays.
-        self.0.push(|| Callback::ReadComplete { transaction, group, master_quality, master_error, items: unsafe { items(n, h, v, q, t, e) } });
+        self.0.push(|| Callback::ReadComplete {
+            transaction,
+            group,
+            master_quality,
+            master_error,
+            items: unsafe { items(n, h, v, q, t, e) },
+        });
         Ok(())
     }
 
-    unsafe fn OnWriteComplete(&self, transaction: u32, group: u32, master_error: HRESULT, n: u32, h: *const u32, e: *const HRESULT) -> windows::core::Result<()> {
+    unsafe fn OnWriteComplete(
+        &self,
+        transaction: u32,
+        group: u32,
+        master_error: HRESULT,
+        n: u32,
+        h: *const u32,
+        e: *const HRESULT,
+    ) -> windows::core::Result<()> {
         let items = if n == 0 || h.is_null() || e.is_null() {
             Vec::new()
         } else {
             // SAFETY: the stub passes `n`-element arrays.
-            unsafe { std::slice::from_raw_parts(h, n as usize).iter().copied().zip(std::slice::from_raw_parts(e, n as usize).iter().copied()).collect() }
+            unsafe {
+                std::slice::from_raw_parts(h, n as usize)
+                    .iter()
+                    .copied()
+                    .zip(std::slice::from_raw_parts(e, n as usize).iter().copied())
+                    .collect()
+            }
         };
-        self.0.push(|| Callback::WriteComplete { transaction, group, master_error, items });
+        self.0.push(|| Callback::WriteComplete {
+            transaction,
+            group,
+            master_error,
+            items,
+        });
         Ok(())
     }
 
     unsafe fn OnCancelComplete(&self, transaction: u32, group: u32) -> windows::core::Result<()> {
-        self.0.push(|| Callback::CancelComplete { transaction, group });
+        self.0
+            .push(|| Callback::CancelComplete { transaction, group });
         Ok(())
     }
 }
@@ -196,7 +262,13 @@ impl TestGroup {
 }
 
 /// IOPCServer::AddGroup (no deadband, English).
-pub fn add_group(server: &Server, name: &str, active: bool, rate_ms: u32, client_handle: u32) -> windows::core::Result<TestGroup> {
+pub fn add_group(
+    server: &Server,
+    name: &str,
+    active: bool,
+    rate_ms: u32,
+    client_handle: u32,
+) -> windows::core::Result<TestGroup> {
     let name = windows::core::HSTRING::from(name);
     let mut handle = 0u32;
     let mut revised = 0u32;
@@ -219,8 +291,13 @@ pub fn add_group(server: &Server, name: &str, active: bool, rate_ms: u32, client
         )
     };
     hr.ok()?;
-    let unknown = unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
-    Ok(TestGroup { unknown, server_handle: handle, revised_rate: revised })
+    let unknown =
+        unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
+    Ok(TestGroup {
+        unknown,
+        server_handle: handle,
+        revised_rate: revised,
+    })
 }
 
 /// An item to add: (item ID, client handle, requested type (VT_EMPTY for canonical), active).
@@ -241,9 +318,15 @@ pub struct Added {
 }
 
 /// IOPCItemMgt::AddItems: (S_OK / S_FALSE, per item).
-pub fn add_items(group: &TestGroup, items: &[ItemSpec]) -> windows::core::Result<(HRESULT, Vec<Added>)> {
+pub fn add_items(
+    group: &TestGroup,
+    items: &[ItemSpec],
+) -> windows::core::Result<(HRESULT, Vec<Added>)> {
     let mgt: IOPCItemMgt = group.cast();
-    let ids: Vec<Vec<u16>> = items.iter().map(|i| i.id.encode_utf16().chain(std::iter::once(0)).collect()).collect();
+    let ids: Vec<Vec<u16>> = items
+        .iter()
+        .map(|i| i.id.encode_utf16().chain(std::iter::once(0)).collect())
+        .collect();
     let mut empty: Vec<u16> = vec![0];
     let defs: Vec<OPCITEMDEF> = items
         .iter()
@@ -277,7 +360,12 @@ pub fn add_items(group: &TestGroup, items: &[ItemSpec]) -> windows::core::Result
                 // SAFETY: a CoTaskMem blob owned by the caller.
                 unsafe { CoTaskMemFree(Some(x.pBlob as *const _)) };
             }
-            out.push(Added { error: errs.get(i).copied().unwrap_or_default(), server: x.hServer, canonical: x.vtCanonicalDataType.0, rights: x.dwAccessRights });
+            out.push(Added {
+                error: errs.get(i).copied().unwrap_or_default(),
+                server: x.hServer,
+                canonical: x.vtCanonicalDataType.0,
+                rights: x.dwAccessRights,
+            });
         }
         // SAFETY: as above.
         unsafe { CoTaskMemFree(Some(results as *const _)) };
@@ -298,7 +386,17 @@ pub fn set_active(group: &TestGroup, active: bool) -> HRESULT {
     let b = BOOL::from(active);
     let mut revised = 0u32;
     // SAFETY: valid in/out pointers; the others are [unique] NULL.
-    unsafe { st.SetState(std::ptr::null(), &mut revised, &b, std::ptr::null(), std::ptr::null(), std::ptr::null(), std::ptr::null()) }
+    unsafe {
+        st.SetState(
+            std::ptr::null(),
+            &mut revised,
+            &b,
+            std::ptr::null(),
+            std::ptr::null(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    }
 }
 
 /// IOPCServer::RemoveGroup.

@@ -26,7 +26,10 @@ pub fn connect() -> (ComThread, Server) {
 pub fn artifact(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("current_exe");
     // .../release/deps/test-xxxx.exe -> .../release/<name>
-    exe.parent().and_then(|d| d.parent()).expect("artifact dir").join(name)
+    exe.parent()
+        .and_then(|d| d.parent())
+        .expect("artifact dir")
+        .join(name)
 }
 
 /// The HRESULT of a failed call, or S_OK.
@@ -46,15 +49,27 @@ pub fn assert_alive(server: &Server) {
 /// The process IDs of the ServerCTOPC.exe processes of this Wine prefix other than `mine`.
 pub fn other_servers(mine: u32) -> Vec<u32> {
     use windows::Win32::Foundation::CloseHandle;
-    use windows::Win32::System::Diagnostics::ToolHelp::{CreateToolhelp32Snapshot, Process32FirstW, Process32NextW, PROCESSENTRY32W, TH32CS_SNAPPROCESS};
+    use windows::Win32::System::Diagnostics::ToolHelp::{
+        CreateToolhelp32Snapshot, Process32FirstW, Process32NextW, PROCESSENTRY32W,
+        TH32CS_SNAPPROCESS,
+    };
     let mut out = Vec::new();
     // SAFETY: a process snapshot, walked with a correctly sized PROCESSENTRY32W and closed.
     unsafe {
-        let Ok(snap) = CreateToolhelp32Snapshot(TH32CS_SNAPPROCESS, 0) else { return out };
-        let mut e = PROCESSENTRY32W { dwSize: std::mem::size_of::<PROCESSENTRY32W>() as u32, ..Default::default() };
+        let Ok(snap) = CreateToolhelp32Snapshot(TH32CS_SNAPPROCESS, 0) else {
+            return out;
+        };
+        let mut e = PROCESSENTRY32W {
+            dwSize: std::mem::size_of::<PROCESSENTRY32W>() as u32,
+            ..Default::default()
+        };
         let mut ok = Process32FirstW(snap, &mut e).is_ok();
         while ok {
-            let len = e.szExeFile.iter().position(|&c| c == 0).unwrap_or(e.szExeFile.len());
+            let len = e
+                .szExeFile
+                .iter()
+                .position(|&c| c == 0)
+                .unwrap_or(e.szExeFile.len());
             let name = String::from_utf16_lossy(&e.szExeFile[..len]);
             if name.eq_ignore_ascii_case("ServerCTOPC.exe") && e.th32ProcessID != mine {
                 out.push(e.th32ProcessID);
@@ -88,7 +103,9 @@ pub fn wait_for_no_other_server() {
 
 /// The next element of an IEnumConnections. (Under Wine the HRESULT of a call that returns
 /// an interface is not reliable: look at the element.)
-pub fn next_connection(e: &windows::Win32::System::Com::IEnumConnections) -> Option<(u32, IUnknown)> {
+pub fn next_connection(
+    e: &windows::Win32::System::Com::IEnumConnections,
+) -> Option<(u32, IUnknown)> {
     let mut one = [windows::Win32::System::Com::CONNECTDATA::default()];
     // SAFETY: room for the one element asked for; a NULL pceltFetched is allowed for one.
     let _ = unsafe { e.Next(&mut one, std::ptr::null_mut()) };

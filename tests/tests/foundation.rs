@@ -4,7 +4,7 @@
 use ctopc_com::client::{ComThread, Server};
 use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
 use std::time::Duration;
-use windows::core::{Interface, IUnknown, GUID, HRESULT};
+use windows::core::{IUnknown, Interface, GUID, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE};
 use windows::Win32::System::Com::{CLSIDFromProgID, CoCreateInstance, CLSCTX_LOCAL_SERVER};
 
@@ -12,7 +12,10 @@ const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
 
 fn unix_now() -> ctopc_core::Timestamp {
-    let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_millis();
+    let ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis();
     ctopc_core::Timestamp::from_unix_millis(ms as i64)
 }
 
@@ -22,12 +25,24 @@ fn get_status_reports_vendor_times_version_and_state() {
     let before = unix_now();
     let s = server.status().expect("GetStatus");
     let after = unix_now();
-    assert_eq!(s.vendor_info.as_deref(), Some(ctopc_com::server::VENDOR_INFO));
+    assert_eq!(
+        s.vendor_info.as_deref(),
+        Some(ctopc_com::server::VENDOR_INFO)
+    );
     assert!(s.start_time <= s.current_time, "{s:?}");
     // UTC: the server's current time lies within the client's call window (same machine).
-    assert!(s.current_time.add_millis(2000) >= before && s.current_time <= after.add_millis(2000), "{s:?}");
-    assert!(s.start_time.add_millis(120_000) >= before, "started long ago? {s:?}");
-    let v: Vec<u16> = env!("CARGO_PKG_VERSION").split('.').map(|x| x.parse().unwrap()).collect();
+    assert!(
+        s.current_time.add_millis(2000) >= before && s.current_time <= after.add_millis(2000),
+        "{s:?}"
+    );
+    assert!(
+        s.start_time.add_millis(120_000) >= before,
+        "started long ago? {s:?}"
+    );
+    let v: Vec<u16> = env!("CARGO_PKG_VERSION")
+        .split('.')
+        .map(|x| x.parse().unwrap())
+        .collect();
     assert_eq!(s.version, (v[0], v[1], v[2]));
     assert_eq!(s.group_count, 0);
     // No ASIXConnect.ini next to the test build: the embedded demo plant, simulated.
@@ -38,10 +53,15 @@ fn get_status_reports_vendor_times_version_and_state() {
 fn locales_polish_and_english_are_available_and_settable() {
     let (_com, server) = connect();
     let ids = server.available_locales().expect("QueryAvailableLocaleIDs");
-    assert!(ids.contains(&LCID_POLISH) && ids.contains(&LCID_ENGLISH_US), "{ids:x?}");
+    assert!(
+        ids.contains(&LCID_POLISH) && ids.contains(&LCID_ENGLISH_US),
+        "{ids:x?}"
+    );
     server.set_locale(LCID_POLISH).expect("SetLocaleID(pl)");
     assert_eq!(server.locale().unwrap(), LCID_POLISH);
-    server.set_locale(LCID_ENGLISH_US).expect("SetLocaleID(en-US)");
+    server
+        .set_locale(LCID_ENGLISH_US)
+        .expect("SetLocaleID(en-US)");
     assert_eq!(server.locale().unwrap(), LCID_ENGLISH_US);
     // Other English variants are accepted as English.
     server.set_locale(0x0809).expect("SetLocaleID(en-GB)");
@@ -52,7 +72,11 @@ fn locales_polish_and_english_are_available_and_settable() {
 fn unavailable_locale_is_e_invalidarg_and_keeps_the_old_one() {
     let (_com, server) = connect();
     server.set_locale(LCID_POLISH).unwrap();
-    assert_eq!(code(&server.set_locale(0x0407)), E_INVALIDARG, "German is not available");
+    assert_eq!(
+        code(&server.set_locale(0x0407)),
+        E_INVALIDARG,
+        "German is not available"
+    );
     assert_eq!(server.locale().unwrap(), LCID_POLISH);
     assert_alive(&server);
 }
@@ -60,7 +84,9 @@ fn unavailable_locale_is_e_invalidarg_and_keeps_the_old_one() {
 #[test]
 fn set_client_name_accepts_non_ascii_names() {
     let (_com, server) = connect();
-    server.set_client_name("Stanowisko operatora – Wytwórnia Kwasu żółć").expect("SetClientName");
+    server
+        .set_client_name("Stanowisko operatora – Wytwórnia Kwasu żółć")
+        .expect("SetClientName");
     assert_alive(&server);
 }
 
@@ -68,15 +94,30 @@ fn set_client_name_accepts_non_ascii_names() {
 fn error_strings_come_in_polish_and_english() {
     let (_com, server) = connect();
     let invalid_handle = HRESULT(OPC_E_INVALIDHANDLE.0);
-    let en = server.error_string_in(invalid_handle, LCID_ENGLISH_US).unwrap().expect("non-NULL string");
-    let pl = server.error_string_in(invalid_handle, LCID_POLISH).unwrap().expect("non-NULL string");
+    let en = server
+        .error_string_in(invalid_handle, LCID_ENGLISH_US)
+        .unwrap()
+        .expect("non-NULL string");
+    let pl = server
+        .error_string_in(invalid_handle, LCID_POLISH)
+        .unwrap()
+        .expect("non-NULL string");
     assert!(en.to_lowercase().contains("handle"), "{en}");
     assert_ne!(en, pl);
-    assert!(pl.chars().any(|c| "ąćęłńóśźżĄĆĘŁŃÓŚŹŻ".contains(c)) || pl.contains("uchwyt"), "{pl}");
+    assert!(
+        pl.chars().any(|c| "ąćęłńóśźżĄĆĘŁŃÓŚŹŻ".contains(c)) || pl.contains("uchwyt"),
+        "{pl}"
+    );
     server.set_locale(LCID_POLISH).unwrap();
-    assert_eq!(server.error_string(invalid_handle).unwrap().as_deref(), Some(pl.as_str()));
+    assert_eq!(
+        server.error_string(invalid_handle).unwrap().as_deref(),
+        Some(pl.as_str())
+    );
     // A locale the server does not offer is E_INVALIDARG.
-    assert_eq!(code(&server.error_string_in(invalid_handle, 0x0407)), E_INVALIDARG);
+    assert_eq!(
+        code(&server.error_string_in(invalid_handle, 0x0407)),
+        E_INVALIDARG
+    );
     assert_alive(&server);
 }
 
@@ -89,7 +130,10 @@ fn each_client_gets_its_own_server_object() {
     assert_eq!(a.locale().unwrap(), LCID_POLISH);
     assert_eq!(b.locale().unwrap(), LCID_ENGLISH_US);
     // ...in one process: the same start time.
-    assert_eq!(a.status().unwrap().start_time, b.status().unwrap().start_time);
+    assert_eq!(
+        a.status().unwrap().start_time,
+        b.status().unwrap().start_time
+    );
 }
 
 #[test]
@@ -98,7 +142,8 @@ fn create_instance_for_an_interface_the_server_lacks_is_e_nointerface() {
     // SAFETY (test): valid ProgID string.
     let clsid = unsafe { CLSIDFromProgID(windows::core::w!("ServerCTOPC.App")) }.unwrap();
     // IOPCServerList is OPCEnum's interface, never the server's.
-    let r: windows::core::Result<IOPCServerList> = unsafe { CoCreateInstance(&clsid, None, CLSCTX_LOCAL_SERVER) };
+    let r: windows::core::Result<IOPCServerList> =
+        unsafe { CoCreateInstance(&clsid, None, CLSCTX_LOCAL_SERVER) };
     assert_eq!(code(&r), E_NOINTERFACE);
     // A GUID nobody defines.
     let unknown = GUID::from_u128(0x0badc0de_0000_4000_8000_000000000001);
@@ -114,7 +159,11 @@ fn create_instance_for_an_interface_the_server_lacks_is_e_nointerface() {
 #[test]
 fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
     let _com = ComThread::mta().unwrap();
-    let first = Server::connect(PROGID).unwrap().status().unwrap().start_time;
+    let first = Server::connect(PROGID)
+        .unwrap()
+        .status()
+        .unwrap()
+        .start_time;
     // Every server object of this test binary is released by now (other tests ran
     // sequentially and dropped theirs), so the process exits; a new one starts later.
     // Each new client restarts the server's exit linger, so wait longer than it between tries.
@@ -126,7 +175,10 @@ fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
         if s.start_time > first {
             break;
         }
-        assert!(std::time::Instant::now() < deadline, "the server process did not exit after its last client left");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server process did not exit after its last client left"
+        );
     }
 }
 
@@ -151,7 +203,11 @@ fn the_server_logs_its_start_to_the_days_log_file_in_the_install_folder() {
         if text.contains("ServerCTOPC starting") && text.contains("configuration") {
             break;
         }
-        assert!(std::time::Instant::now() < deadline, "no start lines in {}: {text}", log.display());
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no start lines in {}: {text}",
+            log.display()
+        );
         std::thread::sleep(Duration::from_millis(200));
     }
 }

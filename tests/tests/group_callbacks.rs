@@ -10,11 +10,15 @@ use ctopc_core::Value;
 use e2e_tests::{assert_alive, code, connect, connections, interfaces::*, next_connection, PROGID};
 use group_common::*;
 use std::time::{Duration, Instant};
-use windows::core::{Interface, IUnknown};
+use windows::core::{IUnknown, Interface};
 use windows::Win32::Foundation::{S_FALSE, S_OK};
 use windows::Win32::System::Com::IConnectionPointContainer;
-use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
-use windows::Win32::UI::WindowsAndMessaging::{DispatchMessageW, PeekMessageW, TranslateMessage, MSG, PM_REMOVE};
+use windows::Win32::System::Ole::{
+    CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION,
+};
+use windows::Win32::UI::WindowsAndMessaging::{
+    DispatchMessageW, PeekMessageW, TranslateMessage, MSG, PM_REMOVE,
+};
 
 const GROUP_CLIENT: u32 = 0x600D;
 
@@ -26,14 +30,25 @@ fn has_item(c: &Change, client: u32) -> bool {
 fn active_items_of_an_active_group_arrive_in_on_data_change() {
     let (_com, server) = connect();
     let g = add_group(&server, "cb-data", true, GROUP_CLIENT);
-    add_ok(&g, &[item("KW_A000", 1), item("KW_A001", 2), inactive("KW_A003", 3)]);
+    add_ok(
+        &g,
+        &[
+            item("KW_A000", 1),
+            item("KW_A001", 2),
+            inactive("KW_A003", 3),
+        ],
+    );
     let log = Log::new();
     let sink = Sink::create(&log);
     let cookie = advise(&g, &sink).unwrap();
     assert_ne!(cookie, 0);
 
     let first = log.wait(Duration::from_secs(5), 1, |c| has_item(c, 1));
-    assert!(!first.is_empty(), "no OnDataChange within 5 s: {:?}", log.changes());
+    assert!(
+        !first.is_empty(),
+        "no OnDataChange within 5 s: {:?}",
+        log.changes()
+    );
     let c = &first[0];
     assert_eq!(c.group, GROUP_CLIENT, "hGroup is the client's group handle");
     assert_eq!(c.transaction, 0);
@@ -44,7 +59,12 @@ fn active_items_of_an_active_group_arrive_in_on_data_change() {
         Value::R4(level) => assert!((0.0..=8.0).contains(level), "{level}"),
         other => panic!("KW_A000 is R4: {other:?}"),
     }
-    assert!(log.changes().iter().all(|c| c.items.iter().all(|i| i.0 != 3)), "inactive items are not reported");
+    assert!(
+        log.changes()
+            .iter()
+            .all(|c| c.items.iter().all(|i| i.0 != 3)),
+        "inactive items are not reported"
+    );
     // The simulated level changes: later callbacks report KW_A000 again, with a new value.
     let more = log.wait(Duration::from_secs(20), 2, |c| has_item(c, 1));
     assert!(more.len() >= 2, "KW_A000 did not change within 20 s");
@@ -62,13 +82,27 @@ fn keep_alive_callbacks_arrive_when_nothing_changes() {
     let log = Log::new();
     let cookie = advise(&g, &Sink::create(&log)).unwrap();
     let initial = log.wait(Duration::from_secs(5), 1, |c| has_item(c, 5));
-    assert_eq!(initial.len(), 1, "the setpoint's first value: {:?}", log.changes());
-    let keep_alives = log.wait(Duration::from_secs(6), 3, |c| c.transaction == 0 && c.items.is_empty());
-    assert!(keep_alives.len() >= 3, "keep-alive callbacks (no items): {:?}", log.changes());
+    assert_eq!(
+        initial.len(),
+        1,
+        "the setpoint's first value: {:?}",
+        log.changes()
+    );
+    let keep_alives = log.wait(Duration::from_secs(6), 3, |c| {
+        c.transaction == 0 && c.items.is_empty()
+    });
+    assert!(
+        keep_alives.len() >= 3,
+        "keep-alive callbacks (no items): {:?}",
+        log.changes()
+    );
     assert!(keep_alives.iter().all(|c| c.group == GROUP_CLIENT));
     // About one per second.
     let span = keep_alives[2].at.duration_since(keep_alives[0].at);
-    assert!(span >= Duration::from_millis(1500) && span <= Duration::from_millis(3500), "{span:?}");
+    assert!(
+        span >= Duration::from_millis(1500) && span <= Duration::from_millis(3500),
+        "{span:?}"
+    );
     // The constant setpoint is not reported again.
     assert_eq!(log.changes().iter().filter(|c| has_item(c, 5)).count(), 1);
     unadvise(&g, cookie).unwrap();
@@ -98,8 +132,21 @@ fn an_inactive_group_calls_back_only_once_activated() {
     let log = Log::new();
     let cookie = advise(&g, &Sink::create(&log)).unwrap();
     std::thread::sleep(Duration::from_secs(3));
-    assert_eq!(log.count(), 0, "an inactive group sends nothing: {:?}", log.changes());
-    assert_eq!(g.set_state(&GroupStateChange { active: Some(true), ..Default::default() }).unwrap().0, S_OK);
+    assert_eq!(
+        log.count(),
+        0,
+        "an inactive group sends nothing: {:?}",
+        log.changes()
+    );
+    assert_eq!(
+        g.set_state(&GroupStateChange {
+            active: Some(true),
+            ..Default::default()
+        })
+        .unwrap()
+        .0,
+        S_OK
+    );
     let got = log.wait(Duration::from_secs(5), 1, |c| has_item(c, 1));
     assert!(!got.is_empty(), "no OnDataChange after activation");
     unadvise(&g, cookie).unwrap();
@@ -134,8 +181,14 @@ fn one_connection_per_group_and_connection_point_rules() {
     let log = Log::new();
     let cookie = advise(&g, &Sink::create(&log)).unwrap();
     let other = Log::new();
-    assert_eq!(code(&advise(&g, &Sink::create(&other))), CONNECT_E_ADVISELIMIT);
-    assert_eq!(code(&unadvise(&g, cookie.wrapping_add(1000))), CONNECT_E_NOCONNECTION);
+    assert_eq!(
+        code(&advise(&g, &Sink::create(&other))),
+        CONNECT_E_ADVISELIMIT
+    );
+    assert_eq!(
+        code(&unadvise(&g, cookie.wrapping_add(1000))),
+        CONNECT_E_NOCONNECTION
+    );
     unadvise(&g, cookie).unwrap();
     let cookie2 = advise(&g, &Sink::create(&other)).expect("advise again after Unadvise");
     assert_ne!(cookie2, 0);
@@ -153,7 +206,11 @@ fn one_connection_per_group_and_connection_point_rules() {
     let listed = connections(&cp);
     assert_eq!(listed.len(), 1, "one connection");
     let sink_identity: IUnknown = sink.cast().unwrap();
-    assert_eq!((listed[0].0, listed[0].1.as_raw()), (cookie3, sink_identity.as_raw()), "its cookie and sink");
+    assert_eq!(
+        (listed[0].0, listed[0].1.as_raw()),
+        (cookie3, sink_identity.as_raw()),
+        "its cookie and sink"
+    );
     unadvise(&g, cookie3).unwrap();
     assert!(connections(&cp).is_empty(), "no connection after Unadvise");
     // The enumerator's Skip, Reset and Clone.
@@ -173,9 +230,15 @@ fn one_connection_per_group_and_connection_point_rules() {
 
     // The point's interface and container; no point for other interfaces.
     // SAFETY: plain calls on valid interfaces.
-    assert_eq!(unsafe { cp.GetConnectionInterface() }.unwrap(), IOPCDataCallback::IID);
+    assert_eq!(
+        unsafe { cp.GetConnectionInterface() }.unwrap(),
+        IOPCDataCallback::IID
+    );
     // SAFETY: as above.
-    let container: IUnknown = unsafe { cp.GetConnectionPointContainer() }.unwrap().cast().unwrap();
+    let container: IUnknown = unsafe { cp.GetConnectionPointContainer() }
+        .unwrap()
+        .cast()
+        .unwrap();
     let group_identity: IUnknown = g.unknown.cast().unwrap();
     assert_eq!(container.as_raw(), group_identity.as_raw());
     let cpc: IConnectionPointContainer = g.unknown.cast().unwrap();
@@ -220,7 +283,12 @@ fn callbacks_reach_an_sta_client_that_pumps_messages() {
         changes
     });
     let changes = t.join().expect("STA thread");
-    assert!(changes.iter().any(|c| has_item(c, 1) && c.group == GROUP_CLIENT), "no callback in the STA: {changes:?}");
+    assert!(
+        changes
+            .iter()
+            .any(|c| has_item(c, 1) && c.group == GROUP_CLIENT),
+        "no callback in the STA: {changes:?}"
+    );
 }
 
 #[test]
@@ -236,7 +304,11 @@ fn releasing_an_advised_group_is_clean() {
     std::thread::sleep(Duration::from_millis(1500));
     let n = log.count();
     std::thread::sleep(Duration::from_secs(2));
-    assert_eq!(log.count(), n, "callbacks after the group object was released");
+    assert_eq!(
+        log.count(),
+        n,
+        "callbacks after the group object was released"
+    );
     assert_alive(&server);
 }
 
@@ -265,13 +337,23 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     std::thread::sleep(Duration::from_secs(10));
     let (slow_n, quick_n) = (slow.count(), quick.count());
     // The quick client is not held up by the slow one: about ten callbacks.
-    assert!(quick_n >= 7, "the quick client got {quick_n} callbacks in 10 s");
+    assert!(
+        quick_n >= 7,
+        "the quick client got {quick_n} callbacks in 10 s"
+    );
     // The slow one gets a callback as soon as it returns from the previous one: about four.
-    assert!((2..=5).contains(&slow_n), "the slow client got {slow_n} callbacks in 10 s: {:?}", slow.changes());
+    assert!(
+        (2..=5).contains(&slow_n),
+        "the slow client got {slow_n} callbacks in 10 s: {:?}",
+        slow.changes()
+    );
     let held = slow.changes();
     for pair in held.windows(2) {
         let gap = pair[1].at.duration_since(pair[0].at);
-        assert!(gap >= Duration::from_millis(2900), "a callback came while the previous one was held: {gap:?}");
+        assert!(
+            gap >= Duration::from_millis(2900),
+            "a callback came while the previous one was held: {gap:?}"
+        );
     }
     // When it speeds up, no backlog of the missed updates arrives: the callbacks pending
     // for the group (at most two: one prepared while another travels, and the update
@@ -279,9 +361,17 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     slow.release();
     std::thread::sleep(Duration::from_millis(700));
     let burst = slow.count() - slow_n;
-    assert!(burst <= 3, "{burst} callbacks within 0.7 s of the client's return (a backlog): {:?}", &slow.changes()[slow_n..]);
+    assert!(
+        burst <= 3,
+        "{burst} callbacks within 0.7 s of the client's return (a backlog): {:?}",
+        &slow.changes()[slow_n..]
+    );
     let later = slow.wait(Duration::from_secs(5), slow_n + burst + 2, |_| true);
-    assert!(later.len() >= slow_n + burst + 2, "callbacks resume at the update rate: {:?}", start.elapsed());
+    assert!(
+        later.len() >= slow_n + burst + 2,
+        "callbacks resume at the update rate: {:?}",
+        start.elapsed()
+    );
     for (g, cookie) in &groups {
         unadvise(g, *cookie).unwrap();
     }

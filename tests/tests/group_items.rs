@@ -10,7 +10,7 @@ use ctopc_core::Value;
 use e2e_tests::{assert_alive, connect, interfaces::*};
 use group_common::*;
 use std::time::Instant;
-use windows::core::{Interface, IUnknown, HRESULT};
+use windows::core::{IUnknown, Interface, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, S_FALSE, S_OK};
 
 const OPC_NOENUM: i32 = 0;
@@ -20,21 +20,38 @@ const OPC_ANALOG: i32 = 1;
 fn add_items_returns_handles_canonical_types_and_rights() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-add", true, 1);
-    let (hr, out) = g.add_items(&[item("KW_A000", 10), item("KW_A110", 11), item_typed("KW_A000", 12, VT_BSTR)]).unwrap();
+    let (hr, out) = g
+        .add_items(&[
+            item("KW_A000", 10),
+            item("KW_A110", 11),
+            item_typed("KW_A000", 12, VT_BSTR),
+        ])
+        .unwrap();
     assert_eq!(hr, S_OK, "{out:x?}");
     assert_eq!(out.len(), 3);
     for o in &out {
         assert_eq!(o.error, S_OK);
         assert_ne!(o.server_handle, 0);
-        assert_eq!(o.canonical_type, VT_R4, "canonical type is the source's, not the requested one");
+        assert_eq!(
+            o.canonical_type, VT_R4,
+            "canonical type is the source's, not the requested one"
+        );
         assert_eq!(o.blob_size, 0);
     }
     assert_eq!(out[0].access_rights, OPC_READABLE, "KW_A000 is read-only");
-    assert_eq!(out[1].access_rights, OPC_READABLE | OPC_WRITEABLE, "KW_A110 is writable");
+    assert_eq!(
+        out[1].access_rights,
+        OPC_READABLE | OPC_WRITEABLE,
+        "KW_A110 is writable"
+    );
     let mut handles: Vec<u32> = out.iter().map(|o| o.server_handle).collect();
     handles.sort();
     handles.dedup();
-    assert_eq!(handles.len(), 3, "the same item ID twice gets two server handles");
+    assert_eq!(
+        handles.len(),
+        3,
+        "the same item ID twice gets two server handles"
+    );
     assert_alive(&server);
 }
 
@@ -56,16 +73,29 @@ fn add_items_reports_each_failure_and_s_false() {
     let errors: Vec<HRESULT> = out.iter().map(|o| o.error).collect();
     assert_eq!(
         errors,
-        vec![S_OK, OPC_E_UNKNOWNITEMID, OPC_E_INVALIDITEMID, OPC_E_UNKNOWNPATH, OPC_E_BADTYPE, OPC_E_INVALIDITEMID, S_OK]
+        vec![
+            S_OK,
+            OPC_E_UNKNOWNITEMID,
+            OPC_E_INVALIDITEMID,
+            OPC_E_UNKNOWNPATH,
+            OPC_E_BADTYPE,
+            OPC_E_INVALIDITEMID,
+            S_OK
+        ]
     );
     assert!(out[0].server_handle != 0 && out[6].server_handle != 0);
     // Only the two good items are in the group.
     let attrs = g.item_attributes().unwrap();
     assert_eq!(attrs.len(), 2, "{attrs:?}");
     // Every item failing is still S_FALSE (not a call failure).
-    let (hr, out) = g.add_items(&[item("KW_A999", 1), item("asmen", 2)]).unwrap();
+    let (hr, out) = g
+        .add_items(&[item("KW_A999", 1), item("asmen", 2)])
+        .unwrap();
     assert_eq!(hr, S_FALSE);
-    assert!(out.iter().all(|o| o.error.is_err() && o.server_handle == 0), "{out:x?}");
+    assert!(
+        out.iter().all(|o| o.error.is_err() && o.server_handle == 0),
+        "{out:x?}"
+    );
     assert_alive(&server);
 }
 
@@ -81,13 +111,22 @@ fn add_items_rejects_count_zero_and_null_pointers() {
     assert_eq!(hr, E_INVALIDARG);
     assert!(results.is_null() && errors.is_null());
     // SAFETY: deliberately NULL [in] and [out] ref pointers: the proxy or the server rejects them.
-    let hr = unsafe { g.item_mgt.AddItems(1, std::ptr::null(), &mut results, &mut errors) };
+    let hr = unsafe {
+        g.item_mgt
+            .AddItems(1, std::ptr::null(), &mut results, &mut errors)
+    };
     assert!(hr == RPC_X_NULL_REF_POINTER || hr == E_INVALIDARG, "{hr:?}");
     // SAFETY: as above.
-    let hr = unsafe { g.item_mgt.AddItems(1, &def, std::ptr::null_mut(), &mut errors) };
+    let hr = unsafe {
+        g.item_mgt
+            .AddItems(1, &def, std::ptr::null_mut(), &mut errors)
+    };
     assert!(hr == RPC_X_NULL_REF_POINTER || hr == E_INVALIDARG, "{hr:?}");
     // SAFETY: as above.
-    let hr = unsafe { g.item_mgt.ValidateItems(0, &def, false.into(), &mut results, &mut errors) };
+    let hr = unsafe {
+        g.item_mgt
+            .ValidateItems(0, &def, false.into(), &mut results, &mut errors)
+    };
     assert_eq!(hr, E_INVALIDARG);
     // A NULL item ID inside an OPCITEMDEF (a [unique] embedded pointer) is a per-item error.
     // SAFETY: valid pointers; the definition's strings are NULL.
@@ -104,11 +143,19 @@ fn validate_items_checks_without_adding() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-validate", true, 1);
     let (hr, out) = g
-        .validate_items(&[item("KW_A000", 1), item("KW_A110", 2), item("KW_A999", 3), item_typed("KW_A110", 4, VT_DISPATCH)])
+        .validate_items(&[
+            item("KW_A000", 1),
+            item("KW_A110", 2),
+            item("KW_A999", 3),
+            item_typed("KW_A110", 4, VT_DISPATCH),
+        ])
         .unwrap();
     assert_eq!(hr, S_FALSE);
     assert_eq!(out[0].error, S_OK);
-    assert_eq!(out[0].server_handle, 0, "ValidateItems returns no server handle");
+    assert_eq!(
+        out[0].server_handle, 0,
+        "ValidateItems returns no server handle"
+    );
     assert_eq!(out[0].canonical_type, VT_R4);
     assert_eq!(out[0].access_rights, OPC_READABLE);
     assert_eq!(out[0].blob_size, 0);
@@ -127,7 +174,10 @@ fn validate_items_checks_without_adding() {
 fn remove_items_and_invalid_handles() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-remove", true, 1);
-    let h = add_ok(&g, &[item("KW_A000", 1), item("KW_A001", 2), item("KW_A110", 3)]);
+    let h = add_ok(
+        &g,
+        &[item("KW_A000", 1), item("KW_A001", 2), item("KW_A110", 3)],
+    );
     let (hr, errs) = g.remove_items(&[h[0], 0xDEAD_BEEF, h[2]]).unwrap();
     assert_eq!(hr, S_FALSE);
     assert_eq!(errs, vec![S_OK, OPC_E_INVALIDHANDLE, S_OK]);
@@ -135,7 +185,10 @@ fn remove_items_and_invalid_handles() {
     let (hr, errs) = g.remove_items(&[h[0]]).unwrap();
     assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_INVALIDHANDLE]));
     let attrs = g.item_attributes().unwrap();
-    assert_eq!(attrs.iter().map(|a| a.server_handle).collect::<Vec<_>>(), vec![h[1]]);
+    assert_eq!(
+        attrs.iter().map(|a| a.server_handle).collect::<Vec<_>>(),
+        vec![h[1]]
+    );
     let (hr, errs) = g.remove_items(&[h[1]]).unwrap();
     assert_eq!((hr, errs), (S_OK, vec![S_OK]));
     let mut errors: *mut HRESULT = std::ptr::null_mut();
@@ -157,8 +210,13 @@ fn set_active_state_client_handles_and_datatypes() {
     assert_eq!((hr, errs), (S_OK, vec![S_OK, S_OK]));
     let (hr, errs) = g.set_client_handles(&[(4242, 1)]).unwrap();
     assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_INVALIDHANDLE]));
-    let (hr, errs) = g.set_datatypes(&[(h[0], VT_BSTR), (h[1], VT_DISPATCH), (999, VT_R8)]).unwrap();
-    assert_eq!((hr, errs), (S_FALSE, vec![S_OK, OPC_E_BADTYPE, OPC_E_INVALIDHANDLE]));
+    let (hr, errs) = g
+        .set_datatypes(&[(h[0], VT_BSTR), (h[1], VT_DISPATCH), (999, VT_R8)])
+        .unwrap();
+    assert_eq!(
+        (hr, errs),
+        (S_FALSE, vec![S_OK, OPC_E_BADTYPE, OPC_E_INVALIDHANDLE])
+    );
 
     let attrs = g.item_attributes().unwrap();
     let a0 = attrs.iter().find(|a| a.server_handle == h[0]).unwrap();
@@ -166,19 +224,43 @@ fn set_active_state_client_handles_and_datatypes() {
     assert!(!a0.active && a1.active);
     assert_eq!((a0.client_handle, a1.client_handle), (100, 200));
     assert_eq!(a0.requested_type, VT_BSTR);
-    assert_eq!(a1.requested_type, VT_EMPTY, "a failed SetDatatypes changes nothing");
+    assert_eq!(
+        a1.requested_type, VT_EMPTY,
+        "a failed SetDatatypes changes nothing"
+    );
 
     // Count 0 and a NULL second array.
     let mut errors: *mut HRESULT = std::ptr::null_mut();
     // SAFETY: valid pointers, count 0.
-    assert_eq!(unsafe { g.item_mgt.SetActiveState(0, h.as_ptr(), true.into(), &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe {
+            g.item_mgt
+                .SetActiveState(0, h.as_ptr(), true.into(), &mut errors)
+        },
+        E_INVALIDARG
+    );
     // SAFETY: as above.
-    assert_eq!(unsafe { g.item_mgt.SetClientHandles(0, h.as_ptr(), h.as_ptr(), &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe {
+            g.item_mgt
+                .SetClientHandles(0, h.as_ptr(), h.as_ptr(), &mut errors)
+        },
+        E_INVALIDARG
+    );
     let types = [windows::Win32::System::Variant::VARENUM(VT_R8)];
     // SAFETY: as above.
-    assert_eq!(unsafe { g.item_mgt.SetDatatypes(0, h.as_ptr(), types.as_ptr(), &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe {
+            g.item_mgt
+                .SetDatatypes(0, h.as_ptr(), types.as_ptr(), &mut errors)
+        },
+        E_INVALIDARG
+    );
     // SAFETY: a deliberately NULL [in] array.
-    let hr = unsafe { g.item_mgt.SetClientHandles(1, h.as_ptr(), std::ptr::null(), &mut errors) };
+    let hr = unsafe {
+        g.item_mgt
+            .SetClientHandles(1, h.as_ptr(), std::ptr::null(), &mut errors)
+    };
     assert!(hr == RPC_X_NULL_REF_POINTER || hr == E_INVALIDARG, "{hr:?}");
     assert_alive(&server);
 }
@@ -187,7 +269,14 @@ fn set_active_state_client_handles_and_datatypes() {
 fn enumerator_lists_item_attributes_with_eu_info() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-enum", true, 1);
-    let h = add_ok(&g, &[item("KW_A000", 1), inactive("KW_A110", 2), item("KW_A000.FormatedCV", 3)]);
+    let h = add_ok(
+        &g,
+        &[
+            item("KW_A000", 1),
+            inactive("KW_A110", 2),
+            item("KW_A000.FormatedCV", 3),
+        ],
+    );
     let (hr, e) = g.item_enumerator().unwrap();
     assert_eq!(hr, S_OK);
     let (hr, first) = OpcGroup::next_attributes(&e, 2).unwrap();
@@ -253,7 +342,10 @@ fn enumerator_of_an_empty_group_is_s_false_and_other_iids_are_refused() {
     assert_eq!(hr, E_NOINTERFACE);
     assert!(unk.is_none());
     // SAFETY: as above.
-    let hr = unsafe { g.item_mgt.CreateEnumerator(&windows::Win32::System::Com::IEnumString::IID, &mut unk) };
+    let hr = unsafe {
+        g.item_mgt
+            .CreateEnumerator(&windows::Win32::System::Com::IEnumString::IID, &mut unk)
+    };
     assert_eq!(hr, E_NOINTERFACE);
     assert_alive(&server);
 }
@@ -263,7 +355,9 @@ fn add_and_remove_ten_thousand_items_in_one_call() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-10k", false, 1);
     let ids = ["KW_A000", "KW_A001", "KW_A002", "KW_A003", "KW_A110"];
-    let items: Vec<ItemDef> = (0..10_000u32).map(|i| item(ids[i as usize % ids.len()], i)).collect();
+    let items: Vec<ItemDef> = (0..10_000u32)
+        .map(|i| item(ids[i as usize % ids.len()], i))
+        .collect();
     // Warm up (first-call costs of the proxy and the namespace).
     let _ = g.validate_items(&items[..10]).unwrap();
     let t = Instant::now();
@@ -288,14 +382,38 @@ fn add_and_remove_ten_thousand_items_in_one_call() {
 fn item_deadband_set_get_clear() {
     let (_com, server) = connect();
     let g = add_group(&server, "items-deadband", true, 1);
-    let h = add_ok(&g, &[item("KW_A000", 1), item("KW_A000.FormatedCV", 2), item("KW_A110", 3)]);
+    let h = add_ok(
+        &g,
+        &[
+            item("KW_A000", 1),
+            item("KW_A000.FormatedCV", 2),
+            item("KW_A110", 3),
+        ],
+    );
     let (analog, text, other) = (h[0], h[1], h[2]);
 
     let (hr, v) = g.get_item_deadband(&[analog]).unwrap();
     assert_eq!((hr, v[0].1), (S_FALSE, OPC_E_DEADBANDNOTSET));
-    let (hr, errs) = g.set_item_deadband(&[(analog, 2.5), (text, 1.0), (other, 101.0), (31337, 1.0), (other, -1.0)]).unwrap();
+    let (hr, errs) = g
+        .set_item_deadband(&[
+            (analog, 2.5),
+            (text, 1.0),
+            (other, 101.0),
+            (31337, 1.0),
+            (other, -1.0),
+        ])
+        .unwrap();
     assert_eq!(hr, S_FALSE);
-    assert_eq!(errs, vec![S_OK, OPC_E_DEADBANDNOTSUPPORTED, E_INVALIDARG, OPC_E_INVALIDHANDLE, E_INVALIDARG]);
+    assert_eq!(
+        errs,
+        vec![
+            S_OK,
+            OPC_E_DEADBANDNOTSUPPORTED,
+            E_INVALIDARG,
+            OPC_E_INVALIDHANDLE,
+            E_INVALIDARG
+        ]
+    );
     let (hr, v) = g.get_item_deadband(&[analog, text, other, 31337]).unwrap();
     assert_eq!(hr, S_FALSE);
     assert_eq!(v[0], (2.5, S_OK));
@@ -305,7 +423,13 @@ fn item_deadband_set_get_clear() {
     let (hr, v) = g.get_item_deadband(&[analog]).unwrap();
     assert_eq!((hr, v), (S_OK, vec![(2.5, S_OK)]));
     let (hr, errs) = g.clear_item_deadband(&[analog, other, text]).unwrap();
-    assert_eq!((hr, errs), (S_FALSE, vec![S_OK, OPC_E_DEADBANDNOTSET, OPC_E_DEADBANDNOTSUPPORTED]));
+    assert_eq!(
+        (hr, errs),
+        (
+            S_FALSE,
+            vec![S_OK, OPC_E_DEADBANDNOTSET, OPC_E_DEADBANDNOTSUPPORTED]
+        )
+    );
     let (_, v) = g.get_item_deadband(&[analog]).unwrap();
     assert_eq!(v[0].1, OPC_E_DEADBANDNOTSET);
 
@@ -313,9 +437,15 @@ fn item_deadband_set_get_clear() {
     let mut errors: *mut HRESULT = std::ptr::null_mut();
     let db = [1.0f32];
     // SAFETY: valid pointers, count 0.
-    assert_eq!(unsafe { d.SetItemDeadband(0, h.as_ptr(), db.as_ptr(), &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe { d.SetItemDeadband(0, h.as_ptr(), db.as_ptr(), &mut errors) },
+        E_INVALIDARG
+    );
     // SAFETY: as above.
-    assert_eq!(unsafe { d.ClearItemDeadband(0, h.as_ptr(), &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe { d.ClearItemDeadband(0, h.as_ptr(), &mut errors) },
+        E_INVALIDARG
+    );
     assert_alive(&server);
 }
 
@@ -328,10 +458,14 @@ fn item_sampling_rate_and_buffering() {
     let (hr, v) = g.get_item_sampling_rate(&[h[0]]).unwrap();
     assert_eq!((hr, v[0].1), (S_FALSE, OPC_E_RATENOTSET));
     // Below the 1 s minimum: raised, OPC_S_UNSUPPORTEDRATE (a success: no S_FALSE).
-    let (hr, v) = g.set_item_sampling_rate(&[(h[0], 200), (h[1], 5000)]).unwrap();
+    let (hr, v) = g
+        .set_item_sampling_rate(&[(h[0], 200), (h[1], 5000)])
+        .unwrap();
     assert_eq!(hr, S_OK);
     assert_eq!(v, vec![(1000, OPC_S_UNSUPPORTEDRATE), (5000, S_OK)]);
-    let (hr, v) = g.set_item_sampling_rate(&[(h[0], 2000), (999_999, 2000)]).unwrap();
+    let (hr, v) = g
+        .set_item_sampling_rate(&[(h[0], 2000), (999_999, 2000)])
+        .unwrap();
     assert_eq!(hr, S_FALSE);
     assert_eq!(v[0], (2000, S_OK));
     assert_eq!(v[1].1, OPC_E_INVALIDHANDLE);
@@ -340,11 +474,19 @@ fn item_sampling_rate_and_buffering() {
     let (hr, errs) = g.clear_item_sampling_rate(&[h[0]]).unwrap();
     assert_eq!((hr, errs), (S_OK, vec![S_OK]));
     let (hr, errs) = g.clear_item_sampling_rate(&[h[0], 4]).unwrap();
-    assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE]));
+    assert_eq!(
+        (hr, errs),
+        (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
+    );
 
     // Buffering is not implemented: enabling is OPC_E_NOBUFFERING, disabling succeeds.
-    let (hr, errs) = g.set_item_buffer_enable(&[(h[0], true), (h[1], false), (12345, false)]).unwrap();
-    assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_NOBUFFERING, S_OK, OPC_E_INVALIDHANDLE]));
+    let (hr, errs) = g
+        .set_item_buffer_enable(&[(h[0], true), (h[1], false), (12345, false)])
+        .unwrap();
+    assert_eq!(
+        (hr, errs),
+        (S_FALSE, vec![OPC_E_NOBUFFERING, S_OK, OPC_E_INVALIDHANDLE])
+    );
     let (hr, v) = g.get_item_buffer_enable(&[h[0], h[1]]).unwrap();
     assert_eq!((hr, v), (S_OK, vec![(false, S_OK), (false, S_OK)]));
 
@@ -352,7 +494,10 @@ fn item_sampling_rate_and_buffering() {
     let mut errors: *mut HRESULT = std::ptr::null_mut();
     let mut rates: *mut u32 = std::ptr::null_mut();
     // SAFETY: valid pointers, count 0.
-    assert_eq!(unsafe { s.GetItemSamplingRate(0, h.as_ptr(), &mut rates, &mut errors) }, E_INVALIDARG);
+    assert_eq!(
+        unsafe { s.GetItemSamplingRate(0, h.as_ptr(), &mut rates, &mut errors) },
+        E_INVALIDARG
+    );
     assert!(rates.is_null() && errors.is_null());
     assert_alive(&server);
 }

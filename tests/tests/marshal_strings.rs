@@ -23,17 +23,35 @@
 /// it back through the proxy.
 const IDL_STRING_OUTPUTS: &[(&str, &[&str])] = &[
     // opccomn.idl
-    (COMMON_GET_ERROR_STRING, &["iopccommon_geterrorstring_string_arrives_intact"]),
-    (LIST_PROGID, &["iopcserverlist_getclassdetails_progid_arrives_intact"]),
-    (LIST_USER_TYPE, &["iopcserverlist_getclassdetails_user_type_arrives_intact"]),
-    (LIST2_PROGID, &["iopcserverlist2_getclassdetails_progid_arrives_intact"]),
-    (LIST2_USER_TYPE, &["iopcserverlist2_getclassdetails_user_type_arrives_intact"]),
+    (
+        COMMON_GET_ERROR_STRING,
+        &["iopccommon_geterrorstring_string_arrives_intact"],
+    ),
+    (
+        LIST_PROGID,
+        &["iopcserverlist_getclassdetails_progid_arrives_intact"],
+    ),
+    (
+        LIST_USER_TYPE,
+        &["iopcserverlist_getclassdetails_user_type_arrives_intact"],
+    ),
+    (
+        LIST2_PROGID,
+        &["iopcserverlist2_getclassdetails_progid_arrives_intact"],
+    ),
+    (
+        LIST2_USER_TYPE,
+        &["iopcserverlist2_getclassdetails_user_type_arrives_intact"],
+    ),
     (
         LIST2_VER_IND_PROGID,
         &["iopcserverlist2_getclassdetails_ver_ind_progid_arrives_intact"],
     ),
     // opcda.idl
-    (SERVER_GET_ERROR_STRING, &["iopcserver_geterrorstring_string_arrives_intact"]),
+    (
+        SERVER_GET_ERROR_STRING,
+        &["iopcserver_geterrorstring_string_arrives_intact"],
+    ),
     (
         SERVER_STATUS_VENDOR_INFO,
         &["iopcserver_getstatus_vendor_info_arrives_intact"],
@@ -49,8 +67,14 @@ const IDL_STRING_OUTPUTS: &[(&str, &[&str])] = &[
             "iopcgroupstatemgt2_getstate_name_arrives_intact",
         ],
     ),
-    (ITEM_ACCESS_PATH, &["ienumopcitemattributes_next_access_path_arrives_intact"]),
-    (ITEM_ITEM_ID, &["ienumopcitemattributes_next_item_id_arrives_intact"]),
+    (
+        ITEM_ACCESS_PATH,
+        &["ienumopcitemattributes_next_access_path_arrives_intact"],
+    ),
+    (
+        ITEM_ITEM_ID,
+        &["ienumopcitemattributes_next_item_id_arrives_intact"],
+    ),
     (
         PROPS_DESCRIPTIONS,
         &["iopcitemproperties_queryavailableproperties_descriptions_arrive_intact"],
@@ -74,8 +98,14 @@ const IDL_STRING_OUTPUTS: &[(&str, &[&str])] = &[
             "iopcbrowse_browse_continuation_point_returns_to_the_server_intact",
         ],
     ),
-    (BROWSE_NAME, &["iopcbrowse_browse_element_name_arrives_intact"]),
-    (BROWSE_ITEM_ID, &["iopcbrowse_browse_element_item_id_arrives_intact"]),
+    (
+        BROWSE_NAME,
+        &["iopcbrowse_browse_element_name_arrives_intact"],
+    ),
+    (
+        BROWSE_ITEM_ID,
+        &["iopcbrowse_browse_element_item_id_arrives_intact"],
+    ),
     (
         BROWSE_PROPERTY_ITEM_ID,
         &["iopcbrowse_browse_element_property_item_id_arrives_intact"],
@@ -118,16 +148,23 @@ const ITEM_ACCESS_PATH: &str = "IEnumOPCItemAttributes::Next(ppItemArray).szAcce
 const ITEM_ITEM_ID: &str = "IEnumOPCItemAttributes::Next(ppItemArray).szItemID";
 const PROPS_DESCRIPTIONS: &str = "IOPCItemProperties::QueryAvailableProperties(ppDescriptions)";
 const PROPS_NEW_ITEM_IDS: &str = "IOPCItemProperties::LookupItemIDs(ppszNewItemIDs)";
-const GET_PROPERTIES_ITEM_ID: &str = "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szItemID";
-const GET_PROPERTIES_DESCRIPTION: &str = "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szDescription";
+const GET_PROPERTIES_ITEM_ID: &str =
+    "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szItemID";
+const GET_PROPERTIES_DESCRIPTION: &str =
+    "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szDescription";
 const BROWSE_CONTINUATION_POINT: &str = "IOPCBrowse::Browse(pszContinuationPoint)";
 const BROWSE_NAME: &str = "IOPCBrowse::Browse(ppBrowseElements).szName";
 const BROWSE_ITEM_ID: &str = "IOPCBrowse::Browse(ppBrowseElements).szItemID";
-const BROWSE_PROPERTY_ITEM_ID: &str = "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szItemID";
-const BROWSE_PROPERTY_DESCRIPTION: &str = "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szDescription";
-const SERVER_GROUP_NAMES: &str = "IOPCServer::CreateGroupEnumerator(ppUnk)->IEnumString::Next(rgelt)";
-const BSAS_ITEM_IDS: &str = "IOPCBrowseServerAddressSpace::BrowseOPCItemIDs(ppIEnumString)->IEnumString::Next(rgelt)";
-const BSAS_ACCESS_PATHS: &str = "IOPCBrowseServerAddressSpace::BrowseAccessPaths(ppIEnumString)->IEnumString::Next(rgelt)";
+const BROWSE_PROPERTY_ITEM_ID: &str =
+    "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szItemID";
+const BROWSE_PROPERTY_DESCRIPTION: &str =
+    "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szDescription";
+const SERVER_GROUP_NAMES: &str =
+    "IOPCServer::CreateGroupEnumerator(ppUnk)->IEnumString::Next(rgelt)";
+const BSAS_ITEM_IDS: &str =
+    "IOPCBrowseServerAddressSpace::BrowseOPCItemIDs(ppIEnumString)->IEnumString::Next(rgelt)";
+const BSAS_ACCESS_PATHS: &str =
+    "IOPCBrowseServerAddressSpace::BrowseAccessPaths(ppIEnumString)->IEnumString::Next(rgelt)";
 
 /// What the probe returns in the string named `param` (stated here independently of
 /// `ctopc_com::probe::text`, so that the test pins the exact text).
@@ -153,8 +190,15 @@ fn expected_texts_contain_polish_diacritics_and_a_surrogate_pair() {
         "{t}"
     );
     let units: Vec<u16> = t.encode_utf16().collect();
-    assert!(units.windows(2).any(|w| w == [0xD83C, 0xDFED]), "U+1F3ED as a surrogate pair");
-    assert_eq!(t.chars().count() + 1, units.len(), "exactly one character outside the BMP");
+    assert!(
+        units.windows(2).any(|w| w == [0xD83C, 0xDFED]),
+        "U+1F3ED as a surrogate pair"
+    );
+    assert_eq!(
+        t.chars().count() + 1,
+        units.len(),
+        "exactly one character outside the BMP"
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -167,7 +211,15 @@ mod idl {
     use std::collections::{BTreeMap, BTreeSet};
 
     /// Pointer-to-string typedefs (a parameter or member of one of these types is a string).
-    const STRING_TYPES: &[&str] = &["LPWSTR", "LPCWSTR", "LPOLESTR", "LPCOLESTR", "LPSTR", "LPCSTR", "BSTR"];
+    const STRING_TYPES: &[&str] = &[
+        "LPWSTR",
+        "LPCWSTR",
+        "LPOLESTR",
+        "LPCOLESTR",
+        "LPSTR",
+        "LPCSTR",
+        "BSTR",
+    ];
 
     /// A declaration `[attrs] TYPE *...* name`.
     #[derive(Debug)]
@@ -271,7 +323,8 @@ mod idl {
     fn find_words<'a>(s: &'a str, word: &'a str) -> impl Iterator<Item = usize> + 'a {
         let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
         s.match_indices(word).map(|(i, _)| i).filter(move |&i| {
-            !s[..i].chars().next_back().is_some_and(ident) && !s[i + word.len()..].chars().next().is_some_and(ident)
+            !s[..i].chars().next_back().is_some_and(ident)
+                && !s[i + word.len()..].chars().next().is_some_and(ident)
         })
     }
 
@@ -318,19 +371,33 @@ mod idl {
             if text[at + "struct".len()..open].contains(';') {
                 continue; // a forward declaration or a `struct X*` member
             }
-            let Some(close) = matching(text, open) else { continue };
-            let Some(semi) = text[close..].find(';') else { continue };
-            let Some(name) = idents(&text[close..close + semi]).last().map(|s| s.to_string()) else {
+            let Some(close) = matching(text, open) else {
                 continue;
             };
-            let members = text[open + 1..close - 1].split(';').filter_map(parse_decl).collect();
+            let Some(semi) = text[close..].find(';') else {
+                continue;
+            };
+            let Some(name) = idents(&text[close..close + semi])
+                .last()
+                .map(|s| s.to_string())
+            else {
+                continue;
+            };
+            let members = text[open + 1..close - 1]
+                .split(';')
+                .filter_map(parse_decl)
+                .collect();
             out.insert(name, members);
         }
         out
     }
 
     /// The string paths inside structure `ty` (`member` or `member.inner...`).
-    fn string_members(structs: &BTreeMap<String, Vec<Decl>>, ty: &str, depth: usize) -> Vec<String> {
+    fn string_members(
+        structs: &BTreeMap<String, Vec<Decl>>,
+        ty: &str,
+        depth: usize,
+    ) -> Vec<String> {
         let Some(members) = structs.get(ty).filter(|_| depth < 8) else {
             return Vec::new();
         };
@@ -351,7 +418,11 @@ mod idl {
 
     /// Every string output of every interface method declared in `sources`.
     pub fn string_outputs(sources: &[&str]) -> BTreeSet<String> {
-        let text: String = sources.iter().map(|s| strip(s)).collect::<Vec<_>>().join("\n");
+        let text: String = sources
+            .iter()
+            .map(|s| strip(s))
+            .collect::<Vec<_>>()
+            .join("\n");
         let structs = structs(&text);
         let mut out = BTreeSet::new();
         for at in find_words(&text, "interface") {
@@ -359,11 +430,15 @@ mod idl {
             let Some(name) = idents(after).first().map(|s| s.to_string()) else {
                 continue;
             };
-            let Some(open) = after.find(['{', ';']) else { continue };
+            let Some(open) = after.find(['{', ';']) else {
+                continue;
+            };
             if after.as_bytes()[open] == b';' {
                 continue; // forward declaration
             }
-            let Some(close) = matching(after, open) else { continue };
+            let Some(close) = matching(after, open) else {
+                continue;
+            };
             for decl in split_top(&after[open + 1..close - 1], ';') {
                 let decl = decl.trim();
                 if decl.is_empty() || decl.starts_with("typedef") || decl.starts_with("const") {
@@ -375,7 +450,10 @@ mod idl {
                 let Some(method) = idents(&decl[..lp]).last().map(|s| s.to_string()) else {
                     continue;
                 };
-                for p in split_top(&decl[lp + 1..rp], ',').into_iter().filter_map(parse_decl) {
+                for p in split_top(&decl[lp + 1..rp], ',')
+                    .into_iter()
+                    .filter_map(parse_decl)
+                {
                     if !p.attrs.iter().any(|a| a == "out") {
                         continue;
                     }
@@ -383,7 +461,11 @@ mod idl {
                     if p.is_string() {
                         out.insert(at);
                     } else {
-                        out.extend(string_members(&structs, &p.base, 0).into_iter().map(|m| format!("{at}.{m}")));
+                        out.extend(
+                            string_members(&structs, &p.base, 0)
+                                .into_iter()
+                                .map(|m| format!("{at}.{m}")),
+                        );
                     }
                 }
             }
@@ -395,7 +477,10 @@ mod idl {
 #[test]
 fn table_lists_every_string_output_declared_in_idl() {
     use std::collections::BTreeSet;
-    let declared = idl::string_outputs(&[include_str!("../../idl/opccomn.idl"), include_str!("../../idl/opcda.idl")]);
+    let declared = idl::string_outputs(&[
+        include_str!("../../idl/opccomn.idl"),
+        include_str!("../../idl/opcda.idl"),
+    ]);
     // The reader itself must see the well-known ones, else the comparison proves nothing.
     for known in [
         COMMON_GET_ERROR_STRING,
@@ -403,10 +488,20 @@ fn table_lists_every_string_output_declared_in_idl() {
         BROWSE_CONTINUATION_POINT,
         BROWSE_PROPERTY_DESCRIPTION,
     ] {
-        assert!(declared.contains(known), "the IDL reader missed {known}: {declared:#?}");
+        assert!(
+            declared.contains(known),
+            "the IDL reader missed {known}: {declared:#?}"
+        );
     }
-    let listed: BTreeSet<String> = IDL_STRING_OUTPUTS.iter().map(|(p, _)| p.to_string()).collect();
-    assert_eq!(listed.len(), IDL_STRING_OUTPUTS.len(), "a row is listed twice");
+    let listed: BTreeSet<String> = IDL_STRING_OUTPUTS
+        .iter()
+        .map(|(p, _)| p.to_string())
+        .collect();
+    assert_eq!(
+        listed.len(),
+        IDL_STRING_OUTPUTS.len(),
+        "a row is listed twice"
+    );
     let missing: Vec<_> = declared.difference(&listed).collect();
     let stale: Vec<_> = listed.difference(&declared).collect();
     assert!(
@@ -473,7 +568,10 @@ mod through_the_proxy {
             }
             if Instant::now() > deadline {
                 let _ = child.kill();
-                return Err(format!("{} /RegServer did not finish within 60 s", exe.display()));
+                return Err(format!(
+                    "{} /RegServer did not finish within 60 s",
+                    exe.display()
+                ));
             }
             std::thread::sleep(Duration::from_millis(50));
         }
@@ -487,7 +585,8 @@ mod through_the_proxy {
         if let Err(e) = REGISTERED.get_or_init(register_probe) {
             panic!("registering the marshal probe: {e}");
         }
-        let server = Server::connect(probe::PROGID).expect("CoCreateInstance(ServerCTOPC.MarshalProbe, CLSCTX_LOCAL_SERVER)");
+        let server = Server::connect(probe::PROGID)
+            .expect("CoCreateInstance(ServerCTOPC.MarshalProbe, CLSCTX_LOCAL_SERVER)");
         (com, server)
     }
 
@@ -506,7 +605,10 @@ mod through_the_proxy {
             if !page.more_elements {
                 return elements;
             }
-            cp = Some(page.continuation_point.expect("a continuation point with more elements"));
+            cp = Some(
+                page.continuation_point
+                    .expect("a continuation point with more elements"),
+            );
         }
         panic!("Browse does not end");
     }
@@ -544,47 +646,83 @@ mod through_the_proxy {
         let s = server
             .error_string(HRESULT(OPC_E_INVALIDHANDLE.0))
             .expect("IOPCCommon::GetErrorString");
-        assert_intact(COMMON_GET_ERROR_STRING, s.as_deref(), &expected(COMMON_GET_ERROR_STRING));
+        assert_intact(
+            COMMON_GET_ERROR_STRING,
+            s.as_deref(),
+            &expected(COMMON_GET_ERROR_STRING),
+        );
     }
 
     #[test]
     fn iopcserverlist_getclassdetails_progid_arrives_intact() {
         let (_com, server) = connect();
-        let list = server.unknown.cast::<IOPCServerList>().expect("IOPCServerList");
-        let (progid, _) = read::class_details(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
+        let list = server
+            .unknown
+            .cast::<IOPCServerList>()
+            .expect("IOPCServerList");
+        let (progid, _) =
+            read::class_details(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
         assert_intact(LIST_PROGID, progid.as_deref(), &expected(LIST_PROGID));
     }
 
     #[test]
     fn iopcserverlist_getclassdetails_user_type_arrives_intact() {
         let (_com, server) = connect();
-        let list = server.unknown.cast::<IOPCServerList>().expect("IOPCServerList");
-        let (_, user_type) = read::class_details(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
-        assert_intact(LIST_USER_TYPE, user_type.as_deref(), &expected(LIST_USER_TYPE));
+        let list = server
+            .unknown
+            .cast::<IOPCServerList>()
+            .expect("IOPCServerList");
+        let (_, user_type) =
+            read::class_details(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
+        assert_intact(
+            LIST_USER_TYPE,
+            user_type.as_deref(),
+            &expected(LIST_USER_TYPE),
+        );
     }
 
     #[test]
     fn iopcserverlist2_getclassdetails_progid_arrives_intact() {
         let (_com, server) = connect();
-        let list = server.unknown.cast::<IOPCServerList2>().expect("IOPCServerList2");
-        let (progid, _, _) = read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
+        let list = server
+            .unknown
+            .cast::<IOPCServerList2>()
+            .expect("IOPCServerList2");
+        let (progid, _, _) =
+            read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
         assert_intact(LIST2_PROGID, progid.as_deref(), &expected(LIST2_PROGID));
     }
 
     #[test]
     fn iopcserverlist2_getclassdetails_user_type_arrives_intact() {
         let (_com, server) = connect();
-        let list = server.unknown.cast::<IOPCServerList2>().expect("IOPCServerList2");
-        let (_, user_type, _) = read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
-        assert_intact(LIST2_USER_TYPE, user_type.as_deref(), &expected(LIST2_USER_TYPE));
+        let list = server
+            .unknown
+            .cast::<IOPCServerList2>()
+            .expect("IOPCServerList2");
+        let (_, user_type, _) =
+            read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
+        assert_intact(
+            LIST2_USER_TYPE,
+            user_type.as_deref(),
+            &expected(LIST2_USER_TYPE),
+        );
     }
 
     #[test]
     fn iopcserverlist2_getclassdetails_ver_ind_progid_arrives_intact() {
         let (_com, server) = connect();
-        let list = server.unknown.cast::<IOPCServerList2>().expect("IOPCServerList2");
-        let (_, _, ver_ind) = read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
-        assert_intact(LIST2_VER_IND_PROGID, ver_ind.as_deref(), &expected(LIST2_VER_IND_PROGID));
+        let list = server
+            .unknown
+            .cast::<IOPCServerList2>()
+            .expect("IOPCServerList2");
+        let (_, _, ver_ind) =
+            read::class_details2(&list, &probe::CLSID_MARSHAL_PROBE).expect("GetClassDetails");
+        assert_intact(
+            LIST2_VER_IND_PROGID,
+            ver_ind.as_deref(),
+            &expected(LIST2_VER_IND_PROGID),
+        );
     }
 
     // --- opcda.idl: server object ------------------------------------------------------
@@ -595,7 +733,11 @@ mod through_the_proxy {
         let s = server
             .error_string_in(HRESULT(OPC_E_UNKNOWNITEMID.0), 0x0415)
             .expect("IOPCServer::GetErrorString");
-        assert_intact(SERVER_GET_ERROR_STRING, s.as_deref(), &expected(SERVER_GET_ERROR_STRING));
+        assert_intact(
+            SERVER_GET_ERROR_STRING,
+            s.as_deref(),
+            &expected(SERVER_GET_ERROR_STRING),
+        );
     }
 
     #[test]
@@ -626,8 +768,12 @@ mod through_the_proxy {
     #[test]
     fn iopcitemproperties_queryavailableproperties_descriptions_arrive_intact() {
         let (_com, server) = connect();
-        let props = server.unknown.cast::<IOPCItemProperties>().expect("IOPCItemProperties");
-        let got = read::available_properties(&props, "Pompa.Ciśnienie").expect("QueryAvailableProperties");
+        let props = server
+            .unknown
+            .cast::<IOPCItemProperties>()
+            .expect("IOPCItemProperties");
+        let got = read::available_properties(&props, "Pompa.Ciśnienie")
+            .expect("QueryAvailableProperties");
         assert_eq!(got.len(), probe::AVAILABLE_PROPERTIES.len());
         for (i, (id, description, _vt)) in got.iter().enumerate() {
             assert_eq!(*id, probe::AVAILABLE_PROPERTIES[i]);
@@ -642,9 +788,13 @@ mod through_the_proxy {
     #[test]
     fn iopcitemproperties_lookupitemids_new_item_ids_arrive_intact() {
         let (_com, server) = connect();
-        let props = server.unknown.cast::<IOPCItemProperties>().expect("IOPCItemProperties");
+        let props = server
+            .unknown
+            .cast::<IOPCItemProperties>()
+            .expect("IOPCItemProperties");
         let ids = [OPC_PROPERTY_EU_UNITS, OPC_PROPERTY_DESCRIPTION];
-        let (hr, got) = read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
+        let (hr, got) =
+            read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
         assert_eq!(hr, S_OK);
         for (i, (id, err)) in got.iter().enumerate() {
             assert_eq!(*err, S_OK);
@@ -656,8 +806,13 @@ mod through_the_proxy {
         }
         // A failed element (NULL, OPC_E_INVALID_PID) between two good ones: the good ones
         // still arrive, the failed one stays NULL.
-        let ids = [OPC_PROPERTY_EU_UNITS, OPC_PROPERTY_VALUE, OPC_PROPERTY_DESCRIPTION];
-        let (hr, got) = read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
+        let ids = [
+            OPC_PROPERTY_EU_UNITS,
+            OPC_PROPERTY_VALUE,
+            OPC_PROPERTY_DESCRIPTION,
+        ];
+        let (hr, got) =
+            read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
         assert_eq!(hr, S_FALSE);
         assert_eq!(got[1], (None, HRESULT(OPC_E_INVALID_PID.0)));
         for i in [0, 2] {
@@ -674,14 +829,20 @@ mod through_the_proxy {
     fn iopcbrowse_getproperties_property_item_id_arrives_intact() {
         let (_com, server) = connect();
         let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
-        let (hr, items) = read::get_properties(&browse, &["Pompa.Ciśnienie", "Pompa.Prędkość"], &[]).expect("GetProperties");
+        let (hr, items) =
+            read::get_properties(&browse, &["Pompa.Ciśnienie", "Pompa.Prędkość"], &[])
+                .expect("GetProperties");
         assert_eq!(hr, S_OK);
         assert_eq!(items.len(), 2);
         for (i, item) in items.iter().enumerate() {
             assert_eq!(item.properties.len(), probe::ALL_PROPERTIES.len());
             for (j, p) in item.properties.iter().enumerate() {
                 let what = format!("{GET_PROPERTIES_ITEM_ID}[{i}][{j}]");
-                assert_intact(&what, p.item_id.as_deref(), &expected_at2(GET_PROPERTIES_ITEM_ID, i, j));
+                assert_intact(
+                    &what,
+                    p.item_id.as_deref(),
+                    &expected_at2(GET_PROPERTIES_ITEM_ID, i, j),
+                );
             }
         }
     }
@@ -690,8 +851,13 @@ mod through_the_proxy {
     fn iopcbrowse_getproperties_property_description_arrives_intact() {
         let (_com, server) = connect();
         let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
-        let ids = [OPC_PROPERTY_EU_UNITS, OPC_PROPERTY_DESCRIPTION, OPC_PROPERTY_HIGH_EU];
-        let (_, items) = read::get_properties(&browse, &["Pompa.Ciśnienie"], &ids).expect("GetProperties");
+        let ids = [
+            OPC_PROPERTY_EU_UNITS,
+            OPC_PROPERTY_DESCRIPTION,
+            OPC_PROPERTY_HIGH_EU,
+        ];
+        let (_, items) =
+            read::get_properties(&browse, &["Pompa.Ciśnienie"], &ids).expect("GetProperties");
         assert_eq!(items.len(), 1);
         let props = &items[0].properties;
         assert_eq!(props.iter().map(|p| p.id).collect::<Vec<_>>(), ids);
@@ -726,9 +892,15 @@ mod through_the_proxy {
         // continuation point, character for character...
         let page = read::browse(&browse, Some(&expected(BROWSE_CONTINUATION_POINT)), false)
             .expect("Browse with the continuation point: the server did not receive it intact");
-        assert_eq!(page.elements.len(), probe::BROWSE_ELEMENTS - probe::BROWSE_PAGE);
+        assert_eq!(
+            page.elements.len(),
+            probe::BROWSE_ELEMENTS - probe::BROWSE_PAGE
+        );
         assert!(!page.more_elements);
-        assert_eq!(page.continuation_point, None, "no continuation point after the last page");
+        assert_eq!(
+            page.continuation_point, None,
+            "no continuation point after the last page"
+        );
         // ...and rejects any other.
         let bad = read::browse(
             &browse,
@@ -782,7 +954,11 @@ mod through_the_proxy {
             assert_eq!(e.properties.properties.len(), probe::ALL_PROPERTIES.len());
             for (j, p) in e.properties.properties.iter().enumerate() {
                 let what = format!("{BROWSE_PROPERTY_ITEM_ID}[{k}][{j}]");
-                assert_intact(&what, p.item_id.as_deref(), &expected_at2(BROWSE_PROPERTY_ITEM_ID, k, j));
+                assert_intact(
+                    &what,
+                    p.item_id.as_deref(),
+                    &expected_at2(BROWSE_PROPERTY_ITEM_ID, k, j),
+                );
             }
         }
     }
@@ -841,7 +1017,9 @@ mod through_the_proxy {
     #[test]
     fn ienumopcitemattributes_next_access_path_arrives_intact() {
         let (_com, server) = connect();
-        let items = group(&server, &IOPCItemMgt::IID).cast::<IOPCItemMgt>().expect("IOPCItemMgt");
+        let items = group(&server, &IOPCItemMgt::IID)
+            .cast::<IOPCItemMgt>()
+            .expect("IOPCItemMgt");
         // One element per Next call.
         let got = read::item_attributes(&items, 1).expect("IEnumOPCItemAttributes::Next");
         assert_eq!(got.len(), probe::ITEM_COUNT);
@@ -857,7 +1035,9 @@ mod through_the_proxy {
     #[test]
     fn ienumopcitemattributes_next_item_id_arrives_intact() {
         let (_com, server) = connect();
-        let items = group(&server, &IOPCItemMgt::IID).cast::<IOPCItemMgt>().expect("IOPCItemMgt");
+        let items = group(&server, &IOPCItemMgt::IID)
+            .cast::<IOPCItemMgt>()
+            .expect("IOPCItemMgt");
         // All elements in one Next call (S_FALSE: fewer than asked for).
         let got = read::item_attributes(&items, 10).expect("IEnumOPCItemAttributes::Next");
         assert_eq!(got.len(), probe::ITEM_COUNT);
@@ -876,7 +1056,11 @@ mod through_the_proxy {
     fn assert_all_intact(param: &str, got: &[Option<String>]) {
         assert_eq!(got.len(), probe::ENUM_STRING_LEN, "{param}: {got:?}");
         for (i, s) in got.iter().enumerate() {
-            assert_intact(&format!("{param}[{i}]"), s.as_deref(), &expected_at(param, i));
+            assert_intact(
+                &format!("{param}[{i}]"),
+                s.as_deref(),
+                &expected_at(param, i),
+            );
         }
     }
 
@@ -894,7 +1078,10 @@ mod through_the_proxy {
             .unknown
             .cast::<IOPCBrowseServerAddressSpace>()
             .expect("IOPCBrowseServerAddressSpace");
-        assert_all_intact(BSAS_ITEM_IDS, &read::browse_item_ids(&bsas).expect("BrowseOPCItemIDs"));
+        assert_all_intact(
+            BSAS_ITEM_IDS,
+            &read::browse_item_ids(&bsas).expect("BrowseOPCItemIDs"),
+        );
     }
 
     #[test]

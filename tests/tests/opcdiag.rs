@@ -17,7 +17,11 @@ struct Run {
 
 impl std::fmt::Debug for Run {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "exit code {}\n--- stdout ---\n{}--- stderr ---\n{}", self.code, self.stdout, self.stderr)
+        write!(
+            f,
+            "exit code {}\n--- stdout ---\n{}--- stderr ---\n{}",
+            self.code, self.stdout, self.stderr
+        )
     }
 }
 
@@ -31,7 +35,12 @@ fn opcdiag_for(args: &[&str], limit: Duration) -> Run {
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .unwrap_or_else(|e| panic!("start {}: {e} (built by `cargo xtask build`)", exe.display()));
+        .unwrap_or_else(|e| {
+            panic!(
+                "start {}: {e} (built by `cargo xtask build`)",
+                exe.display()
+            )
+        });
     let mut out = child.stdout.take().expect("stdout");
     let mut err = child.stderr.take().expect("stderr");
     let reader = std::thread::spawn(move || {
@@ -56,7 +65,11 @@ fn opcdiag_for(args: &[&str], limit: Duration) -> Run {
         }
         std::thread::sleep(Duration::from_millis(50));
     };
-    Run { code: status.code().unwrap_or(-1), stdout: reader.join().expect("stdout reader"), stderr: err_reader.join().expect("stderr reader") }
+    Run {
+        code: status.code().unwrap_or(-1),
+        stdout: reader.join().expect("stdout reader"),
+        stderr: err_reader.join().expect("stderr reader"),
+    }
 }
 
 fn opcdiag(args: &[&str]) -> Run {
@@ -67,9 +80,17 @@ fn opcdiag(args: &[&str]) -> Run {
 fn status_shows_the_vendor_and_the_test_state() {
     let r = opcdiag(&["status"]);
     assert_eq!(r.code, 0, "{r:?}");
-    let state = r.stdout.lines().find(|l| l.starts_with("State")).unwrap_or_else(|| panic!("no State line: {r:?}"));
+    let state = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("State"))
+        .unwrap_or_else(|| panic!("no State line: {r:?}"));
     assert!(state.contains("TEST"), "{r:?}");
-    let vendor = r.stdout.lines().find(|l| l.starts_with("Vendor")).unwrap_or_else(|| panic!("no Vendor line: {r:?}"));
+    let vendor = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("Vendor"))
+        .unwrap_or_else(|| panic!("no Vendor line: {r:?}"));
     assert!(vendor.contains("ServerCTOPC"), "{r:?}");
     assert!(r.stdout.contains("Server        ServerCTOPC.App"), "{r:?}");
 }
@@ -79,18 +100,40 @@ fn browse_shows_the_plant_tree_indented() {
     let r = opcdiag(&["browse"]);
     assert_eq!(r.code, 0, "{r:?}");
     let lines: Vec<&str> = r.stdout.lines().collect();
-    let top = lines.iter().position(|l| *l == "Magazyn siarki/").unwrap_or_else(|| panic!("no top branch Magazyn siarki: {r:?}"));
-    assert!(lines[top + 1].starts_with("  ") && lines[top + 1].ends_with('/'), "a second-level branch follows: {r:?}");
-    assert!(lines.iter().any(|l| l.trim() == "KW_A000" && l.starts_with("    ")), "KW_A000 as a third-level leaf: {r:?}");
+    let top = lines
+        .iter()
+        .position(|l| *l == "Magazyn siarki/")
+        .unwrap_or_else(|| panic!("no top branch Magazyn siarki: {r:?}"));
+    assert!(
+        lines[top + 1].starts_with("  ") && lines[top + 1].ends_with('/'),
+        "a second-level branch follows: {r:?}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.trim() == "KW_A000" && l.starts_with("    ")),
+        "KW_A000 as a third-level leaf: {r:?}"
+    );
 
     let flat = opcdiag(&["browse", "--flat"]);
     assert_eq!(flat.code, 0, "{flat:?}");
     assert!(flat.stdout.lines().any(|l| l == "KW_A000"), "{flat:?}");
-    assert!(flat.stdout.lines().count() > 100, "every variable: {flat:?}");
+    assert!(
+        flat.stdout.lines().count() > 100,
+        "every variable: {flat:?}"
+    );
 
-    let branch = opcdiag(&["browse", "--branch", "Magazyn siarki/Zbiornik siarki ciekłej Z101"]);
+    let branch = opcdiag(&[
+        "browse",
+        "--branch",
+        "Magazyn siarki/Zbiornik siarki ciekłej Z101",
+    ]);
     assert_eq!(branch.code, 0, "{branch:?}");
-    assert_eq!(branch.stdout.lines().collect::<Vec<_>>(), ["KW_A000", "KW_A001", "KW_A002"], "{branch:?}");
+    assert_eq!(
+        branch.stdout.lines().collect::<Vec<_>>(),
+        ["KW_A000", "KW_A001", "KW_A002"],
+        "{branch:?}"
+    );
 }
 
 #[test]
@@ -98,19 +141,33 @@ fn props_lists_id_description_and_value() {
     let r = opcdiag(&["--lang", "en", "props", "KW_A000"]);
     assert_eq!(r.code, 0, "{r:?}");
     let line = |id: &str| {
-        r.stdout.lines().find(|l| l.split_whitespace().next() == Some(id)).unwrap_or_else(|| panic!("no property {id}: {r:?}")).to_string()
+        r.stdout
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some(id))
+            .unwrap_or_else(|| panic!("no property {id}: {r:?}"))
+            .to_string()
     };
-    assert!(line("1").contains("Item Canonical Data Type") && line("1").contains("R4 (4)"), "{r:?}");
+    assert!(
+        line("1").contains("Item Canonical Data Type") && line("1").contains("R4 (4)"),
+        "{r:?}"
+    );
     assert!(line("3").contains("GOOD"), "{r:?}");
     assert!(line("100").contains("\"m\""), "{r:?}");
-    assert!(line("101").contains("Liquid sulphur level in tank Z101"), "{r:?}");
+    assert!(
+        line("101").contains("Liquid sulphur level in tank Z101"),
+        "{r:?}"
+    );
 }
 
 #[test]
 fn read_prints_value_type_quality_and_local_time() {
     let r = opcdiag(&["read", "KW_A000"]);
     assert_eq!(r.code, 0, "{r:?}");
-    let line = r.stdout.lines().find(|l| l.starts_with("KW_A000")).unwrap_or_else(|| panic!("{r:?}"));
+    let line = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("KW_A000"))
+        .unwrap_or_else(|| panic!("{r:?}"));
     let f: Vec<&str> = line.split_whitespace().collect();
     assert!(f[1].parse::<f32>().is_ok(), "a number: {r:?}");
     assert_eq!(f[2], "R4", "{r:?}");
@@ -118,20 +175,39 @@ fn read_prints_value_type_quality_and_local_time() {
     // crosses its warning limits); the local time is the last field.
     assert_eq!(f[3], "GOOD", "{r:?}");
     let time = f[f.len() - 1];
-    assert!(time.len() == "2026-01-05T13:04:05.120+01:00".len() && time.contains('T'), "ISO local time: {r:?}");
+    assert!(
+        time.len() == "2026-01-05T13:04:05.120+01:00".len() && time.contains('T'),
+        "ISO local time: {r:?}"
+    );
 
     let d = opcdiag(&["read", "KW_A000", "KW_A001", "--device"]);
     assert_eq!(d.code, 0, "{d:?}");
-    assert_eq!(d.stdout.lines().filter(|l| l.contains(" GOOD ")).count(), 2, "{d:?}");
+    assert_eq!(
+        d.stdout.lines().filter(|l| l.contains(" GOOD ")).count(),
+        2,
+        "{d:?}"
+    );
 }
 
 #[test]
 fn read_of_an_unknown_item_fails_with_the_servers_text() {
     let r = opcdiag(&["--lang", "en", "read", "KW_A000", "KW_NO_SUCH"]);
     assert_eq!(r.code, 1, "{r:?}");
-    assert!(r.stdout.lines().any(|l| l.starts_with("KW_A000") && l.contains("GOOD")), "the good item is still read: {r:?}");
-    let bad = r.stdout.lines().find(|l| l.starts_with("KW_NO_SUCH")).unwrap_or_else(|| panic!("{r:?}"));
-    assert!(bad.contains("0xC0040007 OPC_E_UNKNOWNITEMID: The item ID is not defined"), "{r:?}");
+    assert!(
+        r.stdout
+            .lines()
+            .any(|l| l.starts_with("KW_A000") && l.contains("GOOD")),
+        "the good item is still read: {r:?}"
+    );
+    let bad = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("KW_NO_SUCH"))
+        .unwrap_or_else(|| panic!("{r:?}"));
+    assert!(
+        bad.contains("0xC0040007 OPC_E_UNKNOWNITEMID: The item ID is not defined"),
+        "{r:?}"
+    );
 }
 
 #[test]
@@ -139,13 +215,24 @@ fn write_then_read_back() {
     // Keeps the server process up between the runs, so that it keeps the written value.
     let (_com, _server) = e2e_tests::connect();
     let before = opcdiag(&["read", "KW_A110"]);
-    let original = before.stdout.split_whitespace().nth(1).unwrap_or_else(|| panic!("{before:?}")).to_string();
+    let original = before
+        .stdout
+        .split_whitespace()
+        .nth(1)
+        .unwrap_or_else(|| panic!("{before:?}"))
+        .to_string();
     let w = opcdiag(&["write", "KW_A110", "12.5"]);
     assert_eq!(w.code, 0, "{w:?}");
     assert!(w.stdout.contains("KW_A110: written 12.5 (R4): OK"), "{w:?}");
     let r = opcdiag(&["read", "KW_A110"]);
     assert_eq!(r.code, 0, "{r:?}");
-    let f: Vec<&str> = r.stdout.lines().find(|l| l.starts_with("KW_A110")).unwrap_or_else(|| panic!("{r:?}")).split_whitespace().collect();
+    let f: Vec<&str> = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("KW_A110"))
+        .unwrap_or_else(|| panic!("{r:?}"))
+        .split_whitespace()
+        .collect();
     assert_eq!((f[1], f[3]), ("12.5", "GOOD"), "{r:?}");
 
     // --type: the value goes as I4 and the server converts it.
@@ -169,36 +256,69 @@ fn write_to_a_read_only_item_fails_readably() {
     // In Polish, from the server's GetErrorString.
     let pl = opcdiag(&["--lang", "pl", "write", "KW_A000", "1"]);
     assert_eq!(pl.code, 1, "{pl:?}");
-    assert!(pl.stdout.contains("0xC0040006 OPC_E_BADRIGHTS: Prawa dostępu do elementu nie pozwalają na tę operację."), "{pl:?}");
+    assert!(
+        pl.stdout.contains(
+            "0xC0040006 OPC_E_BADRIGHTS: Prawa dostępu do elementu nie pozwalają na tę operację."
+        ),
+        "{pl:?}"
+    );
     // A value that does not fit the type is a usage error, found before writing.
     let bad = opcdiag(&["write", "KW_A110", "abc"]);
     assert_eq!(bad.code, 2, "{bad:?}");
-    assert!(bad.stderr.contains("\"abc\" is not a valid value for R4"), "{bad:?}");
+    assert!(
+        bad.stderr.contains("\"abc\" is not a valid value for R4"),
+        "{bad:?}"
+    );
 }
 
 #[test]
 fn subscribe_prints_changes_as_they_arrive() {
-    let r = opcdiag_for(&["subscribe", "KW_A000", "--for", "5"], Duration::from_secs(90));
+    let r = opcdiag_for(
+        &["subscribe", "KW_A000", "--for", "5"],
+        Duration::from_secs(90),
+    );
     assert_eq!(r.code, 0, "{r:?}");
     // GOOD, possibly with limit bits while the simulated level is past a warning limit.
-    let changes: Vec<&str> = r.stdout.lines().filter(|l| l.contains("KW_A000") && (l.ends_with("GOOD") || l.contains(" GOOD ["))).collect();
+    let changes: Vec<&str> = r
+        .stdout
+        .lines()
+        .filter(|l| l.contains("KW_A000") && (l.ends_with("GOOD") || l.contains(" GOOD [")))
+        .collect();
     assert!(changes.len() >= 2, "at least two changes in 5 s: {r:?}");
     // hh:mm:ss.mmm  KW_A000  value  GOOD [limit]
     let f: Vec<&str> = changes[1].split_whitespace().collect();
     assert_eq!(f[0].len(), "13:04:05.120".len(), "{r:?}");
     assert!(f[2].parse::<f32>().is_ok(), "{r:?}");
-    assert!(r.stdout.lines().last().is_some_and(|l| l.contains("change(s) in")), "{r:?}");
+    assert!(
+        r.stdout
+            .lines()
+            .last()
+            .is_some_and(|l| l.contains("change(s) in")),
+        "{r:?}"
+    );
 }
 
 #[test]
 fn help_usage_errors_and_a_missing_server() {
     let h = opcdiag(&["--help"]);
     assert_eq!(h.code, 0, "{h:?}");
-    for c in ["status", "browse", "props", "read", "write", "subscribe", "demo"] {
+    for c in [
+        "status",
+        "browse",
+        "props",
+        "read",
+        "write",
+        "subscribe",
+        "demo",
+    ] {
         assert!(h.stdout.contains(c), "{c}: {h:?}");
         let ch = opcdiag(&[c, "--help"]);
         assert_eq!(ch.code, 0, "{ch:?}");
-        assert!(ch.stdout.starts_with(&format!("usage: opcdiag [--server PROGID] {c}")), "{ch:?}");
+        assert!(
+            ch.stdout
+                .starts_with(&format!("usage: opcdiag [--server PROGID] {c}")),
+            "{ch:?}"
+        );
     }
     let u = opcdiag(&["read"]);
     assert_eq!(u.code, 2, "{u:?}");
@@ -206,16 +326,34 @@ fn help_usage_errors_and_a_missing_server() {
 
     let m = opcdiag(&["--server", "No.Such.Server", "status"]);
     assert_eq!(m.code, 1, "{m:?}");
-    assert!(m.stderr.contains("cannot connect to No.Such.Server: 0x800401F3 CO_E_CLASSSTRING"), "{m:?}");
+    assert!(
+        m.stderr
+            .contains("cannot connect to No.Such.Server: 0x800401F3 CO_E_CLASSSTRING"),
+        "{m:?}"
+    );
 }
 
 #[test]
 fn demo_shows_status_tree_and_live_values() {
-    let r = opcdiag_for(&["--lang", "en", "demo", "--for", "3"], Duration::from_secs(90));
+    let r = opcdiag_for(
+        &["--lang", "en", "demo", "--for", "3"],
+        Duration::from_secs(90),
+    );
     assert_eq!(r.code, 0, "{r:?}");
     assert!(r.stdout.contains("State         TEST"), "{r:?}");
-    assert!(r.stdout.lines().any(|l| l == "  Magazyn siarki/"), "the plant tree: {r:?}");
-    assert!(r.stdout.contains("KW_A000  Liquid sulphur level in tank Z101 [m]"), "the legend: {r:?}");
-    let live = r.stdout.lines().filter(|l| l.contains(" KW_A") && (l.ends_with("GOOD") || l.contains("GOOD ["))).count();
+    assert!(
+        r.stdout.lines().any(|l| l == "  Magazyn siarki/"),
+        "the plant tree: {r:?}"
+    );
+    assert!(
+        r.stdout
+            .contains("KW_A000  Liquid sulphur level in tank Z101 [m]"),
+        "the legend: {r:?}"
+    );
+    let live = r
+        .stdout
+        .lines()
+        .filter(|l| l.contains(" KW_A") && (l.ends_with("GOOD") || l.contains("GOOD [")))
+        .count();
     assert!(live >= 8, "a value of every variable at least: {r:?}");
 }

@@ -14,11 +14,17 @@ const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
 const VT_R4: u16 = 4;
 
 fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER, "{what}: {hr:?}");
+    assert!(
+        hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
+        "{what}: {hr:?}"
+    );
 }
 
 fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_millis();
+    let ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis();
     Timestamp::from_unix_millis(ms as i64)
 }
 
@@ -26,7 +32,9 @@ fn now() -> Timestamp {
 fn read_from_the_device_and_from_the_cache() {
     let (_com, server) = connect();
     let before = now();
-    let (hr, items) = server.item_read(&[("KW_A000", 0), ("KW_A110", 0), ("KW_A000.DESC", 0)]).expect("Read");
+    let (hr, items) = server
+        .item_read(&[("KW_A000", 0), ("KW_A110", 0), ("KW_A000.DESC", 0)])
+        .expect("Read");
     assert_eq!(hr, S_OK, "{items:?}");
     for it in &items[..2] {
         assert_eq!((it.error, it.vt), (S_OK, VT_R4), "{it:?}");
@@ -34,11 +42,23 @@ fn read_from_the_device_and_from_the_cache() {
     }
     // A live measurement is stamped now (a setpoint keeps the time of its last write).
     let it = &items[0];
-    assert!(it.timestamp.add_millis(60_000) >= before && it.timestamp <= now().add_millis(2000), "{it:?}");
-    assert!(matches!(items[0].value, Value::R4(v) if (0.0..=8.0).contains(&v)), "{:?}", items[0].value);
-    assert_eq!(items[2].value, Value::Bstr("Poziom siarki ciekłej w zbiorniku Z101".into()));
+    assert!(
+        it.timestamp.add_millis(60_000) >= before && it.timestamp <= now().add_millis(2000),
+        "{it:?}"
+    );
+    assert!(
+        matches!(items[0].value, Value::R4(v) if (0.0..=8.0).contains(&v)),
+        "{:?}",
+        items[0].value
+    );
+    assert_eq!(
+        items[2].value,
+        Value::Bstr("Poziom siarki ciekłej w zbiorniku Z101".into())
+    );
     // A cache read right after: the value the device read left there.
-    let (hr, cached) = server.item_read(&[("KW_A000.DESC", u32::MAX), ("KW_A000", 60_000)]).unwrap();
+    let (hr, cached) = server
+        .item_read(&[("KW_A000.DESC", u32::MAX), ("KW_A000", 60_000)])
+        .unwrap();
     assert_eq!(hr, S_OK);
     assert_eq!(cached[0].value, items[2].value);
     assert_eq!(cached[1].vt, VT_R4);
@@ -47,12 +67,33 @@ fn read_from_the_device_and_from_the_cache() {
 #[test]
 fn read_per_item_errors() {
     let (_com, server) = connect();
-    let (hr, items) = server.item_read(&[("KW_A999", 0), ("KW_A000.", 0), ("", 0), ("KW_A000", 0), ("asmen.Camac.x.R8", 0)]).unwrap();
+    let (hr, items) = server
+        .item_read(&[
+            ("KW_A999", 0),
+            ("KW_A000.", 0),
+            ("", 0),
+            ("KW_A000", 0),
+            ("asmen.Camac.x.R8", 0),
+        ])
+        .unwrap();
     assert_eq!(hr, S_FALSE);
     let errors: Vec<HRESULT> = items.iter().map(|i| i.error).collect();
-    assert_eq!(errors, [OPC_E_UNKNOWNITEMID, OPC_E_INVALIDITEMID, OPC_E_INVALIDITEMID, S_OK, OPC_E_INVALIDITEMID]);
+    assert_eq!(
+        errors,
+        [
+            OPC_E_UNKNOWNITEMID,
+            OPC_E_INVALIDITEMID,
+            OPC_E_INVALIDITEMID,
+            S_OK,
+            OPC_E_INVALIDITEMID
+        ]
+    );
     for i in [0, 1, 2, 4] {
-        assert_eq!((items[i].vt, items[i].value.clone()), (0, Value::Empty), "failed items are VT_EMPTY");
+        assert_eq!(
+            (items[i].vt, items[i].value.clone()),
+            (0, Value::Empty),
+            "failed items are VT_EMPTY"
+        );
     }
     assert_alive(&server);
 }
@@ -60,11 +101,15 @@ fn read_per_item_errors() {
 #[test]
 fn write_then_read_back() {
     let (_com, server) = connect();
-    let (hr, errors) = server.item_write_vqt(&[("KW_A110", ItemVqt::value(Value::R8(12.5)))]).expect("WriteVQT");
+    let (hr, errors) = server
+        .item_write_vqt(&[("KW_A110", ItemVqt::value(Value::R8(12.5)))])
+        .expect("WriteVQT");
     assert_eq!((hr, errors.clone()), (S_OK, vec![S_OK]));
     let (_, items) = server.item_read(&[("KW_A110", 0)]).unwrap();
     assert_eq!(items[0].value, Value::R4(12.5));
-    let (hr, _) = server.item_write_vqt(&[("KW_A110", ItemVqt::value(Value::I4(7)))]).unwrap();
+    let (hr, _) = server
+        .item_write_vqt(&[("KW_A110", ItemVqt::value(Value::I4(7)))])
+        .unwrap();
     assert_eq!(hr, S_OK, "integers convert to the canonical type");
     let (_, items) = server.item_read(&[("KW_A110", 0)]).unwrap();
     assert_eq!(items[0].value, Value::R4(7.0));
@@ -74,7 +119,11 @@ fn write_then_read_back() {
 fn write_with_quality_and_timestamp() {
     let (_com, server) = connect();
     let t = now();
-    let vqt = ItemVqt { value: Value::R4(3.0), quality: Some(Quality(0xC0)), timestamp: Some(t) };
+    let vqt = ItemVqt {
+        value: Value::R4(3.0),
+        quality: Some(Quality(0xC0)),
+        timestamp: Some(t),
+    };
     let (hr, errors) = server.item_write_vqt(&[("KW_A110", vqt)]).unwrap();
     // The asix extended write carries quality and timestamp; the simulation accepts it.
     assert_eq!((hr, errors.clone()), (S_OK, vec![S_OK]), "{errors:?}");
@@ -87,10 +136,24 @@ fn write_per_item_errors() {
     let (_com, server) = connect();
     let v = |x: f64| ItemVqt::value(Value::R8(x));
     let (hr, errors) = server
-        .item_write_vqt(&[("KW_A000", v(1.0)), ("KW_A999", v(1.0)), ("KW_A000.", v(1.0)), ("KW_A110", v(5.0)), ("KW_A110", ItemVqt::value(Value::Bstr("abc".into())))])
+        .item_write_vqt(&[
+            ("KW_A000", v(1.0)),
+            ("KW_A999", v(1.0)),
+            ("KW_A000.", v(1.0)),
+            ("KW_A110", v(5.0)),
+            ("KW_A110", ItemVqt::value(Value::Bstr("abc".into()))),
+        ])
         .unwrap();
     assert_eq!(hr, S_FALSE);
-    assert_eq!(errors[..4], [OPC_E_BADRIGHTS, OPC_E_UNKNOWNITEMID, OPC_E_INVALIDITEMID, S_OK]);
+    assert_eq!(
+        errors[..4],
+        [
+            OPC_E_BADRIGHTS,
+            OPC_E_UNKNOWNITEMID,
+            OPC_E_INVALIDITEMID,
+            S_OK
+        ]
+    );
     // asix writes numbers only (AsixConnect §5): a string is refused for that item.
     assert!(errors[4].is_err(), "a string: {:?}", errors[4]);
     assert_alive(&server);
@@ -103,21 +166,94 @@ fn count_zero_and_null_pointers() {
     let id = HSTRING::from("KW_A000");
     let ids = [PCWSTR(id.as_ptr())];
     let ages = [0u32];
-    let (mut values, mut qualities, mut times, mut errors): (*mut VARIANT, *mut u16, *mut FILETIME, *mut HRESULT) =
-        (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut());
+    let (mut values, mut qualities, mut times, mut errors): (
+        *mut VARIANT,
+        *mut u16,
+        *mut FILETIME,
+        *mut HRESULT,
+    ) = (
+        std::ptr::null_mut(),
+        std::ptr::null_mut(),
+        std::ptr::null_mut(),
+        std::ptr::null_mut(),
+    );
     let vqt = [OPCITEMVQT::default()];
     // SAFETY: valid or deliberately NULL pointers; nothing is returned on these failures.
     unsafe {
-        assert_eq!(io.Read(0, ids.as_ptr(), ages.as_ptr(), &mut values, &mut qualities, &mut times, &mut errors), E_INVALIDARG);
-        assert_eq!(io.WriteVQT(0, ids.as_ptr(), vqt.as_ptr(), &mut errors), E_INVALIDARG);
+        assert_eq!(
+            io.Read(
+                0,
+                ids.as_ptr(),
+                ages.as_ptr(),
+                &mut values,
+                &mut qualities,
+                &mut times,
+                &mut errors
+            ),
+            E_INVALIDARG
+        );
+        assert_eq!(
+            io.WriteVQT(0, ids.as_ptr(), vqt.as_ptr(), &mut errors),
+            E_INVALIDARG
+        );
         assert_alive(&server);
-        assert_invalid_arg_or_null_ref(io.Read(1, std::ptr::null(), ages.as_ptr(), &mut values, &mut qualities, &mut times, &mut errors), "pszItemIDs");
-        assert_invalid_arg_or_null_ref(io.Read(1, ids.as_ptr(), std::ptr::null(), &mut values, &mut qualities, &mut times, &mut errors), "pdwMaxAge");
-        assert_invalid_arg_or_null_ref(io.Read(1, ids.as_ptr(), ages.as_ptr(), std::ptr::null_mut(), &mut qualities, &mut times, &mut errors), "ppvValues");
-        assert_invalid_arg_or_null_ref(io.Read(1, ids.as_ptr(), ages.as_ptr(), &mut values, &mut qualities, &mut times, std::ptr::null_mut()), "ppErrors");
+        assert_invalid_arg_or_null_ref(
+            io.Read(
+                1,
+                std::ptr::null(),
+                ages.as_ptr(),
+                &mut values,
+                &mut qualities,
+                &mut times,
+                &mut errors,
+            ),
+            "pszItemIDs",
+        );
+        assert_invalid_arg_or_null_ref(
+            io.Read(
+                1,
+                ids.as_ptr(),
+                std::ptr::null(),
+                &mut values,
+                &mut qualities,
+                &mut times,
+                &mut errors,
+            ),
+            "pdwMaxAge",
+        );
+        assert_invalid_arg_or_null_ref(
+            io.Read(
+                1,
+                ids.as_ptr(),
+                ages.as_ptr(),
+                std::ptr::null_mut(),
+                &mut qualities,
+                &mut times,
+                &mut errors,
+            ),
+            "ppvValues",
+        );
+        assert_invalid_arg_or_null_ref(
+            io.Read(
+                1,
+                ids.as_ptr(),
+                ages.as_ptr(),
+                &mut values,
+                &mut qualities,
+                &mut times,
+                std::ptr::null_mut(),
+            ),
+            "ppErrors",
+        );
         assert_alive(&server);
-        assert_invalid_arg_or_null_ref(io.WriteVQT(1, ids.as_ptr(), std::ptr::null(), &mut errors), "pItemVQT");
-        assert_invalid_arg_or_null_ref(io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), std::ptr::null_mut()), "ppErrors");
+        assert_invalid_arg_or_null_ref(
+            io.WriteVQT(1, ids.as_ptr(), std::ptr::null(), &mut errors),
+            "pItemVQT",
+        );
+        assert_invalid_arg_or_null_ref(
+            io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), std::ptr::null_mut()),
+            "ppErrors",
+        );
         assert_alive(&server);
     }
 }

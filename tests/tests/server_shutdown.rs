@@ -14,14 +14,20 @@
 
 use ctopc_com::client::Server;
 use ctopc_core::Timestamp;
-use e2e_tests::{assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID};
+use e2e_tests::{
+    assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID,
+};
 use std::os::windows::process::CommandExt;
 use std::sync::mpsc;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
-use windows::core::{implement, Interface, IUnknown, PCWSTR};
-use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints};
-use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
+use windows::core::{implement, IUnknown, Interface, PCWSTR};
+use windows::Win32::System::Com::{
+    IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints,
+};
+use windows::Win32::System::Ole::{
+    CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION,
+};
 
 /// A client's IOPCShutdown: forwards every reason to the test.
 #[implement(IOPCShutdown)]
@@ -32,7 +38,11 @@ struct Sink {
 impl IOPCShutdown_Impl for Sink_Impl {
     unsafe fn ShutdownRequest(&self, reason: PCWSTR) -> windows::core::Result<()> {
         // SAFETY: a non-null [in, string] is a NUL-terminated UTF-16 string for the call.
-        let reason = if reason.is_null() { None } else { unsafe { reason.to_string() }.ok() };
+        let reason = if reason.is_null() {
+            None
+        } else {
+            unsafe { reason.to_string() }.ok()
+        };
         let _ = self.tx.lock().map(|tx| tx.send(reason));
         Ok(())
     }
@@ -44,7 +54,10 @@ fn sink() -> (IOPCShutdown, mpsc::Receiver<Option<String>>) {
 }
 
 fn container(server: &Server) -> IConnectionPointContainer {
-    server.unknown.cast().expect("the server object is an IConnectionPointContainer")
+    server
+        .unknown
+        .cast()
+        .expect("the server object is an IConnectionPointContainer")
 }
 
 #[test]
@@ -52,13 +65,21 @@ fn one_connection_point_for_iopcshutdown() {
     let (_com, server) = connect();
     let cpc = container(&server);
     // SAFETY: valid IID pointers for the calls.
-    let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.expect("FindConnectionPoint(IOPCShutdown)");
+    let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }
+        .expect("FindConnectionPoint(IOPCShutdown)");
     // SAFETY: no arguments.
-    assert_eq!(unsafe { cp.GetConnectionInterface() }.unwrap(), IID_IOPCShutdown);
+    assert_eq!(
+        unsafe { cp.GetConnectionInterface() }.unwrap(),
+        IID_IOPCShutdown
+    );
     // SAFETY: valid IID pointer.
-    assert_eq!(code(&unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback) }), CONNECT_E_NOCONNECTION);
+    assert_eq!(
+        code(&unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback) }),
+        CONNECT_E_NOCONNECTION
+    );
     // SAFETY: no arguments.
-    let e: IEnumConnectionPoints = unsafe { cpc.EnumConnectionPoints() }.expect("EnumConnectionPoints");
+    let e: IEnumConnectionPoints =
+        unsafe { cpc.EnumConnectionPoints() }.expect("EnumConnectionPoints");
     let mut points = Vec::new();
     loop {
         let mut one: [Option<IConnectionPoint>; 1] = Default::default();
@@ -73,7 +94,10 @@ fn one_connection_point_for_iopcshutdown() {
     }
     assert_eq!(points.len(), 1);
     // SAFETY: no arguments.
-    assert_eq!(unsafe { points[0].GetConnectionInterface() }.unwrap(), IID_IOPCShutdown);
+    assert_eq!(
+        unsafe { points[0].GetConnectionInterface() }.unwrap(),
+        IID_IOPCShutdown
+    );
 }
 
 #[test]
@@ -83,34 +107,57 @@ fn advise_rules_of_the_shutdown_point() {
     let cookie = server.advise_shutdown(&s).expect("Advise");
     assert_ne!(cookie, 0);
     let (s2, _rx2) = sink();
-    assert_eq!(code(&server.advise_shutdown(&s2)), CONNECT_E_ADVISELIMIT, "one connection per point");
-    assert_eq!(code(&server.unadvise_shutdown(cookie.wrapping_add(1000))), CONNECT_E_NOCONNECTION);
+    assert_eq!(
+        code(&server.advise_shutdown(&s2)),
+        CONNECT_E_ADVISELIMIT,
+        "one connection per point"
+    );
+    assert_eq!(
+        code(&server.unadvise_shutdown(cookie.wrapping_add(1000))),
+        CONNECT_E_NOCONNECTION
+    );
     server.unadvise_shutdown(cookie).expect("Unadvise");
-    assert_eq!(code(&server.unadvise_shutdown(cookie)), CONNECT_E_NOCONNECTION, "already unadvised");
+    assert_eq!(
+        code(&server.unadvise_shutdown(cookie)),
+        CONNECT_E_NOCONNECTION,
+        "already unadvised"
+    );
     // An object that is no IOPCShutdown cannot connect.
     let cpc = container(&server);
     // SAFETY: valid IID pointer.
     let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.unwrap();
     let not_a_sink: IUnknown = server.unknown.clone();
     // SAFETY: a live interface pointer.
-    assert_eq!(code(&unsafe { cp.Advise(&not_a_sink) }), CONNECT_E_CANNOTCONNECT);
+    assert_eq!(
+        code(&unsafe { cp.Advise(&not_a_sink) }),
+        CONNECT_E_CANNOTCONNECT
+    );
     // Connect again after the unadvise; EnumConnections lists that connection's cookie.
     let cookie = server.advise_shutdown(&s2).expect("Advise again");
-    let listed: Vec<u32> = e2e_tests::connections(&cp).into_iter().map(|(c, _)| c).collect();
+    let listed: Vec<u32> = e2e_tests::connections(&cp)
+        .into_iter()
+        .map(|(c, _)| c)
+        .collect();
     assert_eq!(listed, [cookie]);
     server.unadvise_shutdown(cookie).unwrap();
     assert_alive(&server);
 }
 
 fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_millis();
+    let ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis();
     Timestamp::from_unix_millis(ms as i64)
 }
 
 /// Connects to the server process the test started (started at or after `since`).
 fn connect_to_new_server(since: Timestamp) -> Server {
     let server = Server::connect(PROGID).expect("CoCreateInstance(ServerCTOPC.App)");
-    assert!(server.status().unwrap().start_time >= since, "connected to another server than the test's");
+    assert!(
+        server.status().unwrap().start_time >= since,
+        "connected to another server than the test's"
+    );
     server
 }
 
@@ -121,8 +168,18 @@ const MARKER_RATE_MS: u32 = 777;
 /// rate for a 1 ms group is the marker rate (a server COM starts has no SERVERCTOPC_INI).
 fn is_marked(server: &Server) -> bool {
     use ctopc_com::client::GroupSpec;
-    let spec = GroupSpec { name: String::new(), active: false, rate_ms: 1, client_handle: 1, time_bias: None, deadband: None, lcid: 0x409 };
-    let Ok(g) = server.add_group(&spec) else { return false };
+    let spec = GroupSpec {
+        name: String::new(),
+        active: false,
+        rate_ms: 1,
+        client_handle: 1,
+        time_bias: None,
+        deadband: None,
+        lcid: 0x409,
+    };
+    let Ok(g) = server.add_group(&spec) else {
+        return false;
+    };
     let _ = server.remove_group(g.server_handle, true);
     g.revised_rate == MARKER_RATE_MS
 }
@@ -142,7 +199,11 @@ fn connect_to_started_server(pid: u32, since: Timestamp) -> Server {
         drop(server);
         let deadline = Instant::now() + Duration::from_secs(30);
         while !other_servers(pid).is_empty() {
-            assert!(Instant::now() < deadline, "the other server does not exit: {:?}", other_servers(pid));
+            assert!(
+                Instant::now() < deadline,
+                "the other server does not exit: {:?}",
+                other_servers(pid)
+            );
             std::thread::sleep(Duration::from_millis(200));
         }
     }
@@ -167,7 +228,11 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     wait_for_no_other_server();
     let since = now();
     let ini = std::env::temp_dir().join(format!("ServerCTOPC-ctrl-c-{}.ini", std::process::id()));
-    std::fs::write(&ini, format!("; the Ctrl+C test's server\r\n[Server]\r\nMinUpdateRate = {MARKER_RATE_MS}\r\n")).expect("write the test's ini");
+    std::fs::write(
+        &ini,
+        format!("; the Ctrl+C test's server\r\n[Server]\r\nMinUpdateRate = {MARKER_RATE_MS}\r\n"),
+    )
+    .expect("write the test's ini");
     let mut server_process = std::process::Command::new(e2e_tests::artifact("ServerCTOPC.exe"))
         .arg("-Embedding")
         .env("SERVERCTOPC_INI", &ini)
@@ -181,12 +246,26 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     // The helper sends Ctrl+C to the server's console; what it printed goes into a
     // failure message.
     let helper = match std::process::Command::new(std::env::current_exe().unwrap())
-        .args(["--exact", "ctrl_c_helper", "--ignored", "--test-threads=1", "--nocapture"])
+        .args([
+            "--exact",
+            "ctrl_c_helper",
+            "--ignored",
+            "--test-threads=1",
+            "--nocapture",
+        ])
         .env(HELPER_PID_VAR, server_process.id().to_string())
         .stdin(std::process::Stdio::null())
         .output()
     {
-        Ok(o) => format!("{}: {}", o.status, String::from_utf8_lossy(&o.stderr).lines().filter(|l| l.contains("panicked")).collect::<Vec<_>>().join(" | ")),
+        Ok(o) => format!(
+            "{}: {}",
+            o.status,
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .filter(|l| l.contains("panicked"))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        ),
         Err(e) => format!("not started: {e}"),
     };
     let reason = rx.recv_timeout(Duration::from_secs(20));
@@ -195,9 +274,14 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     if exit.is_none() {
         let _ = server_process.kill();
     }
-    let reason = reason.unwrap_or_else(|e| panic!("IOPCShutdown::ShutdownRequest within 20 s of Ctrl+C ({e:?}); helper: {helper}"));
+    let reason = reason.unwrap_or_else(|e| {
+        panic!("IOPCShutdown::ShutdownRequest within 20 s of Ctrl+C ({e:?}); helper: {helper}")
+    });
     let reason = reason.expect("a reason, not NULL");
-    assert!(reason.contains("ServerCTOPC") && reason.len() > 12, "a readable reason: {reason:?}");
+    assert!(
+        reason.contains("ServerCTOPC") && reason.len() > 12,
+        "a readable reason: {reason:?}"
+    );
     let exit = exit.expect("the server exits after the shutdown request");
     assert!(exit.success(), "{exit:?}");
     drop(server);
@@ -212,8 +296,15 @@ const HELPER_PID_VAR: &str = "CTOPC_TEST_CTRL_C_TO_PID";
 #[test]
 #[ignore = "helper process of ctrl_c_sends_shutdown_request_to_a_connected_client"]
 fn ctrl_c_helper() {
-    use windows::Win32::System::Console::{AttachConsole, FreeConsole, GenerateConsoleCtrlEvent, SetConsoleCtrlHandler, CTRL_C_EVENT};
-    let Some(pid) = std::env::var(HELPER_PID_VAR).ok().and_then(|p| p.parse::<u32>().ok()) else { return };
+    use windows::Win32::System::Console::{
+        AttachConsole, FreeConsole, GenerateConsoleCtrlEvent, SetConsoleCtrlHandler, CTRL_C_EVENT,
+    };
+    let Some(pid) = std::env::var(HELPER_PID_VAR)
+        .ok()
+        .and_then(|p| p.parse::<u32>().ok())
+    else {
+        return;
+    };
     // SAFETY: plain Win32 console calls on this process's console attachment.
     unsafe {
         let _ = FreeConsole();

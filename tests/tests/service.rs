@@ -11,16 +11,22 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use windows::core::{implement, Interface, PCWSTR};
 use windows::Win32::System::Com::IConnectionPointContainer;
-use windows::Win32::System::Registry::{RegGetValueW, HKEY_CLASSES_ROOT, HKEY_LOCAL_MACHINE, RRF_RT_REG_SZ};
+use windows::Win32::System::Registry::{
+    RegGetValueW, HKEY_CLASSES_ROOT, HKEY_LOCAL_MACHINE, RRF_RT_REG_SZ,
+};
 use windows::Win32::System::Services::{
-    CloseServiceHandle, ControlService, OpenSCManagerW, OpenServiceW, QueryServiceStatus, SC_HANDLE, SC_MANAGER_CONNECT,
-    SERVICE_CONTROL_STOP, SERVICE_QUERY_STATUS, SERVICE_RUNNING, SERVICE_STATUS, SERVICE_STOP, SERVICE_STOPPED,
+    CloseServiceHandle, ControlService, OpenSCManagerW, OpenServiceW, QueryServiceStatus,
+    SC_HANDLE, SC_MANAGER_CONNECT, SERVICE_CONTROL_STOP, SERVICE_QUERY_STATUS, SERVICE_RUNNING,
+    SERVICE_STATUS, SERVICE_STOP, SERVICE_STOPPED,
 };
 
 const SERVICE: windows::core::PCWSTR = windows::core::w!("ServerCTOPC");
 
 fn server_exe(arg: &str) -> std::process::ExitStatus {
-    std::process::Command::new(artifact("ServerCTOPC.exe")).arg(arg).status().expect("run ServerCTOPC.exe")
+    std::process::Command::new(artifact("ServerCTOPC.exe"))
+        .arg(arg)
+        .status()
+        .expect("run ServerCTOPC.exe")
 }
 
 /// Restores the ordinary COM registration whatever happens (other test binaries need it).
@@ -32,17 +38,33 @@ impl Drop for Restore {
     }
 }
 
-fn reg_string(root: windows::Win32::System::Registry::HKEY, key: &str, value: &str) -> Option<String> {
+fn reg_string(
+    root: windows::Win32::System::Registry::HKEY,
+    key: &str,
+    value: &str,
+) -> Option<String> {
     let key: Vec<u16> = key.encode_utf16().chain([0]).collect();
     let value: Vec<u16> = value.encode_utf16().chain([0]).collect();
     let mut buf = vec![0u16; 1024];
     let mut len = (buf.len() * 2) as u32;
     // SAFETY (test): valid strings and buffer.
-    let r = unsafe { RegGetValueW(root, PCWSTR(key.as_ptr()), PCWSTR(value.as_ptr()), RRF_RT_REG_SZ, None, Some(buf.as_mut_ptr().cast()), Some(&mut len)) };
+    let r = unsafe {
+        RegGetValueW(
+            root,
+            PCWSTR(key.as_ptr()),
+            PCWSTR(value.as_ptr()),
+            RRF_RT_REG_SZ,
+            None,
+            Some(buf.as_mut_ptr().cast()),
+            Some(&mut len),
+        )
+    };
     if r.is_err() {
         return None;
     }
-    Some(String::from_utf16_lossy(&buf[..(len as usize / 2).saturating_sub(1)]))
+    Some(String::from_utf16_lossy(
+        &buf[..(len as usize / 2).saturating_sub(1)],
+    ))
 }
 
 struct Scm(SC_HANDLE);
@@ -89,23 +111,42 @@ fn the_service_is_installed_started_by_com_stopped_with_shutdown_requests_and_re
     assert!(server_exe("/Service").success(), "/Service is idempotent");
     let key = r"System\CurrentControlSet\Services\ServerCTOPC";
     let image = reg_string(HKEY_LOCAL_MACHINE, key, "ImagePath").expect("service ImagePath");
-    assert!(image.contains("ServerCTOPC.exe") && image.ends_with("-ServiceRun"), "{image}");
-    assert_eq!(reg_string(HKEY_LOCAL_MACHINE, key, "ObjectName").as_deref(), Some(r"NT AUTHORITY\LocalService"));
-    assert_eq!(reg_string(HKEY_CLASSES_ROOT, r"AppID\{3277B556-BA68-4BDE-8687-8EE4E4B46336}", "LocalService").as_deref(), Some("ServerCTOPC"));
+    assert!(
+        image.contains("ServerCTOPC.exe") && image.ends_with("-ServiceRun"),
+        "{image}"
+    );
+    assert_eq!(
+        reg_string(HKEY_LOCAL_MACHINE, key, "ObjectName").as_deref(),
+        Some(r"NT AUTHORITY\LocalService")
+    );
+    assert_eq!(
+        reg_string(
+            HKEY_CLASSES_ROOT,
+            r"AppID\{3277B556-BA68-4BDE-8687-8EE4E4B46336}",
+            "LocalService"
+        )
+        .as_deref(),
+        Some("ServerCTOPC")
+    );
 
     // COM activation starts the service (once no earlier test's server lingers: Wine hands
     // activations to the first server that registered the class).
     wait_for_no_other_server();
     let (_com, server) = connect();
     assert_alive(&server);
-    assert_eq!(service_state(), Some(SERVICE_RUNNING.0), "the server runs as the service");
+    assert_eq!(
+        service_state(),
+        Some(SERVICE_RUNNING.0),
+        "the server runs as the service"
+    );
 
     // A client connected to IOPCShutdown hears about the service stop.
     let got = Arc::new(Mutex::new(Vec::new()));
     let sink: IOPCShutdown = ShutdownSink(Arc::clone(&got)).into();
     let cpc: IConnectionPointContainer = server.unknown.cast().expect("IConnectionPointContainer");
     // SAFETY (test): valid IID pointer.
-    let cp = unsafe { cpc.FindConnectionPoint(&IOPCShutdown::IID) }.expect("IOPCShutdown connection point");
+    let cp = unsafe { cpc.FindConnectionPoint(&IOPCShutdown::IID) }
+        .expect("IOPCShutdown connection point");
     // SAFETY (test): valid sink.
     let sink_unknown: windows::core::IUnknown = sink.cast().unwrap();
     let cookie = unsafe { cp.Advise(&sink_unknown) }.expect("Advise");
@@ -114,11 +155,15 @@ fn the_service_is_installed_started_by_com_stopped_with_shutdown_requests_and_re
         let (_m, s) = open_service(SERVICE_STOP).expect("open the service to stop it");
         let mut st = SERVICE_STATUS::default();
         // SAFETY (test): valid handle and out struct.
-        unsafe { ControlService(s.0, SERVICE_CONTROL_STOP, &mut st) }.expect("ControlService(STOP)");
+        unsafe { ControlService(s.0, SERVICE_CONTROL_STOP, &mut st) }
+            .expect("ControlService(STOP)");
     }
     let deadline = Instant::now() + Duration::from_secs(20);
     while got.lock().unwrap().is_empty() {
-        assert!(Instant::now() < deadline, "no ShutdownRequest within 20 s of the service stop");
+        assert!(
+            Instant::now() < deadline,
+            "no ShutdownRequest within 20 s of the service stop"
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
     let reasons = got.lock().unwrap().clone();
@@ -132,7 +177,10 @@ fn the_service_is_installed_started_by_com_stopped_with_shutdown_requests_and_re
 
     // /UnregServer removes the service and the registration, quietly, twice.
     assert!(server_exe("/UnregServer").success());
-    assert!(server_exe("/UnregServer").success(), "unregistering what is not registered succeeds");
+    assert!(
+        server_exe("/UnregServer").success(),
+        "unregistering what is not registered succeeds"
+    );
     assert_eq!(service_state(), None, "the service is gone");
     assert_eq!(reg_string(HKEY_LOCAL_MACHINE, key, "ImagePath"), None);
 }

@@ -32,7 +32,11 @@ fn wineserver(pfx: &Path, arg: &str, limit: Duration) {
     let mut c = Command::new(wine::WINESERVER);
     wine::env(&mut c);
     c.env("WINEPREFIX", pfx).arg(arg);
-    let _ = util::run_with_timeout(c.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()), limit);
+    let _ = util::run_with_timeout(
+        c.stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null()),
+        limit,
+    );
 }
 
 /// Creates the benchmark prefix (as `setup` does the test prefix) and installs the shim.
@@ -40,7 +44,8 @@ fn ensure_prefix(pfx: &Path) -> Result<(), String> {
     if !pfx.join("system.reg").exists() {
         println!("bench: creating Wine prefix {}", pfx.display());
         std::fs::create_dir_all(pfx).map_err(|e| e.to_string())?;
-        let status = util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
+        let status =
+            util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
         if !status.success() {
             return Err(format!("wineboot -i failed: {status}"));
         }
@@ -57,22 +62,45 @@ fn ensure_prefix(pfx: &Path) -> Result<(), String> {
 pub fn run(args: &[String]) -> Result<(), String> {
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
-    util::run(util::cargo().args(["build", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "--bin", "bench-com"]))?;
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        setup::TARGET,
+        "-p",
+        "e2e-tests",
+        "--bin",
+        "bench-com",
+    ]))?;
     let exe = artifacts.dir.join("bench-com.exe");
     let pfx = prefix();
     ensure_prefix(&pfx)?;
     wineserver(&pfx, "-k", Duration::from_secs(20));
     let result = (|| {
         let limit = Duration::from_secs(120);
-        let status = util::run_with_timeout(wine_in(&pfx, "regsvr32").arg("/s").arg(&artifacts.proxy), limit)?;
+        let status = util::run_with_timeout(
+            wine_in(&pfx, "regsvr32").arg("/s").arg(&artifacts.proxy),
+            limit,
+        )?;
         if !status.success() {
-            return Err(format!("regsvr32 {} failed: {status}", artifacts.proxy.display()));
+            return Err(format!(
+                "regsvr32 {} failed: {status}",
+                artifacts.proxy.display()
+            ));
         }
-        let status = util::run_with_timeout(wine_in(&pfx, &artifacts.server).arg("/RegServer"), limit)?;
+        let status =
+            util::run_with_timeout(wine_in(&pfx, &artifacts.server).arg("/RegServer"), limit)?;
         if !status.success() {
-            return Err(format!("{} /RegServer failed: {status}", artifacts.server.display()));
+            return Err(format!(
+                "{} /RegServer failed: {status}",
+                artifacts.server.display()
+            ));
         }
-        println!("bench: running {} under Wine (prefix {})", exe.display(), pfx.display());
+        println!(
+            "bench: running {} under Wine (prefix {})",
+            exe.display(),
+            pfx.display()
+        );
         let status = util::run_with_timeout(wine_in(&pfx, &exe).args(args), LIMIT)?;
         if status.success() {
             Ok(())

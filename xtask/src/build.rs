@@ -12,8 +12,22 @@ pub struct Artifacts {
 pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     let root = util::root();
     let dir = root.join("target").join(TARGET).join("release");
-    util::run(util::cargo().args(["build", "--release", "--target", TARGET, "-p", "serverctopc", "-p", "opc-client", "--bins"]))?;
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        TARGET,
+        "-p",
+        "serverctopc",
+        "-p",
+        "opc-client",
+        "--bins",
+    ]))?;
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let proxy = proxy::build_proxy(&root, &dir)?;
-    Ok(Artifacts { server: dir.join("ServerCTOPC.exe"), proxy, dir })
+    Ok(Artifacts {
+        server: dir.join("ServerCTOPC.exe"),
+        proxy,
+        dir,
+    })
 }

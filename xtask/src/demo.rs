@@ -58,7 +58,12 @@ fn parse(args: &[String]) -> Result<Option<u64>, String> {
         match a.as_str() {
             "--for" => {
                 let v = it.next().ok_or("--for needs a number of seconds")?;
-                for_secs = Some(v.parse::<u64>().ok().filter(|s| *s > 0).ok_or_else(|| format!("--for: expected whole seconds > 0, got {v:?}"))?);
+                for_secs = Some(
+                    v.parse::<u64>()
+                        .ok()
+                        .filter(|s| *s > 0)
+                        .ok_or_else(|| format!("--for: expected whole seconds > 0, got {v:?}"))?,
+                );
             }
             "-h" | "--help" => {
                 print!("{USAGE}");
@@ -98,7 +103,9 @@ fn copy(from: &Path, to: &Path) -> Result<(), String> {
     if let Some(dir) = to.parent() {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     }
-    std::fs::copy(from, to).map(|_| ()).map_err(|e| format!("copy {} to {}: {e}", from.display(), to.display()))
+    std::fs::copy(from, to)
+        .map(|_| ())
+        .map_err(|e| format!("copy {} to {}: {e}", from.display(), to.display()))
 }
 
 /// Stages the demo install folder; returns it.
@@ -109,7 +116,10 @@ fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
     copy(&a.proxy, &dir.join("opc_ps.dll"))?;
     copy(&a.dir.join("opcdiag.exe"), &dir.join("opcdiag.exe"))?;
     for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
-        copy(&root.join("demo/wytwornia_kwasu").join(f), &dir.join("demo/wytwornia_kwasu").join(f))?;
+        copy(
+            &root.join("demo/wytwornia_kwasu").join(f),
+            &dir.join("demo/wytwornia_kwasu").join(f),
+        )?;
     }
     let ini = dir.join("ASIXConnect.ini");
     std::fs::write(&ini, ini_text()).map_err(|e| format!("{}: {e}", ini.display()))?;
@@ -126,11 +136,20 @@ fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
         return Err(format!("regsvr32 {} failed: {status}", dll.display()));
     }
     let exe = dir.join("ServerCTOPC.exe");
-    let status = util::run_with_timeout(wine::wine_in(pfx, &exe).arg("/RegServer").stdout(Stdio::null()), limit)?;
+    let status = util::run_with_timeout(
+        wine::wine_in(pfx, &exe)
+            .arg("/RegServer")
+            .stdout(Stdio::null()),
+        limit,
+    )?;
     if !status.success() {
         return Err(format!("{} /RegServer failed: {status}", exe.display()));
     }
-    println!("demo: registered opc_ps.dll and {} in {}", exe.display(), pfx.display());
+    println!(
+        "demo: registered opc_ps.dll and {} in {}",
+        exe.display(),
+        pfx.display()
+    );
     Ok(())
 }
 
@@ -142,7 +161,12 @@ impl Sim {
         let mut child = Command::new(exe)
             .arg("--demo-db")
             .arg(db)
-            .args(["--udp", &format!("127.0.0.1:{DISCOVERY_PORT}"), "--tcp", &format!("127.0.0.1:{DATA_PORT}")])
+            .args([
+                "--udp",
+                &format!("127.0.0.1:{DISCOVERY_PORT}"),
+                "--tcp",
+                &format!("127.0.0.1:{DATA_PORT}"),
+            ])
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             // Its own process group: Ctrl+C in the terminal reaches xtask and opcdiag, not
@@ -166,7 +190,9 @@ impl Sim {
                 println!("demo: {line}");
                 Ok(sim)
             }
-            Err(_) => Err("asix-sim did not start (no ready line in 30 s; is the port in use?)".into()),
+            Err(_) => {
+                Err("asix-sim did not start (no ready line in 30 s; is the port in use?)".into())
+            }
         }
     }
 }
@@ -181,7 +207,9 @@ impl Drop for Sim {
         loop {
             match self.0.try_wait() {
                 Ok(Some(_)) => return,
-                Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(50)),
+                Ok(None) if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(50))
+                }
                 _ => break,
             }
         }
@@ -192,19 +220,29 @@ impl Drop for Sim {
 
 /// Asks a process to stop as Ctrl+C would (SIGINT; Wine turns it into CTRL_C_EVENT).
 fn interrupt(child: &Child) {
-    let _ = Command::new("kill").args(["-INT", &child.id().to_string()]).stderr(Stdio::null()).status();
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .stderr(Stdio::null())
+        .status();
 }
 
 /// Runs `opcdiag demo` in the foreground until it exits; on Ctrl+C (the flag) or after
 /// `limit` it is interrupted, and killed if it has not left 10 s later.
-fn run_opcdiag(pfx: &Path, dir: &Path, for_secs: Option<u64>, stop: &AtomicBool) -> Result<(), String> {
+fn run_opcdiag(
+    pfx: &Path,
+    dir: &Path,
+    for_secs: Option<u64>,
+    stop: &AtomicBool,
+) -> Result<(), String> {
     let exe = dir.join("opcdiag.exe");
     let mut cmd = wine::wine_in(pfx, &exe);
     cmd.arg("demo");
     if let Some(s) = for_secs {
         cmd.args(["--for", &s.to_string()]);
     }
-    let mut child = cmd.spawn().map_err(|e| format!("cannot start opcdiag.exe: {e}"))?;
+    let mut child = cmd
+        .spawn()
+        .map_err(|e| format!("cannot start opcdiag.exe: {e}"))?;
     let started = Instant::now();
     // With --for: its time plus Wine's and the server's start (and some slack).
     let limit = for_secs.map(|s| Duration::from_secs(s + 90));
@@ -212,7 +250,11 @@ fn run_opcdiag(pfx: &Path, dir: &Path, for_secs: Option<u64>, stop: &AtomicBool)
     loop {
         match child.try_wait() {
             // After Ctrl+C its exit code is no verdict (it may have been stopped early).
-            Ok(Some(status)) if status.success() || interrupted_at.is_some() || stop.load(Ordering::SeqCst) => return Ok(()),
+            Ok(Some(status))
+                if status.success() || interrupted_at.is_some() || stop.load(Ordering::SeqCst) =>
+            {
+                return Ok(())
+            }
             Ok(Some(status)) => return Err(format!("opcdiag demo failed: {status}")),
             Ok(None) => {}
             Err(e) => return Err(format!("waiting for opcdiag: {e}")),
@@ -225,7 +267,10 @@ fn run_opcdiag(pfx: &Path, dir: &Path, for_secs: Option<u64>, stop: &AtomicBool)
                 interrupted_at = Some(Instant::now());
                 if overtime {
                     let _ = child.wait();
-                    return Err(format!("opcdiag demo did not end within {} s", limit.map_or(0, |l| l.as_secs())));
+                    return Err(format!(
+                        "opcdiag demo did not end within {} s",
+                        limit.map_or(0, |l| l.as_secs())
+                    ));
                 }
             }
             Some(t) if t.elapsed() > Duration::from_secs(10) => {
@@ -245,7 +290,8 @@ pub fn run(args: &[String]) -> Result<(), String> {
     // terminal's SIGINT reaches opcdiag too, which stops by itself).
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).map_err(|e| format!("cannot catch Ctrl+C: {e}"))?;
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .map_err(|e| format!("cannot catch Ctrl+C: {e}"))?;
 
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
@@ -264,8 +310,18 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let mut sim = None;
     let result = (|| {
         register(&pfx, &dir)?;
-        sim = Some(Sim::start(&sim_exe, &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"))?);
-        println!("demo: starting `opcdiag demo` under Wine{}\n", if for_secs.is_none() { " (Ctrl+C to stop)" } else { "" });
+        sim = Some(Sim::start(
+            &sim_exe,
+            &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
+        )?);
+        println!(
+            "demo: starting `opcdiag demo` under Wine{}\n",
+            if for_secs.is_none() {
+                " (Ctrl+C to stop)"
+            } else {
+                ""
+            }
+        );
         run_opcdiag(&pfx, &dir, for_secs, &stop)
     })();
     // The server leaves by itself 3 s after its last client (and logs it); Wine's own
@@ -274,7 +330,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::wineserver_in(&pfx, "-w", Duration::from_secs(10));
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     drop(sim);
-    println!("demo: stopped (Wine processes of {} ended, asix-sim ended)", pfx.display());
+    println!(
+        "demo: stopped (Wine processes of {} ended, asix-sim ended)",
+        pfx.display()
+    );
     result
 }
 
@@ -303,7 +362,11 @@ mod tests {
         let db = dir.join("demo/wytwornia_kwasu");
         std::fs::create_dir_all(&db).unwrap();
         for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
-            std::fs::copy(util::root().join("demo/wytwornia_kwasu").join(f), db.join(f)).unwrap();
+            std::fs::copy(
+                util::root().join("demo/wytwornia_kwasu").join(f),
+                db.join(f),
+            )
+            .unwrap();
         }
         std::fs::write(dir.join("ASIXConnect.ini"), ini_text()).unwrap();
         let loaded = ctopc_core::asix::load_config_file(&dir.join("ASIXConnect.ini"));
@@ -311,7 +374,10 @@ mod tests {
         assert!(warnings.is_empty(), "{warnings:?}");
         assert!(!cfg.server.simulate_current_data);
         assert_eq!(cfg.server.broadcast_address.as_deref(), Some("127.0.0.1"));
-        assert_eq!((cfg.server.discovery_port, cfg.server.data_port), (Some(DISCOVERY_PORT), Some(DATA_PORT)));
+        assert_eq!(
+            (cfg.server.discovery_port, cfg.server.data_port),
+            (Some(DISCOVERY_PORT), Some(DATA_PORT))
+        );
         let (ns, _) = ctopc_core::asix::AsixNamespace::load(cfg);
         assert_eq!(ns.no_config_reason(), None, "the demo database loads");
         let _ = std::fs::remove_dir_all(&dir);

@@ -17,14 +17,26 @@ pub fn run(_args: &[String]) -> Result<(), String> {
         ("ServerCTOPC.exe".into(), a.server.clone()),
         ("opc_ps.dll".into(), a.proxy.clone()),
         ("opcdiag.exe".into(), a.dir.join("opcdiag.exe")),
-        ("asixconnect.ini.example".into(), root.join("asixconnect.ini.example")),
+        (
+            "asixconnect.ini.example".into(),
+            root.join("asixconnect.ini.example"),
+        ),
         ("README.md".into(), root.join("README.md")),
         ("docs/deployment.md".into(), root.join("docs/deployment.md")),
-        ("docs/variable-database.md".into(), root.join("docs/variable-database.md")),
-        ("docs/asix-net-protocol.md".into(), root.join("docs/asix-net-protocol.md")),
+        (
+            "docs/variable-database.md".into(),
+            root.join("docs/variable-database.md"),
+        ),
+        (
+            "docs/asix-net-protocol.md".into(),
+            root.join("docs/asix-net-protocol.md"),
+        ),
     ];
     for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
-        files.push((format!("demo/wytwornia_kwasu/{f}"), root.join("demo/wytwornia_kwasu").join(f)));
+        files.push((
+            format!("demo/wytwornia_kwasu/{f}"),
+            root.join("demo/wytwornia_kwasu").join(f),
+        ));
     }
     let mut entries = Vec::new();
     for (name, path) in &files {
@@ -44,11 +56,17 @@ fn crc32(data: &[u8]) -> u32 {
     for (i, t) in table.iter_mut().enumerate() {
         let mut c = i as u32;
         for _ in 0..8 {
-            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
         }
         *t = c;
     }
-    !data.iter().fold(!0u32, |c, &b| table[((c ^ u32::from(b)) & 0xFF) as usize] ^ (c >> 8))
+    !data.iter().fold(!0u32, |c, &b| {
+        table[((c ^ u32::from(b)) & 0xFF) as usize] ^ (c >> 8)
+    })
 }
 
 /// A ZIP archive of `(name, data)` entries, stored (no compression), UTF-8 names,
@@ -117,7 +135,10 @@ mod tests {
 
     #[test]
     fn the_archive_lists_every_entry_with_its_size_and_offset() {
-        let entries = vec![("a/x.txt".to_string(), b"hello".to_vec()), ("a/żółć.md".to_string(), vec![7u8; 300])];
+        let entries = vec![
+            ("a/x.txt".to_string(), b"hello".to_vec()),
+            ("a/żółć.md".to_string(), vec![7u8; 300]),
+        ];
         let z = zip(&entries);
         // End of central directory: two entries.
         let eocd = z.len() - 22;

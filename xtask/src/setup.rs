@@ -9,7 +9,12 @@ use std::time::Duration;
 /// Debian packages: Wine 8 (64-bit), the mingw C toolchain (linker for the Rust
 /// windows-gnu target, the shim and the proxy/stub DLL), widl, and the system IDL files
 /// widl imports (only libwine-dev ships them).
-pub const PACKAGES: &[&str] = &["wine64", "gcc-mingw-w64-x86-64", "mingw-w64-tools", "libwine-dev"];
+pub const PACKAGES: &[&str] = &[
+    "wine64",
+    "gcc-mingw-w64-x86-64",
+    "mingw-w64-tools",
+    "libwine-dev",
+];
 pub const TARGET: &str = "x86_64-pc-windows-gnu";
 
 pub fn run(_args: &[String]) -> Result<(), String> {
@@ -85,7 +90,8 @@ fn prefix(shim: &Path) -> Result<(), String> {
     if !pfx.join("system.reg").exists() {
         println!("setup: creating Wine prefix {}", pfx.display());
         std::fs::create_dir_all(&pfx).map_err(|e| e.to_string())?;
-        let status = util::run_with_timeout(wine::wine("wineboot").arg("-i"), Duration::from_secs(180))?;
+        let status =
+            util::run_with_timeout(wine::wine("wineboot").arg("-i"), Duration::from_secs(180))?;
         if !status.success() {
             return Err(format!("wineboot -i failed: {status}"));
         }

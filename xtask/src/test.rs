@@ -29,7 +29,18 @@ pub fn run(args: &[String]) -> Result<(), String> {
         println!("test: end-to-end tests under Wine");
         let mut c = util::cargo();
         // The COM crate's own unit tests only build for Windows: they run here too.
-        c.args(["test", "--release", "--target", setup::TARGET, "-p", "e2e-tests", "-p", "ctopc-com", "--", "--test-threads=1"]);
+        c.args([
+            "test",
+            "--release",
+            "--target",
+            setup::TARGET,
+            "-p",
+            "e2e-tests",
+            "-p",
+            "ctopc-com",
+            "--",
+            "--test-threads=1",
+        ]);
         c.env("CTOPC_BIN_DIR", &artifacts.dir);
         let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
         if !status.success() {
@@ -51,9 +62,16 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
     }
     let status = util::run_with_timeout(wine::wine(&a.server).arg("/RegServer"), limit)?;
     if !status.success() {
-        return Err(format!("{} /RegServer failed: {status}", a.server.display()));
+        return Err(format!(
+            "{} /RegServer failed: {status}",
+            a.server.display()
+        ));
     }
-    println!("test: registered {} and {}", a.proxy.display(), a.server.display());
+    println!(
+        "test: registered {} and {}",
+        a.proxy.display(),
+        a.server.display()
+    );
     Ok(())
 }
 
@@ -66,11 +84,19 @@ fn thirdparty_client() -> Result<(), String> {
     let target_dir = root.join("target/thirdparty");
     util::run(
         util::cargo()
-            .args(["build", "--release", "--target", setup::TARGET, "--manifest-path"])
+            .args([
+                "build",
+                "--release",
+                "--target",
+                setup::TARGET,
+                "--manifest-path",
+            ])
             .arg(root.join("tests/thirdparty-client/Cargo.toml"))
             .env("CARGO_TARGET_DIR", &target_dir),
     )?;
-    let exe = target_dir.join(setup::TARGET).join("release/thirdparty-client.exe");
+    let exe = target_dir
+        .join(setup::TARGET)
+        .join("release/thirdparty-client.exe");
     let status = util::run_with_timeout(&mut wine::wine(&exe), Duration::from_secs(120))?;
     if status.success() {
         Ok(())

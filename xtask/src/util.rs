@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 pub fn root() -> PathBuf {
     let manifest = std::env::var("CARGO_MANIFEST_DIR").unwrap_or_else(|_| ".".into());
     let p = Path::new(&manifest);
-    p.parent().map(Path::to_path_buf).unwrap_or_else(|| p.to_path_buf())
+    p.parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| p.to_path_buf())
 }
 
 /// `cargo` as invoked by the user (respects $CARGO, rustup's proxy).
@@ -30,7 +32,9 @@ fn describe(cmd: &Command) -> String {
 
 /// Runs `cmd`, inheriting stdio; an error names the command and its status.
 pub fn run(cmd: &mut Command) -> Result<(), String> {
-    let status = cmd.status().map_err(|e| format!("cannot start `{}`: {e}", describe(cmd)))?;
+    let status = cmd
+        .status()
+        .map_err(|e| format!("cannot start `{}`: {e}", describe(cmd)))?;
     if status.success() {
         Ok(())
     } else {
@@ -61,7 +65,9 @@ pub fn output(cmd: &mut Command) -> Result<String, String> {
 /// or an error when it timed out.
 pub fn run_with_timeout(cmd: &mut Command, limit: Duration) -> Result<ExitStatus, String> {
     let what = describe(cmd);
-    let mut child = cmd.spawn().map_err(|e| format!("cannot start `{what}`: {e}"))?;
+    let mut child = cmd
+        .spawn()
+        .map_err(|e| format!("cannot start `{what}`: {e}"))?;
     let start = Instant::now();
     loop {
         match child.try_wait() {
@@ -69,7 +75,10 @@ pub fn run_with_timeout(cmd: &mut Command, limit: Duration) -> Result<ExitStatus
             Ok(None) if start.elapsed() >= limit => {
                 let _ = child.kill();
                 let _ = child.wait();
-                return Err(format!("`{what}` timed out after {} s and was killed", limit.as_secs()));
+                return Err(format!(
+                    "`{what}` timed out after {} s and was killed",
+                    limit.as_secs()
+                ));
             }
             Ok(None) => std::thread::sleep(Duration::from_millis(50)),
             Err(e) => return Err(format!("waiting for `{what}`: {e}")),
@@ -96,9 +105,13 @@ pub fn up_to_date(path: &Path, inputs: &[PathBuf]) -> bool {
             meta.modified().ok()
         }
     }
-    inputs.iter().all(|i| newest(i).is_some_and(|t| t <= out_time))
+    inputs
+        .iter()
+        .all(|i| newest(i).is_some_and(|t| t <= out_time))
 }
 
 pub fn is_root() -> bool {
-    output(Command::new("id").arg("-u")).map(|s| s.trim() == "0").unwrap_or(false)
+    output(Command::new("id").arg("-u"))
+        .map(|s| s.trim() == "0")
+        .unwrap_or(false)
 }

@@ -26,7 +26,10 @@ pub fn env(c: &mut Command) {
     c.env("WINEPREFIX", prefix())
         .env("WINEARCH", "win64")
         .env("WINEDLLOVERRIDES", "mscoree,mshtml=")
-        .env("WINEDEBUG", std::env::var("WINEDEBUG").unwrap_or_else(|_| "-all".into()));
+        .env(
+            "WINEDEBUG",
+            std::env::var("WINEDEBUG").unwrap_or_else(|_| "-all".into()),
+        );
 }
 
 /// Ends every process of the prefix (wineserver -k); harmless when none runs.
@@ -34,7 +37,11 @@ pub fn kill_all() {
     let mut c = Command::new(WINESERVER);
     env(&mut c);
     c.arg("-k");
-    let _ = util::run_with_timeout(c.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()), Duration::from_secs(20));
+    let _ = util::run_with_timeout(
+        c.stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null()),
+        Duration::from_secs(20),
+    );
 }
 
 /// Waits until the prefix's wineserver has exited (wineserver -w), bounded.
@@ -63,7 +70,11 @@ pub fn wineserver_in(pfx: &Path, arg: &str, limit: Duration) {
     let mut c = Command::new(WINESERVER);
     env(&mut c);
     c.env("WINEPREFIX", pfx).arg(arg);
-    let _ = util::run_with_timeout(c.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::null()), limit);
+    let _ = util::run_with_timeout(
+        c.stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null()),
+        limit,
+    );
 }
 
 /// Creates a Wine prefix of its own at `pfx` (as `setup` makes the project's, about 10 s
@@ -72,7 +83,8 @@ pub fn ensure_prefix(pfx: &Path) -> Result<(), String> {
     if !pfx.join("system.reg").exists() {
         println!("creating Wine prefix {}", pfx.display());
         std::fs::create_dir_all(pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
-        let status = util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
+        let status =
+            util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
         if !status.success() {
             return Err(format!("wineboot -i failed: {status}"));
         }

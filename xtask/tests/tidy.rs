@@ -9,11 +9,16 @@
 use std::path::{Path, PathBuf};
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
     for e in entries.flatten() {
         let p = e.path();
         let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
@@ -66,7 +71,8 @@ fn code_lines(text: &str) -> Vec<(usize, String, bool)> {
 }
 
 fn has_unsafe_token(code: &str) -> bool {
-    code.split(|c: char| !c.is_alphanumeric() && c != '_').any(|w| w == "unsafe")
+    code.split(|c: char| !c.is_alphanumeric() && c != '_')
+        .any(|w| w == "unsafe")
         && !code.contains("\"")
 }
 
@@ -79,18 +85,29 @@ fn unsafe_code_lives_only_in_the_com_crate() {
     }
     let mut bad = Vec::new();
     for f in files {
-        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().replace('\\', "/");
+        let rel = f
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .replace('\\', "/");
         if rel.starts_with("crates/ctopc-com/") {
             continue;
         }
         let text = std::fs::read_to_string(&f).unwrap();
         for (n, code, _) in code_lines(&text) {
-            if has_unsafe_token(&code) && !code.contains("forbid(unsafe_code)") && !code.contains("deny(unsafe_code)") {
+            if has_unsafe_token(&code)
+                && !code.contains("forbid(unsafe_code)")
+                && !code.contains("deny(unsafe_code)")
+            {
                 bad.push(format!("{rel}:{n}: {code}"));
             }
         }
     }
-    assert!(bad.is_empty(), "unsafe outside crates/ctopc-com:\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "unsafe outside crates/ctopc-com:\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
@@ -100,7 +117,11 @@ fn every_unsafe_block_in_the_com_crate_has_a_safety_comment() {
     rust_files(&root.join("crates/ctopc-com/src"), &mut files);
     let mut bad = Vec::new();
     for f in files {
-        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().into_owned();
+        let rel = f
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         let text = std::fs::read_to_string(&f).unwrap();
         let lines: Vec<&str> = text.lines().collect();
         for (i, line) in lines.iter().enumerate() {
@@ -110,13 +131,18 @@ fn every_unsafe_block_in_the_com_crate_has_a_safety_comment() {
             }
             // Look upwards through the statement's preceding lines for a SAFETY comment.
             let from = i.saturating_sub(6);
-            let found = line.contains("SAFETY") || lines[from..i].iter().any(|l| l.contains("// SAFETY"));
+            let found =
+                line.contains("SAFETY") || lines[from..i].iter().any(|l| l.contains("// SAFETY"));
             if !found {
                 bad.push(format!("{rel}:{}: {}", i + 1, line.trim()));
             }
         }
     }
-    assert!(bad.is_empty(), "unsafe blocks without a `// SAFETY:` comment:\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "unsafe blocks without a `// SAFETY:` comment:\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
@@ -126,7 +152,11 @@ fn the_com_crate_does_not_unwrap_outside_tests() {
     rust_files(&root.join("crates/ctopc-com/src"), &mut files);
     let mut bad = Vec::new();
     for f in files {
-        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().into_owned();
+        let rel = f
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         let text = std::fs::read_to_string(&f).unwrap();
         for (n, code, in_test) in code_lines(&text) {
             if !in_test && (code.contains(".unwrap()") || code.contains(".expect(")) {
@@ -134,7 +164,11 @@ fn the_com_crate_does_not_unwrap_outside_tests() {
             }
         }
     }
-    assert!(bad.is_empty(), "unwrap/expect in the COM crate (a panic would cross COM):\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "unwrap/expect in the COM crate (a panic would cross COM):\n{}",
+        bad.join("\n")
+    );
 }
 
 /// `windows::core::Error::new(code, message)` calls RoOriginateErrorW, which Wine 8 only
@@ -147,7 +181,11 @@ fn com_errors_with_messages_go_through_mem_error() {
     rust_files(&root.join("crates/server/src"), &mut files);
     let mut bad = Vec::new();
     for f in files {
-        let rel = f.strip_prefix(&root).unwrap().to_string_lossy().into_owned();
+        let rel = f
+            .strip_prefix(&root)
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         if rel.ends_with("ctopc-com/src/mem.rs") {
             continue;
         }
@@ -158,7 +196,11 @@ fn com_errors_with_messages_go_through_mem_error() {
             }
         }
     }
-    assert!(bad.is_empty(), "use ctopc_com::mem::error (Error::new aborts under Wine):\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "use ctopc_com::mem::error (Error::new aborts under Wine):\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
@@ -167,14 +209,23 @@ fn the_core_forbids_unsafe_and_does_not_depend_on_windows() {
     let lib = std::fs::read_to_string(root.join("crates/ctopc-core/src/lib.rs")).unwrap();
     assert!(lib.contains("#![forbid(unsafe_code)]"));
     let manifest = std::fs::read_to_string(root.join("crates/ctopc-core/Cargo.toml")).unwrap();
-    assert!(!manifest.lines().any(|l| l.trim_start().starts_with("windows")), "ctopc-core must not depend on windows crates");
+    assert!(
+        !manifest
+            .lines()
+            .any(|l| l.trim_start().starts_with("windows")),
+        "ctopc-core must not depend on windows crates"
+    );
 }
 
 #[test]
 fn the_scanner_skips_test_modules_and_comments() {
     let src = "fn a() { x.unwrap(); }\n// y.unwrap()\n#[cfg(test)]\nmod tests {\n    fn b() { z.unwrap(); }\n}\nfn c() {}\n";
     let lines = code_lines(src);
-    let flagged: Vec<usize> = lines.iter().filter(|(_, c, t)| !t && c.contains(".unwrap()")).map(|(n, _, _)| *n).collect();
+    let flagged: Vec<usize> = lines
+        .iter()
+        .filter(|(_, c, t)| !t && c.contains(".unwrap()"))
+        .map(|(n, _, _)| *n)
+        .collect();
     assert_eq!(flagged, vec![1]);
     assert!(has_unsafe_token("unsafe { f() }"));
     assert!(!has_unsafe_token("let unsafely = 1;"));

@@ -18,7 +18,9 @@ use std::time::{Duration, Instant};
 use asix_net::inproc::InProcessSim;
 use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
 use ctopc_core::asix::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase, BASIC_CHANNEL};
-use ctopc_core::model::{DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, SyncOutcome};
+use ctopc_core::model::{
+    DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, SyncOutcome,
+};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{Timestamp, Value, VarType};
 
@@ -83,8 +85,23 @@ impl Driver {
 
     fn group(&mut self) -> GroupHandle {
         let s = self.e.open_session();
-        let g = self.e.add_group(self.now, s, &GroupParams { name: "", active: true, update_rate: 1000, ..Default::default() }).expect("group").group;
-        self.e.set_callback_connected(self.now, g, true).expect("connect");
+        let g = self
+            .e
+            .add_group(
+                self.now,
+                s,
+                &GroupParams {
+                    name: "",
+                    active: true,
+                    update_rate: 1000,
+                    ..Default::default()
+                },
+            )
+            .expect("group")
+            .group;
+        self.e
+            .set_callback_connected(self.now, g, true)
+            .expect("connect");
         g
     }
 
@@ -93,7 +110,13 @@ impl Driver {
             let defs: Vec<ItemDefinition> = chunk
                 .iter()
                 .enumerate()
-                .map(|(i, id)| ItemDefinition { item_id: id, access_path: "", active: true, client_handle: i as u32, requested_type: VarType::EMPTY })
+                .map(|(i, id)| ItemDefinition {
+                    item_id: id,
+                    access_path: "",
+                    active: true,
+                    client_handle: i as u32,
+                    requested_type: VarType::EMPTY,
+                })
                 .collect();
             for r in self.e.add_items(self.now, g, &defs).expect("add") {
                 r.expect("item");
@@ -107,7 +130,13 @@ impl Driver {
             let defs: Vec<ItemDefinition> = chunk
                 .iter()
                 .enumerate()
-                .map(|(i, id)| ItemDefinition { item_id: id, access_path: "", active: true, client_handle: i as u32, requested_type: VarType::EMPTY })
+                .map(|(i, id)| ItemDefinition {
+                    item_id: id,
+                    access_path: "",
+                    active: true,
+                    client_handle: i as u32,
+                    requested_type: VarType::EMPTY,
+                })
                 .collect();
             for r in self.e.add_items(self.now, g, &defs).expect("add") {
                 handles.push(r.expect("item").server_handle);
@@ -128,12 +157,26 @@ fn ms(d: Duration) -> f64 {
 }
 
 fn time(runs: usize, mut f: impl FnMut()) -> f64 {
-    median((0..runs).map(|_| { let t = Instant::now(); f(); ms(t.elapsed()) }).collect())
+    median(
+        (0..runs)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                ms(t.elapsed())
+            })
+            .collect(),
+    )
 }
 
 fn main() {
     let ns = demo_namespace();
-    let names: Vec<String> = ns.database(BASIC_CHANNEL).expect("db").variables.iter().map(|v| v.name.clone()).collect();
+    let names: Vec<String> = ns
+        .database(BASIC_CHANNEL)
+        .expect("db")
+        .variables
+        .iter()
+        .map(|v| v.name.clone())
+        .collect();
     let writable: Vec<String> = ns
         .database(BASIC_CHANNEL)
         .expect("db")
@@ -143,15 +186,39 @@ fn main() {
         .map(|v| v.name.clone())
         .collect();
     let now = Timestamp::from_filetime_parts(0, 0x01DC_0000);
-    let mut d = Driver { e: Engine::new(EngineConfig::default(), ns.clone()), sim: InProcessSim::new(ns.clone(), 1, now), now };
-    println!("engine + in-process simulation of the demo plant ({} variables), natively", names.len());
+    let mut d = Driver {
+        e: Engine::new(EngineConfig::default(), ns.clone()),
+        sim: InProcessSim::new(ns.clone(), 1, now),
+        now,
+    };
+    println!(
+        "engine + in-process simulation of the demo plant ({} variables), natively",
+        names.len()
+    );
 
     // Memory per item.
     let repeated: Vec<String> = names.iter().cycle().take(MEMORY_ITEMS).cloned().collect();
-    let distinct: Vec<String> = (0..MEMORY_ITEMS).map(|i| format!("asmen.BENCH.V{i:06}.R4")).collect();
-    for (what, ids) in [("over the demo's variables, repeated", &repeated), ("distinct descriptive IDs", &distinct)] {
+    let distinct: Vec<String> = (0..MEMORY_ITEMS)
+        .map(|i| format!("asmen.BENCH.V{i:06}.R4"))
+        .collect();
+    for (what, ids) in [
+        ("over the demo's variables, repeated", &repeated),
+        ("distinct descriptive IDs", &distinct),
+    ] {
         let s = d.e.open_session();
-        let g = d.e.add_group(d.now, s, &GroupParams { name: "", active: true, update_rate: 1000, ..Default::default() }).expect("group").group;
+        let g =
+            d.e.add_group(
+                d.now,
+                s,
+                &GroupParams {
+                    name: "",
+                    active: true,
+                    update_rate: 1000,
+                    ..Default::default()
+                },
+            )
+            .expect("group")
+            .group;
         d.e.set_callback_connected(d.now, g, true).expect("connect");
         let before = live();
         d.add_engine_only(g, ids);
@@ -159,17 +226,29 @@ fn main() {
         d.step();
         println!("  (engine alone {engine:.0} B/item)");
         let per = (live() - before) as f64 / MEMORY_ITEMS as f64;
-        println!("memory per item, {MEMORY_ITEMS} items {what:<36} {per:>8.0} B/item (goal <= 300)");
+        println!(
+            "memory per item, {MEMORY_ITEMS} items {what:<36} {per:>8.0} B/item (goal <= 300)"
+        );
         d.e.remove_group(d.now, s, g, true).expect("remove");
         d.step();
     }
 
     // Sync Write / Read of 10,000 items.
     let g = d.group();
-    let wh = d.add(g, &writable.iter().cycle().take(N).cloned().collect::<Vec<_>>());
-    let rh = d.add(g, &names.iter().cycle().take(N).cloned().collect::<Vec<_>>());
+    let wh = d.add(
+        g,
+        &writable.iter().cycle().take(N).cloned().collect::<Vec<_>>(),
+    );
+    let rh = d.add(
+        g,
+        &names.iter().cycle().take(N).cloned().collect::<Vec<_>>(),
+    );
     d.step();
-    let values: Vec<(u32, Value)> = wh.iter().enumerate().map(|(i, &h)| (h, Value::R4((i % 10) as f32))).collect();
+    let values: Vec<(u32, Value)> = wh
+        .iter()
+        .enumerate()
+        .map(|(i, &h)| (h, Value::R4((i % 10) as f32)))
+        .collect();
     let base = time(RUNS * 10, || {
         let o = d.e.write(d.now, g, &values[..1]).expect("write");
         assert!(d.settle(o).is_some());

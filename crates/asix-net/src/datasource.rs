@@ -873,8 +873,12 @@ impl<R: Resolver> Backend for AsixSource<R> {
 /// this computer's name, per-channel discovery options from the channels, the external
 /// server lists of `ASIXConnect.ini` ([`ExternalServerLists::from_config`]), and a tokio
 /// runtime of its own. Callable from any thread (no tokio context needed).
-pub fn network_backend(ns: Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> std::io::Result<Box<dyn Backend>> {
-    let base = client_config_from_server_options(&ns.config().server, &crate::naming::computer_name());
+pub fn network_backend(
+    ns: Arc<AsixNamespace>,
+    wake: Arc<dyn Wake>,
+) -> std::io::Result<Box<dyn Backend>> {
+    let base =
+        client_config_from_server_options(&ns.config().server, &crate::naming::computer_name());
     let source = AsixSource::with_own_runtime(NamespaceResolver::new(ns, base), wake)?;
     Ok(Box::new(source))
 }

@@ -14,7 +14,9 @@
 //! delayed.
 
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
-use ctopc_core::asix::{apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable};
+use ctopc_core::asix::{
+    apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable,
+};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -54,11 +56,24 @@ struct Unserved {
 
 impl Unserved {
     fn new() -> Unserved {
-        let r = |live: Option<Live>| Arc::new(Resolved { var: None, control: None, rules: RuleOptions::default(), live });
+        let r = |live: Option<Live>| {
+            Arc::new(Resolved {
+                var: None,
+                control: None,
+                rules: RuleOptions::default(),
+                live,
+            })
+        };
         Unserved {
             not_live: r(None),
-            value: r(Some(Live { derivation: Derivation::Value, definition: None })),
-            derived: r(Some(Live { derivation: Derivation::Formatted(None), definition: None })),
+            value: r(Some(Live {
+                derivation: Derivation::Value,
+                definition: None,
+            })),
+            derived: r(Some(Live {
+                derivation: Derivation::Formatted(None),
+                definition: None,
+            })),
         }
     }
 }
@@ -134,7 +149,8 @@ impl InProcessSim {
     /// Hands a device answer out at the next `poll`, or holds it until it is due.
     fn answer(&mut self, now: Timestamp, answer: Held) {
         if self.device_delay_ms > 0 {
-            self.held.push((now.add_millis(self.device_delay_ms), answer));
+            self.held
+                .push((now.add_millis(self.device_delay_ms), answer));
             return;
         }
         match answer {
@@ -148,7 +164,9 @@ impl InProcessSim {
         if self.held.iter().all(|(due, _)| *due > now) {
             return;
         }
-        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.held).into_iter().partition(|(t, _)| *t <= now);
+        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.held)
+            .into_iter()
+            .partition(|(t, _)| *t <= now);
         self.held = later;
         for (_, answer) in due {
             match answer {
@@ -168,7 +186,11 @@ impl InProcessSim {
     fn find_var(&self, asmen_channel: Option<&str>, variable: &str) -> Option<usize> {
         match asmen_channel {
             Some(ch) => self.plant.lookup(ch, variable),
-            None => self.plant.channels().iter().find_map(|ch| self.plant.lookup(ch, variable)),
+            None => self
+                .plant
+                .channels()
+                .iter()
+                .find_map(|ch| self.plant.lookup(ch, variable)),
         }
     }
 
@@ -188,7 +210,11 @@ impl InProcessSim {
             if self.slots.capacity() <= i {
                 // Grow by a quarter, not double (large configurations: see the engine's
                 // source table).
-                self.slots.reserve_exact((i + 1 - self.slots.len()).max(self.slots.len() / 4).max(1024));
+                self.slots.reserve_exact(
+                    (i + 1 - self.slots.len())
+                        .max(self.slots.len() / 4)
+                        .max(1024),
+                );
             }
             self.slots.resize_with(i + 1, || None);
         }
@@ -199,9 +225,19 @@ impl InProcessSim {
         };
         let entry = &mut self.slots[i];
         if let Some(r) = r {
-            return entry.insert(Slot { key, rate_ms: 0, next_due: Timestamp(0), r });
+            return entry.insert(Slot {
+                key,
+                rate_ms: 0,
+                next_due: Timestamp(0),
+                r,
+            });
         }
-        entry.get_or_insert_with(|| Slot { key, rate_ms: 0, next_due: Timestamp(0), r: Arc::clone(&self.unserved.not_live) })
+        entry.get_or_insert_with(|| Slot {
+            key,
+            rate_ms: 0,
+            next_due: Timestamp(0),
+            r: Arc::clone(&self.unserved.not_live),
+        })
     }
 
     fn resolve(&self, item: &SourceItem) -> Arc<Resolved> {
@@ -209,14 +245,25 @@ impl InProcessSim {
             return Arc::clone(&self.unserved.not_live);
         };
         let Some(var) = self.find_var(live.asmen_channel.as_deref(), &live.variable) else {
-            return Arc::clone(if live.derivation == Derivation::Value { &self.unserved.value } else { &self.unserved.derived });
+            return Arc::clone(if live.derivation == Derivation::Value {
+                &self.unserved.value
+            } else {
+                &self.unserved.derived
+            });
         };
-        let control = live.definition.as_ref().and_then(|d| d.control_variable.as_deref()).and_then(|c| self.find_var(None, c));
+        let control = live
+            .definition
+            .as_ref()
+            .and_then(|d| d.control_variable.as_deref())
+            .and_then(|c| self.find_var(None, c));
         Arc::new(Resolved {
             var: Some(var as u32),
             control: control.map(|c| c as u32),
             rules: self.rules_for(&item.channel),
-            live: Some(Live { derivation: live.derivation, definition: live.definition }),
+            live: Some(Live {
+                derivation: live.derivation,
+                definition: live.definition,
+            }),
         })
     }
 
@@ -231,20 +278,40 @@ impl InProcessSim {
     fn sample(&self, r: &Resolved) -> Vqt {
         let (Some(i), Some(live)) = (r.var, r.live.as_ref()) else {
             // Not a variable of the plant: asix would answer "unknown item".
-            return Vqt { value: Value::Empty, quality: Quality::BAD_CONFIG_ERROR, timestamp: self.plant.time_of(self.plant.tick()) };
+            return Vqt {
+                value: Value::Empty,
+                quality: Quality::BAD_CONFIG_ERROR,
+                timestamp: self.plant.time_of(self.plant.tick()),
+            };
         };
         let raw = self.plant.vqt(i as usize);
         let control_value = r.control.map(|c| self.plant.vqt(c as usize).value);
         let quality = match &live.definition {
             // Limits held as variable names (asix limit variables) read the plant's values.
-            Some(def) => apply_quality_rules_with(def, &raw.value, raw.quality, control_value.as_ref(), r.rules, &|name| {
-                self.find_var(None, name).and_then(|v| self.plant.vqt(v).value.as_f64())
-            }),
+            Some(def) => apply_quality_rules_with(
+                def,
+                &raw.value,
+                raw.quality,
+                control_value.as_ref(),
+                r.rules,
+                &|name| {
+                    self.find_var(None, name)
+                        .and_then(|v| self.plant.vqt(v).value.as_f64())
+                },
+            ),
             None => raw.quality,
         };
         match live.derivation.apply(&raw.value) {
-            Some(value) => Vqt { value, quality, timestamp: raw.timestamp },
-            None => Vqt { value: Value::Empty, quality: Quality::BAD_CONFIG_ERROR, timestamp: raw.timestamp },
+            Some(value) => Vqt {
+                value,
+                quality,
+                timestamp: raw.timestamp,
+            },
+            None => Vqt {
+                value: Value::Empty,
+                quality: Quality::BAD_CONFIG_ERROR,
+                timestamp: raw.timestamp,
+            },
         }
     }
 
@@ -264,7 +331,11 @@ impl InProcessSim {
         }
         check_write_value(&vqt.value)?;
         let var = r.var.ok_or(OpcError::ItemUnknown)? as usize;
-        let writable = live.definition.as_ref().is_none_or(|d: &Variable| d.writable) && self.plant.vars()[var].spec.writable;
+        let writable = live
+            .definition
+            .as_ref()
+            .is_none_or(|d: &Variable| d.writable)
+            && self.plant.vars()[var].spec.writable;
         if !writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
         }
@@ -275,7 +346,10 @@ impl InProcessSim {
 
     /// The slot of a key still current (same generation).
     fn slot_of(&mut self, key: SourceKey) -> Option<&mut Slot> {
-        self.slots.get_mut(key.index() as usize)?.as_mut().filter(|s| s.key == key)
+        self.slots
+            .get_mut(key.index() as usize)?
+            .as_mut()
+            .filter(|s| s.key == key)
     }
 }
 
@@ -307,7 +381,10 @@ impl Backend for InProcessSim {
                 self.answer(now, Held::Read(req_id, results));
             }
             SourceRequest::Write { req_id, items } => {
-                let results = items.iter().map(|(i, v)| self.write(i, &ItemVqt::value(v.clone()))).collect();
+                let results = items
+                    .iter()
+                    .map(|(i, v)| self.write(i, &ItemVqt::value(v.clone())))
+                    .collect();
                 self.answer(now, Held::Write(req_id, results));
             }
             SourceRequest::WriteVqt { req_id, items } => {

@@ -23,7 +23,7 @@ pub mod sim;
 
 pub use client::{channel_sink, AsixClient, ClientEvent, EventSink, ItemKey, RequestId};
 pub use config::{ClientConfig, ConnectOptions, ExternalServerLists, ServerChoice};
-pub use naming::{asix_client_name, computer_name};
-pub use proto::frame::ReadSource;
 /// The value-quality-timestamp triple, shared with the core.
 pub use ctopc_core::Vqt;
+pub use naming::{asix_client_name, computer_name};
+pub use proto::frame::ReadSource;

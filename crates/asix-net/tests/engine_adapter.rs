@@ -350,7 +350,11 @@ fn the_resolver_takes_the_external_server_lists_from_the_configuration() {
 /// namespace alone (discovery target from `[Server] BroadcastAddress` / `DiscoveryPort`).
 #[test]
 fn the_network_backend_runs_from_a_plain_thread() {
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(1).enable_all().build().unwrap();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
     let sim = rt.block_on(sim("PLAIN"));
     let db = repo().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
     let ini = format!(
@@ -366,14 +370,37 @@ fn the_network_backend_runs_from_a_plain_thread() {
     let mut backend = asix_net::datasource::network_backend(ns.clone(), wake.clone()).unwrap();
     let mut e = Engine::new(EngineConfig::default(), ns as Arc<dyn Namespace>);
     let session = e.open_session();
-    let group = e.add_group(wall_now(), session, &GroupParams { name: "g", active: true, ..GroupParams::default() }).unwrap().group;
+    let group = e
+        .add_group(
+            wall_now(),
+            session,
+            &GroupParams {
+                name: "g",
+                active: true,
+                ..GroupParams::default()
+            },
+        )
+        .unwrap()
+        .group;
     // The simulator serves the built-in plant: a descriptive ID of its channel.
     let id = format!("asmen.{CH}.ZB1_POZIOM.R4");
-    let def = ItemDefinition { item_id: &id, access_path: "", active: true, client_handle: 1, requested_type: VarType::EMPTY };
-    let h = e.add_items(wall_now(), group, &[def]).unwrap()[0].as_ref().unwrap().server_handle;
+    let def = ItemDefinition {
+        item_id: &id,
+        access_path: "",
+        active: true,
+        client_handle: 1,
+        requested_type: VarType::EMPTY,
+    };
+    let h = e.add_items(wall_now(), group, &[def]).unwrap()[0]
+        .as_ref()
+        .unwrap()
+        .server_handle;
     let t0 = Instant::now();
     let state = loop {
-        assert!(t0.elapsed() < Duration::from_secs(10), "no value through the network backend");
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "no value through the network backend"
+        );
         let now = wall_now();
         while let Some(r) = e.poll_source_request() {
             backend.request(now, r);

@@ -6,14 +6,18 @@
 use asix_net::inproc::InProcessSim;
 use ctopc_core::asix::{parse_config, AsixNamespace};
 use ctopc_core::model::{
-    DataSource, Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SourceRequest, SyncOutcome, SyncResult,
+    DataSource, Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition,
+    SourceRequest, SyncOutcome, SyncResult,
 };
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Timestamp, Value, VarType};
 use std::sync::Arc;
 
 fn demo() -> Arc<AsixNamespace> {
-    let db = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+    let db = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez"
+    );
     let ini = format!("[Channel:*]\nItemsDatabase = {db}\nCheckLimits = tak\n");
     let (cfg, _) = parse_config(ini.as_bytes(), "test.ini").unwrap();
     Arc::new(AsixNamespace::load(cfg).0)
@@ -45,23 +49,52 @@ fn step(e: &mut Engine, s: &mut InProcessSim, now: Timestamp) {
     pull(e, s, now);
 }
 
-fn setup() -> (Engine, InProcessSim, Timestamp, ctopc_core::model::GroupHandle, Vec<u32>) {
+fn setup() -> (
+    Engine,
+    InProcessSim,
+    Timestamp,
+    ctopc_core::model::GroupHandle,
+    Vec<u32>,
+) {
     let ns = demo();
     let t0 = Timestamp::from_unix_millis(1_700_000_000_000);
     let mut e = Engine::new(EngineConfig::default(), ns.clone());
     let s = InProcessSim::new(ns, 7, t0);
     let session = e.open_session();
     let g = e
-        .add_group(t0, session, &GroupParams { name: "g", active: true, update_rate: 1000, client_handle: 1, time_bias: 0, percent_deadband: 0.0, lcid: 0x409 })
+        .add_group(
+            t0,
+            session,
+            &GroupParams {
+                name: "g",
+                active: true,
+                update_rate: 1000,
+                client_handle: 1,
+                time_bias: 0,
+                percent_deadband: 0.0,
+                lcid: 0x409,
+            },
+        )
         .unwrap()
         .group;
     let ids = ["KW_A000", "KW_A110", "KW_A000.PercentageCV", "KW_A000.DESC"];
     let defs: Vec<ItemDefinition> = ids
         .iter()
         .enumerate()
-        .map(|(i, id)| ItemDefinition { item_id: id, access_path: "", active: true, client_handle: i as u32, requested_type: VarType::EMPTY })
+        .map(|(i, id)| ItemDefinition {
+            item_id: id,
+            access_path: "",
+            active: true,
+            client_handle: i as u32,
+            requested_type: VarType::EMPTY,
+        })
         .collect();
-    let handles = e.add_items(t0, g, &defs).unwrap().into_iter().map(|r| r.unwrap().server_handle).collect();
+    let handles = e
+        .add_items(t0, g, &defs)
+        .unwrap()
+        .into_iter()
+        .map(|r| r.unwrap().server_handle)
+        .collect();
     (e, s, t0, g, handles)
 }
 
@@ -72,15 +105,24 @@ fn subscribed_demo_values_arrive_good_and_evolve() {
     for k in 0..40 {
         let now = t0.add_millis(k * 500);
         step(&mut e, &mut s, now);
-        let SyncOutcome::Ready(r) = e.read(now, g, DataSource::Cache, &h[..1]).unwrap() else { panic!("cache read pends") };
+        let SyncOutcome::Ready(r) = e.read(now, g, DataSource::Cache, &h[..1]).unwrap() else {
+            panic!("cache read pends")
+        };
         let st = r[0].as_ref().unwrap();
         if k > 0 {
-            assert!(st.quality.is_good() || st.quality.is_uncertain(), "{:?}", st.quality);
+            assert!(
+                st.quality.is_good() || st.quality.is_uncertain(),
+                "{:?}",
+                st.quality
+            );
             seen.push(st.value.clone());
         }
     }
     seen.dedup();
-    assert!(seen.len() > 3, "the tank level should move over 20 s: {seen:?}");
+    assert!(
+        seen.len() > 3,
+        "the tank level should move over 20 s: {seen:?}"
+    );
     assert!(matches!(seen[0], Value::R4(_)));
 }
 
@@ -91,10 +133,15 @@ fn derived_items_and_attributes_come_through() {
         step(&mut e, &mut s, t0.add_millis(k * 500));
     }
     let now = t0.add_millis(2000);
-    let SyncOutcome::Ready(r) = e.read(now, g, DataSource::Cache, &h).unwrap() else { panic!() };
+    let SyncOutcome::Ready(r) = e.read(now, g, DataSource::Cache, &h).unwrap() else {
+        panic!()
+    };
     let level = r[0].as_ref().unwrap().value.as_f64().unwrap();
     let pct = r[2].as_ref().unwrap().value.as_f64().unwrap();
-    assert!((pct - level / 8.0 * 100.0).abs() < 1e-3, "level {level} m of 0..8 m is {pct} %");
+    assert!(
+        (pct - level / 8.0 * 100.0).abs() < 1e-3,
+        "level {level} m of 0..8 m is {pct} %"
+    );
     assert!(matches!(&r[3].as_ref().unwrap().value, Value::Bstr(d) if d.contains("Z101")));
 }
 
@@ -103,7 +150,17 @@ fn device_write_reaches_the_plant_and_read_only_items_refuse() {
     let (mut e, mut s, t0, g, h) = setup();
     step(&mut e, &mut s, t0);
     let now = t0.add_millis(100);
-    let out = e.write(now, g, &[(h[1], Value::R8(12.5)), (h[0], Value::R8(1.0)), (h[2], Value::R8(5.0))]).unwrap();
+    let out = e
+        .write(
+            now,
+            g,
+            &[
+                (h[1], Value::R8(12.5)),
+                (h[0], Value::R8(1.0)),
+                (h[2], Value::R8(5.0)),
+            ],
+        )
+        .unwrap();
     let results = match out {
         SyncOutcome::Ready(r) => r,
         SyncOutcome::Pending(id) => {
@@ -115,8 +172,16 @@ fn device_write_reaches_the_plant_and_read_only_items_refuse() {
         }
     };
     assert_eq!(results[0], Ok(()));
-    assert!(results[1].is_err(), "KW_A000 is not writable: {:?}", results[1]);
-    assert!(results[2].is_err(), "a derived item is read-only: {:?}", results[2]);
+    assert!(
+        results[1].is_err(),
+        "KW_A000 is not writable: {:?}",
+        results[1]
+    );
+    assert!(
+        results[2].is_err(),
+        "a derived item is read-only: {:?}",
+        results[2]
+    );
     let now = t0.add_millis(200);
     let r = match e.read(now, g, DataSource::Device, &h[1..2]).unwrap() {
         SyncOutcome::Ready(r) => r,
@@ -137,8 +202,14 @@ fn device_write_reaches_the_plant_and_read_only_items_refuse() {
 /// engine configured from the options, the simulation with their SimulationDeviceDelay.
 /// One group (inactive unless `active`: no subscriptions then, so the simulation's only
 /// timers are its held answers) with KW_A000 (read-only) and KW_A110 (writable).
-fn slow_setup(server_options: &str, active: bool) -> (Engine, InProcessSim, Timestamp, GroupHandle, Vec<u32>) {
-    let db = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+fn slow_setup(
+    server_options: &str,
+    active: bool,
+) -> (Engine, InProcessSim, Timestamp, GroupHandle, Vec<u32>) {
+    let db = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez"
+    );
     let ini = format!("[Server]\nSimulateCurrentData = tak\n{server_options}\n[Channel:*]\nItemsDatabase = {db}\n");
     let (cfg, w) = parse_config(ini.as_bytes(), "slow.ini").unwrap();
     assert!(w.is_empty(), "{w:?}");
@@ -150,15 +221,38 @@ fn slow_setup(server_options: &str, active: bool) -> (Engine, InProcessSim, Time
     let s = InProcessSim::new(ns, 7, t0).with_device_delay(delay);
     let session = e.open_session();
     let g = e
-        .add_group(t0, session, &GroupParams { name: "slow", active, update_rate: 1000, client_handle: 77, time_bias: 0, percent_deadband: 0.0, lcid: 0x409 })
+        .add_group(
+            t0,
+            session,
+            &GroupParams {
+                name: "slow",
+                active,
+                update_rate: 1000,
+                client_handle: 77,
+                time_bias: 0,
+                percent_deadband: 0.0,
+                lcid: 0x409,
+            },
+        )
         .unwrap()
         .group;
     let defs: Vec<ItemDefinition> = ["KW_A000", "KW_A110"]
         .iter()
         .enumerate()
-        .map(|(i, id)| ItemDefinition { item_id: id, access_path: "", active: true, client_handle: i as u32 + 1, requested_type: VarType::EMPTY })
+        .map(|(i, id)| ItemDefinition {
+            item_id: id,
+            access_path: "",
+            active: true,
+            client_handle: i as u32 + 1,
+            requested_type: VarType::EMPTY,
+        })
         .collect();
-    let handles = e.add_items(t0, g, &defs).unwrap().into_iter().map(|r| r.unwrap().server_handle).collect();
+    let handles = e
+        .add_items(t0, g, &defs)
+        .unwrap()
+        .into_iter()
+        .map(|r| r.unwrap().server_handle)
+        .collect();
     e.set_callback_connected(t0, g, true).unwrap();
     (e, s, t0, g, handles)
 }
@@ -174,7 +268,15 @@ fn pending<T: std::fmt::Debug>(o: SyncOutcome<T>) -> ctopc_core::model::SyncId {
 fn device_requests(e: &mut Engine) -> Vec<SourceRequest> {
     let mut v = Vec::new();
     while let Some(r) = e.poll_source_request() {
-        assert!(matches!(r, SourceRequest::Read { .. } | SourceRequest::Write { .. } | SourceRequest::WriteVqt { .. }), "{r:?}");
+        assert!(
+            matches!(
+                r,
+                SourceRequest::Read { .. }
+                    | SourceRequest::Write { .. }
+                    | SourceRequest::WriteVqt { .. }
+            ),
+            "{r:?}"
+        );
         v.push(r);
     }
     v
@@ -183,7 +285,11 @@ fn device_requests(e: &mut Engine) -> Vec<SourceRequest> {
 #[test]
 fn a_slow_device_holds_its_answers_until_due_and_says_when() {
     let (mut e, mut s, t0, g, h) = slow_setup("SimulationDeviceDelay = 1500", false);
-    assert_eq!(s.poll_timeout(), None, "an inactive group subscribes nothing");
+    assert_eq!(
+        s.poll_timeout(),
+        None,
+        "an inactive group subscribes nothing"
+    );
     // A write at t0, then a device read of the same item at t0 + 10.
     let write = pending(e.write(t0, g, &[(h[1], Value::R8(12.5))]).unwrap());
     for r in device_requests(&mut e) {
@@ -194,7 +300,11 @@ fn a_slow_device_holds_its_answers_until_due_and_says_when() {
     for r in device_requests(&mut e) {
         s.request(t1, r);
     }
-    assert_eq!(s.poll_timeout(), Some(t0.add_millis(1500)), "the earliest due answer wakes the driver");
+    assert_eq!(
+        s.poll_timeout(),
+        Some(t0.add_millis(1500)),
+        "the earliest due answer wakes the driver"
+    );
 
     let mut out = SourceOutput::default();
     s.poll(t0.add_millis(1499), &mut out);
@@ -210,7 +320,11 @@ fn a_slow_device_holds_its_answers_until_due_and_says_when() {
     assert_eq!((late.write_results.len(), late.read_results.len()), (0, 1));
     assert_eq!(s.poll_timeout(), None, "nothing held any more");
     // The write took effect when it was requested: the read made 10 ms later sees it.
-    let values: Vec<Option<f64>> = late.read_results[0].1.iter().map(|r| r.as_ref().unwrap().value.as_f64()).collect();
+    let values: Vec<Option<f64>> = late.read_results[0]
+        .1
+        .iter()
+        .map(|r| r.as_ref().unwrap().value.as_f64())
+        .collect();
     assert_eq!(values.len(), 2);
     assert_eq!(values[1], Some(12.5));
 
@@ -222,8 +336,13 @@ fn a_slow_device_holds_its_answers_until_due_and_says_when() {
     for (id, r) in late.read_results {
         e.handle_source_read_result(now, id, r);
     }
-    assert_eq!(e.take_sync_result(write), Some(SyncResult::Write(vec![Ok(())])));
-    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else { panic!("no read result") };
+    assert_eq!(
+        e.take_sync_result(write),
+        Some(SyncResult::Write(vec![Ok(())]))
+    );
+    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else {
+        panic!("no read result")
+    };
     assert_eq!(r[1].as_ref().unwrap().value.as_f64(), Some(12.5));
 }
 
@@ -240,11 +359,22 @@ fn a_slow_device_with_the_same_inputs_answers_the_same() {
             }
             let mut out = SourceOutput::default();
             s.poll(now, &mut out);
-            answers.push((now, s.poll_timeout(), out.read_results.into_iter().map(|(_, r)| r).collect::<Vec<_>>()));
+            answers.push((
+                now,
+                s.poll_timeout(),
+                out.read_results
+                    .into_iter()
+                    .map(|(_, r)| r)
+                    .collect::<Vec<_>>(),
+            ));
         }
         let mut out = SourceOutput::default();
         s.poll(t0.add_millis(10_000), &mut out);
-        answers.push((t0, s.poll_timeout(), out.read_results.into_iter().map(|(_, r)| r).collect()));
+        answers.push((
+            t0,
+            s.poll_timeout(),
+            out.read_results.into_iter().map(|(_, r)| r).collect(),
+        ));
         answers
     };
     let a = run();
@@ -258,16 +388,27 @@ fn a_slow_device_with_the_same_inputs_answers_the_same() {
 
 #[test]
 fn source_timeout_from_the_ini_fails_a_read_and_a_write_the_device_answers_too_late() {
-    let (mut e, mut s, t0, g, h) = slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 3000", false);
-    assert_eq!(e.config().source_timeout_ms, 1000, "SourceTimeout reaches the engine");
+    let (mut e, mut s, t0, g, h) =
+        slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 3000", false);
+    assert_eq!(
+        e.config().source_timeout_ms,
+        1000,
+        "SourceTimeout reaches the engine"
+    );
     let read = pending(e.read(t0, g, DataSource::Device, &h).unwrap());
     let write = pending(e.write(t0, g, &[(h[1], Value::R8(3.0))]).unwrap());
     step(&mut e, &mut s, t0);
     step(&mut e, &mut s, t0.add_millis(999));
     assert_eq!(e.take_sync_result(read), None, "still waiting at 999 ms");
     step(&mut e, &mut s, t0.add_millis(1000));
-    assert_eq!(e.take_sync_result(read), Some(SyncResult::Read(vec![Err(OpcError::NetAnswerTimeout); 2])));
-    assert_eq!(e.take_sync_result(write), Some(SyncResult::Write(vec![Err(OpcError::NetAnswerTimeout)])));
+    assert_eq!(
+        e.take_sync_result(read),
+        Some(SyncResult::Read(vec![Err(OpcError::NetAnswerTimeout); 2]))
+    );
+    assert_eq!(
+        e.take_sync_result(write),
+        Some(SyncResult::Write(vec![Err(OpcError::NetAnswerTimeout)]))
+    );
     // The answers arriving at 3000 ms belong to nobody any more: dropped quietly.
     for ms in [2999, 3000, 3001] {
         step(&mut e, &mut s, t0.add_millis(ms));
@@ -276,13 +417,16 @@ fn source_timeout_from_the_ini_fails_a_read_and_a_write_the_device_answers_too_l
     assert_eq!(e.stats().pending_transactions, 0);
 
     // Within the timeout the late answer is the answer.
-    let (mut e, mut s, t0, g, h) = slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 600", false);
+    let (mut e, mut s, t0, g, h) =
+        slow_setup("SourceTimeout = 1000\nSimulationDeviceDelay = 600", false);
     let read = pending(e.read(t0, g, DataSource::Device, &h).unwrap());
     step(&mut e, &mut s, t0);
     step(&mut e, &mut s, t0.add_millis(599));
     assert_eq!(e.take_sync_result(read), None);
     step(&mut e, &mut s, t0.add_millis(600));
-    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else { panic!("no answer at 600 ms") };
+    let Some(SyncResult::Read(r)) = e.take_sync_result(read) else {
+        panic!("no answer at 600 ms")
+    };
     assert!(r.iter().all(Result::is_ok), "{r:?}");
 }
 
@@ -297,11 +441,18 @@ fn cancel2_beats_a_slow_device_and_no_read_complete_follows() {
     e.cancel2(g, started.cancel_id).unwrap();
     match e.poll_event() {
         Some(Event::CancelComplete(c)) => {
-            assert_eq!((c.transaction_id, c.client_group, c.group, c.cancel_id), (7, 77, g, started.cancel_id));
+            assert_eq!(
+                (c.transaction_id, c.client_group, c.group, c.cancel_id),
+                (7, 77, g, started.cancel_id)
+            );
         }
         other => panic!("{other:?}"),
     }
-    assert_eq!(e.cancel2(g, started.cancel_id), Err(OpcError::Fail), "cancelled already");
+    assert_eq!(
+        e.cancel2(g, started.cancel_id),
+        Err(OpcError::Fail),
+        "cancelled already"
+    );
     // The device's answer (1500 ms) and the engine's timeout (10 s) pass without a callback.
     for ms in (200..=12_000).step_by(100) {
         step(&mut e, &mut s, t0.add_millis(ms));
@@ -317,9 +468,16 @@ fn cancel2_beats_a_slow_device_and_no_read_complete_follows() {
     step(&mut e, &mut s, t1.add_millis(1500));
     match e.poll_event() {
         Some(Event::ReadComplete(r)) => {
-            assert_eq!((r.transaction_id, r.cancel_id, r.items.len()), (8, started.cancel_id, 2));
+            assert_eq!(
+                (r.transaction_id, r.cancel_id, r.items.len()),
+                (8, started.cancel_id, 2)
+            );
         }
         other => panic!("{other:?}"),
     }
-    assert_eq!(e.cancel2(g, started.cancel_id), Err(OpcError::Fail), "completed already");
+    assert_eq!(
+        e.cancel2(g, started.cancel_id),
+        Err(OpcError::Fail),
+        "completed already"
+    );
 }

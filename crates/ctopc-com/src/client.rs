@@ -4,11 +4,11 @@
 use crate::interfaces::*;
 use ctopc_core::Timestamp;
 use std::ffi::c_void;
-use windows::core::{Interface, IUnknown, HSTRING, PWSTR};
+use windows::core::{IUnknown, Interface, HSTRING, PWSTR};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{
-    CLSIDFromProgID, CoCreateInstance, CoInitializeEx, CoTaskMemFree, CoUninitialize, CLSCTX_LOCAL_SERVER,
-    COINIT_APARTMENTTHREADED, COINIT_MULTITHREADED,
+    CLSIDFromProgID, CoCreateInstance, CoInitializeEx, CoTaskMemFree, CoUninitialize,
+    CLSCTX_LOCAL_SERVER, COINIT_APARTMENTTHREADED, COINIT_MULTITHREADED,
 };
 
 /// COM initialised on this thread for the lifetime of the value.
@@ -100,7 +100,11 @@ impl Server {
     pub fn from_unknown(unknown: IUnknown) -> windows::core::Result<Server> {
         let server = unknown.cast::<IOPCServer>()?;
         let common = unknown.cast::<IOPCCommon>()?;
-        Ok(Server { unknown, server, common })
+        Ok(Server {
+            unknown,
+            server,
+            common,
+        })
     }
 
     pub fn status(&self) -> windows::core::Result<ServerStatus> {
@@ -149,11 +153,17 @@ impl Server {
     pub fn set_client_name(&self, name: &str) -> windows::core::Result<()> {
         let name = HSTRING::from(name);
         // SAFETY: valid NUL-terminated string for the call.
-        unsafe { self.common.SetClientName(windows::core::PCWSTR(name.as_ptr())) }
+        unsafe {
+            self.common
+                .SetClientName(windows::core::PCWSTR(name.as_ptr()))
+        }
     }
 
     /// IOPCCommon::GetErrorString (in the session's locale).
-    pub fn error_string(&self, code: windows::core::HRESULT) -> windows::core::Result<Option<String>> {
+    pub fn error_string(
+        &self,
+        code: windows::core::HRESULT,
+    ) -> windows::core::Result<Option<String>> {
         let mut p = PWSTR::null();
         // SAFETY: valid out-pointer.
         unsafe { self.common.GetErrorString(code, &mut p)? };
@@ -161,7 +171,11 @@ impl Server {
     }
 
     /// IOPCServer::GetErrorString in `lcid`.
-    pub fn error_string_in(&self, code: windows::core::HRESULT, lcid: u32) -> windows::core::Result<Option<String>> {
+    pub fn error_string_in(
+        &self,
+        code: windows::core::HRESULT,
+        lcid: u32,
+    ) -> windows::core::Result<Option<String>> {
         let mut p = PWSTR::null();
         // SAFETY: valid out-pointer.
         unsafe { self.server.GetErrorString(code, lcid, &mut p)? };
@@ -195,7 +209,10 @@ fn per_item_hr(hr: windows::core::HRESULT) -> windows::core::Result<windows::cor
 }
 
 /// Takes a CoTaskMem VARIANT array of `n` elements: converts, clears and frees it.
-pub fn take_variants(p: *mut windows::Win32::System::Variant::VARIANT, n: usize) -> Vec<(u16, ctopc_core::Value)> {
+pub fn take_variants(
+    p: *mut windows::Win32::System::Variant::VARIANT,
+    n: usize,
+) -> Vec<(u16, ctopc_core::Value)> {
     if p.is_null() {
         return Vec::new();
     }
@@ -205,7 +222,10 @@ pub fn take_variants(p: *mut windows::Win32::System::Variant::VARIANT, n: usize)
     let out = slice
         .iter_mut()
         .map(|v| {
-            let r = (crate::variant::var_type(v).0, crate::variant::from_variant(v).unwrap_or(ctopc_core::Value::Empty));
+            let r = (
+                crate::variant::var_type(v).0,
+                crate::variant::from_variant(v).unwrap_or(ctopc_core::Value::Empty),
+            );
             crate::variant::clear(v);
             r
         })
@@ -219,7 +239,9 @@ pub fn take_variants(p: *mut windows::Win32::System::Variant::VARIANT, n: usize)
 struct InVariants(Vec<windows::Win32::System::Variant::VARIANT>);
 
 impl InVariants {
-    fn new<'a>(values: impl Iterator<Item = &'a ctopc_core::Value>) -> windows::core::Result<InVariants> {
+    fn new<'a>(
+        values: impl Iterator<Item = &'a ctopc_core::Value>,
+    ) -> windows::core::Result<InVariants> {
         let mut v = InVariants(Vec::new());
         for value in values {
             v.0.push(crate::variant::to_variant(value)?);
@@ -237,11 +259,23 @@ impl Drop for InVariants {
 }
 
 /// IOPCSyncIO::Read: (S_OK or S_FALSE, one item per handle).
-pub fn sync_read(io: &IOPCSyncIO, source: OPCDATASOURCE, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<ReadItem>)> {
+pub fn sync_read(
+    io: &IOPCSyncIO,
+    source: OPCDATASOURCE,
+    handles: &[u32],
+) -> windows::core::Result<(windows::core::HRESULT, Vec<ReadItem>)> {
     let mut states: *mut OPCITEMSTATE = std::ptr::null_mut();
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: `handles` holds `len` elements; valid out-pointers.
-    let hr = per_item_hr(unsafe { io.Read(source, handles.len() as u32, handles.as_ptr(), &mut states, &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.Read(
+            source,
+            handles.len() as u32,
+            handles.as_ptr(),
+            &mut states,
+            &mut errors,
+        )
+    })?;
     let n = handles.len();
     let errors = take_array(errors, n);
     let mut out = Vec::with_capacity(n);
@@ -253,7 +287,8 @@ pub fn sync_read(io: &IOPCSyncIO, source: OPCDATASOURCE, handles: &[u32]) -> win
             out.push(ReadItem {
                 client_handle: s.hClient,
                 vt: crate::variant::var_type(&s.vDataValue).0,
-                value: crate::variant::from_variant(&s.vDataValue).unwrap_or(ctopc_core::Value::Empty),
+                value: crate::variant::from_variant(&s.vDataValue)
+                    .unwrap_or(ctopc_core::Value::Empty),
                 quality: s.wQuality,
                 timestamp: timestamp(s.ftTimeStamp),
                 error: errors.get(i).copied().unwrap_or_default(),
@@ -267,17 +302,30 @@ pub fn sync_read(io: &IOPCSyncIO, source: OPCDATASOURCE, handles: &[u32]) -> win
 }
 
 /// IOPCSyncIO::Write: (S_OK or S_FALSE, per-item errors).
-pub fn sync_write(io: &IOPCSyncIO, items: &[(u32, ctopc_core::Value)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+pub fn sync_write(
+    io: &IOPCSyncIO,
+    items: &[(u32, ctopc_core::Value)],
+) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
     let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
     let values = InVariants::new(items.iter().map(|(_, v)| v))?;
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: both arrays hold `len` elements and live for the call; valid out-pointer.
-    let hr = per_item_hr(unsafe { io.Write(handles.len() as u32, handles.as_ptr(), values.0.as_ptr(), &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.Write(
+            handles.len() as u32,
+            handles.as_ptr(),
+            values.0.as_ptr(),
+            &mut errors,
+        )
+    })?;
     Ok((hr, take_array(errors, handles.len())))
 }
 
 /// IOPCSyncIO2::ReadMaxAge for `(server handle, MaxAge ms)` items.
-pub fn read_max_age(io: &IOPCSyncIO2, items: &[(u32, u32)]) -> windows::core::Result<(windows::core::HRESULT, Vec<ReadItem>)> {
+pub fn read_max_age(
+    io: &IOPCSyncIO2,
+    items: &[(u32, u32)],
+) -> windows::core::Result<(windows::core::HRESULT, Vec<ReadItem>)> {
     let handles: Vec<u32> = items.iter().map(|i| i.0).collect();
     let ages: Vec<u32> = items.iter().map(|i| i.1).collect();
     let n = items.len();
@@ -287,7 +335,15 @@ pub fn read_max_age(io: &IOPCSyncIO2, items: &[(u32, u32)]) -> windows::core::Re
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: the arrays hold `n` elements; valid out-pointers.
     let hr = per_item_hr(unsafe {
-        io.ReadMaxAge(n as u32, handles.as_ptr(), ages.as_ptr(), &mut values, &mut qualities, &mut times, &mut errors)
+        io.ReadMaxAge(
+            n as u32,
+            handles.as_ptr(),
+            ages.as_ptr(),
+            &mut values,
+            &mut qualities,
+            &mut times,
+            &mut errors,
+        )
     })?;
     let values = take_variants(values, n);
     let qualities = take_array(qualities, n);
@@ -295,7 +351,10 @@ pub fn read_max_age(io: &IOPCSyncIO2, items: &[(u32, u32)]) -> windows::core::Re
     let errors = take_array(errors, n);
     let out = (0..n)
         .map(|i| {
-            let (vt, value) = values.get(i).cloned().unwrap_or((0, ctopc_core::Value::Empty));
+            let (vt, value) = values
+                .get(i)
+                .cloned()
+                .unwrap_or((0, ctopc_core::Value::Empty));
             ReadItem {
                 client_handle: 0,
                 vt,
@@ -323,22 +382,38 @@ fn item_vqts(items: &[(u32, ctopc_core::model::ItemVqt)], values: &InVariants) -
             wReserved: 0,
             bTimeStampSpecified: vqt.timestamp.is_some().into(),
             dwReserved: 0,
-            ftTimeStamp: vqt.timestamp.map(|t| {
-                let (lo, hi) = t.filetime_parts();
-                FILETIME { dwLowDateTime: lo, dwHighDateTime: hi }
-            }).unwrap_or_default(),
+            ftTimeStamp: vqt
+                .timestamp
+                .map(|t| {
+                    let (lo, hi) = t.filetime_parts();
+                    FILETIME {
+                        dwLowDateTime: lo,
+                        dwHighDateTime: hi,
+                    }
+                })
+                .unwrap_or_default(),
         })
         .collect()
 }
 
 /// IOPCSyncIO2::WriteVQT: (S_OK or S_FALSE, per-item errors).
-pub fn write_vqt(io: &IOPCSyncIO2, items: &[(u32, ctopc_core::model::ItemVqt)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+pub fn write_vqt(
+    io: &IOPCSyncIO2,
+    items: &[(u32, ctopc_core::model::ItemVqt)],
+) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
     let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
     let values = InVariants::new(items.iter().map(|(_, v)| &v.value))?;
     let vqts = item_vqts(items, &values);
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: both arrays hold `len` elements and live for the call; valid out-pointer.
-    let hr = per_item_hr(unsafe { io.WriteVQT(handles.len() as u32, handles.as_ptr(), vqts.as_ptr(), &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.WriteVQT(
+            handles.len() as u32,
+            handles.as_ptr(),
+            vqts.as_ptr(),
+            &mut errors,
+        )
+    })?;
     Ok((hr, take_array(errors, handles.len())))
 }
 
@@ -347,27 +422,56 @@ pub fn write_vqt(io: &IOPCSyncIO2, items: &[(u32, ctopc_core::model::ItemVqt)]) 
 pub type AsyncCall = (windows::core::HRESULT, u32, Vec<windows::core::HRESULT>);
 
 /// IOPCAsyncIO2::Read.
-pub fn async_read(io: &IOPCAsyncIO2, handles: &[u32], transaction: u32) -> windows::core::Result<AsyncCall> {
+pub fn async_read(
+    io: &IOPCAsyncIO2,
+    handles: &[u32],
+    transaction: u32,
+) -> windows::core::Result<AsyncCall> {
     let mut cancel = 0u32;
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: `handles` holds `len` elements; valid out-pointers.
-    let hr = per_item_hr(unsafe { io.Read(handles.len() as u32, handles.as_ptr(), transaction, &mut cancel, &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.Read(
+            handles.len() as u32,
+            handles.as_ptr(),
+            transaction,
+            &mut cancel,
+            &mut errors,
+        )
+    })?;
     Ok((hr, cancel, take_array(errors, handles.len())))
 }
 
 /// IOPCAsyncIO2::Write.
-pub fn async_write(io: &IOPCAsyncIO2, items: &[(u32, ctopc_core::Value)], transaction: u32) -> windows::core::Result<AsyncCall> {
+pub fn async_write(
+    io: &IOPCAsyncIO2,
+    items: &[(u32, ctopc_core::Value)],
+    transaction: u32,
+) -> windows::core::Result<AsyncCall> {
     let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
     let values = InVariants::new(items.iter().map(|(_, v)| v))?;
     let mut cancel = 0u32;
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: both arrays hold `len` elements and live for the call; valid out-pointers.
-    let hr = per_item_hr(unsafe { io.Write(handles.len() as u32, handles.as_ptr(), values.0.as_ptr(), transaction, &mut cancel, &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.Write(
+            handles.len() as u32,
+            handles.as_ptr(),
+            values.0.as_ptr(),
+            transaction,
+            &mut cancel,
+            &mut errors,
+        )
+    })?;
     Ok((hr, cancel, take_array(errors, handles.len())))
 }
 
 /// IOPCAsyncIO2::Refresh2: the server's cancel ID.
-pub fn refresh2(io: &IOPCAsyncIO2, source: OPCDATASOURCE, transaction: u32) -> windows::core::Result<u32> {
+pub fn refresh2(
+    io: &IOPCAsyncIO2,
+    source: OPCDATASOURCE,
+    transaction: u32,
+) -> windows::core::Result<u32> {
     let mut cancel = 0u32;
     // SAFETY: valid out-pointer.
     unsafe { io.Refresh2(source, transaction, &mut cancel)? };
@@ -383,30 +487,60 @@ pub fn get_enable(io: &IOPCAsyncIO2) -> windows::core::Result<bool> {
 }
 
 /// IOPCAsyncIO3::ReadMaxAge for `(server handle, MaxAge ms)` items.
-pub fn async_read_max_age(io: &IOPCAsyncIO3, items: &[(u32, u32)], transaction: u32) -> windows::core::Result<AsyncCall> {
+pub fn async_read_max_age(
+    io: &IOPCAsyncIO3,
+    items: &[(u32, u32)],
+    transaction: u32,
+) -> windows::core::Result<AsyncCall> {
     let handles: Vec<u32> = items.iter().map(|i| i.0).collect();
     let ages: Vec<u32> = items.iter().map(|i| i.1).collect();
     let mut cancel = 0u32;
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: the arrays hold `len` elements; valid out-pointers.
-    let hr = per_item_hr(unsafe { io.ReadMaxAge(handles.len() as u32, handles.as_ptr(), ages.as_ptr(), transaction, &mut cancel, &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.ReadMaxAge(
+            handles.len() as u32,
+            handles.as_ptr(),
+            ages.as_ptr(),
+            transaction,
+            &mut cancel,
+            &mut errors,
+        )
+    })?;
     Ok((hr, cancel, take_array(errors, handles.len())))
 }
 
 /// IOPCAsyncIO3::WriteVQT.
-pub fn async_write_vqt(io: &IOPCAsyncIO3, items: &[(u32, ctopc_core::model::ItemVqt)], transaction: u32) -> windows::core::Result<AsyncCall> {
+pub fn async_write_vqt(
+    io: &IOPCAsyncIO3,
+    items: &[(u32, ctopc_core::model::ItemVqt)],
+    transaction: u32,
+) -> windows::core::Result<AsyncCall> {
     let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
     let values = InVariants::new(items.iter().map(|(_, v)| &v.value))?;
     let vqts = item_vqts(items, &values);
     let mut cancel = 0u32;
     let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
     // SAFETY: both arrays hold `len` elements and live for the call; valid out-pointers.
-    let hr = per_item_hr(unsafe { io.WriteVQT(handles.len() as u32, handles.as_ptr(), vqts.as_ptr(), transaction, &mut cancel, &mut errors) })?;
+    let hr = per_item_hr(unsafe {
+        io.WriteVQT(
+            handles.len() as u32,
+            handles.as_ptr(),
+            vqts.as_ptr(),
+            transaction,
+            &mut cancel,
+            &mut errors,
+        )
+    })?;
     Ok((hr, cancel, take_array(errors, handles.len())))
 }
 
 /// IOPCAsyncIO3::RefreshMaxAge: the server's cancel ID.
-pub fn refresh_max_age(io: &IOPCAsyncIO3, max_age: u32, transaction: u32) -> windows::core::Result<u32> {
+pub fn refresh_max_age(
+    io: &IOPCAsyncIO3,
+    max_age: u32,
+    transaction: u32,
+) -> windows::core::Result<u32> {
     let mut cancel = 0u32;
     // SAFETY: valid out-pointer.
     unsafe { io.RefreshMaxAge(max_age, transaction, &mut cancel)? };
@@ -415,7 +549,10 @@ pub fn refresh_max_age(io: &IOPCAsyncIO3, max_age: u32, transaction: u32) -> win
 
 /// Connects an IOPCDataCallback sink to a group (its IConnectionPointContainer):
 /// the Advise cookie.
-pub fn advise_data_callback(group: &IUnknown, sink: &IOPCDataCallback) -> windows::core::Result<u32> {
+pub fn advise_data_callback(
+    group: &IUnknown,
+    sink: &IOPCDataCallback,
+) -> windows::core::Result<u32> {
     let cpc: windows::Win32::System::Com::IConnectionPointContainer = group.cast()?;
     // SAFETY: a valid IID pointer for the call.
     let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback)? };
@@ -449,7 +586,13 @@ pub struct ItemDef {
 impl ItemDef {
     /// An active item in the default channel with its canonical type.
     pub fn new(item_id: &str, client_handle: u32) -> ItemDef {
-        ItemDef { item_id: item_id.into(), access_path: String::new(), active: true, client_handle, requested_type: 0 }
+        ItemDef {
+            item_id: item_id.into(),
+            access_path: String::new(),
+            active: true,
+            client_handle,
+            requested_type: 0,
+        }
     }
 }
 
@@ -524,16 +667,31 @@ impl OpcGroup {
     pub fn from_unknown(unknown: IUnknown) -> windows::core::Result<OpcGroup> {
         let item_mgt = unknown.cast::<IOPCItemMgt>()?;
         let state_mgt = unknown.cast::<IOPCGroupStateMgt>()?;
-        Ok(OpcGroup { unknown, item_mgt, state_mgt })
+        Ok(OpcGroup {
+            unknown,
+            item_mgt,
+            state_mgt,
+        })
     }
 
     fn item_call(
         &self,
         items: &[ItemDef],
-        f: impl FnOnce(u32, *const OPCITEMDEF, *mut *mut OPCITEMRESULT, *mut *mut windows::core::HRESULT) -> windows::core::HRESULT,
+        f: impl FnOnce(
+            u32,
+            *const OPCITEMDEF,
+            *mut *mut OPCITEMRESULT,
+            *mut *mut windows::core::HRESULT,
+        ) -> windows::core::HRESULT,
     ) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemOutcome>)> {
-        let ids: Vec<HSTRING> = items.iter().map(|i| HSTRING::from(i.item_id.as_str())).collect();
-        let paths: Vec<HSTRING> = items.iter().map(|i| HSTRING::from(i.access_path.as_str())).collect();
+        let ids: Vec<HSTRING> = items
+            .iter()
+            .map(|i| HSTRING::from(i.item_id.as_str()))
+            .collect();
+        let paths: Vec<HSTRING> = items
+            .iter()
+            .map(|i| HSTRING::from(i.access_path.as_str()))
+            .collect();
         let defs: Vec<OPCITEMDEF> = items
             .iter()
             .zip(ids.iter().zip(&paths))
@@ -550,7 +708,12 @@ impl OpcGroup {
             .collect();
         let mut results: *mut OPCITEMRESULT = std::ptr::null_mut();
         let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
-        let hr = group_call_hr(f(defs.len() as u32, defs.as_ptr(), &mut results, &mut errors))?;
+        let hr = group_call_hr(f(
+            defs.len() as u32,
+            defs.as_ptr(),
+            &mut results,
+            &mut errors,
+        ))?;
         let n = items.len();
         let errors = take_array(errors, n);
         let results = take_array(results, n);
@@ -574,15 +737,25 @@ impl OpcGroup {
     }
 
     /// IOPCItemMgt::AddItems: (S_OK or S_FALSE, one outcome per item).
-    pub fn add_items(&self, items: &[ItemDef]) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemOutcome>)> {
+    pub fn add_items(
+        &self,
+        items: &[ItemDef],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemOutcome>)> {
         // SAFETY: the definitions and their strings live for the call; valid out-pointers.
-        self.item_call(items, |n, d, r, e| unsafe { self.item_mgt.AddItems(n, d, r, e) })
+        self.item_call(items, |n, d, r, e| unsafe {
+            self.item_mgt.AddItems(n, d, r, e)
+        })
     }
 
     /// IOPCItemMgt::ValidateItems (no blob update).
-    pub fn validate_items(&self, items: &[ItemDef]) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemOutcome>)> {
+    pub fn validate_items(
+        &self,
+        items: &[ItemDef],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemOutcome>)> {
         // SAFETY: as above.
-        self.item_call(items, |n, d, r, e| unsafe { self.item_mgt.ValidateItems(n, d, false.into(), r, e) })
+        self.item_call(items, |n, d, r, e| unsafe {
+            self.item_mgt.ValidateItems(n, d, false.into(), r, e)
+        })
     }
 
     fn errors_call(
@@ -606,45 +779,80 @@ impl OpcGroup {
         Ok((hr, values.into_iter().zip(errors).collect()))
     }
 
-    pub fn remove_items(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn remove_items(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         // SAFETY: `handles` lives for the call; valid out-pointer.
-        Self::errors_call(handles.len(), |e| unsafe { self.item_mgt.RemoveItems(handles.len() as u32, handles.as_ptr(), e) })
+        Self::errors_call(handles.len(), |e| unsafe {
+            self.item_mgt
+                .RemoveItems(handles.len() as u32, handles.as_ptr(), e)
+        })
     }
 
-    pub fn set_active_state(&self, handles: &[u32], active: bool) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn set_active_state(
+        &self,
+        handles: &[u32],
+        active: bool,
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         // SAFETY: as above.
         Self::errors_call(handles.len(), |e| unsafe {
-            self.item_mgt.SetActiveState(handles.len() as u32, handles.as_ptr(), active.into(), e)
+            self.item_mgt
+                .SetActiveState(handles.len() as u32, handles.as_ptr(), active.into(), e)
         })
     }
 
     /// SetClientHandles for `(server handle, client handle)` pairs.
-    pub fn set_client_handles(&self, items: &[(u32, u32)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn set_client_handles(
+        &self,
+        items: &[(u32, u32)],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let (h, c): (Vec<u32>, Vec<u32>) = items.iter().copied().unzip();
         // SAFETY: both arrays hold `len` elements and live for the call.
-        Self::errors_call(h.len(), |e| unsafe { self.item_mgt.SetClientHandles(h.len() as u32, h.as_ptr(), c.as_ptr(), e) })
+        Self::errors_call(h.len(), |e| unsafe {
+            self.item_mgt
+                .SetClientHandles(h.len() as u32, h.as_ptr(), c.as_ptr(), e)
+        })
     }
 
     /// SetDatatypes for `(server handle, VARTYPE)` pairs.
-    pub fn set_datatypes(&self, items: &[(u32, u16)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn set_datatypes(
+        &self,
+        items: &[(u32, u16)],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let h: Vec<u32> = items.iter().map(|i| i.0).collect();
-        let t: Vec<VARTYPE> = items.iter().map(|i| windows::Win32::System::Variant::VARENUM(i.1)).collect();
+        let t: Vec<VARTYPE> = items
+            .iter()
+            .map(|i| windows::Win32::System::Variant::VARENUM(i.1))
+            .collect();
         // SAFETY: both arrays hold `len` elements and live for the call.
-        Self::errors_call(h.len(), |e| unsafe { self.item_mgt.SetDatatypes(h.len() as u32, h.as_ptr(), t.as_ptr(), e) })
+        Self::errors_call(h.len(), |e| unsafe {
+            self.item_mgt
+                .SetDatatypes(h.len() as u32, h.as_ptr(), t.as_ptr(), e)
+        })
     }
 
     /// IOPCItemMgt::CreateEnumerator(IID_IEnumOPCItemAttributes): the HRESULT (S_FALSE
     /// when the group has no items) and the enumerator.
-    pub fn item_enumerator(&self) -> windows::core::Result<(windows::core::HRESULT, IEnumOPCItemAttributes)> {
+    pub fn item_enumerator(
+        &self,
+    ) -> windows::core::Result<(windows::core::HRESULT, IEnumOPCItemAttributes)> {
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid IID and out-pointer.
-        let hr = group_call_hr(unsafe { self.item_mgt.CreateEnumerator(&IEnumOPCItemAttributes::IID, &mut unk) })?;
-        let unk = unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
+        let hr = group_call_hr(unsafe {
+            self.item_mgt
+                .CreateEnumerator(&IEnumOPCItemAttributes::IID, &mut unk)
+        })?;
+        let unk =
+            unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
         Ok((hr, unk.cast()?))
     }
 
     /// IEnumOPCItemAttributes::Next(celt): (S_OK or S_FALSE, the items).
-    pub fn next_attributes(e: &IEnumOPCItemAttributes, celt: u32) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemAttrs>)> {
+    pub fn next_attributes(
+        e: &IEnumOPCItemAttributes,
+        celt: u32,
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<ItemAttrs>)> {
         let mut p: *mut OPCITEMATTRIBUTES = std::ptr::null_mut();
         let mut fetched = 0u32;
         // SAFETY: valid out-pointers.
@@ -666,7 +874,8 @@ impl OpcGroup {
                     canonical_type: a.vtCanonicalDataType.0,
                     eu_type: a.dwEUType.0,
                     eu_vt: crate::variant::var_type(&a.vEUInfo).0,
-                    eu_info: crate::variant::from_variant(&a.vEUInfo).unwrap_or(ctopc_core::Value::Empty),
+                    eu_info: crate::variant::from_variant(&a.vEUInfo)
+                        .unwrap_or(ctopc_core::Value::Empty),
                 });
                 crate::variant::clear(&mut a.vEUInfo);
             }
@@ -691,11 +900,37 @@ impl OpcGroup {
     }
 
     pub fn get_state(&self) -> windows::core::Result<GroupStateInfo> {
-        let (mut rate, mut active, mut name, mut bias, mut deadband, mut lcid, mut client, mut server) =
-            (0u32, windows::core::BOOL(0), PWSTR::null(), 0i32, 0f32, 0u32, 0u32, 0u32);
+        let (
+            mut rate,
+            mut active,
+            mut name,
+            mut bias,
+            mut deadband,
+            mut lcid,
+            mut client,
+            mut server,
+        ) = (
+            0u32,
+            windows::core::BOOL(0),
+            PWSTR::null(),
+            0i32,
+            0f32,
+            0u32,
+            0u32,
+            0u32,
+        );
         // SAFETY: valid out-pointers; the name is CoTaskMem owned by us afterwards.
         unsafe {
-            self.state_mgt.GetState(&mut rate, &mut active, &mut name, &mut bias, &mut deadband, &mut lcid, &mut client, &mut server)?
+            self.state_mgt.GetState(
+                &mut rate,
+                &mut active,
+                &mut name,
+                &mut bias,
+                &mut deadband,
+                &mut lcid,
+                &mut client,
+                &mut server,
+            )?
         };
         Ok(GroupStateInfo {
             update_rate: rate,
@@ -710,7 +945,10 @@ impl OpcGroup {
     }
 
     /// IOPCGroupStateMgt::SetState: (S_OK or OPC_S_UNSUPPORTEDRATE, revised update rate).
-    pub fn set_state(&self, c: &GroupStateChange) -> windows::core::Result<(windows::core::HRESULT, u32)> {
+    pub fn set_state(
+        &self,
+        c: &GroupStateChange,
+    ) -> windows::core::Result<(windows::core::HRESULT, u32)> {
         fn opt<T>(o: &Option<T>) -> *const T {
             o.as_ref().map_or(std::ptr::null(), |v| v as *const T)
         }
@@ -738,11 +976,18 @@ impl OpcGroup {
     }
 
     /// IOPCGroupStateMgt::CloneGroup, asking for `riid`.
-    pub fn clone_group_as(&self, name: &str, riid: &windows::core::GUID) -> windows::core::Result<IUnknown> {
+    pub fn clone_group_as(
+        &self,
+        name: &str,
+        riid: &windows::core::GUID,
+    ) -> windows::core::Result<IUnknown> {
         let name = HSTRING::from(name);
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid string, IID and out-pointer.
-        unsafe { self.state_mgt.CloneGroup(windows::core::PCWSTR(name.as_ptr()), riid, &mut unk)? };
+        unsafe {
+            self.state_mgt
+                .CloneGroup(windows::core::PCWSTR(name.as_ptr()), riid, &mut unk)?
+        };
         unk.ok_or_else(|| windows::Win32::Foundation::E_POINTER.into())
     }
 
@@ -768,56 +1013,94 @@ impl OpcGroup {
     }
 
     /// SetItemDeadband for `(server handle, percent)` pairs.
-    pub fn set_item_deadband(&self, items: &[(u32, f32)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn set_item_deadband(
+        &self,
+        items: &[(u32, f32)],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let d = self.unknown.cast::<IOPCItemDeadbandMgt>()?;
         let h: Vec<u32> = items.iter().map(|i| i.0).collect();
         let v: Vec<f32> = items.iter().map(|i| i.1).collect();
         // SAFETY: both arrays hold `len` elements and live for the call.
-        Self::errors_call(h.len(), |e| unsafe { d.SetItemDeadband(h.len() as u32, h.as_ptr(), v.as_ptr(), e) })
+        Self::errors_call(h.len(), |e| unsafe {
+            d.SetItemDeadband(h.len() as u32, h.as_ptr(), v.as_ptr(), e)
+        })
     }
 
-    pub fn get_item_deadband(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<(f32, windows::core::HRESULT)>)> {
+    pub fn get_item_deadband(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<(f32, windows::core::HRESULT)>)> {
         let d = self.unknown.cast::<IOPCItemDeadbandMgt>()?;
         // SAFETY: `handles` lives for the call; valid out-pointers.
-        Self::values_call(handles.len(), |v, e| unsafe { d.GetItemDeadband(handles.len() as u32, handles.as_ptr(), v, e) })
+        Self::values_call(handles.len(), |v, e| unsafe {
+            d.GetItemDeadband(handles.len() as u32, handles.as_ptr(), v, e)
+        })
     }
 
-    pub fn clear_item_deadband(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn clear_item_deadband(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let d = self.unknown.cast::<IOPCItemDeadbandMgt>()?;
         // SAFETY: as above.
-        Self::errors_call(handles.len(), |e| unsafe { d.ClearItemDeadband(handles.len() as u32, handles.as_ptr(), e) })
+        Self::errors_call(handles.len(), |e| unsafe {
+            d.ClearItemDeadband(handles.len() as u32, handles.as_ptr(), e)
+        })
     }
 
     /// SetItemSamplingRate for `(server handle, rate ms)`: per item (revised rate, HRESULT).
-    pub fn set_item_sampling_rate(&self, items: &[(u32, u32)]) -> windows::core::Result<(windows::core::HRESULT, Vec<(u32, windows::core::HRESULT)>)> {
+    pub fn set_item_sampling_rate(
+        &self,
+        items: &[(u32, u32)],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<(u32, windows::core::HRESULT)>)> {
         let s = self.unknown.cast::<IOPCItemSamplingMgt>()?;
         let h: Vec<u32> = items.iter().map(|i| i.0).collect();
         let r: Vec<u32> = items.iter().map(|i| i.1).collect();
         // SAFETY: both arrays hold `len` elements and live for the call; valid out-pointers.
-        Self::values_call(h.len(), |v, e| unsafe { s.SetItemSamplingRate(h.len() as u32, h.as_ptr(), r.as_ptr(), v, e) })
+        Self::values_call(h.len(), |v, e| unsafe {
+            s.SetItemSamplingRate(h.len() as u32, h.as_ptr(), r.as_ptr(), v, e)
+        })
     }
 
-    pub fn get_item_sampling_rate(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<(u32, windows::core::HRESULT)>)> {
+    pub fn get_item_sampling_rate(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<(u32, windows::core::HRESULT)>)> {
         let s = self.unknown.cast::<IOPCItemSamplingMgt>()?;
         // SAFETY: `handles` lives for the call; valid out-pointers.
-        Self::values_call(handles.len(), |v, e| unsafe { s.GetItemSamplingRate(handles.len() as u32, handles.as_ptr(), v, e) })
+        Self::values_call(handles.len(), |v, e| unsafe {
+            s.GetItemSamplingRate(handles.len() as u32, handles.as_ptr(), v, e)
+        })
     }
 
-    pub fn clear_item_sampling_rate(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn clear_item_sampling_rate(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let s = self.unknown.cast::<IOPCItemSamplingMgt>()?;
         // SAFETY: as above.
-        Self::errors_call(handles.len(), |e| unsafe { s.ClearItemSamplingRate(handles.len() as u32, handles.as_ptr(), e) })
+        Self::errors_call(handles.len(), |e| unsafe {
+            s.ClearItemSamplingRate(handles.len() as u32, handles.as_ptr(), e)
+        })
     }
 
-    pub fn set_item_buffer_enable(&self, items: &[(u32, bool)]) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
+    pub fn set_item_buffer_enable(
+        &self,
+        items: &[(u32, bool)],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let s = self.unknown.cast::<IOPCItemSamplingMgt>()?;
         let h: Vec<u32> = items.iter().map(|i| i.0).collect();
         let b: Vec<windows::core::BOOL> = items.iter().map(|i| i.1.into()).collect();
         // SAFETY: both arrays hold `len` elements and live for the call.
-        Self::errors_call(h.len(), |e| unsafe { s.SetItemBufferEnable(h.len() as u32, h.as_ptr(), b.as_ptr(), e) })
+        Self::errors_call(h.len(), |e| unsafe {
+            s.SetItemBufferEnable(h.len() as u32, h.as_ptr(), b.as_ptr(), e)
+        })
     }
 
-    pub fn get_item_buffer_enable(&self, handles: &[u32]) -> windows::core::Result<(windows::core::HRESULT, Vec<(bool, windows::core::HRESULT)>)> {
+    pub fn get_item_buffer_enable(
+        &self,
+        handles: &[u32],
+    ) -> windows::core::Result<(windows::core::HRESULT, Vec<(bool, windows::core::HRESULT)>)> {
         let s = self.unknown.cast::<IOPCItemSamplingMgt>()?;
         // SAFETY: `handles` lives for the call; valid out-pointers.
         let (hr, v) = Self::values_call::<windows::core::BOOL>(handles.len(), |v, e| unsafe {
@@ -830,7 +1113,10 @@ impl OpcGroup {
 // ---- server object: groups, browsing, item properties, item I/O, shutdown ---------------
 
 mod server_ext;
-pub use server_ext::{enum_strings, enum_unknowns, AddedGroup, BrowseArgs, BrowseElement, BrowsePage, GroupSpec, ItemProperties, NewItemId, Property};
+pub use server_ext::{
+    enum_strings, enum_unknowns, AddedGroup, BrowseArgs, BrowseElement, BrowsePage, GroupSpec,
+    ItemProperties, NewItemId, Property,
+};
 
 // ---- console clients (opcdiag): a data-change sink, Ctrl+C, local time -----------------
 

@@ -7,10 +7,14 @@
 use crate::enums::ConnectionPointEnum;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
-use windows::core::{implement, Interface, IUnknown, Ref, GUID};
+use windows::core::{implement, IUnknown, Interface, Ref, GUID};
 use windows::Win32::Foundation::E_POINTER;
-use windows::Win32::System::Com::{IConnectionPoint, IConnectionPoint_Impl, IConnectionPointContainer, IEnumConnections};
-use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION};
+use windows::Win32::System::Com::{
+    IConnectionPoint, IConnectionPointContainer, IConnectionPoint_Impl, IEnumConnections,
+};
+use windows::Win32::System::Ole::{
+    CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION,
+};
 
 static NEXT_COOKIE: AtomicU32 = AtomicU32::new(1);
 
@@ -28,7 +32,9 @@ unsafe impl<I: Interface> Sync for SinkSlot<I> {}
 
 impl<I: Interface> Default for SinkSlot<I> {
     fn default() -> Self {
-        SinkSlot { sink: Mutex::new(None) }
+        SinkSlot {
+            sink: Mutex::new(None),
+        }
     }
 }
 
@@ -61,7 +67,9 @@ impl<I: Interface + Clone> SinkSlot<I> {
         taken.is_some()
     }
     fn advise(&self, unk: &IUnknown) -> windows::core::Result<u32> {
-        let sink: I = unk.cast().map_err(|_| windows::core::Error::from(CONNECT_E_CANNOTCONNECT))?;
+        let sink: I = unk
+            .cast()
+            .map_err(|_| windows::core::Error::from(CONNECT_E_CANNOTCONNECT))?;
         let mut g = self.lock();
         if g.is_some() {
             return Err(CONNECT_E_ADVISELIMIT.into());
@@ -78,7 +86,11 @@ impl<I: Interface + Clone> SinkSlot<I> {
         }
     }
     fn connections(&self) -> Vec<(u32, IUnknown)> {
-        self.lock().as_ref().and_then(|(c, s)| s.cast::<IUnknown>().ok().map(|u| (*c, u))).into_iter().collect()
+        self.lock()
+            .as_ref()
+            .and_then(|(c, s)| s.cast::<IUnknown>().ok().map(|u| (*c, u)))
+            .into_iter()
+            .collect()
     }
 }
 
@@ -110,8 +122,17 @@ pub struct ConnectionPoint {
 }
 
 impl ConnectionPoint {
-    pub fn create(iid: GUID, container: IConnectionPointContainer, slot: Arc<dyn Slot>) -> IConnectionPoint {
-        ConnectionPoint { iid, container, slot }.into()
+    pub fn create(
+        iid: GUID,
+        container: IConnectionPointContainer,
+        slot: Arc<dyn Slot>,
+    ) -> IConnectionPoint {
+        ConnectionPoint {
+            iid,
+            container,
+            slot,
+        }
+        .into()
     }
 }
 
@@ -123,19 +144,27 @@ impl IConnectionPoint_Impl for ConnectionPoint_Impl {
         Ok(self.container.clone())
     }
     fn Advise(&self, sink: Ref<IUnknown>) -> windows::core::Result<u32> {
-        let sink = sink.ok().map_err(|_| windows::core::Error::from(E_POINTER))?;
+        let sink = sink
+            .ok()
+            .map_err(|_| windows::core::Error::from(E_POINTER))?;
         self.slot.advise(sink)
     }
     fn Unadvise(&self, cookie: u32) -> windows::core::Result<()> {
         self.slot.unadvise(cookie)
     }
     fn EnumConnections(&self) -> windows::core::Result<IEnumConnections> {
-        Ok(crate::enums::ConnectionEnum::create(self.slot.connections()))
+        Ok(crate::enums::ConnectionEnum::create(
+            self.slot.connections(),
+        ))
     }
 }
 
 /// FindConnectionPoint for a container with the given (iid, slot) points.
-pub fn find(container: IConnectionPointContainer, points: &[(GUID, Arc<dyn Slot>)], riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
+pub fn find(
+    container: IConnectionPointContainer,
+    points: &[(GUID, Arc<dyn Slot>)],
+    riid: *const GUID,
+) -> windows::core::Result<IConnectionPoint> {
     if riid.is_null() {
         return Err(E_POINTER.into());
     }
@@ -149,7 +178,13 @@ pub fn find(container: IConnectionPointContainer, points: &[(GUID, Arc<dyn Slot>
 }
 
 /// EnumConnectionPoints for a container with the given points.
-pub fn enumerate(container: IConnectionPointContainer, points: &[(GUID, Arc<dyn Slot>)]) -> windows::Win32::System::Com::IEnumConnectionPoints {
-    let cps = points.iter().map(|(iid, slot)| ConnectionPoint::create(*iid, container.clone(), Arc::clone(slot))).collect();
+pub fn enumerate(
+    container: IConnectionPointContainer,
+    points: &[(GUID, Arc<dyn Slot>)],
+) -> windows::Win32::System::Com::IEnumConnectionPoints {
+    let cps = points
+        .iter()
+        .map(|(iid, slot)| ConnectionPoint::create(*iid, container.clone(), Arc::clone(slot)))
+        .collect();
     ConnectionPointEnum::create(cps)
 }

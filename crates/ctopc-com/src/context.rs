@@ -12,8 +12,8 @@
 
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
 use crate::runtime::Runtime;
-use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
 use ctopc_core::asix::address_space::build_address_space;
+use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
 use ctopc_core::asix::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase};
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::Lang;
@@ -60,7 +60,9 @@ pub struct Loaded {
 /// silently run without the configuration the engineer wrote; so is a file named by
 /// `SERVERCTOPC_INI` that does not exist. An empty `SERVERCTOPC_INI` counts as not set.
 pub fn load(dir: &Path) -> Result<Loaded, String> {
-    let from_env = std::env::var_os(CONFIG_ENV).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let from_env = std::env::var_os(CONFIG_ENV)
+        .filter(|v| !v.is_empty())
+        .map(PathBuf::from);
     if let Some(path) = from_env {
         let loaded = load_file(&path, ConfigSource::FromEnv(path.clone()));
         return loaded.map_err(|e| format!("{CONFIG_ENV}: {e}"));
@@ -75,20 +77,37 @@ pub fn load(dir: &Path) -> Result<Loaded, String> {
 fn load_file(path: &Path, source: ConfigSource) -> Result<Loaded, String> {
     let (cfg, w) = ctopc_core::asix::load_config_file(path).map_err(|e| e.to_string())?;
     let (ns, dbw) = AsixNamespace::load(cfg);
-    let warnings = w.iter().chain(dbw.iter()).map(ToString::to_string).collect();
-    Ok(Loaded { namespace: ns, source, warnings })
+    let warnings = w
+        .iter()
+        .chain(dbw.iter())
+        .map(ToString::to_string)
+        .collect();
+    Ok(Loaded {
+        namespace: ns,
+        source,
+        warnings,
+    })
 }
 
 /// The embedded default configuration: the demo plant database in channel `*`, simulated.
 pub fn embedded_demo() -> Result<Loaded, String> {
     let (cfg, _) = parse_config(DEMO_INI.as_bytes(), "<embedded>").map_err(|e| e.to_string())?;
-    let table = parse_attribute_table(DEMO_TABLE, "<embedded>/atrybuty.csv").map_err(|e| e.to_string())?;
-    let (set, mut warnings) = parse_var_set(DEMO_SET, "<embedded>/wytwornia_kwasu.zez").map_err(|e| e.to_string())?;
+    let table =
+        parse_attribute_table(DEMO_TABLE, "<embedded>/atrybuty.csv").map_err(|e| e.to_string())?;
+    let (set, mut warnings) =
+        parse_var_set(DEMO_SET, "<embedded>/wytwornia_kwasu.zez").map_err(|e| e.to_string())?;
     let (db, w2) = VarDatabase::build(&table, Some(&set), None).map_err(|e| e.to_string())?;
     warnings.extend(w2);
     let mut ns = AsixNamespace::new(cfg);
-    ns.set_database(ctopc_core::asix::BASIC_CHANNEL, ChannelDatabase::Loaded(Arc::new(db)));
-    Ok(Loaded { namespace: ns, source: ConfigSource::EmbeddedDemo, warnings: warnings.iter().map(ToString::to_string).collect() })
+    ns.set_database(
+        ctopc_core::asix::BASIC_CHANNEL,
+        ChannelDatabase::Loaded(Arc::new(db)),
+    );
+    Ok(Loaded {
+        namespace: ns,
+        source: ConfigSource::EmbeddedDemo,
+        warnings: warnings.iter().map(ToString::to_string).collect(),
+    })
 }
 
 /// Everything COM objects share.
@@ -121,7 +140,9 @@ impl Context {
         match build_address_space(ns) {
             Ok(a) => Arc::new(a),
             Err(e) => {
-                tracing::error!("cannot build the browse tree: {e:?}; browsing shows an empty tree");
+                tracing::error!(
+                    "cannot build the browse tree: {e:?}; browsing shows an empty tree"
+                );
                 Arc::new(AddressSpace::empty())
             }
         }
@@ -132,8 +153,12 @@ static CONTEXT: OnceLock<Context> = OnceLock::new();
 
 /// Installs the process context (once per process).
 pub fn install(ctx: Context) -> Result<&'static Context, String> {
-    CONTEXT.set(ctx).map_err(|_| "the server context is already installed".to_string())?;
-    CONTEXT.get().ok_or_else(|| "the server context is missing".to_string())
+    CONTEXT
+        .set(ctx)
+        .map_err(|_| "the server context is already installed".to_string())?;
+    CONTEXT
+        .get()
+        .ok_or_else(|| "the server context is missing".to_string())
 }
 
 /// The process context, once the server has started.

@@ -7,8 +7,9 @@ use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IEnumConnectionPoints, IEnumConnectionPoints_Impl, IEnumConnections, IEnumConnections_Impl, IEnumString,
-    IEnumString_Impl, IEnumUnknown, IEnumUnknown_Impl, CONNECTDATA,
+    IConnectionPoint, IEnumConnectionPoints, IEnumConnectionPoints_Impl, IEnumConnections,
+    IEnumConnections_Impl, IEnumString, IEnumString_Impl, IEnumUnknown, IEnumUnknown_Impl,
+    CONNECTDATA,
 };
 
 /// A position in a shared snapshot.
@@ -19,7 +20,10 @@ pub struct Cursor<T> {
 
 impl<T> Cursor<T> {
     pub fn new(items: Vec<T>) -> Self {
-        Cursor { items: Arc::new(items), pos: Mutex::new(0) }
+        Cursor {
+            items: Arc::new(items),
+            pos: Mutex::new(0),
+        }
     }
 
     fn pos(&self) -> std::sync::MutexGuard<'_, usize> {
@@ -28,7 +32,10 @@ impl<T> Cursor<T> {
 
     /// A copy sharing the snapshot, at the same position.
     pub fn fork(&self) -> Self {
-        Cursor { items: Arc::clone(&self.items), pos: Mutex::new(*self.pos()) }
+        Cursor {
+            items: Arc::clone(&self.items),
+            pos: Mutex::new(*self.pos()),
+        }
     }
 
     /// Takes up to `n` items: the slice and the position after it is committed by `commit`.
@@ -97,7 +104,13 @@ fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
 
 /// IEnum*::Next for elements that cannot fail to copy (interface pointers, AddRef'd by
 /// `make`): the next `celt` elements into `rgelt`.
-fn next_into<T, U>(cursor: &Cursor<T>, celt: u32, rgelt: *mut U, fetched: *mut u32, make: impl Fn(&T) -> U) -> HRESULT {
+fn next_into<T, U>(
+    cursor: &Cursor<T>,
+    celt: u32,
+    rgelt: *mut U,
+    fetched: *mut u32,
+    make: impl Fn(&T) -> U,
+) -> HRESULT {
     if let Err(hr) = check_next(celt, rgelt, fetched) {
         return hr;
     }

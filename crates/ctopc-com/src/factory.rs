@@ -3,7 +3,7 @@
 
 use crate::lifetime;
 use std::ffi::c_void;
-use windows::core::{implement, Interface, IUnknown, Ref, BOOL, GUID};
+use windows::core::{implement, IUnknown, Interface, Ref, BOOL, GUID};
 use windows::Win32::Foundation::{CLASS_E_NOAGGREGATION, E_POINTER};
 use windows::Win32::System::Com::{IClassFactory, IClassFactory_Impl};
 
@@ -22,7 +22,12 @@ impl ClassFactory {
 }
 
 impl IClassFactory_Impl for ClassFactory_Impl {
-    fn CreateInstance(&self, outer: Ref<IUnknown>, riid: *const GUID, ppv: *mut *mut c_void) -> windows::core::Result<()> {
+    fn CreateInstance(
+        &self,
+        outer: Ref<IUnknown>,
+        riid: *const GUID,
+        ppv: *mut *mut c_void,
+    ) -> windows::core::Result<()> {
         if ppv.is_null() {
             return Err(E_POINTER.into());
         }

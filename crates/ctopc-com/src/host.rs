@@ -1,8 +1,8 @@
 //! What ServerCTOPC.exe does for each switch: register, unregister, serve.
 
+use crate::context::{self, ConfigSource, Context};
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
-use crate::context::{self, ConfigSource, Context};
 use crate::runtime::{self, Runtime};
 use crate::{factory::ClassFactory, lifetime, server};
 use ctopc_core::asix::AsixNamespace;
@@ -16,12 +16,12 @@ use std::time::Duration;
 use windows::core::{BOOL, GUID};
 use windows::Win32::Foundation::E_FAIL;
 use windows::Win32::Globalization::GetUserDefaultUILanguage;
-use windows::Win32::System::Console::SetConsoleCtrlHandler;
 use windows::Win32::System::Com::{
-    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CoUninitialize,
-    CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
-    RPC_C_IMP_LEVEL_IDENTIFY,
+    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
+    CoUninitialize, CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE,
+    RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
 };
+use windows::Win32::System::Console::SetConsoleCtrlHandler;
 
 /// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
 pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(0x3277b556_ba68_4bde_8687_8ee4e4b46336);
@@ -54,15 +54,25 @@ impl Drop for ComInit {
 }
 
 fn exe_path() -> windows::core::Result<String> {
-    let exe = std::env::current_exe().map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
+    let exe = std::env::current_exe()
+        .map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())
 }
 
-fn with_registration<R>(service: Option<&str>, f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
+fn with_registration<R>(
+    service: Option<&str>,
+    f: impl FnOnce(&ServerRegistration) -> R,
+) -> windows::core::Result<R> {
     let exe = exe_path()?;
     let categories = [
-        Category { catid: CATID_OPCDAServer20, description: "OPC Data Access Servers Version 2.0" },
-        Category { catid: CATID_OPCDAServer30, description: "OPC Data Access Servers Version 3.0" },
+        Category {
+            catid: CATID_OPCDAServer20,
+            description: "OPC Data Access Servers Version 2.0",
+        },
+        Category {
+            catid: CATID_OPCDAServer30,
+            description: "OPC Data Access Servers Version 3.0",
+        },
     ];
     let reg = ServerRegistration {
         clsid: CLSID_SERVERCTOPC,
@@ -83,7 +93,10 @@ fn with_registration<R>(service: Option<&str>, f: impl FnOnce(&ServerRegistratio
 pub fn register() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     with_registration(None, registry::register)??;
-    println!("ServerCTOPC: registered {PROGID} ({})", registry::guid_string(&CLSID_SERVERCTOPC));
+    println!(
+        "ServerCTOPC: registered {PROGID} ({})",
+        registry::guid_string(&CLSID_SERVERCTOPC)
+    );
     Ok(())
 }
 
@@ -92,9 +105,13 @@ pub fn register() -> windows::core::Result<()> {
 pub fn register_service() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     let exe = exe_path()?;
-    crate::service::install(std::path::Path::new(&exe)).map_err(|e| crate::mem::error(E_FAIL, &e))?;
+    crate::service::install(std::path::Path::new(&exe))
+        .map_err(|e| crate::mem::error(E_FAIL, &e))?;
     with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
-    println!("ServerCTOPC: registered {PROGID} as the NT service {}", crate::service::SERVICE_NAME);
+    println!(
+        "ServerCTOPC: registered {PROGID} as the NT service {}",
+        crate::service::SERVICE_NAME
+    );
     Ok(())
 }
 
@@ -109,7 +126,8 @@ pub fn unregister() -> windows::core::Result<()> {
 
 /// Makes the data source for a namespace (the server binary decides: the in-process
 /// simulation or the asix network client). Gets the waker to call when data arrives.
-pub type MakeBackend<'a> = dyn FnOnce(&Arc<AsixNamespace>, Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
+pub type MakeBackend<'a> =
+    dyn FnOnce(&Arc<AsixNamespace>, Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
 
 /// The default language: the configured one, else Polish on Polish Windows, else English.
 fn default_lang(ns: &AsixNamespace) -> Lang {
@@ -128,7 +146,10 @@ pub fn install_dir() -> Result<PathBuf, String> {
 }
 
 /// Starts the runtime over a loaded configuration and installs the process context.
-pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
+pub fn start(
+    loaded: context::Loaded,
+    make_backend: Box<MakeBackend<'_>>,
+) -> Result<&'static Context, String> {
     match &loaded.source {
         ConfigSource::File(p) => tracing::info!("configuration: {}", p.display()),
         ConfigSource::FromEnv(p) => tracing::info!("configuration: {} (from {})", p.display(), context::CONFIG_ENV),
@@ -145,7 +166,10 @@ pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Res
     }
     let engine_config = ns.config().server.engine_config();
     if engine_config.source_timeout_ms != ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS {
-        tracing::info!("data source timeout: {} ms (SourceTimeout)", engine_config.source_timeout_ms);
+        tracing::info!(
+            "data source timeout: {} ms (SourceTimeout)",
+            engine_config.source_timeout_ms
+        );
     }
     let engine = Engine::new(engine_config, Arc::clone(&ns) as Arc<dyn Namespace>);
     let ns_for_backend = Arc::clone(&ns);
@@ -165,7 +189,11 @@ pub fn start(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> Res
 
 unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
     // CTRL_LOGOFF_EVENT (5) and CTRL_SHUTDOWN_EVENT (6): the system is going down.
-    let reason = if ctrl >= 5 { "the system is shutting down" } else { "ServerCTOPC was stopped from its console" };
+    let reason = if ctrl >= 5 {
+        "the system is shutting down"
+    } else {
+        "ServerCTOPC was stopped from its console"
+    };
     lifetime::request_stop_with(reason);
     BOOL(1)
 }
@@ -173,7 +201,10 @@ unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
 /// `-Embedding`: start, register the class object for multiple use, serve until the last
 /// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
 /// stop every connected client first gets IOPCShutdown::ShutdownRequest.
-pub fn serve(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
+pub fn serve(
+    loaded: context::Loaded,
+    make_backend: Box<MakeBackend<'_>>,
+) -> windows::core::Result<()> {
     serve_as(loaded, make_backend, ServeMode::UntilUnused)
 }
 
@@ -187,14 +218,28 @@ pub enum ServeMode {
 }
 
 /// Serves in the given mode (see [`serve`]).
-pub fn serve_as(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>, mode: ServeMode) -> windows::core::Result<()> {
+pub fn serve_as(
+    loaded: context::Loaded,
+    make_backend: Box<MakeBackend<'_>>,
+    mode: ServeMode,
+) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     // Authentication level NONE and identify-level impersonation: the usual OPC setting,
     // so that callbacks into clients on other machines work without a shared domain;
     // access is governed by the AppID's DCOM settings (see the deployment guide).
     // SAFETY: called once, before any marshalling on this process.
     let _ = unsafe {
-        CoInitializeSecurity(None, -1, None, None, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY, None, EOAC_NONE, None)
+        CoInitializeSecurity(
+            None,
+            -1,
+            None,
+            None,
+            RPC_C_AUTHN_LEVEL_NONE,
+            RPC_C_IMP_LEVEL_IDENTIFY,
+            None,
+            EOAC_NONE,
+            None,
+        )
     };
     let ctx = start(loaded, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
@@ -204,7 +249,14 @@ pub fn serve_as(loaded: context::Loaded, make_backend: Box<MakeBackend<'_>>, mod
     let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };
     let factory = ClassFactory::new(server::create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
-    let cookie = unsafe { CoRegisterClassObject(&CLSID_SERVERCTOPC, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
+    let cookie = unsafe {
+        CoRegisterClassObject(
+            &CLSID_SERVERCTOPC,
+            &factory,
+            CLSCTX_LOCAL_SERVER,
+            REGCLS_MULTIPLEUSE,
+        )?
+    };
     tracing::info!("serving {PROGID}");
     let reason = match mode {
         ServeMode::UntilUnused => lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER),

@@ -12,7 +12,12 @@ struct Counts {
     stop_requested: bool,
 }
 
-static COUNTS: Mutex<Counts> = Mutex::new(Counts { objects: 0, locks: 0, ever_used: false, stop_requested: false });
+static COUNTS: Mutex<Counts> = Mutex::new(Counts {
+    objects: 0,
+    locks: 0,
+    ever_used: false,
+    stop_requested: false,
+});
 static CHANGED: Condvar = Condvar::new();
 
 fn with<R>(f: impl FnOnce(&mut Counts) -> R) -> R {
@@ -68,7 +73,10 @@ pub fn request_stop_with(reason: &'static str) {
 
 /// The reason of a requested stop.
 pub fn stop_reason() -> &'static str {
-    STOP_REASON.lock().unwrap_or_else(|p| p.into_inner()).unwrap_or("ServerCTOPC is stopping")
+    STOP_REASON
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .unwrap_or("ServerCTOPC is stopping")
 }
 
 /// Blocks until a stop is requested (the NT service serves until the SCM stops it).
@@ -106,15 +114,29 @@ pub fn wait_until_unused(grace: Duration, linger: Duration) -> ExitReason {
             if since.elapsed() >= linger {
                 return ExitReason::LastClientGone;
             }
-            let left = linger.saturating_sub(since.elapsed()).max(Duration::from_millis(10));
-            g = CHANGED.wait_timeout(g, left).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+            let left = linger
+                .saturating_sub(since.elapsed())
+                .max(Duration::from_millis(10));
+            g = CHANGED
+                .wait_timeout(g, left)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
             continue;
         }
         idle_since = None;
         if !g.ever_used && start.elapsed() >= grace {
             return ExitReason::NeverUsed;
         }
-        let wait = if g.ever_used { Duration::from_secs(1) } else { grace.saturating_sub(start.elapsed()).max(Duration::from_millis(10)) };
-        g = CHANGED.wait_timeout(g, wait).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+        let wait = if g.ever_used {
+            Duration::from_secs(1)
+        } else {
+            grace
+                .saturating_sub(start.elapsed())
+                .max(Duration::from_millis(10))
+        };
+        g = CHANGED
+            .wait_timeout(g, wait)
+            .map(|(g, _)| g)
+            .unwrap_or_else(|p| p.into_inner().0);
     }
 }

@@ -52,7 +52,9 @@ pub struct TaskMem<T> {
 impl<T> TaskMem<T> {
     /// A zeroed array of `len` elements (`len` may be 0: then a valid 1-byte block).
     pub fn zeroed(len: usize) -> windows::core::Result<TaskMem<T>> {
-        let bytes = std::mem::size_of::<T>().checked_mul(len).ok_or_else(|| windows::core::Error::from(E_OUTOFMEMORY))?;
+        let bytes = std::mem::size_of::<T>()
+            .checked_mul(len)
+            .ok_or_else(|| windows::core::Error::from(E_OUTOFMEMORY))?;
         // SAFETY: CoTaskMemAlloc returns null or a block of at least `bytes.max(1)` bytes.
         let ptr = unsafe { CoTaskMemAlloc(bytes.max(1)) }.cast::<T>();
         if ptr.is_null() {
@@ -101,12 +103,17 @@ pub fn free_wstr(p: PWSTR) {
 
 pub fn filetime(t: Timestamp) -> FILETIME {
     let (lo, hi) = t.filetime_parts();
-    FILETIME { dwLowDateTime: lo, dwHighDateTime: hi }
+    FILETIME {
+        dwLowDateTime: lo,
+        dwHighDateTime: hi,
+    }
 }
 
 /// The current UTC time (the only clock read of the COM layer's data path).
 pub fn now() -> Timestamp {
-    let since = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let since = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
     Timestamp::from_unix_millis(0).add_micros_saturating(since.as_micros())
 }
 

@@ -30,8 +30,9 @@ use std::time::Duration;
 use windows::core::{implement, IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CoTaskMemFree, CoUninitialize, IEnumString,
-    IEnumString_Impl, CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
+    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
+    CoTaskMemFree, CoUninitialize, IEnumString, IEnumString_Impl, CLSCTX_LOCAL_SERVER,
+    COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
     RPC_C_IMP_LEVEL_IDENTIFY,
 };
 use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BSTR, VT_I4, VT_R8};
@@ -70,27 +71,34 @@ pub fn text_at2(param: &str, i: usize, j: usize) -> String {
 pub mod param {
     pub const COMMON_GET_ERROR_STRING: &str = "IOPCCommon::GetErrorString(ppString)";
     pub const SERVER_GET_ERROR_STRING: &str = "IOPCServer::GetErrorString(ppString)";
-    pub const SERVER_STATUS_VENDOR_INFO: &str = "IOPCServer::GetStatus(ppServerStatus).szVendorInfo";
-    pub const SERVER_GROUP_NAMES: &str = "IOPCServer::CreateGroupEnumerator(ppUnk)->IEnumString::Next(rgelt)";
+    pub const SERVER_STATUS_VENDOR_INFO: &str =
+        "IOPCServer::GetStatus(ppServerStatus).szVendorInfo";
+    pub const SERVER_GROUP_NAMES: &str =
+        "IOPCServer::CreateGroupEnumerator(ppUnk)->IEnumString::Next(rgelt)";
     pub const LIST_PROGID: &str = "IOPCServerList::GetClassDetails(ppszProgID)";
     pub const LIST_USER_TYPE: &str = "IOPCServerList::GetClassDetails(ppszUserType)";
     pub const LIST2_PROGID: &str = "IOPCServerList2::GetClassDetails(ppszProgID)";
     pub const LIST2_USER_TYPE: &str = "IOPCServerList2::GetClassDetails(ppszUserType)";
     pub const LIST2_VER_IND_PROGID: &str = "IOPCServerList2::GetClassDetails(ppszVerIndProgID)";
     pub const BSAS_ITEM_ID: &str = "IOPCBrowseServerAddressSpace::GetItemID(szItemID)";
-    pub const BSAS_ITEM_IDS: &str = "IOPCBrowseServerAddressSpace::BrowseOPCItemIDs(ppIEnumString)->IEnumString::Next(rgelt)";
+    pub const BSAS_ITEM_IDS: &str =
+        "IOPCBrowseServerAddressSpace::BrowseOPCItemIDs(ppIEnumString)->IEnumString::Next(rgelt)";
     pub const BSAS_ACCESS_PATHS: &str =
         "IOPCBrowseServerAddressSpace::BrowseAccessPaths(ppIEnumString)->IEnumString::Next(rgelt)";
-    pub const PROPS_DESCRIPTIONS: &str = "IOPCItemProperties::QueryAvailableProperties(ppDescriptions)";
+    pub const PROPS_DESCRIPTIONS: &str =
+        "IOPCItemProperties::QueryAvailableProperties(ppDescriptions)";
     pub const PROPS_NEW_ITEM_IDS: &str = "IOPCItemProperties::LookupItemIDs(ppszNewItemIDs)";
     pub const BROWSE_CONTINUATION_POINT: &str = "IOPCBrowse::Browse(pszContinuationPoint)";
     pub const BROWSE_NAME: &str = "IOPCBrowse::Browse(ppBrowseElements).szName";
     pub const BROWSE_ITEM_ID: &str = "IOPCBrowse::Browse(ppBrowseElements).szItemID";
-    pub const BROWSE_PROPERTY_ITEM_ID: &str = "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szItemID";
+    pub const BROWSE_PROPERTY_ITEM_ID: &str =
+        "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szItemID";
     pub const BROWSE_PROPERTY_DESCRIPTION: &str =
         "IOPCBrowse::Browse(ppBrowseElements).ItemProperties.pItemProperties.szDescription";
-    pub const GET_PROPERTIES_ITEM_ID: &str = "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szItemID";
-    pub const GET_PROPERTIES_DESCRIPTION: &str = "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szDescription";
+    pub const GET_PROPERTIES_ITEM_ID: &str =
+        "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szItemID";
+    pub const GET_PROPERTIES_DESCRIPTION: &str =
+        "IOPCBrowse::GetProperties(ppItemProperties).pItemProperties.szDescription";
     pub const GROUP_NAME: &str = "IOPCGroupStateMgt::GetState(ppName)";
     pub const ITEM_ACCESS_PATH: &str = "IEnumOPCItemAttributes::Next(ppItemArray).szAccessPath";
     pub const ITEM_ITEM_ID: &str = "IEnumOPCItemAttributes::Next(ppItemArray).szItemID";
@@ -99,7 +107,11 @@ pub mod param {
 /// How many names each IEnumString of the probe yields.
 pub const ENUM_STRING_LEN: usize = 3;
 /// `QueryAvailableProperties` reports these property IDs (with [`PROPERTY_TYPES`]).
-pub const AVAILABLE_PROPERTIES: [u32; 3] = [OPC_PROPERTY_DATATYPE, OPC_PROPERTY_VALUE, OPC_PROPERTY_EU_UNITS];
+pub const AVAILABLE_PROPERTIES: [u32; 3] = [
+    OPC_PROPERTY_DATATYPE,
+    OPC_PROPERTY_VALUE,
+    OPC_PROPERTY_EU_UNITS,
+];
 const PROPERTY_TYPES: [windows::Win32::System::Variant::VARENUM; 3] = [
     windows::Win32::System::Variant::VT_I2,
     windows::Win32::System::Variant::VT_VARIANT,
@@ -249,7 +261,9 @@ impl<T: OwnsTaskMem> OwnedArray<T> {
     }
 
     fn into_raw(mut self) -> *mut T {
-        self.mem.take().map_or(std::ptr::null_mut(), TaskMem::into_raw)
+        self.mem
+            .take()
+            .map_or(std::ptr::null_mut(), TaskMem::into_raw)
     }
 }
 
@@ -316,7 +330,12 @@ fn hresult(r: windows::core::Result<HRESULT>) -> HRESULT {
     r.unwrap_or_else(|e| e.code())
 }
 
-fn properties(param_item: &str, param_desc: &str, i: usize, ids: &[u32]) -> windows::core::Result<OPCITEMPROPERTIES> {
+fn properties(
+    param_item: &str,
+    param_desc: &str,
+    i: usize,
+    ids: &[u32],
+) -> windows::core::Result<OPCITEMPROPERTIES> {
     let mut props = OwnedArray::<OPCITEMPROPERTY>::zeroed(ids.len())?;
     for (j, (slot, &id)) in props.as_mut_slice().iter_mut().zip(ids).enumerate() {
         slot.vtDataType = VT_I4;
@@ -414,11 +433,19 @@ impl IOPCCommon_Impl for ProbeServer_Impl {
         Err(E_NOTIMPL.into())
     }
 
-    unsafe fn QueryAvailableLocaleIDs(&self, _pcount: *mut u32, _plcids: *mut *mut u32) -> windows::core::Result<()> {
+    unsafe fn QueryAvailableLocaleIDs(
+        &self,
+        _pcount: *mut u32,
+        _plcids: *mut *mut u32,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 
-    unsafe fn GetErrorString(&self, _code: HRESULT, pstring: *mut PWSTR) -> windows::core::Result<()> {
+    unsafe fn GetErrorString(
+        &self,
+        _code: HRESULT,
+        pstring: *mut PWSTR,
+    ) -> windows::core::Result<()> {
         error_string(param::COMMON_GET_ERROR_STRING, pstring)
     }
 
@@ -460,11 +487,21 @@ impl IOPCServer_Impl for ProbeServer_Impl {
         hr
     }
 
-    unsafe fn GetErrorString(&self, _code: HRESULT, _lcid: u32, pstring: *mut PWSTR) -> windows::core::Result<()> {
+    unsafe fn GetErrorString(
+        &self,
+        _code: HRESULT,
+        _lcid: u32,
+        pstring: *mut PWSTR,
+    ) -> windows::core::Result<()> {
         error_string(param::SERVER_GET_ERROR_STRING, pstring)
     }
 
-    unsafe fn GetGroupByName(&self, _name: PCWSTR, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+    unsafe fn GetGroupByName(
+        &self,
+        _name: PCWSTR,
+        _riid: *const GUID,
+        _unk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 
@@ -491,7 +528,12 @@ impl IOPCServer_Impl for ProbeServer_Impl {
         E_NOTIMPL
     }
 
-    unsafe fn CreateGroupEnumerator(&self, _scope: OPCENUMSCOPE, riid: *const GUID, unk: *mut Option<IUnknown>) -> HRESULT {
+    unsafe fn CreateGroupEnumerator(
+        &self,
+        _scope: OPCENUMSCOPE,
+        riid: *const GUID,
+        unk: *mut Option<IUnknown>,
+    ) -> HRESULT {
         string_enum(param::SERVER_GROUP_NAMES, riid, unk)
     }
 }
@@ -514,10 +556,17 @@ impl IOPCServerList_Impl for ProbeServer_Impl {
         progid: *mut PWSTR,
         user_type: *mut PWSTR,
     ) -> windows::core::Result<()> {
-        class_details(&[(progid, param::LIST_PROGID), (user_type, param::LIST_USER_TYPE)])
+        class_details(&[
+            (progid, param::LIST_PROGID),
+            (user_type, param::LIST_USER_TYPE),
+        ])
     }
 
-    unsafe fn CLSIDFromProgID(&self, _progid: PCWSTR, _clsid: *mut GUID) -> windows::core::Result<()> {
+    unsafe fn CLSIDFromProgID(
+        &self,
+        _progid: PCWSTR,
+        _clsid: *mut GUID,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 }
@@ -548,7 +597,11 @@ impl IOPCServerList2_Impl for ProbeServer_Impl {
         ])
     }
 
-    unsafe fn CLSIDFromProgID(&self, _progid: PCWSTR, _clsid: *mut GUID) -> windows::core::Result<()> {
+    unsafe fn CLSIDFromProgID(
+        &self,
+        _progid: PCWSTR,
+        _clsid: *mut GUID,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 }
@@ -558,7 +611,11 @@ impl IOPCBrowseServerAddressSpace_Impl for ProbeServer_Impl {
         Err(E_NOTIMPL.into())
     }
 
-    unsafe fn ChangeBrowsePosition(&self, _dir: OPCBROWSEDIRECTION, _s: PCWSTR) -> windows::core::Result<()> {
+    unsafe fn ChangeBrowsePosition(
+        &self,
+        _dir: OPCBROWSEDIRECTION,
+        _s: PCWSTR,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 
@@ -570,7 +627,11 @@ impl IOPCBrowseServerAddressSpace_Impl for ProbeServer_Impl {
         _rights: u32,
         out: *mut Option<IEnumString>,
     ) -> HRESULT {
-        string_enum(param::BSAS_ITEM_IDS, &IEnumString::IID, out.cast::<Option<IUnknown>>())
+        string_enum(
+            param::BSAS_ITEM_IDS,
+            &IEnumString::IID,
+            out.cast::<Option<IUnknown>>(),
+        )
     }
 
     unsafe fn GetItemID(&self, _data_id: PCWSTR, item_id: *mut PWSTR) -> windows::core::Result<()> {
@@ -578,7 +639,11 @@ impl IOPCBrowseServerAddressSpace_Impl for ProbeServer_Impl {
     }
 
     unsafe fn BrowseAccessPaths(&self, _item_id: PCWSTR, out: *mut Option<IEnumString>) -> HRESULT {
-        string_enum(param::BSAS_ACCESS_PATHS, &IEnumString::IID, out.cast::<Option<IUnknown>>())
+        string_enum(
+            param::BSAS_ACCESS_PATHS,
+            &IEnumString::IID,
+            out.cast::<Option<IUnknown>>(),
+        )
     }
 }
 
@@ -689,7 +754,12 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
             }
             let mut items = OwnedArray::<OPCITEMPROPERTIES>::zeroed(count as usize)?;
             for (i, slot) in items.as_mut_slice().iter_mut().enumerate() {
-                *slot = properties(param::GET_PROPERTIES_ITEM_ID, param::GET_PROPERTIES_DESCRIPTION, i, &ids)?;
+                *slot = properties(
+                    param::GET_PROPERTIES_ITEM_ID,
+                    param::GET_PROPERTIES_DESCRIPTION,
+                    i,
+                    &ids,
+                )?;
             }
             // SAFETY: checked non-null; every allocation has succeeded.
             unsafe { put(pitem_properties, items.into_raw()) };
@@ -725,9 +795,13 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
                 None
             } else {
                 // SAFETY: a non-null [in, out, string] is a NUL-terminated UTF-16 string.
-                Some(unsafe { incoming.to_string() }.map_err(|_| windows::core::Error::from(OPC_E_INVALIDCONTINUATIONPOINT))?)
+                Some(
+                    unsafe { incoming.to_string() }
+                        .map_err(|_| windows::core::Error::from(OPC_E_INVALIDCONTINUATIONPOINT))?,
+                )
             };
-            let start = page_start(cp.as_deref()).ok_or_else(|| windows::core::Error::from(OPC_E_INVALIDCONTINUATIONPOINT))?;
+            let start = page_start(cp.as_deref())
+                .ok_or_else(|| windows::core::Error::from(OPC_E_INVALIDCONTINUATIONPOINT))?;
             let page = if max_elements == 0 {
                 BROWSE_PAGE
             } else {
@@ -743,7 +817,12 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
                 slot.szName = OwnedWstr::new(&text_at(param::BROWSE_NAME, k))?.into_raw();
                 slot.szItemID = OwnedWstr::new(&text_at(param::BROWSE_ITEM_ID, k))?.into_raw();
                 slot.dwFlagValue = OPC_BROWSE_ISITEM;
-                slot.ItemProperties = properties(param::BROWSE_PROPERTY_ITEM_ID, param::BROWSE_PROPERTY_DESCRIPTION, k, &ids)?;
+                slot.ItemProperties = properties(
+                    param::BROWSE_PROPERTY_ITEM_ID,
+                    param::BROWSE_PROPERTY_DESCRIPTION,
+                    k,
+                    &ids,
+                )?;
             }
             let more = end < BROWSE_ELEMENTS;
             let next = if more {
@@ -755,7 +834,10 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
             // continuation point is freed exactly once and replaced.
             unsafe {
                 mem::free_wstr(incoming);
-                put(pcontinuation_point, next.map_or(PWSTR::null(), OwnedWstr::into_raw));
+                put(
+                    pcontinuation_point,
+                    next.map_or(PWSTR::null(), OwnedWstr::into_raw),
+                );
                 put(pmore, BOOL::from(more));
                 put(pcount, (end - start) as u32);
                 put(pelements, elements.into_raw());
@@ -831,7 +913,12 @@ impl IOPCGroupStateMgt_Impl for ProbeGroup_Impl {
         Err(E_NOTIMPL.into())
     }
 
-    unsafe fn CloneGroup(&self, _name: PCWSTR, _riid: *const GUID, _unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+    unsafe fn CloneGroup(
+        &self,
+        _name: PCWSTR,
+        _riid: *const GUID,
+        _unk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<()> {
         Err(E_NOTIMPL.into())
     }
 }
@@ -868,19 +955,42 @@ impl IOPCItemMgt_Impl for ProbeGroup_Impl {
         E_NOTIMPL
     }
 
-    unsafe fn RemoveItems(&self, _n: u32, _server: *const u32, _errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn RemoveItems(
+        &self,
+        _n: u32,
+        _server: *const u32,
+        _errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         E_NOTIMPL
     }
 
-    unsafe fn SetActiveState(&self, _n: u32, _server: *const u32, _active: BOOL, _errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn SetActiveState(
+        &self,
+        _n: u32,
+        _server: *const u32,
+        _active: BOOL,
+        _errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         E_NOTIMPL
     }
 
-    unsafe fn SetClientHandles(&self, _n: u32, _server: *const u32, _client: *const u32, _errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn SetClientHandles(
+        &self,
+        _n: u32,
+        _server: *const u32,
+        _client: *const u32,
+        _errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         E_NOTIMPL
     }
 
-    unsafe fn SetDatatypes(&self, _n: u32, _server: *const u32, _types: *const VARTYPE, _errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn SetDatatypes(
+        &self,
+        _n: u32,
+        _server: *const u32,
+        _types: *const VARTYPE,
+        _errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         E_NOTIMPL
     }
 
@@ -920,7 +1030,12 @@ fn item_attributes(slot: &mut OPCITEMATTRIBUTES, k: usize) -> windows::core::Res
 }
 
 impl IEnumOPCItemAttributes_Impl for ItemEnum_Impl {
-    unsafe fn Next(&self, celt: u32, pitems: *mut *mut OPCITEMATTRIBUTES, pfetched: *mut u32) -> HRESULT {
+    unsafe fn Next(
+        &self,
+        celt: u32,
+        pitems: *mut *mut OPCITEMATTRIBUTES,
+        pfetched: *mut u32,
+    ) -> HRESULT {
         hresult((|| {
             nonnull(pitems)?;
             nonnull(pfetched)?;
@@ -932,7 +1047,11 @@ impl IEnumOPCItemAttributes_Impl for ItemEnum_Impl {
             for (k, slot) in (start..end).zip(items.as_mut_slice()) {
                 item_attributes(slot, k)?;
             }
-            let array = if n == 0 { std::ptr::null_mut() } else { items.into_raw() };
+            let array = if n == 0 {
+                std::ptr::null_mut()
+            } else {
+                items.into_raw()
+            };
             // SAFETY: both checked non-null; every allocation has succeeded.
             unsafe {
                 put(pitems, array);
@@ -1062,8 +1181,8 @@ impl Drop for ComInit {
 }
 
 fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
-    let exe =
-        std::env::current_exe().map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
+    let exe = std::env::current_exe()
+        .map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     let exe = exe.to_string_lossy();
     let reg = ServerRegistration {
         clsid: CLSID_MARSHAL_PROBE,
@@ -1118,7 +1237,14 @@ pub fn serve() -> windows::core::Result<()> {
     };
     let factory = ClassFactory::new(create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
-    let cookie = unsafe { CoRegisterClassObject(&CLSID_MARSHAL_PROBE, &factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE)? };
+    let cookie = unsafe {
+        CoRegisterClassObject(
+            &CLSID_MARSHAL_PROBE,
+            &factory,
+            CLSCTX_LOCAL_SERVER,
+            REGCLS_MULTIPLEUSE,
+        )?
+    };
     let reason = lifetime::wait_until_unused(STARTUP_GRACE, LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
@@ -1165,7 +1291,10 @@ pub mod client {
     }
 
     /// `IOPCServerList::GetClassDetails`: (ppszProgID, ppszUserType).
-    pub fn class_details(list: &IOPCServerList, clsid: &GUID) -> windows::core::Result<(Option<String>, Option<String>)> {
+    pub fn class_details(
+        list: &IOPCServerList,
+        clsid: &GUID,
+    ) -> windows::core::Result<(Option<String>, Option<String>)> {
         let (mut a, mut b) = (PWSTR::null(), PWSTR::null());
         // SAFETY: valid pointers for the call; the strings are ours afterwards.
         unsafe { list.GetClassDetails(clsid, &mut a, &mut b)? };
@@ -1184,7 +1313,10 @@ pub mod client {
     }
 
     /// `IOPCBrowseServerAddressSpace::GetItemID`.
-    pub fn item_id(bsas: &IOPCBrowseServerAddressSpace, item_data_id: &str) -> windows::core::Result<Option<String>> {
+    pub fn item_id(
+        bsas: &IOPCBrowseServerAddressSpace,
+        item_data_id: &str,
+    ) -> windows::core::Result<Option<String>> {
         let name = wide(item_data_id);
         let mut out = PWSTR::null();
         // SAFETY: NUL-terminated input alive for the call; valid out-pointer.
@@ -1213,7 +1345,11 @@ pub mod client {
     pub fn group_names(server: &IOPCServer) -> windows::core::Result<Vec<Option<String>>> {
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid IID and out-pointer.
-        unsafe { server.CreateGroupEnumerator(OPC_ENUM_ALL, &IEnumString::IID, &mut unk).ok()? };
+        unsafe {
+            server
+                .CreateGroupEnumerator(OPC_ENUM_ALL, &IEnumString::IID, &mut unk)
+                .ok()?
+        };
         drain(
             &unk.ok_or_else(|| windows::core::Error::from(E_POINTER))?
                 .cast::<IEnumString>()?,
@@ -1222,19 +1358,30 @@ pub mod client {
     }
 
     /// `IOPCBrowseServerAddressSpace::BrowseOPCItemIDs(OPC_FLAT, "")`: the item IDs.
-    pub fn browse_item_ids(bsas: &IOPCBrowseServerAddressSpace) -> windows::core::Result<Vec<Option<String>>> {
+    pub fn browse_item_ids(
+        bsas: &IOPCBrowseServerAddressSpace,
+    ) -> windows::core::Result<Vec<Option<String>>> {
         let filter = wide("");
         let mut e: Option<IEnumString> = None;
         // SAFETY: NUL-terminated input alive for the call; valid out-pointer.
         unsafe {
-            bsas.BrowseOPCItemIDs(OPC_FLAT, PCWSTR(filter.as_ptr()), Default::default(), 0, &mut e)
-                .ok()?
+            bsas.BrowseOPCItemIDs(
+                OPC_FLAT,
+                PCWSTR(filter.as_ptr()),
+                Default::default(),
+                0,
+                &mut e,
+            )
+            .ok()?
         };
         drain(&e.ok_or_else(|| windows::core::Error::from(E_POINTER))?, 2)
     }
 
     /// `IOPCBrowseServerAddressSpace::BrowseAccessPaths`: the access paths.
-    pub fn browse_access_paths(bsas: &IOPCBrowseServerAddressSpace, item_id: &str) -> windows::core::Result<Vec<Option<String>>> {
+    pub fn browse_access_paths(
+        bsas: &IOPCBrowseServerAddressSpace,
+        item_id: &str,
+    ) -> windows::core::Result<Vec<Option<String>>> {
         let item = wide(item_id);
         let mut e: Option<IEnumString> = None;
         // SAFETY: NUL-terminated input alive for the call; valid out-pointer.
@@ -1253,7 +1400,15 @@ pub mod client {
         let mut descriptions: *mut PWSTR = std::ptr::null_mut();
         let mut types: *mut VARTYPE = std::ptr::null_mut();
         // SAFETY: NUL-terminated input alive for the call; valid out-pointers.
-        unsafe { props.QueryAvailableProperties(PCWSTR(item.as_ptr()), &mut n, &mut ids, &mut descriptions, &mut types)? };
+        unsafe {
+            props.QueryAvailableProperties(
+                PCWSTR(item.as_ptr()),
+                &mut n,
+                &mut ids,
+                &mut descriptions,
+                &mut types,
+            )?
+        };
         let n = n as usize;
         let texts: Vec<Option<String>> = (0..n)
             .map(|i| {
@@ -1356,7 +1511,11 @@ pub mod client {
     }
 
     /// `IOPCBrowse::GetProperties` of `items` (`ids` empty: all properties).
-    pub fn get_properties(browse: &IOPCBrowse, items: &[&str], ids: &[u32]) -> windows::core::Result<(HRESULT, Vec<Properties>)> {
+    pub fn get_properties(
+        browse: &IOPCBrowse,
+        items: &[&str],
+        ids: &[u32],
+    ) -> windows::core::Result<(HRESULT, Vec<Properties>)> {
         let wides: Vec<Vec<u16>> = items.iter().map(|s| wide(s)).collect();
         let ptrs: Vec<PCWSTR> = wides.iter().map(|w| PCWSTR(w.as_ptr())).collect();
         let mut out: *mut OPCITEMPROPERTIES = std::ptr::null_mut();
@@ -1481,7 +1640,11 @@ pub mod client {
     }
 
     /// `IOPCServer::AddGroup` asking for `riid`; returns the group.
-    pub fn add_group(server: &IOPCServer, name: &str, riid: &GUID) -> windows::core::Result<IUnknown> {
+    pub fn add_group(
+        server: &IOPCServer,
+        name: &str,
+        riid: &GUID,
+    ) -> windows::core::Result<IUnknown> {
         let name = wide(name);
         let (mut h, mut rate) = (0u32, 0u32);
         let mut unk: Option<IUnknown> = None;
@@ -1508,7 +1671,9 @@ pub mod client {
 
     /// `IOPCGroupStateMgt::GetState`: the group's name (`ppName`), with the other outputs
     /// (update rate, client handle, server handle) to check they were not disturbed.
-    pub fn group_state_name(group: &IOPCGroupStateMgt) -> windows::core::Result<(Option<String>, u32, u32, u32)> {
+    pub fn group_state_name(
+        group: &IOPCGroupStateMgt,
+    ) -> windows::core::Result<(Option<String>, u32, u32, u32)> {
         let (mut rate, mut bias, mut lcid, mut client, mut server) = (0u32, 0i32, 0u32, 0u32, 0u32);
         let mut active = BOOL::default();
         let mut deadband = 0f32;
@@ -1540,10 +1705,17 @@ pub mod client {
 
     /// `IOPCItemMgt::CreateEnumerator(IEnumOPCItemAttributes)`, then `Next(celt)` until the
     /// enumerator is exhausted.
-    pub fn item_attributes(items: &IOPCItemMgt, celt: u32) -> windows::core::Result<Vec<ItemAttributes>> {
+    pub fn item_attributes(
+        items: &IOPCItemMgt,
+        celt: u32,
+    ) -> windows::core::Result<Vec<ItemAttributes>> {
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid IID and out-pointer.
-        unsafe { items.CreateEnumerator(&IEnumOPCItemAttributes::IID, &mut unk).ok()? };
+        unsafe {
+            items
+                .CreateEnumerator(&IEnumOPCItemAttributes::IID, &mut unk)
+                .ok()?
+        };
         let e = unk
             .ok_or_else(|| windows::core::Error::from(E_POINTER))?
             .cast::<IEnumOPCItemAttributes>()?;
@@ -1556,11 +1728,13 @@ pub mod client {
             let n = fetched as usize;
             if !p.is_null() {
                 // SAFETY: `n` elements were returned.
-                all.extend(unsafe { std::slice::from_raw_parts(p, n) }.iter().map(|a| ItemAttributes {
-                    access_path: copy_wstr(a.szAccessPath),
-                    item_id: copy_wstr(a.szItemID),
-                    client: a.hClient,
-                    server: a.hServer,
+                all.extend(unsafe { std::slice::from_raw_parts(p, n) }.iter().map(|a| {
+                    ItemAttributes {
+                        access_path: copy_wstr(a.szAccessPath),
+                        item_id: copy_wstr(a.szItemID),
+                        client: a.hClient,
+                        server: a.hServer,
+                    }
                 }));
             }
             // SAFETY: the CoTaskMem array and everything in it is ours.

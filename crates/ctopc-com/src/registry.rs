@@ -14,7 +14,8 @@ use windows::Win32::System::Registry::{
 };
 
 /// `CLSID_StdComponentCategoriesMgr`.
-const CLSID_STD_COMPONENT_CATEGORIES_MGR: GUID = GUID::from_u128(0x0002e005_0000_0000_c000_000000000046);
+const CLSID_STD_COMPONENT_CATEGORIES_MGR: GUID =
+    GUID::from_u128(0x0002e005_0000_0000_c000_000000000046);
 
 /// A component category to implement, with the description it is registered under.
 pub struct Category {
@@ -50,31 +51,59 @@ fn check(err: WIN32_ERROR, what: &str) -> windows::core::Result<()> {
     if err == ERROR_SUCCESS {
         Ok(())
     } else {
-        Err(crate::mem::error(err.to_hresult(), &format!("registry: {what}: error {}", err.0)))
+        Err(crate::mem::error(
+            err.to_hresult(),
+            &format!("registry: {what}: error {}", err.0),
+        ))
     }
 }
 
 /// Creates (or opens) `HKCR\<path>` and sets its default value (when given) and named values.
-fn set_key(path: &str, default: Option<&str>, values: &[(&str, &str)]) -> windows::core::Result<()> {
+fn set_key(
+    path: &str,
+    default: Option<&str>,
+    values: &[(&str, &str)],
+) -> windows::core::Result<()> {
     let mut key = HKEY::default();
     let wpath = HSTRING::from(path);
     // SAFETY: all pointers are valid for the call; `key` receives an open handle on success.
     check(
         unsafe {
-            RegCreateKeyExW(HKEY_CLASSES_ROOT, &wpath, None, PCWSTR::null(), REG_OPTION_NON_VOLATILE, KEY_WRITE, None, &mut key, None)
+            RegCreateKeyExW(
+                HKEY_CLASSES_ROOT,
+                &wpath,
+                None,
+                PCWSTR::null(),
+                REG_OPTION_NON_VOLATILE,
+                KEY_WRITE,
+                None,
+                &mut key,
+                None,
+            )
         },
         path,
     )?;
     let mut result = Ok(());
-    let all = default.map(|d| ("", d)).into_iter().chain(values.iter().copied());
+    let all = default
+        .map(|d| ("", d))
+        .into_iter()
+        .chain(values.iter().copied());
     for (name, value) in all {
         let wide: Vec<u16> = value.encode_utf16().chain(std::iter::once(0)).collect();
         // SAFETY: REG_SZ data is the UTF-16 string with its terminator, viewed as bytes.
-        let bytes = unsafe { std::slice::from_raw_parts(wide.as_ptr().cast::<u8>(), wide.len() * 2) };
+        let bytes =
+            unsafe { std::slice::from_raw_parts(wide.as_ptr().cast::<u8>(), wide.len() * 2) };
         let wname = HSTRING::from(name);
-        let name_ptr = if name.is_empty() { PCWSTR::null() } else { PCWSTR(wname.as_ptr()) };
+        let name_ptr = if name.is_empty() {
+            PCWSTR::null()
+        } else {
+            PCWSTR(wname.as_ptr())
+        };
         // SAFETY: `key` is open; `bytes` outlives the call.
-        let r = check(unsafe { RegSetValueExW(key, name_ptr, None, REG_SZ, Some(bytes)) }, path);
+        let r = check(
+            unsafe { RegSetValueExW(key, name_ptr, None, REG_SZ, Some(bytes)) },
+            path,
+        );
         if r.is_err() {
             result = r;
             break;
@@ -100,7 +129,13 @@ fn delete_tree(path: &str) -> windows::core::Result<()> {
 
 fn category_manager() -> windows::core::Result<ICatRegister> {
     // SAFETY: COM is initialised by the caller; standard in-proc class.
-    unsafe { CoCreateInstance(&CLSID_STD_COMPONENT_CATEGORIES_MGR, None, CLSCTX_INPROC_SERVER) }
+    unsafe {
+        CoCreateInstance(
+            &CLSID_STD_COMPONENT_CATEGORIES_MGR,
+            None,
+            CLSCTX_INPROC_SERVER,
+        )
+    }
 }
 
 /// Writes every key of `r`. COM must be initialised on this thread.
@@ -109,12 +144,28 @@ pub fn register(r: &ServerRegistration) -> windows::core::Result<()> {
     let appid = guid_string(&r.appid);
     let clsid_key = format!("CLSID\\{clsid}");
     set_key(&clsid_key, Some(r.description), &[("AppID", &appid)])?;
-    set_key(&format!("{clsid_key}\\LocalServer32"), Some(&format!("\"{}\"", r.exe_path)), &[])?;
-    set_key(&format!("{clsid_key}\\ProgID"), Some(r.progid_versioned), &[])?;
-    set_key(&format!("{clsid_key}\\VersionIndependentProgID"), Some(r.progid), &[])?;
+    set_key(
+        &format!("{clsid_key}\\LocalServer32"),
+        Some(&format!("\"{}\"", r.exe_path)),
+        &[],
+    )?;
+    set_key(
+        &format!("{clsid_key}\\ProgID"),
+        Some(r.progid_versioned),
+        &[],
+    )?;
+    set_key(
+        &format!("{clsid_key}\\VersionIndependentProgID"),
+        Some(r.progid),
+        &[],
+    )?;
     set_key(r.progid, Some(r.description), &[])?;
     set_key(&format!("{}\\CLSID", r.progid), Some(&clsid), &[])?;
-    set_key(&format!("{}\\CurVer", r.progid), Some(r.progid_versioned), &[])?;
+    set_key(
+        &format!("{}\\CurVer", r.progid),
+        Some(r.progid_versioned),
+        &[],
+    )?;
     set_key(r.progid_versioned, Some(r.description), &[])?;
     set_key(&format!("{}\\CLSID", r.progid_versioned), Some(&clsid), &[])?;
     if let Some(vendor) = r.opc_key_vendor {
@@ -127,8 +178,16 @@ pub fn register(r: &ServerRegistration) -> windows::core::Result<()> {
     if let Some(svc) = r.service_name {
         appid_values.push(("LocalService", svc));
     }
-    set_key(&format!("AppID\\{appid}"), Some(r.description), &appid_values)?;
-    set_key(&format!("AppID\\{}", r.exe_name), None, &[("AppID", &appid)])?;
+    set_key(
+        &format!("AppID\\{appid}"),
+        Some(r.description),
+        &appid_values,
+    )?;
+    set_key(
+        &format!("AppID\\{}", r.exe_name),
+        None,
+        &[("AppID", &appid)],
+    )?;
 
     if !r.categories.is_empty() {
         let mgr = category_manager()?;
@@ -136,8 +195,16 @@ pub fn register(r: &ServerRegistration) -> windows::core::Result<()> {
             .categories
             .iter()
             .map(|c| {
-                let mut info = CATEGORYINFO { catid: c.catid, lcid: 0x0409, szDescription: [0; 128] };
-                for (dst, src) in info.szDescription.iter_mut().zip(c.description.encode_utf16().take(127)) {
+                let mut info = CATEGORYINFO {
+                    catid: c.catid,
+                    lcid: 0x0409,
+                    szDescription: [0; 128],
+                };
+                for (dst, src) in info
+                    .szDescription
+                    .iter_mut()
+                    .zip(c.description.encode_utf16().take(127))
+                {
                     *dst = src;
                 }
                 info

@@ -95,7 +95,11 @@ impl Signal {
     fn wait(&self, limit: Duration) {
         let mut w = self.woken.lock().unwrap_or_else(|p| p.into_inner());
         if !*w {
-            w = self.cv.wait_timeout(w, limit).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+            w = self
+                .cv
+                .wait_timeout(w, limit)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
         }
         *w = false;
     }
@@ -165,7 +169,11 @@ impl Runtime {
         let waker: Arc<dyn Wake> = Arc::new(SourceWaker(Arc::downgrade(&signal)));
         let source = make_source(waker)?;
         let rt = Arc::new(Runtime {
-            state: Mutex::new(State { engine, source, stop: false }),
+            state: Mutex::new(State {
+                engine,
+                source,
+                stop: false,
+            }),
             stepped: Condvar::new(),
             signal,
             sinks: Mutex::new(HashMap::new()),
@@ -175,7 +183,9 @@ impl Runtime {
             start_time: mem::now(),
         });
         let weak = Arc::downgrade(&rt);
-        let spawned = std::thread::Builder::new().name("driver".into()).spawn(move || driver(weak));
+        let spawned = std::thread::Builder::new()
+            .name("driver".into())
+            .spawn(move || driver(weak));
         spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
         Ok(rt)
     }
@@ -197,7 +207,11 @@ impl Runtime {
     }
 
     /// Waits until `poll` returns Some (checked after every driver step), at most `limit`.
-    pub fn wait_for<R>(&self, limit: Duration, mut poll: impl FnMut(&mut Engine) -> Option<R>) -> Option<R> {
+    pub fn wait_for<R>(
+        &self,
+        limit: Duration,
+        mut poll: impl FnMut(&mut Engine) -> Option<R>,
+    ) -> Option<R> {
         let deadline = std::time::Instant::now() + limit;
         let mut g = self.lock();
         loop {
@@ -208,7 +222,11 @@ impl Runtime {
             if left.is_zero() {
                 return None;
             }
-            g = self.stepped.wait_timeout(g, left).map(|(g, _)| g).unwrap_or_else(|p| p.into_inner().0);
+            g = self
+                .stepped
+                .wait_timeout(g, left)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
         }
     }
 
@@ -220,7 +238,10 @@ impl Runtime {
     pub fn open_session(&self) -> SessionHandle {
         let s = self.with_engine(|e, _| e.open_session());
         if let Some(w) = Worker::spawn(s) {
-            self.workers.lock().unwrap_or_else(|p| p.into_inner()).insert(s, w);
+            self.workers
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .insert(s, w);
         }
         s
     }
@@ -228,43 +249,65 @@ impl Runtime {
     /// Ends a session: its groups go, its worker finishes what is queued and exits.
     pub fn close_session(&self, s: SessionHandle) {
         let _ = self.with_engine(|e, now| e.close_session(now, s));
-        self.workers.lock().unwrap_or_else(|p| p.into_inner()).remove(&s);
-        self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).remove(&s);
+        self.workers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&s);
+        self.shutdown_sinks
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&s);
     }
 
     pub fn set_group_sink(&self, group: GroupHandle, slot: Arc<SinkSlot<IOPCDataCallback>>) {
-        self.sinks.lock().unwrap_or_else(|p| p.into_inner()).insert(group, slot);
+        self.sinks
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(group, slot);
     }
 
     pub fn remove_group_sink(&self, group: GroupHandle) {
-        self.sinks.lock().unwrap_or_else(|p| p.into_inner()).remove(&group);
+        self.sinks
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&group);
     }
 
     pub fn set_shutdown_sink(&self, session: SessionHandle, slot: Arc<SinkSlot<IOPCShutdown>>) {
-        self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).insert(session, slot);
+        self.shutdown_sinks
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(session, slot);
     }
 
     /// Sends IOPCShutdown::ShutdownRequest(reason) to every connected client and waits
     /// (bounded) for the calls to return. Then stops the driver.
     pub fn shutdown(&self, reason: &str) {
-        let slots: Vec<Arc<SinkSlot<IOPCShutdown>>> =
-            self.shutdown_sinks.lock().unwrap_or_else(|p| p.into_inner()).values().cloned().collect();
+        let slots: Vec<Arc<SinkSlot<IOPCShutdown>>> = self
+            .shutdown_sinks
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .values()
+            .cloned()
+            .collect();
         let mut done = Vec::new();
         for slot in slots {
             let Some(sink) = slot.get() else { continue };
             let sink = Mta(sink);
             let reason: Vec<u16> = reason.encode_utf16().chain(std::iter::once(0)).collect();
             let (tx, rx) = mpsc::channel::<()>();
-            let spawned = std::thread::Builder::new().name("shutdown-request".into()).spawn(move || {
-                let _com = crate::client::ComThread::mta();
-                let sink = sink;
-                // SAFETY: `reason` is a NUL-terminated UTF-16 string alive for the call.
-                let r = unsafe { sink.0.ShutdownRequest(PCWSTR(reason.as_ptr())) };
-                if let Err(e) = r {
-                    tracing::warn!("ShutdownRequest failed: {e}");
-                }
-                let _ = tx.send(());
-            });
+            let spawned = std::thread::Builder::new()
+                .name("shutdown-request".into())
+                .spawn(move || {
+                    let _com = crate::client::ComThread::mta();
+                    let sink = sink;
+                    // SAFETY: `reason` is a NUL-terminated UTF-16 string alive for the call.
+                    let r = unsafe { sink.0.ShutdownRequest(PCWSTR(reason.as_ptr())) };
+                    if let Err(e) = r {
+                        tracing::warn!("ShutdownRequest failed: {e}");
+                    }
+                    let _ = tx.send(());
+                });
             if spawned.is_ok() {
                 done.push(rx);
             }
@@ -288,7 +331,9 @@ impl Runtime {
             for event in events {
                 let group = event.group();
                 let paced = matches!(&event, Event::DataChange(d) if d.kind.is_scheduled());
-                let (Some(slot), Some(worker)) = (sinks.get(&group).cloned(), workers.get(&event.session())) else {
+                let (Some(slot), Some(worker)) =
+                    (sinks.get(&group).cloned(), workers.get(&event.session()))
+                else {
                     if paced {
                         not_queued.push(group);
                     }
@@ -316,7 +361,10 @@ impl Runtime {
     /// Hands the groups whose scheduled OnDataChange is done with (delivered, failed or
     /// never queued) to the driver, which tells the engine at its next step.
     fn deliveries_ended(&self, groups: impl IntoIterator<Item = GroupHandle>) {
-        self.delivered.lock().unwrap_or_else(|p| p.into_inner()).extend(groups);
+        self.delivered
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .extend(groups);
         self.signal.wake();
     }
 
@@ -342,7 +390,8 @@ fn driver(rt: Weak<Runtime>) {
     let _com = crate::client::ComThread::mta();
     loop {
         let Some(rt) = rt.upgrade() else { return };
-        let delivered = std::mem::take(&mut *rt.delivered.lock().unwrap_or_else(|p| p.into_inner()));
+        let delivered =
+            std::mem::take(&mut *rt.delivered.lock().unwrap_or_else(|p| p.into_inner()));
         let (events, next) = {
             let mut g = rt.lock();
             if g.stop {
@@ -386,28 +435,64 @@ fn hr_of(e: Option<OpcError>) -> HRESULT {
 }
 
 /// Delivers one event to a group's sink on the client's worker thread.
-fn deliver_one(rt: Weak<Runtime>, group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) {
-    let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else { return };
+fn deliver_one(
+    rt: Weak<Runtime>,
+    group: GroupHandle,
+    slot: &SinkSlot<IOPCDataCallback>,
+    event: Event,
+) {
+    let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else {
+        return;
+    };
     let result = match &event {
-        Event::DataChange(d) => call_values(&sink, true, d.transaction_id, d.client_group, d.master_quality, d.master_error, &d.items),
-        Event::ReadComplete(d) => call_values(&sink, false, d.transaction_id, d.client_group, d.master_quality, d.master_error, &d.items),
+        Event::DataChange(d) => call_values(
+            &sink,
+            true,
+            d.transaction_id,
+            d.client_group,
+            d.master_quality,
+            d.master_error,
+            &d.items,
+        ),
+        Event::ReadComplete(d) => call_values(
+            &sink,
+            false,
+            d.transaction_id,
+            d.client_group,
+            d.master_quality,
+            d.master_error,
+            &d.items,
+        ),
         Event::WriteComplete(d) => {
             let handles: Vec<u32> = d.items.iter().map(|i| i.client_handle).collect();
             let errors: Vec<HRESULT> = d.items.iter().map(|i| hr_of(i.error)).collect();
             // SAFETY: the arrays hold `handles.len()` elements and live for the call.
             unsafe {
-                sink.OnWriteComplete(d.transaction_id, d.client_group, hr_of(d.master_error), handles.len() as u32, handles.as_ptr(), errors.as_ptr())
+                sink.OnWriteComplete(
+                    d.transaction_id,
+                    d.client_group,
+                    hr_of(d.master_error),
+                    handles.len() as u32,
+                    handles.as_ptr(),
+                    errors.as_ptr(),
+                )
             }
         }
         // SAFETY: plain values.
-        Event::CancelComplete(d) => unsafe { sink.OnCancelComplete(d.transaction_id, d.client_group) },
+        Event::CancelComplete(d) => unsafe {
+            sink.OnCancelComplete(d.transaction_id, d.client_group)
+        },
     };
     if let Err(e) = result {
         if is_disconnected(e.code()) {
-            tracing::warn!("group {}: the client's IOPCDataCallback is gone ({e}); dropping it", group.0);
+            tracing::warn!(
+                "group {}: the client's IOPCDataCallback is gone ({e}); dropping it",
+                group.0
+            );
             if slot.drop_if(cookie) {
                 if let Some(rt) = rt.upgrade() {
-                    let _ = rt.with_engine(|eng, now| eng.set_callback_connected(now, group, false));
+                    let _ =
+                        rt.with_engine(|eng, now| eng.set_callback_connected(now, group, false));
                 }
             }
         } else {
@@ -438,9 +523,31 @@ fn call_values(
     // cleared below.
     let r = unsafe {
         if data_change {
-            sink.OnDataChange(transaction, client_group, hr_of(master_quality), hr_of(master_error), n, handles.as_ptr(), values.as_ptr(), qualities.as_ptr(), times.as_ptr(), errors.as_ptr())
+            sink.OnDataChange(
+                transaction,
+                client_group,
+                hr_of(master_quality),
+                hr_of(master_error),
+                n,
+                handles.as_ptr(),
+                values.as_ptr(),
+                qualities.as_ptr(),
+                times.as_ptr(),
+                errors.as_ptr(),
+            )
         } else {
-            sink.OnReadComplete(transaction, client_group, hr_of(master_quality), hr_of(master_error), n, handles.as_ptr(), values.as_ptr(), qualities.as_ptr(), times.as_ptr(), errors.as_ptr())
+            sink.OnReadComplete(
+                transaction,
+                client_group,
+                hr_of(master_quality),
+                hr_of(master_error),
+                n,
+                handles.as_ptr(),
+                values.as_ptr(),
+                qualities.as_ptr(),
+                times.as_ptr(),
+                errors.as_ptr(),
+            )
         }
     };
     for v in values.iter_mut() {

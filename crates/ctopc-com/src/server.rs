@@ -47,7 +47,8 @@ use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG};
 use windows::Win32::System::Com::IConnectionPointContainer;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
-pub const VENDOR_INFO: &str = "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
+pub const VENDOR_INFO: &str =
+    "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
 
 struct Session {
     lcid: u32,
@@ -88,7 +89,10 @@ pub fn create_instance() -> windows::core::Result<IUnknown> {
     let server = OpcServer {
         ctx,
         handle,
-        session: Mutex::new(Session { lcid: ctx.default_lang.lcid(), client_name: None }),
+        session: Mutex::new(Session {
+            lcid: ctx.default_lang.lcid(),
+            client_name: None,
+        }),
         browse: Mutex::new(BrowseCursor::new(Arc::clone(&ctx.address_space))),
         shutdown,
         _guard: ObjectGuard::new(),
@@ -115,7 +119,10 @@ impl OpcServer {
 /// The language for an LCID a client passes: Polish, any English, or the system/user
 /// default and neutral locales (the server's default language). Others are not available.
 fn lang_for(lcid: u32) -> Option<Lang> {
-    Lang::from_lcid(lcid, context::get().map_or(Lang::English, |c| c.default_lang))
+    Lang::from_lcid(
+        lcid,
+        context::get().map_or(Lang::English, |c| c.default_lang),
+    )
 }
 
 /// The text of `code` in `lang`: our own codes from the core table, else the system's.
@@ -152,7 +159,11 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         write_out(plcid, lcid)
     }
 
-    unsafe fn QueryAvailableLocaleIDs(&self, pcount: *mut u32, plcids: *mut *mut u32) -> windows::core::Result<()> {
+    unsafe fn QueryAvailableLocaleIDs(
+        &self,
+        pcount: *mut u32,
+        plcids: *mut *mut u32,
+    ) -> windows::core::Result<()> {
         if pcount.is_null() || plcids.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -167,7 +178,11 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         Ok(())
     }
 
-    unsafe fn GetErrorString(&self, code: HRESULT, pstring: *mut PWSTR) -> windows::core::Result<()> {
+    unsafe fn GetErrorString(
+        &self,
+        code: HRESULT,
+        pstring: *mut PWSTR,
+    ) -> windows::core::Result<()> {
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -181,7 +196,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
             return Err(E_INVALIDARG.into());
         }
         // SAFETY: a non-null [in, string] parameter is a NUL-terminated UTF-16 string.
-        let name = unsafe { name.to_string() }.map_err(|_| windows::core::Error::from(E_INVALIDARG))?;
+        let name =
+            unsafe { name.to_string() }.map_err(|_| windows::core::Error::from(E_INVALIDARG))?;
         self.session().client_name = Some(name);
         Ok(())
     }
@@ -202,11 +218,24 @@ impl IOPCServer_Impl for OpcServer_Impl {
         riid: *const GUID,
         unk: *mut Option<IUnknown>,
     ) -> HRESULT {
-        let args = groups::AddGroupArgs { name, active, rate, client, bias, deadband, lcid };
+        let args = groups::AddGroupArgs {
+            name,
+            active,
+            rate,
+            client,
+            bias,
+            deadband,
+            lcid,
+        };
         out::hresult(self.add_group(&args, server, revised, riid, unk))
     }
 
-    unsafe fn GetErrorString(&self, code: HRESULT, lcid: u32, pstring: *mut PWSTR) -> windows::core::Result<()> {
+    unsafe fn GetErrorString(
+        &self,
+        code: HRESULT,
+        lcid: u32,
+        pstring: *mut PWSTR,
+    ) -> windows::core::Result<()> {
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -215,7 +244,12 @@ impl IOPCServer_Impl for OpcServer_Impl {
         write_out(pstring, text)
     }
 
-    unsafe fn GetGroupByName(&self, name: PCWSTR, riid: *const GUID, unk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+    unsafe fn GetGroupByName(
+        &self,
+        name: PCWSTR,
+        riid: *const GUID,
+        unk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<()> {
         self.group_by_name(name, riid, unk)
     }
 
@@ -225,9 +259,18 @@ impl IOPCServer_Impl for OpcServer_Impl {
         }
         let ctx = self.ctx;
         let (groups, last_update) = ctx.runtime.with_engine(|e, _| {
-            (e.groups(self.handle).map(|g| g.len()).unwrap_or(0), e.last_update_time(self.handle).ok())
+            (
+                e.groups(self.handle).map(|g| g.len()).unwrap_or(0),
+                e.last_update_time(self.handle).ok(),
+            )
         });
-        let version = |i: usize| env!("CARGO_PKG_VERSION").split('.').nth(i).and_then(|s| s.parse::<u16>().ok()).unwrap_or(0);
+        let version = |i: usize| {
+            env!("CARGO_PKG_VERSION")
+                .split('.')
+                .nth(i)
+                .and_then(|s| s.parse::<u16>().ok())
+                .unwrap_or(0)
+        };
         let now = mem::now();
         let mut block = TaskMem::<OPCSERVERSTATUS>::zeroed(1)?;
         let vendor = mem::alloc_wstr(VENDOR_INFO)?;
@@ -235,7 +278,11 @@ impl IOPCServer_Impl for OpcServer_Impl {
             ftStartTime: mem::filetime(ctx.runtime.start_time),
             ftCurrentTime: mem::filetime(now),
             // The last data callback sent to this client (the start time before the first).
-            ftLastUpdateTime: mem::filetime(last_update.filter(|t| t.0 > 0).unwrap_or(ctx.runtime.start_time)),
+            ftLastUpdateTime: mem::filetime(
+                last_update
+                    .filter(|t| t.0 > 0)
+                    .unwrap_or(ctx.runtime.start_time),
+            ),
             dwServerState: ctx.state,
             dwGroupCount: groups as u32,
             dwBandWidth: u32::MAX,
@@ -254,7 +301,12 @@ impl IOPCServer_Impl for OpcServer_Impl {
         out::hresult(self.remove_group(server_group, force))
     }
 
-    unsafe fn CreateGroupEnumerator(&self, scope: OPCENUMSCOPE, riid: *const GUID, unk: *mut Option<IUnknown>) -> HRESULT {
+    unsafe fn CreateGroupEnumerator(
+        &self,
+        scope: OPCENUMSCOPE,
+        riid: *const GUID,
+        unk: *mut Option<IUnknown>,
+    ) -> HRESULT {
         out::hresult(self.group_enumerator(scope, riid, unk))
     }
 }

@@ -8,15 +8,16 @@ use std::ffi::OsString;
 use std::path::Path;
 use std::time::Duration;
 use windows_service::service::{
-    ServiceAccess, ServiceControl, ServiceControlAccept, ServiceErrorControl, ServiceExitCode, ServiceInfo, ServiceStartType,
-    ServiceState, ServiceStatus, ServiceType,
+    ServiceAccess, ServiceControl, ServiceControlAccept, ServiceErrorControl, ServiceExitCode,
+    ServiceInfo, ServiceStartType, ServiceState, ServiceStatus, ServiceType,
 };
 use windows_service::service_control_handler::{self, ServiceControlHandlerResult};
 use windows_service::service_manager::{ServiceManager, ServiceManagerAccess};
 
 pub const SERVICE_NAME: &str = "ServerCTOPC";
 pub const DISPLAY_NAME: &str = "ServerCTOPC OPC DA Server (asix)";
-pub const DESCRIPTION: &str = "OPC DA 2.05a/3.0 server for asix process data (ProgID ServerCTOPC.App).";
+pub const DESCRIPTION: &str =
+    "OPC DA 2.05a/3.0 server for asix process data (ProgID ServerCTOPC.App).";
 /// The account the service runs as by default.
 pub const ACCOUNT: &str = "NT AUTHORITY\\LocalService";
 /// The switch the service control manager starts the executable with.
@@ -39,11 +40,16 @@ fn service_info(exe: &Path) -> ServiceInfo {
 
 /// Creates the service, or updates its configuration when it exists (idempotent).
 pub fn install(exe: &Path) -> Result<(), String> {
-    let manager = ServiceManager::local_computer(None::<&str>, ServiceManagerAccess::CONNECT | ServiceManagerAccess::CREATE_SERVICE)
-        .map_err(|e| format!("cannot open the service control manager (run as administrator): {e}"))?;
+    let manager = ServiceManager::local_computer(
+        None::<&str>,
+        ServiceManagerAccess::CONNECT | ServiceManagerAccess::CREATE_SERVICE,
+    )
+    .map_err(|e| format!("cannot open the service control manager (run as administrator): {e}"))?;
     let info = service_info(exe);
     match manager.open_service(SERVICE_NAME, ServiceAccess::CHANGE_CONFIG) {
-        Ok(existing) => existing.change_config(&info).map_err(|e| format!("cannot update the service {SERVICE_NAME}: {e}"))?,
+        Ok(existing) => existing
+            .change_config(&info)
+            .map_err(|e| format!("cannot update the service {SERVICE_NAME}: {e}"))?,
         Err(_) => {
             let created = manager
                 .create_service(&info, ServiceAccess::CHANGE_CONFIG)
@@ -57,22 +63,36 @@ pub fn install(exe: &Path) -> Result<(), String> {
 
 /// Stops and deletes the service; succeeds quietly when it does not exist.
 pub fn uninstall() -> Result<(), String> {
-    let Ok(manager) = ServiceManager::local_computer(None::<&str>, ServiceManagerAccess::CONNECT) else {
+    let Ok(manager) = ServiceManager::local_computer(None::<&str>, ServiceManagerAccess::CONNECT)
+    else {
         return Ok(());
     };
-    let Ok(service) = manager.open_service(SERVICE_NAME, ServiceAccess::QUERY_STATUS | ServiceAccess::STOP | ServiceAccess::DELETE) else {
+    let Ok(service) = manager.open_service(
+        SERVICE_NAME,
+        ServiceAccess::QUERY_STATUS | ServiceAccess::STOP | ServiceAccess::DELETE,
+    ) else {
         return Ok(());
     };
-    if service.query_status().map(|s| s.current_state != ServiceState::Stopped).unwrap_or(false) {
+    if service
+        .query_status()
+        .map(|s| s.current_state != ServiceState::Stopped)
+        .unwrap_or(false)
+    {
         let _ = service.stop();
         for _ in 0..50 {
             std::thread::sleep(Duration::from_millis(100));
-            if service.query_status().map(|s| s.current_state == ServiceState::Stopped).unwrap_or(true) {
+            if service
+                .query_status()
+                .map(|s| s.current_state == ServiceState::Stopped)
+                .unwrap_or(true)
+            {
                 break;
             }
         }
     }
-    service.delete().map_err(|e| format!("cannot delete the service {SERVICE_NAME}: {e}"))
+    service
+        .delete()
+        .map_err(|e| format!("cannot delete the service {SERVICE_NAME}: {e}"))
 }
 
 type ServeFn = Box<dyn FnOnce() -> Result<(), String> + Send>;
@@ -85,7 +105,8 @@ windows_service::define_windows_service!(ffi_service_main, service_main);
 /// Returns when the service has stopped.
 pub fn run(serve: ServeFn) -> Result<(), String> {
     *SERVE.lock().unwrap_or_else(|p| p.into_inner()) = Some(serve);
-    windows_service::service_dispatcher::start(SERVICE_NAME, ffi_service_main).map_err(|e| format!("cannot start the service dispatcher: {e}"))
+    windows_service::service_dispatcher::start(SERVICE_NAME, ffi_service_main)
+        .map_err(|e| format!("cannot start the service dispatcher: {e}"))
 }
 
 fn service_main(_args: Vec<OsString>) {
@@ -111,7 +132,11 @@ fn service_main(_args: Vec<OsString>) {
         let _ = status.set_service_status(ServiceStatus {
             service_type: ServiceType::OWN_PROCESS,
             current_state: state,
-            controls_accepted: if state == ServiceState::Running { ServiceControlAccept::STOP | ServiceControlAccept::SHUTDOWN } else { ServiceControlAccept::empty() },
+            controls_accepted: if state == ServiceState::Running {
+                ServiceControlAccept::STOP | ServiceControlAccept::SHUTDOWN
+            } else {
+                ServiceControlAccept::empty()
+            },
             exit_code: ServiceExitCode::Win32(code),
             checkpoint: 0,
             wait_hint: Duration::from_secs(10),

@@ -10,8 +10,8 @@ use windows::core::BSTR;
 use windows::Win32::Foundation::{VARIANT_BOOL, VARIANT_FALSE, VARIANT_TRUE};
 use windows::Win32::System::Com::{CY, SAFEARRAY};
 use windows::Win32::System::Ole::{
-    SafeArrayAccessData, SafeArrayCreateVector, SafeArrayDestroy, SafeArrayGetDim, SafeArrayGetLBound,
-    SafeArrayGetUBound, SafeArrayUnaccessData,
+    SafeArrayAccessData, SafeArrayCreateVector, SafeArrayDestroy, SafeArrayGetDim,
+    SafeArrayGetLBound, SafeArrayGetUBound, SafeArrayUnaccessData,
 };
 use windows::Win32::System::Variant::*;
 
@@ -27,7 +27,10 @@ fn vt_of(v: &VARIANT) -> u16 {
 }
 
 fn set(v: &mut VARIANT, vt: VARENUM, f: impl FnOnce(&mut VARIANT_0_0_0)) {
-    let mut inner = VARIANT_0_0 { vt, ..Default::default() };
+    let mut inner = VARIANT_0_0 {
+        vt,
+        ..Default::default()
+    };
     f(&mut inner.Anonymous);
     v.Anonymous.Anonymous = ManuallyDrop::new(inner);
 }
@@ -49,7 +52,9 @@ pub fn to_variant(value: &Value) -> windows::core::Result<VARIANT> {
         Value::R8(x) => set(&mut v, VT_R8, |u| u.dblVal = *x),
         Value::Cy(x) => set(&mut v, VT_CY, |u| u.cyVal = CY { int64: *x }),
         Value::Date(x) => set(&mut v, VT_DATE, |u| u.date = *x),
-        Value::Bool(x) => set(&mut v, VT_BOOL, |u| u.boolVal = if *x { VARIANT_TRUE } else { VARIANT_FALSE }),
+        Value::Bool(x) => set(&mut v, VT_BOOL, |u| {
+            u.boolVal = if *x { VARIANT_TRUE } else { VARIANT_FALSE }
+        }),
         Value::Error(x) => set(&mut v, VT_ERROR, |u| u.scode = *x),
         Value::Bstr(s) => {
             let b = BSTR::from(s.as_str());
@@ -57,7 +62,9 @@ pub fn to_variant(value: &Value) -> windows::core::Result<VARIANT> {
         }
         Value::Array(a) => {
             let psa = to_safearray(a)?;
-            set(&mut v, VARENUM(VT_ARRAY.0 | a.element_type.0), |u| u.parray = psa);
+            set(&mut v, VARENUM(VT_ARRAY.0 | a.element_type.0), |u| {
+                u.parray = psa
+            });
         }
     }
     Ok(v)
@@ -105,7 +112,9 @@ fn to_safearray(a: &ArrayValue) -> windows::core::Result<*mut SAFEARRAY> {
             let e = if a.element_type == VarType::VARIANT || e.var_type() == a.element_type {
                 e
             } else {
-                converted = e.convert(a.element_type).map_err(|err| windows::core::Error::from(windows::core::HRESULT(err.hresult())));
+                converted = e.convert(a.element_type).map_err(|err| {
+                    windows::core::Error::from(windows::core::HRESULT(err.hresult()))
+                });
                 match &converted {
                     Ok(c) => c,
                     Err(err) => {
@@ -136,8 +145,14 @@ fn to_safearray(a: &ArrayValue) -> windows::core::Result<*mut SAFEARRAY> {
 
 /// # Safety
 /// `data` must point at an array of at least `i + 1` elements of type `vt`.
-unsafe fn write_element(data: *mut c_void, i: usize, vt: VarType, e: &Value) -> windows::core::Result<()> {
-    let mismatch = || windows::core::Error::from(windows::core::HRESULT(OpcError::BadType.hresult()));
+unsafe fn write_element(
+    data: *mut c_void,
+    i: usize,
+    vt: VarType,
+    e: &Value,
+) -> windows::core::Result<()> {
+    let mismatch =
+        || windows::core::Error::from(windows::core::HRESULT(OpcError::BadType.hresult()));
     // SAFETY (whole body): guaranteed by the caller; each arm writes one element of the
     // array's element type at index i.
     unsafe {
@@ -156,8 +171,15 @@ unsafe fn write_element(data: *mut c_void, i: usize, vt: VarType, e: &Value) -> 
             (VarType::CY, Value::Cy(x)) => data.cast::<i64>().add(i).write(*x),
             (VarType::DATE, Value::Date(x)) => data.cast::<f64>().add(i).write(*x),
             (VarType::ERROR, Value::Error(x)) => data.cast::<i32>().add(i).write(*x),
-            (VarType::BOOL, Value::Bool(x)) => data.cast::<VARIANT_BOOL>().add(i).write(if *x { VARIANT_TRUE } else { VARIANT_FALSE }),
-            (VarType::BSTR, Value::Bstr(s)) => data.cast::<ManuallyDrop<BSTR>>().add(i).write(ManuallyDrop::new(BSTR::from(s.as_str()))),
+            (VarType::BOOL, Value::Bool(x)) => data.cast::<VARIANT_BOOL>().add(i).write(if *x {
+                VARIANT_TRUE
+            } else {
+                VARIANT_FALSE
+            }),
+            (VarType::BSTR, Value::Bstr(s)) => data
+                .cast::<ManuallyDrop<BSTR>>()
+                .add(i)
+                .write(ManuallyDrop::new(BSTR::from(s.as_str()))),
             _ => return Err(mismatch()),
         }
     }
@@ -280,7 +302,10 @@ fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError>
         }
         let _ = SafeArrayUnaccessData(psa);
         result?;
-        Ok(Value::Array(ArrayValue { element_type: elem, elements }))
+        Ok(Value::Array(ArrayValue {
+            element_type: elem,
+            elements,
+        }))
     }
 }
 

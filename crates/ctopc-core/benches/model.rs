@@ -41,7 +41,10 @@ impl Namespace for BenchNs {
             channel: "*".to_string(),
             canonical_type: VarType::R8,
             access_rights: OPC_READABLE | OPC_WRITEABLE,
-            eu: EuInfo::Analog { low: 0.0, high: 100.0 },
+            eu: EuInfo::Analog {
+                low: 0.0,
+                high: 100.0,
+            },
             constant: None,
         })
     }
@@ -67,7 +70,16 @@ fn add_groups(e: &mut Engine, now: Timestamp, s: SessionHandle, prefix: &str) ->
         .map(|i| {
             let name = format!("{prefix}{i}");
             let g = e
-                .add_group(now, s, &GroupParams { name: &name, update_rate: 1000, percent_deadband: DEADBAND, ..Default::default() })
+                .add_group(
+                    now,
+                    s,
+                    &GroupParams {
+                        name: &name,
+                        update_rate: 1000,
+                        percent_deadband: DEADBAND,
+                        ..Default::default()
+                    },
+                )
                 .unwrap()
                 .group;
             e.set_callback_connected(now, g, true).unwrap();
@@ -78,7 +90,9 @@ fn add_groups(e: &mut Engine, now: Timestamp, s: SessionHandle, prefix: &str) ->
 
 fn add_items(e: &mut Engine, now: Timestamp, groups: &[GroupHandle], defs: &[ItemDefinition<'_>]) {
     for (gi, g) in groups.iter().enumerate() {
-        let r = e.add_items(now, *g, &defs[gi * PER_GROUP..(gi + 1) * PER_GROUP]).unwrap();
+        let r = e
+            .add_items(now, *g, &defs[gi * PER_GROUP..(gi + 1) * PER_GROUP])
+            .unwrap();
         debug_assert!(r.iter().all(|r| r.is_ok()));
     }
 }
@@ -146,7 +160,10 @@ fn main() {
     println!("  per group (empty, with name)              {per_group:8.0} bytes");
     println!("  per item, 1 group item + its cache entry   {total:8.1} bytes   (goal <= 200)");
     println!("  per additional group item, shared cache    {shared:8.1} bytes   (goal <= 200)");
-    println!("  AddItems of {ITEMS} items (1000 calls)   {:8.1} ms", ms(add_time));
+    println!(
+        "  AddItems of {ITEMS} items (1000 calls)   {:8.1} ms",
+        ms(add_time)
+    );
 
     // ---- update throughput -------------------------------------------------------------
     // The backend pushes samples in an order unrelated to the groups: shuffle the keys.
@@ -160,7 +177,15 @@ fn main() {
     }
     // First tick sends everything (initial values).
     let base = |i: u32| 10.0 + f64::from(i % 80);
-    e.handle_source_updates(now, order.iter().map(|&i| (keys[i as usize], Vqt::new(Value::R8(base(i)), Quality::GOOD, now))));
+    e.handle_source_updates(
+        now,
+        order.iter().map(|&i| {
+            (
+                keys[i as usize],
+                Vqt::new(Value::R8(base(i)), Quality::GOOD, now),
+            )
+        }),
+    );
     now = now.add_millis(1000);
     e.handle_timeout(now);
     drain_events(&mut e);
@@ -177,7 +202,15 @@ fn main() {
             base(i) + if up { d } else { 0.0 }
         };
         let t = Instant::now();
-        e.handle_source_updates(now, order.iter().map(|&i| (keys[i as usize], Vqt::new(Value::R8(value(i)), Quality::GOOD, now))));
+        e.handle_source_updates(
+            now,
+            order.iter().map(|&i| {
+                (
+                    keys[i as usize],
+                    Vqt::new(Value::R8(value(i)), Quality::GOOD, now),
+                )
+            }),
+        );
         let ta = t.elapsed();
         now = now.add_millis(1000);
         let t = Instant::now();
@@ -199,7 +232,14 @@ fn main() {
             now,
             (0..ITEMS as u32).map(|i| {
                 let d = if i & 1 == 0 { 5.0 } else { 0.3 };
-                (keys[i as usize], Vqt::new(Value::R8(base(i) + if up { d } else { 0.0 }), Quality::GOOD, now))
+                (
+                    keys[i as usize],
+                    Vqt::new(
+                        Value::R8(base(i) + if up { d } else { 0.0 }),
+                        Quality::GOOD,
+                        now,
+                    ),
+                )
             }),
         );
         apply_ordered.push(ITEMS as f64 / t.elapsed().as_secs_f64());
@@ -209,10 +249,22 @@ fn main() {
     }
     println!();
     println!("updates into {ITEMS} subscribed items (shuffled order), every sample a change, {reported} reported per round");
-    println!("  apply samples (handle_source_updates)      {:8.2} M updates/s", median(apply) / 1e6);
-    println!("  update tick: detect + deadband + callbacks {:8.1} ms for 1000 groups", median(tick));
-    println!("  end to end (apply + tick)                  {:8.2} M updates/s   (goal >= 2)", median(total_rate) / 1e6);
-    println!("  apply, samples in subscription order       {:8.2} M updates/s", median(apply_ordered) / 1e6);
+    println!(
+        "  apply samples (handle_source_updates)      {:8.2} M updates/s",
+        median(apply) / 1e6
+    );
+    println!(
+        "  update tick: detect + deadband + callbacks {:8.1} ms for 1000 groups",
+        median(tick)
+    );
+    println!(
+        "  end to end (apply + tick)                  {:8.2} M updates/s   (goal >= 2)",
+        median(total_rate) / 1e6
+    );
+    println!(
+        "  apply, samples in subscription order       {:8.2} M updates/s",
+        median(apply_ordered) / 1e6
+    );
 
     // ---- scheduler cost per tick -------------------------------------------------------
     let mut changed_tick = Vec::new();
@@ -223,7 +275,16 @@ fn main() {
         // 100,000 changed items: every 10th source item, beyond the band.
         e.handle_source_updates(
             now,
-            (0..ITEMS as u32).step_by(10).map(|i| (keys[i as usize], Vqt::new(Value::R8(base(i) + if up { 7.0 } else { 0.0 }), Quality::GOOD, now))),
+            (0..ITEMS as u32).step_by(10).map(|i| {
+                (
+                    keys[i as usize],
+                    Vqt::new(
+                        Value::R8(base(i) + if up { 7.0 } else { 0.0 }),
+                        Quality::GOOD,
+                        now,
+                    ),
+                )
+            }),
         );
         now = now.add_millis(1000);
         let t = Instant::now();
@@ -239,7 +300,13 @@ fn main() {
     }
     println!();
     println!("scheduler tick over 1000 groups / {ITEMS} items");
-    println!("  100,000 changed items ({reported} reported)    {:8.2} ms", median(changed_tick));
-    println!("  nothing changed                            {:8.3} ms", median(idle_tick));
+    println!(
+        "  100,000 changed items ({reported} reported)    {:8.2} ms",
+        median(changed_tick)
+    );
+    println!(
+        "  nothing changed                            {:8.3} ms",
+        median(idle_tick)
+    );
     let _ = e.stats();
 }

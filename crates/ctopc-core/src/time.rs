@@ -92,7 +92,11 @@ mod tests {
     fn ole_date_round_trips_before_and_after_the_epoch() {
         for ole in [0.0, 0.25, 1.5, 45_000.125, -1.25, -2.0, -700.75] {
             let t = Timestamp::from_ole_date(ole).unwrap();
-            assert!((t.to_ole_date() - ole).abs() < 1e-9, "{ole} -> {t:?} -> {}", t.to_ole_date());
+            assert!(
+                (t.to_ole_date() - ole).abs() < 1e-9,
+                "{ole} -> {t:?} -> {}",
+                t.to_ole_date()
+            );
         }
         // 1899-12-29 06:00 is -1.25 in OLE encoding.
         let t = Timestamp(Timestamp::OLE_EPOCH_TICKS - 18 * 3600 * 10_000_000);

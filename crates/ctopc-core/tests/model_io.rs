@@ -34,13 +34,33 @@ fn cache_read_of_inactive_item_or_group_is_out_of_service() {
     sim.push_good("A1", 1.0);
     sim.push_good("A2", 2.0);
     sim.e.set_active_state(sim.now, g, &[h[1]], false).unwrap();
-    let r = ready(sim.e.read(sim.now, g, DataSource::Cache, &[h[0], h[1], 31337]).unwrap());
+    let r = ready(
+        sim.e
+            .read(sim.now, g, DataSource::Cache, &[h[0], h[1], 31337])
+            .unwrap(),
+    );
     let a = r[0].as_ref().unwrap();
-    assert_eq!((a.client_handle, &a.value, a.quality, a.timestamp), (100, &Value::R8(1.0), Quality::GOOD, sim.now));
+    assert_eq!(
+        (a.client_handle, &a.value, a.quality, a.timestamp),
+        (100, &Value::R8(1.0), Quality::GOOD, sim.now)
+    );
     let b = r[1].as_ref().unwrap();
-    assert_eq!((&b.value, b.quality), (&Value::R8(2.0), Quality::BAD_OUT_OF_SERVICE), "value from the cache, quality out of service");
+    assert_eq!(
+        (&b.value, b.quality),
+        (&Value::R8(2.0), Quality::BAD_OUT_OF_SERVICE),
+        "value from the cache, quality out of service"
+    );
     assert_eq!(r[2], Err(OpcError::InvalidHandle));
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(false), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(false),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     let r = ready(sim.e.read(sim.now, g, DataSource::Cache, &[h[0]]).unwrap());
     assert_eq!(r[0].as_ref().unwrap().quality, Quality::BAD_OUT_OF_SERVICE);
 }
@@ -53,21 +73,43 @@ fn device_read_waits_for_the_source_and_refreshes_the_cache() {
     let h = sim.items(g, &["A1", "A2", "CONST"]);
     sim.tick();
     sim.events();
-    let id = pending(sim.e.read(sim.now, g, DataSource::Device, &[h[0], 4711, h[1], h[2]]).unwrap());
+    let id = pending(
+        sim.e
+            .read(sim.now, g, DataSource::Device, &[h[0], 4711, h[1], h[2]])
+            .unwrap(),
+    );
     let (req, items) = sim.take_read();
     let ids: Vec<&str> = items.iter().map(|i| &*i.item_id).collect();
-    assert_eq!(ids, vec!["A1", "A2"], "invalid handles and constants are not asked for");
+    assert_eq!(
+        ids,
+        vec!["A1", "A2"],
+        "invalid handles and constants are not asked for"
+    );
     assert!(sim.e.sync_pending(id));
     assert_eq!(sim.e.take_sync_result(id), None);
     assert_eq!(sim.e.poll_sync_completion(), None);
-    sim.e.handle_source_read_result(sim.now, req, vec![good(11.0, sim.now), Err(OpcError::NetLinkToServer)]);
+    sim.e.handle_source_read_result(
+        sim.now,
+        req,
+        vec![good(11.0, sim.now), Err(OpcError::NetLinkToServer)],
+    );
     assert!(!sim.e.sync_pending(id));
-    assert_eq!(sim.e.poll_sync_completion(), Some(id), "the driver learns which waiter to wake");
+    assert_eq!(
+        sim.e.poll_sync_completion(),
+        Some(id),
+        "the driver learns which waiter to wake"
+    );
     assert_eq!(sim.e.poll_sync_completion(), None);
-    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else { panic!() };
+    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(11.0));
     assert_eq!(r[1], Err(OpcError::InvalidHandle));
-    assert_eq!(r[2], Err(OpcError::NetLinkToServer), "ASKOM codes reach the client per item");
+    assert_eq!(
+        r[2],
+        Err(OpcError::NetLinkToServer),
+        "ASKOM codes reach the client per item"
+    );
     assert_eq!(r[3].as_ref().unwrap().value, Value::R8(42.0));
     assert_eq!(sim.e.take_sync_result(id), None, "taken once");
     // The device value also went into the cache (and so to subscribers).
@@ -78,7 +120,10 @@ fn device_read_waits_for_the_source_and_refreshes_the_cache() {
 
 #[test]
 fn device_read_times_out_with_net_answer_timeout() {
-    let mut sim = Sim::with_config(EngineConfig { source_timeout_ms: 5000, ..Default::default() });
+    let mut sim = Sim::with_config(EngineConfig {
+        source_timeout_ms: 5000,
+        ..Default::default()
+    });
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1"]);
@@ -89,9 +134,13 @@ fn device_read_times_out_with_net_answer_timeout() {
     sim.advance(4999);
     assert!(sim.e.sync_pending(id));
     sim.advance(1);
-    assert_eq!(sim.e.take_sync_result(id), Some(SyncResult::Read(vec![Err(OpcError::NetAnswerTimeout)])));
+    assert_eq!(
+        sim.e.take_sync_result(id),
+        Some(SyncResult::Read(vec![Err(OpcError::NetAnswerTimeout)]))
+    );
     // A late answer is ignored.
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
     assert_eq!(sim.e.take_sync_result(id), None);
 }
 
@@ -105,7 +154,8 @@ fn abandoned_sync_read_is_forgotten() {
     let (req, _) = sim.take_read();
     sim.e.abandon_sync(id);
     assert!(!sim.e.sync_pending(id));
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
     assert_eq!(sim.e.take_sync_result(id), None);
     assert_eq!(sim.e.stats().pending_transactions, 0);
 }
@@ -121,15 +171,30 @@ fn read_max_age_uses_cache_when_fresh_and_device_when_stale() {
     sim.advance(3000);
     sim.events();
     // Age 3000 ms: MaxAge 5000 and MAX read the cache.
-    let r = ready(sim.e.read_max_age(sim.now, g, &[(h[0], 5000), (h[1], MAX_AGE_CACHE)]).unwrap());
+    let r = ready(
+        sim.e
+            .read_max_age(sim.now, g, &[(h[0], 5000), (h[1], MAX_AGE_CACHE)])
+            .unwrap(),
+    );
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(1.0));
     assert_eq!(r[1].as_ref().unwrap().value, Value::R8(2.0));
     // MaxAge 2000 is stale, 0 always goes to the device.
-    let id = pending(sim.e.read_max_age(sim.now, g, &[(h[0], 2000), (h[1], MAX_AGE_DEVICE), (h[0], 3000)]).unwrap());
+    let id = pending(
+        sim.e
+            .read_max_age(
+                sim.now,
+                g,
+                &[(h[0], 2000), (h[1], MAX_AGE_DEVICE), (h[0], 3000)],
+            )
+            .unwrap(),
+    );
     let (req, items) = sim.take_read();
     assert_eq!(items.len(), 2);
-    sim.e.handle_source_read_result(sim.now, req, vec![good(10.0, sim.now), good(20.0, sim.now)]);
-    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else { panic!() };
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(10.0, sim.now), good(20.0, sim.now)]);
+    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
     let v: Vec<Value> = r.into_iter().map(|r| r.unwrap().value).collect();
     assert_eq!(v, vec![Value::R8(10.0), Value::R8(20.0), Value::R8(1.0)]);
 }
@@ -141,8 +206,15 @@ fn read_max_age_of_never_sampled_item_goes_to_the_device() {
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1"]);
     pending(sim.e.read_max_age(sim.now, g, &[(h[0], 60_000)]).unwrap());
-    let r = ready(sim.e.read_max_age(sim.now, g, &[(h[0], MAX_AGE_CACHE)]).unwrap());
-    assert_eq!(r[0].as_ref().unwrap().quality, Quality::BAD_WAITING_FOR_INITIAL_DATA);
+    let r = ready(
+        sim.e
+            .read_max_age(sim.now, g, &[(h[0], MAX_AGE_CACHE)])
+            .unwrap(),
+    );
+    assert_eq!(
+        r[0].as_ref().unwrap().quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA
+    );
 }
 
 #[test]
@@ -169,11 +241,26 @@ fn write_rejects_read_only_and_converts_to_canonical() {
         .unwrap();
     let id = pending(out);
     sim.pump();
-    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else { panic!("{:?}", sim.io) };
-    let sent: Vec<(&str, Value)> = items.iter().map(|(i, v)| (&*i.item_id, v.clone())).collect();
-    assert_eq!(sent, vec![("A1", Value::R8(5.0)), ("A2", Value::R8(2.5))], "converted to the canonical type");
-    sim.e.handle_source_write_result(sim.now, req_id, vec![Ok(()), Err(OpcError::WriteErrorDriverTimeout)]);
-    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else { panic!() };
+    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else {
+        panic!("{:?}", sim.io)
+    };
+    let sent: Vec<(&str, Value)> = items
+        .iter()
+        .map(|(i, v)| (&*i.item_id, v.clone()))
+        .collect();
+    assert_eq!(
+        sent,
+        vec![("A1", Value::R8(5.0)), ("A2", Value::R8(2.5))],
+        "converted to the canonical type"
+    );
+    sim.e.handle_source_write_result(
+        sim.now,
+        req_id,
+        vec![Ok(()), Err(OpcError::WriteErrorDriverTimeout)],
+    );
+    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
     assert_eq!(
         r,
         vec![
@@ -197,16 +284,29 @@ fn extended_write_array_becomes_write_vqt() {
     let stamp = Timestamp::from_unix_millis(1_600_000_000_000);
     let arr = Value::Array(ctopc_core::value::ArrayValue::new(
         VarType::VARIANT,
-        vec![Value::R4(7.5), Value::I4(0xD8), Value::Date(stamp.to_ole_date())],
+        vec![
+            Value::R4(7.5),
+            Value::I4(0xD8),
+            Value::Date(stamp.to_ole_date()),
+        ],
     ));
     let id = pending(sim.e.write(sim.now, g, &[(h[0], arr)]).unwrap());
     sim.pump();
-    let Some(SourceRequest::WriteVqt { req_id, items }) = sim.io.pop() else { panic!("{:?}", sim.io) };
+    let Some(SourceRequest::WriteVqt { req_id, items }) = sim.io.pop() else {
+        panic!("{:?}", sim.io)
+    };
     assert_eq!(items[0].1.value, Value::R8(7.5));
     assert_eq!(items[0].1.quality, Some(Quality::GOOD_LOCAL_OVERRIDE));
-    assert_eq!(items[0].1.timestamp.map(|t| t.unix_millis()), Some(stamp.unix_millis()));
-    sim.e.handle_source_write_result(sim.now, req_id, vec![Ok(())]);
-    assert_eq!(sim.e.take_sync_result(id), Some(SyncResult::Write(vec![Ok(())])));
+    assert_eq!(
+        items[0].1.timestamp.map(|t| t.unix_millis()),
+        Some(stamp.unix_millis())
+    );
+    sim.e
+        .handle_source_write_result(sim.now, req_id, vec![Ok(())]);
+    assert_eq!(
+        sim.e.take_sync_result(id),
+        Some(SyncResult::Write(vec![Ok(())]))
+    );
 }
 
 #[test]
@@ -215,29 +315,75 @@ fn write_vqt_passes_quality_and_timestamp_and_source_may_refuse() {
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1", "A2"]);
-    let vqt = ItemVqt { value: Value::R8(1.0), quality: Some(Quality::UNCERTAIN), timestamp: None };
-    let id = pending(sim.e.write_vqt(sim.now, g, &[(h[0], vqt.clone()), (h[1], ItemVqt::value(Value::R8(2.0)))]).unwrap());
+    let vqt = ItemVqt {
+        value: Value::R8(1.0),
+        quality: Some(Quality::UNCERTAIN),
+        timestamp: None,
+    };
+    let id = pending(
+        sim.e
+            .write_vqt(
+                sim.now,
+                g,
+                &[(h[0], vqt.clone()), (h[1], ItemVqt::value(Value::R8(2.0)))],
+            )
+            .unwrap(),
+    );
     sim.pump();
-    let Some(SourceRequest::WriteVqt { req_id, items }) = sim.io.pop() else { panic!() };
+    let Some(SourceRequest::WriteVqt { req_id, items }) = sim.io.pop() else {
+        panic!()
+    };
     assert_eq!(items[0].1, vqt);
-    assert_eq!(items[1].1, ItemVqt::value(Value::R8(2.0)), "plain values travel with no quality/timestamp");
-    sim.e.handle_source_write_result(sim.now, req_id, vec![Err(OpcError::NotSupported)]);
-    assert_eq!(sim.e.take_sync_result(id), Some(SyncResult::Write(vec![Err(OpcError::NotSupported), Err(OpcError::Fail)])), "missing results are E_FAIL");
+    assert_eq!(
+        items[1].1,
+        ItemVqt::value(Value::R8(2.0)),
+        "plain values travel with no quality/timestamp"
+    );
+    sim.e
+        .handle_source_write_result(sim.now, req_id, vec![Err(OpcError::NotSupported)]);
+    assert_eq!(
+        sim.e.take_sync_result(id),
+        Some(SyncResult::Write(vec![
+            Err(OpcError::NotSupported),
+            Err(OpcError::Fail)
+        ])),
+        "missing results are E_FAIL"
+    );
 }
 
 #[test]
 fn async_calls_without_callback_are_noconnection() {
     let mut sim = Sim::new();
     let s = sim.session();
-    let g = sim.e.add_group(sim.now, s, &GroupParams::default()).unwrap().group;
+    let g = sim
+        .e
+        .add_group(sim.now, s, &GroupParams::default())
+        .unwrap()
+        .group;
     let h = sim.items(g, &["A1"]);
     let now = sim.now;
     assert_eq!(sim.e.async_read(now, g, 1, &h), Err(OpcError::NoConnection));
-    assert_eq!(sim.e.async_read_max_age(now, g, 1, &[(h[0], 0)]), Err(OpcError::NoConnection));
-    assert_eq!(sim.e.async_write(now, g, 1, &[(h[0], Value::R8(1.0))]), Err(OpcError::NoConnection));
-    assert_eq!(sim.e.async_write_vqt(now, g, 1, &[(h[0], ItemVqt::value(Value::R8(1.0)))]), Err(OpcError::NoConnection));
-    assert_eq!(sim.e.refresh2(now, g, DataSource::Cache, 1), Err(OpcError::NoConnection));
-    assert_eq!(sim.e.refresh_max_age(now, g, 0, 1), Err(OpcError::NoConnection));
+    assert_eq!(
+        sim.e.async_read_max_age(now, g, 1, &[(h[0], 0)]),
+        Err(OpcError::NoConnection)
+    );
+    assert_eq!(
+        sim.e.async_write(now, g, 1, &[(h[0], Value::R8(1.0))]),
+        Err(OpcError::NoConnection)
+    );
+    assert_eq!(
+        sim.e
+            .async_write_vqt(now, g, 1, &[(h[0], ItemVqt::value(Value::R8(1.0)))]),
+        Err(OpcError::NoConnection)
+    );
+    assert_eq!(
+        sim.e.refresh2(now, g, DataSource::Cache, 1),
+        Err(OpcError::NoConnection)
+    );
+    assert_eq!(
+        sim.e.refresh_max_age(now, g, 0, 1),
+        Err(OpcError::NoConnection)
+    );
     assert_eq!(sim.e.cancel2(g, 1), Err(OpcError::NoConnection));
 }
 
@@ -255,9 +401,18 @@ fn refresh2_sends_all_active_items_even_unchanged_with_transaction_id() {
     let cancel = sim.e.refresh2(sim.now, g, DataSource::Cache, 4321).unwrap();
     assert_ne!(cancel, 0);
     let ev = sim.events();
-    let [Event::DataChange(d)] = &ev[..] else { panic!("{ev:?}") };
-    assert_eq!((d.kind, d.transaction_id, d.cancel_id, d.client_group), (DataChangeKind::Refresh, 4321, cancel, 7));
-    assert_eq!(values(d), vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))], "active items only, unchanged too");
+    let [Event::DataChange(d)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!(
+        (d.kind, d.transaction_id, d.cancel_id, d.client_group),
+        (DataChangeKind::Refresh, 4321, cancel, 7)
+    );
+    assert_eq!(
+        values(d),
+        vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))],
+        "active items only, unchanged too"
+    );
 }
 
 #[test]
@@ -265,14 +420,38 @@ fn refresh2_fails_for_inactive_group_or_no_active_items() {
     let mut sim = Sim::new();
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
-    assert_eq!(sim.e.refresh2(sim.now, g, DataSource::Cache, 1), Err(OpcError::Fail), "no items");
+    assert_eq!(
+        sim.e.refresh2(sim.now, g, DataSource::Cache, 1),
+        Err(OpcError::Fail),
+        "no items"
+    );
     let h = sim.items(g, &["A1"]);
     sim.e.set_active_state(sim.now, g, &h, false).unwrap();
-    assert_eq!(sim.e.refresh2(sim.now, g, DataSource::Device, 1), Err(OpcError::Fail), "no active items");
+    assert_eq!(
+        sim.e.refresh2(sim.now, g, DataSource::Device, 1),
+        Err(OpcError::Fail),
+        "no active items"
+    );
     sim.e.set_active_state(sim.now, g, &h, true).unwrap();
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(false), ..Default::default() }).unwrap();
-    assert_eq!(sim.e.refresh2(sim.now, g, DataSource::Cache, 1), Err(OpcError::Fail), "inactive group");
-    assert_eq!(sim.e.refresh_max_age(sim.now, g, 1000, 1), Err(OpcError::Fail));
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(false),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert_eq!(
+        sim.e.refresh2(sim.now, g, DataSource::Cache, 1),
+        Err(OpcError::Fail),
+        "inactive group"
+    );
+    assert_eq!(
+        sim.e.refresh_max_age(sim.now, g, 1000, 1),
+        Err(OpcError::Fail)
+    );
 }
 
 #[test]
@@ -289,7 +468,10 @@ fn refresh_values_become_last_sent() {
     sim.e.refresh2(sim.now, g, DataSource::Cache, 1).unwrap();
     assert_eq!(sim.events().len(), 1);
     sim.advance(500);
-    assert!(sim.data_changes().is_empty(), "the change went out with the refresh, not again");
+    assert!(
+        sim.data_changes().is_empty(),
+        "the change went out with the refresh, not again"
+    );
 }
 
 #[test]
@@ -304,10 +486,16 @@ fn refresh2_from_device_waits_for_the_source() {
     assert!(sim.events().is_empty());
     let (req, items) = sim.take_read();
     assert_eq!(items.len(), 1);
-    sim.e.handle_source_read_result(sim.now, req, vec![Err(OpcError::NetAnswerTimeout)]);
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![Err(OpcError::NetAnswerTimeout)]);
     let ev = sim.events();
-    let [Event::DataChange(d)] = &ev[..] else { panic!("{ev:?}") };
-    assert_eq!((d.transaction_id, d.cancel_id, d.master_error), (8, cancel, Some(OpcError::False)));
+    let [Event::DataChange(d)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!(
+        (d.transaction_id, d.cancel_id, d.master_error),
+        (8, cancel, Some(OpcError::False))
+    );
     assert_eq!(d.items[0].error, Some(OpcError::NetAnswerTimeout));
     assert_eq!(d.items[1].value, Value::R8(42.0));
 }
@@ -324,11 +512,20 @@ fn refresh_max_age_reads_stale_items_from_the_device() {
     sim.events();
     sim.e.refresh_max_age(sim.now, g, 1000, 5).unwrap();
     let (req, items) = sim.take_read();
-    assert_eq!(items.iter().map(|i| &*i.item_id).collect::<Vec<_>>(), vec!["A1"]);
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.5, sim.now)]);
+    assert_eq!(
+        items.iter().map(|i| &*i.item_id).collect::<Vec<_>>(),
+        vec!["A1"]
+    );
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.5, sim.now)]);
     let ev = sim.events();
-    let [Event::DataChange(d)] = &ev[..] else { panic!("{ev:?}") };
-    assert_eq!(values(d), vec![(100, Value::R8(1.5)), (101, Value::R8(2.0))]);
+    let [Event::DataChange(d)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!(
+        values(d),
+        vec![(100, Value::R8(1.5)), (101, Value::R8(2.0))]
+    );
 }
 
 #[test]
@@ -342,17 +539,48 @@ fn async_read_completes_with_read_complete_and_excludes_invalid_handles() {
     sim.events();
     let started = sim.e.async_read(sim.now, g, 77, &[h[0], 5, h[1]]).unwrap();
     assert_ne!(started.cancel_id, 0);
-    assert_eq!(started.results, vec![Ok(()), Err(OpcError::InvalidHandle), Ok(())]);
+    assert_eq!(
+        started.results,
+        vec![Ok(()), Err(OpcError::InvalidHandle), Ok(())]
+    );
     let (req, items) = sim.take_read();
-    assert_eq!(items.len(), 2, "async Read reads inactive items from the device too");
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.0, sim.now), good(2.0, sim.now)]);
+    assert_eq!(
+        items.len(),
+        2,
+        "async Read reads inactive items from the device too"
+    );
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.0, sim.now), good(2.0, sim.now)]);
     let ev = sim.events();
-    let [Event::ReadComplete(r)] = &ev[..] else { panic!("{ev:?}") };
-    assert_eq!((r.transaction_id, r.cancel_id, r.client_group, r.master_quality, r.master_error), (77, started.cancel_id, 7, None, None));
-    assert_eq!(r.items.iter().map(|i| (i.client_handle, i.value.clone())).collect::<Vec<_>>(), vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))]);
+    let [Event::ReadComplete(r)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!(
+        (
+            r.transaction_id,
+            r.cancel_id,
+            r.client_group,
+            r.master_quality,
+            r.master_error
+        ),
+        (77, started.cancel_id, 7, None, None)
+    );
+    assert_eq!(
+        r.items
+            .iter()
+            .map(|i| (i.client_handle, i.value.clone()))
+            .collect::<Vec<_>>(),
+        vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))]
+    );
     // Only invalid handles: nothing queued, no callback.
     let none = sim.e.async_read(sim.now, g, 78, &[5]).unwrap();
-    assert_eq!(none, AsyncStarted { cancel_id: 0, results: vec![Err(OpcError::InvalidHandle)] });
+    assert_eq!(
+        none,
+        AsyncStarted {
+            cancel_id: 0,
+            results: vec![Err(OpcError::InvalidHandle)]
+        }
+    );
     sim.pump();
     assert!(sim.io.is_empty() && sim.events().is_empty());
 }
@@ -366,9 +594,14 @@ fn async_read_max_age_from_cache_completes_at_once() {
     sim.push_good("A1", 3.0);
     sim.tick();
     sim.events();
-    let started = sim.e.async_read_max_age(sim.now, g, 9, &[(h[0], MAX_AGE_CACHE)]).unwrap();
+    let started = sim
+        .e
+        .async_read_max_age(sim.now, g, 9, &[(h[0], MAX_AGE_CACHE)])
+        .unwrap();
     let ev = sim.events();
-    assert!(matches!(&ev[..], [Event::ReadComplete(r)] if r.cancel_id == started.cancel_id && r.items[0].value == Value::R8(3.0)));
+    assert!(
+        matches!(&ev[..], [Event::ReadComplete(r)] if r.cancel_id == started.cancel_id && r.items[0].value == Value::R8(3.0))
+    );
 }
 
 #[test]
@@ -377,16 +610,51 @@ fn async_write_completes_with_source_errors_per_item() {
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1", "RO", "A2"]);
-    let started = sim.e.async_write(sim.now, g, 55, &[(h[0], Value::R8(1.0)), (h[1], Value::R8(1.0)), (h[2], Value::R8(2.0))]).unwrap();
-    assert_eq!(started.results, vec![Ok(()), Err(OpcError::BadRights), Ok(())]);
+    let started = sim
+        .e
+        .async_write(
+            sim.now,
+            g,
+            55,
+            &[
+                (h[0], Value::R8(1.0)),
+                (h[1], Value::R8(1.0)),
+                (h[2], Value::R8(2.0)),
+            ],
+        )
+        .unwrap();
+    assert_eq!(
+        started.results,
+        vec![Ok(()), Err(OpcError::BadRights), Ok(())]
+    );
     sim.pump();
-    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else { panic!() };
+    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else {
+        panic!()
+    };
     assert_eq!(items.len(), 2);
-    sim.e.handle_source_write_result(sim.now, req_id, vec![Ok(()), Err(OpcError::WriteError)]);
+    sim.e
+        .handle_source_write_result(sim.now, req_id, vec![Ok(()), Err(OpcError::WriteError)]);
     let ev = sim.events();
-    let [Event::WriteComplete(w)] = &ev[..] else { panic!("{ev:?}") };
-    assert_eq!((w.transaction_id, w.cancel_id, w.master_error), (55, started.cancel_id, Some(OpcError::False)));
-    assert_eq!(w.items, vec![WriteResult { client_handle: 100, error: None }, WriteResult { client_handle: 102, error: Some(OpcError::WriteError) }]);
+    let [Event::WriteComplete(w)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!(
+        (w.transaction_id, w.cancel_id, w.master_error),
+        (55, started.cancel_id, Some(OpcError::False))
+    );
+    assert_eq!(
+        w.items,
+        vec![
+            WriteResult {
+                client_handle: 100,
+                error: None
+            },
+            WriteResult {
+                client_handle: 102,
+                error: Some(OpcError::WriteError)
+            }
+        ]
+    );
 }
 
 #[test]
@@ -403,10 +671,17 @@ fn cancel2_of_pending_transaction_sends_cancel_complete() {
     let ev = sim.events();
     assert_eq!(
         ev,
-        vec![Event::CancelComplete(CancelComplete { session: s, group: g, client_group: 7, transaction_id: 3, cancel_id: started.cancel_id })]
+        vec![Event::CancelComplete(CancelComplete {
+            session: s,
+            group: g,
+            client_group: 7,
+            transaction_id: 3,
+            cancel_id: started.cancel_id
+        })]
     );
     // The source's late answer produces no callback.
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
     assert!(sim.events().is_empty());
     assert_eq!(sim.e.cancel2(g, started.cancel_id), Err(OpcError::Fail));
 }
@@ -423,7 +698,9 @@ fn cancel2_of_queued_completion_replaces_it_until_delivered() {
     let cancel = sim.e.refresh2(sim.now, g, DataSource::Cache, 12).unwrap();
     assert_eq!(sim.e.cancel2(g, cancel), Ok(()));
     let ev = sim.events();
-    assert!(matches!(&ev[..], [Event::CancelComplete(c)] if c.transaction_id == 12 && c.cancel_id == cancel));
+    assert!(
+        matches!(&ev[..], [Event::CancelComplete(c)] if c.transaction_id == 12 && c.cancel_id == cancel)
+    );
     // The cancelled refresh did not count as sent.
     sim.advance(1000);
     assert_eq!(sim.data_changes().len(), 1);
@@ -440,7 +717,11 @@ fn cancel2_of_completed_transaction_fails() {
     let cancel = sim.e.refresh2(sim.now, g, DataSource::Cache, 1).unwrap();
     assert_eq!(sim.events().len(), 1, "delivered");
     assert_eq!(sim.e.cancel2(g, cancel), Err(OpcError::Fail));
-    assert_eq!(sim.e.cancel2(g, 0xDEAD), Err(OpcError::Fail), "unknown cancel ID");
+    assert_eq!(
+        sim.e.cancel2(g, 0xDEAD),
+        Err(OpcError::Fail),
+        "unknown cancel ID"
+    );
 }
 
 #[test]
@@ -456,19 +737,33 @@ fn cancel2_of_another_groups_transaction_fails() {
 
 #[test]
 fn outstanding_transactions_are_bounded_with_adviselimit() {
-    let mut sim = Sim::with_config(EngineConfig { max_transactions_per_group: 3, ..Default::default() });
+    let mut sim = Sim::with_config(EngineConfig {
+        max_transactions_per_group: 3,
+        ..Default::default()
+    });
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let other = sim.group(s, "other", 1000, 0.0);
     let h = sim.items(g, &["A1"]);
     let ho = sim.items(other, &["A1"]);
-    let ids: Vec<u32> = (0..3).map(|t| sim.e.async_read(sim.now, g, t, &h).unwrap().cancel_id).collect();
+    let ids: Vec<u32> = (0..3)
+        .map(|t| sim.e.async_read(sim.now, g, t, &h).unwrap().cancel_id)
+        .collect();
     let mut uniq = ids.clone();
     uniq.dedup();
     assert_eq!(uniq.len(), 3, "cancel IDs are unique");
-    assert_eq!(sim.e.async_read(sim.now, g, 9, &h), Err(OpcError::AdviseLimit));
-    assert_eq!(sim.e.refresh2(sim.now, g, DataSource::Cache, 9), Err(OpcError::AdviseLimit));
-    assert!(sim.e.async_read(sim.now, other, 9, &ho).is_ok(), "the limit is per group");
+    assert_eq!(
+        sim.e.async_read(sim.now, g, 9, &h),
+        Err(OpcError::AdviseLimit)
+    );
+    assert_eq!(
+        sim.e.refresh2(sim.now, g, DataSource::Cache, 9),
+        Err(OpcError::AdviseLimit)
+    );
+    assert!(
+        sim.e.async_read(sim.now, other, 9, &ho).is_ok(),
+        "the limit is per group"
+    );
     // A completion taken with poll_event frees a place.
     let (req, _) = sim.take_read();
     let _ = req;
@@ -476,8 +771,13 @@ fn outstanding_transactions_are_bounded_with_adviselimit() {
         SourceRequest::Read { req_id, .. } => Some(*req_id),
         _ => None,
     });
-    sim.e.handle_source_read_result(sim.now, first.unwrap(), vec![good(1.0, sim.now)]);
-    assert_eq!(sim.e.async_read(sim.now, g, 9, &h), Err(OpcError::AdviseLimit), "completed but not yet delivered");
+    sim.e
+        .handle_source_read_result(sim.now, first.unwrap(), vec![good(1.0, sim.now)]);
+    assert_eq!(
+        sim.e.async_read(sim.now, g, 9, &h),
+        Err(OpcError::AdviseLimit),
+        "completed but not yet delivered"
+    );
     sim.events();
     assert!(sim.e.async_read(sim.now, g, 9, &h).is_ok());
 }
@@ -493,24 +793,36 @@ fn removing_a_group_drops_its_pending_transactions_and_callbacks() {
     sim.e.async_read(sim.now, g, 1, &h).unwrap();
     let (req, _) = sim.take_read();
     sim.e.remove_group(sim.now, s, g, true).unwrap();
-    assert!(sim.events().is_empty(), "queued callbacks of a removed group are dropped");
-    sim.e.handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
+    assert!(
+        sim.events().is_empty(),
+        "queued callbacks of a removed group are dropped"
+    );
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(1.0, sim.now)]);
     assert!(sim.events().is_empty());
     assert_eq!(sim.e.stats().pending_transactions, 0);
 }
 
 #[test]
 fn async_transaction_times_out_per_item() {
-    let mut sim = Sim::with_config(EngineConfig { source_timeout_ms: 2000, ..Default::default() });
+    let mut sim = Sim::with_config(EngineConfig {
+        source_timeout_ms: 2000,
+        ..Default::default()
+    });
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1"]);
     sim.tick();
     sim.events();
-    sim.e.async_write(sim.now, g, 4, &[(h[0], Value::R8(3.0))]).unwrap();
+    sim.e
+        .async_write(sim.now, g, 4, &[(h[0], Value::R8(3.0))])
+        .unwrap();
     sim.advance(2000);
     let ev = sim.events();
-    assert!(matches!(&ev[..], [Event::WriteComplete(w)] if w.items[0].error == Some(OpcError::NetAnswerTimeout)), "{ev:?}");
+    assert!(
+        matches!(&ev[..], [Event::WriteComplete(w)] if w.items[0].error == Some(OpcError::NetAnswerTimeout)),
+        "{ev:?}"
+    );
 }
 
 #[test]
@@ -522,8 +834,11 @@ fn sync_read_survives_group_removal() {
     let id = pending(sim.e.read(sim.now, g, DataSource::Device, &h).unwrap());
     let (req, _) = sim.take_read();
     sim.e.remove_group(sim.now, s, g, true).unwrap();
-    sim.e.handle_source_read_result(sim.now, req, vec![good(4.0, sim.now)]);
-    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else { panic!() };
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(4.0, sim.now)]);
+    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(4.0));
 }
 
@@ -531,19 +846,40 @@ fn sync_read_survives_group_removal() {
 fn item_io_read_resolves_ids_and_releases_the_cache_afterwards() {
     let mut sim = Sim::new();
     let s = sim.session();
-    let r = sim.e.item_io_read(sim.now, s, &[("CONST", 0), ("NOPE", 0), ("bad id", 0)]).unwrap();
+    let r = sim
+        .e
+        .item_io_read(sim.now, s, &[("CONST", 0), ("NOPE", 0), ("bad id", 0)])
+        .unwrap();
     let r = ready(r);
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(42.0));
-    assert_eq!((r[1].clone().err(), r[2].clone().err()), (Some(OpcError::UnknownItemId), Some(OpcError::InvalidItemId)));
-    let id = pending(sim.e.item_io_read(sim.now, s, &[("A1", MAX_AGE_DEVICE), ("A1", MAX_AGE_CACHE)]).unwrap());
+    assert_eq!(
+        (r[1].clone().err(), r[2].clone().err()),
+        (Some(OpcError::UnknownItemId), Some(OpcError::InvalidItemId))
+    );
+    let id = pending(
+        sim.e
+            .item_io_read(sim.now, s, &[("A1", MAX_AGE_DEVICE), ("A1", MAX_AGE_CACHE)])
+            .unwrap(),
+    );
     let (req, items) = sim.take_read();
     assert_eq!(items.len(), 1);
-    sim.e.handle_source_read_result(sim.now, req, vec![good(8.0, sim.now)]);
-    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else { panic!() };
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(8.0, sim.now)]);
+    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(8.0));
-    assert_eq!(r[1].as_ref().unwrap().quality, Quality::BAD_WAITING_FOR_INITIAL_DATA, "the cache as it was at the call");
+    assert_eq!(
+        r[1].as_ref().unwrap().quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA,
+        "the cache as it was at the call"
+    );
     sim.pump();
-    assert_eq!(sim.e.stats().source_items, 0, "no group refers to the items: the cache entries are gone");
+    assert_eq!(
+        sim.e.stats().source_items,
+        0,
+        "no group refers to the items: the cache entries are gone"
+    );
     assert!(sim.sub_log.is_empty(), "IOPCItemIO never subscribes");
 }
 
@@ -556,17 +892,37 @@ fn item_io_write_vqt_checks_rights_and_converts() {
             .item_io_write_vqt(
                 sim.now,
                 s,
-                &[("A1", ItemVqt::value(Value::I2(3))), ("RO", ItemVqt::value(Value::R8(1.0))), ("NOPE", ItemVqt::value(Value::R8(1.0)))],
+                &[
+                    ("A1", ItemVqt::value(Value::I2(3))),
+                    ("RO", ItemVqt::value(Value::R8(1.0))),
+                    ("NOPE", ItemVqt::value(Value::R8(1.0))),
+                ],
             )
             .unwrap(),
     );
     sim.pump();
-    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else { panic!("{:?}", sim.io) };
-    assert_eq!(items.iter().map(|(i, v)| (&*i.item_id, v.clone())).collect::<Vec<_>>(), vec![("A1", Value::R8(3.0))]);
-    sim.e.handle_source_write_result(sim.now, req_id, vec![Ok(())]);
+    let Some(SourceRequest::Write { req_id, items }) = sim.io.pop() else {
+        panic!("{:?}", sim.io)
+    };
+    assert_eq!(
+        items
+            .iter()
+            .map(|(i, v)| (&*i.item_id, v.clone()))
+            .collect::<Vec<_>>(),
+        vec![("A1", Value::R8(3.0))]
+    );
+    sim.e
+        .handle_source_write_result(sim.now, req_id, vec![Ok(())]);
     assert_eq!(
         sim.e.take_sync_result(id),
-        Some(SyncResult::Write(vec![Ok(()), Err(OpcError::BadRights), Err(OpcError::UnknownItemId)]))
+        Some(SyncResult::Write(vec![
+            Ok(()),
+            Err(OpcError::BadRights),
+            Err(OpcError::UnknownItemId)
+        ]))
     );
-    assert_eq!(sim.e.item_io_read(sim.now, s, &[]), Err(OpcError::InvalidArg));
+    assert_eq!(
+        sim.e.item_io_read(sim.now, s, &[]),
+        Err(OpcError::InvalidArg)
+    );
 }

@@ -19,8 +19,19 @@ fn first_update_sends_all_active_items_then_only_changes() {
     sim.tick();
     let dc = sim.data_changes();
     assert_eq!(dc.len(), 1);
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))]);
-    assert_eq!((dc[0].transaction_id, dc[0].client_group, dc[0].master_quality, dc[0].master_error), (0, 7, None, None));
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))]
+    );
+    assert_eq!(
+        (
+            dc[0].transaction_id,
+            dc[0].client_group,
+            dc[0].master_quality,
+            dc[0].master_error
+        ),
+        (0, 7, None, None)
+    );
     // Nothing changed: no callback at the next ticks.
     sim.push_good("A1", 1.0);
     sim.advance(2000);
@@ -40,12 +51,18 @@ fn items_waiting_for_initial_data_report_bad_waiting_quality() {
     sim.items(g, &["A1"]);
     sim.tick();
     let dc = sim.data_changes();
-    assert_eq!(dc[0].items[0].quality, Quality::BAD_WAITING_FOR_INITIAL_DATA);
+    assert_eq!(
+        dc[0].items[0].quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA
+    );
     assert_eq!(dc[0].master_quality, Some(OpcError::False));
     sim.push_good("A1", 3.0);
     sim.advance(1000);
     let dc = sim.data_changes();
-    assert_eq!((dc[0].items[0].quality, dc[0].master_quality), (Quality::GOOD, None));
+    assert_eq!(
+        (dc[0].items[0].quality, dc[0].master_quality),
+        (Quality::GOOD, None)
+    );
 }
 
 #[test]
@@ -100,7 +117,15 @@ fn deadband_suppresses_change_within_percent_of_eu_range() {
     sim.tick();
     assert_eq!(sim.data_changes().len(), 1);
     // After 60.01 is sent, 50.5 is within 10 of it and 49.0 is not.
-    for (v, reported) in [(55.0, false), (60.0, false), (40.0, false), (60.01, true), (50.5, false), (49.0, true), (55.0, false)] {
+    for (v, reported) in [
+        (55.0, false),
+        (60.0, false),
+        (40.0, false),
+        (60.01, true),
+        (50.5, false),
+        (49.0, true),
+        (55.0, false),
+    ] {
         sim.push_good("A1", v);
         sim.advance(1000);
         let dc = sim.data_changes();
@@ -145,17 +170,33 @@ fn item_deadband_overrides_group_deadband() {
     sim.push_good("A2", 2.0);
     sim.advance(1000);
     let dc = sim.data_changes();
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(2.0))], "A1 uses its 1 %, A2 the group's 50 %");
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(2.0))],
+        "A1 uses its 1 %, A2 the group's 50 %"
+    );
     // Clearing the item deadband: the group's applies again.
     sim.e.clear_item_deadband(g, &[h[0]]).unwrap();
     sim.push_good("A1", 4.0);
     sim.advance(1000);
     assert!(sim.data_changes().is_empty());
     // A lower group deadband lets the pending A2 change through without a new sample.
-    sim.e.set_group_state(sim.now, g, &SetGroupState { percent_deadband: Some(1.0), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                percent_deadband: Some(1.0),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.advance(1000);
     let dc = sim.data_changes();
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(4.0)), (101, Value::R8(2.0))]);
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(4.0)), (101, Value::R8(2.0))]
+    );
 }
 
 #[test]
@@ -173,12 +214,20 @@ fn quality_change_is_reported_even_without_value_change() {
     assert_eq!(dc[0].items[0].quality, Quality::BAD_COMM_FAILURE);
     assert_eq!(dc[0].master_quality, Some(OpcError::False));
     // Limit bits are part of the quality word.
-    sim.push("A1", Value::R8(1.0), Quality::BAD_COMM_FAILURE.with_limit(Quality::LIMIT_HIGH));
+    sim.push(
+        "A1",
+        Value::R8(1.0),
+        Quality::BAD_COMM_FAILURE.with_limit(Quality::LIMIT_HIGH),
+    );
     sim.advance(1000);
     assert_eq!(sim.data_changes().len(), 1);
     // A new timestamp alone is not a change.
     sim.advance(10);
-    sim.push("A1", Value::R8(1.0), Quality::BAD_COMM_FAILURE.with_limit(Quality::LIMIT_HIGH));
+    sim.push(
+        "A1",
+        Value::R8(1.0),
+        Quality::BAD_COMM_FAILURE.with_limit(Quality::LIMIT_HIGH),
+    );
     sim.advance(1000);
     assert!(sim.data_changes().is_empty());
 }
@@ -197,10 +246,16 @@ fn non_analog_items_report_any_change_despite_deadband() {
     sim.push("S1", Value::Bstr("b".into()), Quality::GOOD);
     sim.advance(1000);
     let dc = sim.data_changes();
-    assert_eq!(values(&dc[0]), vec![(100, Value::R4(1.001)), (101, Value::Bstr("b".into()))]);
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R4(1.001)), (101, Value::Bstr("b".into()))]
+    );
     sim.push("S1", Value::Bstr("b".into()), Quality::GOOD);
     sim.advance(1000);
-    assert!(sim.data_changes().is_empty(), "an equal string is no change");
+    assert!(
+        sim.data_changes().is_empty(),
+        "an equal string is no change"
+    );
 }
 
 #[test]
@@ -221,7 +276,12 @@ fn inactive_items_are_not_reported_and_reactivated_items_are_resent() {
     sim.advance(1000);
     assert!(sim.data_changes().is_empty());
     // Reactivated: reported at the next update although unchanged.
-    assert_eq!(sim.e.set_active_state(sim.now, g, &[h[0], 555], true).unwrap(), vec![Ok(()), Err(OpcError::InvalidHandle)]);
+    assert_eq!(
+        sim.e
+            .set_active_state(sim.now, g, &[h[0], 555], true)
+            .unwrap(),
+        vec![Ok(()), Err(OpcError::InvalidHandle)]
+    );
     sim.push_good("A1", 1.0);
     sim.advance(1000);
     let dc = sim.data_changes();
@@ -238,18 +298,46 @@ fn group_activation_resends_all_active_items() {
     sim.push_good("A2", 2.0);
     sim.tick();
     assert_eq!(sim.data_changes().len(), 1);
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(false), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(false),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.pump();
-    assert!(sim.subscribed.is_empty(), "an inactive group does not subscribe");
+    assert!(
+        sim.subscribed.is_empty(),
+        "an inactive group does not subscribe"
+    );
     sim.advance(5000);
-    assert!(sim.events().is_empty(), "no callbacks for an inactive group");
+    assert!(
+        sim.events().is_empty(),
+        "no callbacks for an inactive group"
+    );
     assert_eq!(sim.e.poll_timeout(), None);
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(true), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(true),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.push_good("A1", 1.0);
     sim.push_good("A2", 2.0);
     sim.tick();
     let dc = sim.data_changes();
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))], "all items, unchanged ones too, at once");
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(1.0)), (101, Value::R8(2.0))],
+        "all items, unchanged ones too, at once"
+    );
 }
 
 #[test]
@@ -270,20 +358,33 @@ fn disabled_callbacks_suppress_updates_until_enabled() {
     // Refresh still calls back while disabled.
     let cancel = sim.e.refresh2(sim.now, g, DataSource::Cache, 99).unwrap();
     let ev = sim.events();
-    assert!(matches!(&ev[..], [Event::DataChange(d)] if d.kind == DataChangeKind::Refresh && d.transaction_id == 99 && d.cancel_id == cancel));
+    assert!(
+        matches!(&ev[..], [Event::DataChange(d)] if d.kind == DataChangeKind::Refresh && d.transaction_id == 99 && d.cancel_id == cancel)
+    );
     sim.push_good("A1", 3.0);
     sim.e.set_enable(sim.now, g, true).unwrap();
     sim.tick();
     let dc = sim.data_changes();
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(3.0))], "changed since the last value sent (by the refresh)");
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(3.0))],
+        "changed since the last value sent (by the refresh)"
+    );
 }
 
 #[test]
 fn set_enable_without_callback_is_noconnection() {
     let mut sim = Sim::new();
     let s = sim.session();
-    let g = sim.e.add_group(sim.now, s, &GroupParams::default()).unwrap().group;
-    assert_eq!(sim.e.set_enable(sim.now, g, false), Err(OpcError::NoConnection));
+    let g = sim
+        .e
+        .add_group(sim.now, s, &GroupParams::default())
+        .unwrap()
+        .group;
+    assert_eq!(
+        sim.e.set_enable(sim.now, g, false),
+        Err(OpcError::NoConnection)
+    );
     assert_eq!(sim.e.get_enable(g), Err(OpcError::NoConnection));
 }
 
@@ -310,7 +411,16 @@ fn values_are_converted_to_the_requested_type() {
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     let h = sim.items(g, &["A1", "A2", "D1"]);
-    sim.e.set_datatypes(g, &[(h[0], VarType::I2), (h[1], VarType::BSTR), (h[2], VarType::UI1)]).unwrap();
+    sim.e
+        .set_datatypes(
+            g,
+            &[
+                (h[0], VarType::I2),
+                (h[1], VarType::BSTR),
+                (h[2], VarType::UI1),
+            ],
+        )
+        .unwrap();
     sim.push_good("A1", 2.5);
     sim.push_good("A2", 0.5);
     sim.push("D1", Value::R4(300.0), Quality::GOOD);
@@ -319,7 +429,10 @@ fn values_are_converted_to_the_requested_type() {
     let items = &dc[0].items;
     assert_eq!(items[0].value, Value::I2(2), "banker's rounding");
     assert_eq!(items[1].value, Value::Bstr("0.5".into()));
-    assert_eq!((items[2].value.clone(), items[2].error, items[2].quality), (Value::Empty, Some(OpcError::Overflow), Quality::BAD));
+    assert_eq!(
+        (items[2].value.clone(), items[2].error, items[2].quality),
+        (Value::Empty, Some(OpcError::Overflow), Quality::BAD)
+    );
     assert_eq!(dc[0].master_error, Some(OpcError::False));
 }
 
@@ -327,13 +440,27 @@ fn values_are_converted_to_the_requested_type() {
 fn group_lcid_selects_the_string_format() {
     let mut sim = Sim::new();
     let s = sim.session();
-    let g = sim.e.add_group(sim.now, s, &GroupParams { lcid: 0x0415, ..Default::default() }).unwrap().group;
+    let g = sim
+        .e
+        .add_group(
+            sim.now,
+            s,
+            &GroupParams {
+                lcid: 0x0415,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+        .group;
     sim.e.set_callback_connected(sim.now, g, true).unwrap();
     let h = sim.items(g, &["A1"]);
     sim.e.set_datatypes(g, &[(h[0], VarType::BSTR)]).unwrap();
     sim.push_good("A1", 1.5);
     sim.tick();
-    assert_eq!(sim.data_changes()[0].items[0].value, Value::Bstr("1,5".into()));
+    assert_eq!(
+        sim.data_changes()[0].items[0].value,
+        Value::Bstr("1,5".into())
+    );
 }
 
 #[test]
@@ -352,13 +479,22 @@ fn keepalive_sends_empty_callback_when_nothing_changed() {
         sim.advance(100);
         for e in sim.events() {
             if let Event::DataChange(d) = e {
-                log.push((sim.now.millis_since(start), d.kind, d.items.len(), d.transaction_id));
+                log.push((
+                    sim.now.millis_since(start),
+                    d.kind,
+                    d.items.len(),
+                    d.transaction_id,
+                ));
             }
         }
     }
     assert_eq!(
         log,
-        vec![(2500, DataChangeKind::KeepAlive, 0, 0), (5000, DataChangeKind::KeepAlive, 0, 0), (7500, DataChangeKind::KeepAlive, 0, 0)]
+        vec![
+            (2500, DataChangeKind::KeepAlive, 0, 0),
+            (5000, DataChangeKind::KeepAlive, 0, 0),
+            (7500, DataChangeKind::KeepAlive, 0, 0)
+        ]
     );
 }
 
@@ -385,7 +521,14 @@ fn keepalive_timer_restarts_after_a_data_callback() {
             }
         }
     }
-    assert_eq!(log, vec![(3000, DataChangeKind::Subscription), (6000, DataChangeKind::KeepAlive), (9000, DataChangeKind::KeepAlive)]);
+    assert_eq!(
+        log,
+        vec![
+            (3000, DataChangeKind::Subscription),
+            (6000, DataChangeKind::KeepAlive),
+            (9000, DataChangeKind::KeepAlive)
+        ]
+    );
 }
 
 #[test]
@@ -394,16 +537,36 @@ fn keepalive_is_not_sent_for_inactive_or_disabled_groups() {
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     sim.e.set_keep_alive(sim.now, g, 1000).unwrap();
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(false), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(false),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.advance(5000);
     assert!(sim.events().is_empty());
-    sim.e.set_group_state(sim.now, g, &SetGroupState { active: Some(true), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            g,
+            &SetGroupState {
+                active: Some(true),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.e.set_enable(sim.now, g, false).unwrap();
     sim.advance(5000);
     assert!(sim.events().is_empty());
     sim.e.set_enable(sim.now, g, true).unwrap();
     sim.advance(1000);
-    assert!(matches!(&sim.events()[..], [Event::DataChange(d)] if d.kind == DataChangeKind::KeepAlive));
+    assert!(
+        matches!(&sim.events()[..], [Event::DataChange(d)] if d.kind == DataChangeKind::KeepAlive)
+    );
 }
 
 #[test]
@@ -417,9 +580,14 @@ fn constant_items_never_reach_the_source_and_read_good_constant() {
     sim.tick();
     let dc = sim.data_changes();
     assert_eq!(dc[0].items[0].value, Value::R8(42.0));
-    assert_eq!(dc[0].items[0].quality, Quality::GOOD.with_limit(Quality::LIMIT_CONST));
+    assert_eq!(
+        dc[0].items[0].quality,
+        Quality::GOOD.with_limit(Quality::LIMIT_CONST)
+    );
     let r = sim.e.read(sim.now, g, DataSource::Device, &h).unwrap();
-    let SyncOutcome::Ready(r) = r else { panic!("constants answer at once") };
+    let SyncOutcome::Ready(r) = r else {
+        panic!("constants answer at once")
+    };
     assert_eq!(r[0].as_ref().unwrap().value, Value::R8(42.0));
     sim.pump();
     assert!(sim.io.is_empty(), "no device read for a constant");
@@ -436,10 +604,16 @@ fn first_subscriber_subscribes_last_unsubscribes() {
     let g2 = sim.group(s2, "g", 1000, 0.0);
     let h1 = sim.items(g1, &["A1"]);
     assert_eq!(sim.sub_log.len(), 1);
-    assert!(matches!(&sim.sub_log[0], SourceRequest::Subscribe(v) if v.len() == 1 && &*v[0].item.item_id == "A1" && v[0].sampling_rate_ms == 1000));
+    assert!(
+        matches!(&sim.sub_log[0], SourceRequest::Subscribe(v) if v.len() == 1 && &*v[0].item.item_id == "A1" && v[0].sampling_rate_ms == 1000)
+    );
     let h2 = sim.items(g2, &["A1", "alias.A1"]);
     let h3 = sim.items(g1, &["A1"]);
-    assert_eq!(sim.sub_log.len(), 1, "later subscribers do not reach the source");
+    assert_eq!(
+        sim.sub_log.len(),
+        1,
+        "later subscribers do not reach the source"
+    );
     sim.e.remove_items(sim.now, g1, &h1).unwrap();
     sim.e.set_active_state(sim.now, g2, &h2, false).unwrap();
     sim.pump();
@@ -461,8 +635,20 @@ fn subscription_changes_between_polls_are_netted() {
     let mut sim = Sim::new();
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
-    let defs = [ItemDefinition { item_id: "A1", access_path: "", active: true, client_handle: 1, requested_type: VarType::EMPTY }];
-    let h: Vec<u32> = sim.e.add_items(sim.now, g, &defs).unwrap().into_iter().map(|r| r.unwrap().server_handle).collect();
+    let defs = [ItemDefinition {
+        item_id: "A1",
+        access_path: "",
+        active: true,
+        client_handle: 1,
+        requested_type: VarType::EMPTY,
+    }];
+    let h: Vec<u32> = sim
+        .e
+        .add_items(sim.now, g, &defs)
+        .unwrap()
+        .into_iter()
+        .map(|r| r.unwrap().server_handle)
+        .collect();
     sim.e.remove_items(sim.now, g, &h).unwrap();
     sim.pump();
     assert!(sim.sub_log.is_empty());
@@ -479,14 +665,27 @@ fn fastest_sampling_rate_is_requested_from_the_source() {
     assert_eq!(sim.subscribed["A1"], 5000);
     let hf = sim.items(fast, &["A1"]);
     assert_eq!(sim.subscribed["A1"], 2000);
-    assert!(matches!(sim.sub_log.last(), Some(SourceRequest::SetSamplingRate(v)) if v[0].1 == 2000));
-    sim.e.set_item_sampling_rate(slow, &[(hs[0], 1000)]).unwrap();
+    assert!(
+        matches!(sim.sub_log.last(), Some(SourceRequest::SetSamplingRate(v)) if v[0].1 == 2000)
+    );
+    sim.e
+        .set_item_sampling_rate(slow, &[(hs[0], 1000)])
+        .unwrap();
     sim.pump();
     assert_eq!(sim.subscribed["A1"], 1000);
     sim.e.clear_item_sampling_rate(slow, &hs).unwrap();
     sim.pump();
     assert_eq!(sim.subscribed["A1"], 2000);
-    sim.e.set_group_state(sim.now, fast, &SetGroupState { update_rate: Some(10_000), ..Default::default() }).unwrap();
+    sim.e
+        .set_group_state(
+            sim.now,
+            fast,
+            &SetGroupState {
+                update_rate: Some(10_000),
+                ..Default::default()
+            },
+        )
+        .unwrap();
     sim.pump();
     assert_eq!(sim.subscribed["A1"], 5000);
     sim.e.remove_items(sim.now, slow, &hs).unwrap();
@@ -512,9 +711,15 @@ fn samples_for_stale_source_keys_are_ignored() {
     assert_ne!(old, new, "with a new generation");
     sim.tick();
     sim.events();
-    sim.e.handle_source_updates(sim.now, [(old, Vqt::new(Value::R8(666.0), Quality::GOOD, sim.now))]);
+    sim.e.handle_source_updates(
+        sim.now,
+        [(old, Vqt::new(Value::R8(666.0), Quality::GOOD, sim.now))],
+    );
     sim.advance(1000);
-    assert!(sim.data_changes().is_empty(), "the late sample of A1 does not land in A2");
+    assert!(
+        sim.data_changes().is_empty(),
+        "the late sample of A1 does not land in A2"
+    );
     assert!(sim.e.source_item(old).is_none());
     assert_eq!(&*sim.e.source_item(new).unwrap().item_id, "A2");
 }
@@ -523,7 +728,9 @@ fn samples_for_stale_source_keys_are_ignored() {
 fn one_cache_entry_serves_many_groups() {
     let mut sim = Sim::new();
     let s = sim.session();
-    let groups: Vec<GroupHandle> = (0..3).map(|i| sim.group(s, &format!("g{i}"), 1000, 0.0)).collect();
+    let groups: Vec<GroupHandle> = (0..3)
+        .map(|i| sim.group(s, &format!("g{i}"), 1000, 0.0))
+        .collect();
     for g in &groups {
         sim.items(*g, &["A1"]);
     }
@@ -591,7 +798,10 @@ proptest! {
 
 /// An engine whose subscription callbacks wait for their delivery, one at a time.
 fn paced() -> Sim {
-    Sim::with_config(EngineConfig { max_pending_data_changes: 1, ..EngineConfig::default() })
+    Sim::with_config(EngineConfig {
+        max_pending_data_changes: 1,
+        ..EngineConfig::default()
+    })
 }
 
 /// A paced engine with a 1 s group of one item, A1 (client handle 100), whose first
@@ -622,7 +832,10 @@ fn paced_callbacks_coalesce_while_the_client_is_busy_and_resume_when_it_returns(
     for i in 1..=35 {
         sim.advance(100);
         sim.push_good("A1", 1.0 + f64::from(i));
-        assert!(sim.data_changes().is_empty(), "nothing is queued while the callback is delivered");
+        assert!(
+            sim.data_changes().is_empty(),
+            "nothing is queued while the callback is delivered"
+        );
     }
     sim.push_good("A2", 2.5);
     sim.e.data_change_delivered(sim.now, g);
@@ -630,13 +843,19 @@ fn paced_callbacks_coalesce_while_the_client_is_busy_and_resume_when_it_returns(
     // One callback at once, with the latest values only (no backlog of the missed updates).
     let dc = sim.data_changes();
     assert_eq!(dc.len(), 1);
-    assert_eq!(values(&dc[0]), vec![(100, Value::R8(36.0)), (101, Value::R8(2.5))]);
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(36.0)), (101, Value::R8(2.5))]
+    );
     assert_eq!(sim.now.millis_since(start), 3500);
     // Delivered at once this time: the next update keeps the update rate from then on.
     sim.e.data_change_delivered(sim.now, g);
     sim.push_good("A1", 40.0);
     sim.advance(999);
-    assert!(sim.data_changes().is_empty(), "no callback sooner than the update rate");
+    assert!(
+        sim.data_changes().is_empty(),
+        "no callback sooner than the update rate"
+    );
     sim.advance(1);
     assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(40.0))]);
 }
@@ -648,7 +867,10 @@ fn paced_callbacks_wait_for_the_next_tick_when_the_delivery_was_quick() {
     sim.push_good("A1", 2.0);
     sim.e.data_change_delivered(sim.now, g);
     sim.tick();
-    assert!(sim.data_changes().is_empty(), "an early return does not bring the update forward");
+    assert!(
+        sim.data_changes().is_empty(),
+        "an early return does not bring the update forward"
+    );
     sim.advance(700);
     assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(2.0))]);
 }
@@ -673,7 +895,14 @@ fn paced_keepalive_is_not_sent_while_a_callback_is_under_way() {
             }
         }
     }
-    assert_eq!(log, vec![(2000, DataChangeKind::KeepAlive), (4000, DataChangeKind::KeepAlive), (6000, DataChangeKind::KeepAlive)]);
+    assert_eq!(
+        log,
+        vec![
+            (2000, DataChangeKind::KeepAlive),
+            (4000, DataChangeKind::KeepAlive),
+            (6000, DataChangeKind::KeepAlive)
+        ]
+    );
 }
 
 #[test]
@@ -683,7 +912,10 @@ fn paced_acknowledgements_of_unknown_or_removed_groups_are_ignored() {
     sim.advance(1000);
     sim.push_good("A1", 2.0);
     sim.advance(1000);
-    assert!(sim.data_changes().is_empty(), "another group's acknowledgement does not release this one");
+    assert!(
+        sim.data_changes().is_empty(),
+        "another group's acknowledgement does not release this one"
+    );
     sim.e.remove_group(sim.now, s, g, true).unwrap();
     sim.e.data_change_delivered(sim.now, g);
     sim.advance(2000);
@@ -707,7 +939,10 @@ fn unpaced_engine_sends_at_every_update_without_acknowledgements() {
 
 #[test]
 fn paced_with_two_pending_prepares_the_next_callback_while_one_travels() {
-    let mut sim = Sim::with_config(EngineConfig { max_pending_data_changes: SERVER_PENDING_DATA_CHANGES, ..EngineConfig::default() });
+    let mut sim = Sim::with_config(EngineConfig {
+        max_pending_data_changes: SERVER_PENDING_DATA_CHANGES,
+        ..EngineConfig::default()
+    });
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     sim.items(g, &["A1"]);

@@ -38,15 +38,22 @@ fn sim() -> (Sim, GroupHandle, Vec<u32>) {
 fn written(sim: &mut Sim) -> (SourceReqId, Vec<Value>) {
     sim.pump();
     match sim.io.pop() {
-        Some(SourceRequest::Write { req_id, items }) => (req_id, items.into_iter().map(|(_, v)| v).collect()),
-        Some(SourceRequest::WriteVqt { req_id, items }) => (req_id, items.into_iter().map(|(_, v)| v.value).collect()),
+        Some(SourceRequest::Write { req_id, items }) => {
+            (req_id, items.into_iter().map(|(_, v)| v).collect())
+        }
+        Some(SourceRequest::WriteVqt { req_id, items }) => {
+            (req_id, items.into_iter().map(|(_, v)| v.value).collect())
+        }
         other => panic!("no write request: {other:?}"),
     }
 }
 
 fn ext(value: Value) -> Value {
     let stamp = Timestamp::from_unix_millis(1_600_000_000_000);
-    Value::Array(ArrayValue::new(VarType::VARIANT, vec![value, Value::I4(0xC0), Value::Date(stamp.to_ole_date())]))
+    Value::Array(ArrayValue::new(
+        VarType::VARIANT,
+        vec![value, Value::I4(0xC0), Value::Date(stamp.to_ole_date())],
+    ))
 }
 
 #[test]
@@ -63,11 +70,20 @@ fn sync_write_accepts_integers_and_reals_only() {
         (h[0], ext(Value::Bstr("7.5".into()))),
         (h[2], Value::R8(1e300)),
     ];
-    let SyncOutcome::Pending(id) = sim.e.write(sim.now, g, &items).unwrap() else { panic!("not sent") };
+    let SyncOutcome::Pending(id) = sim.e.write(sim.now, g, &items).unwrap() else {
+        panic!("not sent")
+    };
     let (req, values) = written(&mut sim);
-    assert_eq!(values, vec![Value::R8(3.0), Value::R8(7.5)], "only the numeric values reach the source");
-    sim.e.handle_source_write_result(sim.now, req, vec![Ok(()), Ok(())]);
-    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else { panic!("no result") };
+    assert_eq!(
+        values,
+        vec![Value::R8(3.0), Value::R8(7.5)],
+        "only the numeric values reach the source"
+    );
+    sim.e
+        .handle_source_write_result(sim.now, req, vec![Ok(()), Ok(())]);
+    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else {
+        panic!("no result")
+    };
     assert_eq!(
         r,
         vec![
@@ -87,17 +103,43 @@ fn sync_write_accepts_integers_and_reals_only() {
 #[test]
 fn write_vqt_and_async_writes_apply_the_same_check() {
     let (mut sim, g, h) = sim();
-    let vqt = |v: Value| ItemVqt { value: v, quality: Some(Quality::GOOD), timestamp: None };
-    let SyncOutcome::Pending(_) = sim.e.write_vqt(sim.now, g, &[(h[0], vqt(Value::UI4(1))), (h[0], vqt(Value::Bstr("1".into())))]).unwrap() else {
+    let vqt = |v: Value| ItemVqt {
+        value: v,
+        quality: Some(Quality::GOOD),
+        timestamp: None,
+    };
+    let SyncOutcome::Pending(_) = sim
+        .e
+        .write_vqt(
+            sim.now,
+            g,
+            &[
+                (h[0], vqt(Value::UI4(1))),
+                (h[0], vqt(Value::Bstr("1".into()))),
+            ],
+        )
+        .unwrap()
+    else {
         panic!("not sent")
     };
     assert_eq!(written(&mut sim).1, vec![Value::R8(1.0)]);
 
     sim.e.set_callback_connected(sim.now, g, true).unwrap();
-    let started = sim.e.async_write(sim.now, g, 5, &[(h[0], Value::Bstr("4".into())), (h[0], Value::I8(4))]).unwrap();
+    let started = sim
+        .e
+        .async_write(
+            sim.now,
+            g,
+            5,
+            &[(h[0], Value::Bstr("4".into())), (h[0], Value::I8(4))],
+        )
+        .unwrap();
     assert_eq!(started.results, vec![Err(OpcError::BadType), Ok(())]);
     assert_eq!(written(&mut sim).1, vec![Value::R8(4.0)]);
-    let started = sim.e.async_write_vqt(sim.now, g, 6, &[(h[0], vqt(Value::Bool(false)))]).unwrap();
+    let started = sim
+        .e
+        .async_write_vqt(sim.now, g, 6, &[(h[0], vqt(Value::Bool(false)))])
+        .unwrap();
     assert_eq!(started.results, vec![Err(OpcError::BadType)]);
     assert_eq!(started.cancel_id, 0, "nothing queued");
 }

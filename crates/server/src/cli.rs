@@ -89,8 +89,14 @@ mod tests {
     #[test]
     fn no_or_unknown_arguments_are_errors() {
         assert!(parse(Vec::<String>::new()).is_err());
-        assert_eq!(parse(["/Frobnicate"]), Err("unknown switch `/Frobnicate`".into()));
-        assert_eq!(parse(["RegServer"]), Err("unknown argument `RegServer`".into()));
+        assert_eq!(
+            parse(["/Frobnicate"]),
+            Err("unknown switch `/Frobnicate`".into())
+        );
+        assert_eq!(
+            parse(["RegServer"]),
+            Err("unknown argument `RegServer`".into())
+        );
         assert!(parse(["/RegServer", "extra"]).is_err());
     }
 }

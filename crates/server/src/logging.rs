@@ -55,9 +55,20 @@ pub struct LogFiles {
 
 impl LogFiles {
     /// Creates the directory if needed. `today` gives the local date (injected for tests).
-    pub fn new(dir: &Path, max_bytes: u64, keep: usize, today: Box<dyn Fn() -> Date + Send>) -> io::Result<LogFiles> {
+    pub fn new(
+        dir: &Path,
+        max_bytes: u64,
+        keep: usize,
+        today: Box<dyn Fn() -> Date + Send>,
+    ) -> io::Result<LogFiles> {
         fs::create_dir_all(dir)?;
-        Ok(LogFiles { dir: dir.to_path_buf(), max_bytes: max_bytes.max(1), keep: keep.max(1), today, open: None })
+        Ok(LogFiles {
+            dir: dir.to_path_buf(),
+            max_bytes: max_bytes.max(1),
+            keep: keep.max(1),
+            today,
+            open: None,
+        })
     }
 
     fn open_file(&mut self, date: Date, mut index: u32) -> io::Result<()> {
@@ -67,7 +78,12 @@ impl LogFiles {
             let len = fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
             if len < self.max_bytes {
                 let file = OpenOptions::new().create(true).append(true).open(&path)?;
-                self.open = Some(Open { date, index, file, written: len });
+                self.open = Some(Open {
+                    date,
+                    index,
+                    file,
+                    written: len,
+                });
                 break;
             }
             index += 1;
@@ -78,7 +94,9 @@ impl LogFiles {
 
     /// Deletes the oldest of our files beyond `keep` (other files are never touched).
     pub fn cleanup(&self) {
-        let Ok(entries) = fs::read_dir(&self.dir) else { return };
+        let Ok(entries) = fs::read_dir(&self.dir) else {
+            return;
+        };
         let mut ours: Vec<((u32, u32), PathBuf)> = entries
             .flatten()
             .filter_map(|e| {
@@ -103,13 +121,17 @@ impl Write for LogFiles {
         let rotate = match &self.open {
             None => Some((today, 0)),
             Some(o) if o.date != today => Some((today, 0)),
-            Some(o) if o.written > 0 && o.written + buf.len() as u64 > self.max_bytes => Some((today, o.index + 1)),
+            Some(o) if o.written > 0 && o.written + buf.len() as u64 > self.max_bytes => {
+                Some((today, o.index + 1))
+            }
             Some(_) => None,
         };
         if let Some((date, index)) = rotate {
             self.open_file(date, index)?;
         }
-        let Some(o) = self.open.as_mut() else { return Err(io::Error::other("no log file")) };
+        let Some(o) = self.open.as_mut() else {
+            return Err(io::Error::other("no log file"));
+        };
         o.file.write_all(buf)?;
         o.written += buf.len() as u64;
         Ok(buf.len())
@@ -135,7 +157,11 @@ mod tests {
     }
 
     fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = fs::read_dir(dir).unwrap().flatten().map(|e| e.file_name().into_string().unwrap()).collect();
+        let mut v: Vec<String> = fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().into_string().unwrap())
+            .collect();
         v.sort();
         v
     }
@@ -145,7 +171,10 @@ mod tests {
         assert_eq!(file_name((2026, 11, 22), 0), "ServerCTOPC.20261122.log");
         assert_eq!(file_name((2026, 1, 2), 3), "ServerCTOPC.20260102.3.log");
         assert_eq!(parse_name("ServerCTOPC.20261122.log"), Some((20261122, 0)));
-        assert_eq!(parse_name("ServerCTOPC.20261122.12.log"), Some((20261122, 12)));
+        assert_eq!(
+            parse_name("ServerCTOPC.20261122.12.log"),
+            Some((20261122, 12))
+        );
         assert_eq!(parse_name("ServerCTOPC.2026112.log"), None);
         assert_eq!(parse_name("other.20261122.log"), None);
     }
@@ -161,8 +190,20 @@ mod tests {
         *day.lock().unwrap() = (2026, 11, 23);
         log.write_all(b"next day\n").unwrap();
         log.flush().unwrap();
-        assert_eq!(names(&dir), vec!["ServerCTOPC.20261122.1.log", "ServerCTOPC.20261122.log", "ServerCTOPC.20261123.log"]);
-        assert_eq!(fs::read(dir.join("ServerCTOPC.20261122.log")).unwrap().len(), 60);
+        assert_eq!(
+            names(&dir),
+            vec![
+                "ServerCTOPC.20261122.1.log",
+                "ServerCTOPC.20261122.log",
+                "ServerCTOPC.20261123.log"
+            ]
+        );
+        assert_eq!(
+            fs::read(dir.join("ServerCTOPC.20261122.log"))
+                .unwrap()
+                .len(),
+            60
+        );
         let _ = fs::remove_dir_all(&dir);
     }
 
@@ -180,9 +221,17 @@ mod tests {
         log.flush().unwrap();
         assert_eq!(
             names(&dir),
-            vec!["ServerCTOPC.20261004.log", "ServerCTOPC.20261005.log", "ServerCTOPC.20261122.log", "unrelated.txt"]
+            vec![
+                "ServerCTOPC.20261004.log",
+                "ServerCTOPC.20261005.log",
+                "ServerCTOPC.20261122.log",
+                "unrelated.txt"
+            ]
         );
-        assert_eq!(fs::read_to_string(dir.join("ServerCTOPC.20261122.log")).unwrap(), "before restart\nafter restart\n");
+        assert_eq!(
+            fs::read_to_string(dir.join("ServerCTOPC.20261122.log")).unwrap(),
+            "before restart\nafter restart\n"
+        );
         let _ = fs::remove_dir_all(&dir);
     }
 }
@@ -198,11 +247,19 @@ pub fn log_dir(install_dir: &Path, configured: Option<&str>) -> PathBuf {
 /// Sets up tracing into the log files, written on a background thread (never blocking a
 /// COM call). Keep the returned guard alive: dropping it flushes and ends the writer.
 #[cfg(windows)]
-pub fn init(install_dir: &Path, opts: &ctopc_core::asix::ServerOptions) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+pub fn init(
+    install_dir: &Path,
+    opts: &ctopc_core::asix::ServerOptions,
+) -> Option<tracing_appender::non_blocking::WorkerGuard> {
     use ctopc_core::asix::LogLevel;
     let dir = log_dir(install_dir, opts.log_directory.as_deref());
     let max = u64::from(opts.log_max_file_size_mb) * 1024 * 1024;
-    let files = match LogFiles::new(&dir, max, opts.log_keep_files as usize, Box::new(ctopc_com::mem::local_date)) {
+    let files = match LogFiles::new(
+        &dir,
+        max,
+        opts.log_keep_files as usize,
+        Box::new(ctopc_com::mem::local_date),
+    ) {
         Ok(f) => f,
         Err(e) => {
             eprintln!("ServerCTOPC: cannot write logs to {}: {e}", dir.display());
@@ -216,7 +273,12 @@ pub fn init(install_dir: &Path, opts: &ctopc_core::asix::ServerOptions) -> Optio
         LogLevel::Info => tracing::Level::INFO,
         LogLevel::Debug => tracing::Level::DEBUG,
     };
-    let subscriber = tracing_subscriber::fmt().with_writer(writer).with_ansi(false).with_max_level(level).with_thread_names(true).finish();
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(writer)
+        .with_ansi(false)
+        .with_max_level(level)
+        .with_thread_names(true)
+        .finish();
     if tracing::subscriber::set_global_default(subscriber).is_err() {
         eprintln!("ServerCTOPC: logging was already set up");
     }
@@ -233,7 +295,10 @@ pub fn emergency(install_dir: &Path, message: &str) {
 
 /// The UTC date (used only when the local date is not available).
 pub fn today_utc() -> Date {
-    let days = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs() / 86_400).unwrap_or(0) as i64;
+    let days = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() / 86_400)
+        .unwrap_or(0) as i64;
     civil_from_days(days)
 }
 

@@ -33,9 +33,11 @@ fn run(cmd: cli::Command) -> ExitCode {
         cli::Command::Embedding => return embedding(host::ServeMode::UntilUnused),
         cli::Command::Service => host::register_service(),
         cli::Command::ServiceRun => {
-            return match ctopc_com::service::run(Box::new(|| match embedding(host::ServeMode::UntilStopped) {
-                code if code == ExitCode::SUCCESS => Ok(()),
-                _ => Err("the server stopped with an error (see the log)".into()),
+            return match ctopc_com::service::run(Box::new(|| {
+                match embedding(host::ServeMode::UntilStopped) {
+                    code if code == ExitCode::SUCCESS => Ok(()),
+                    _ => Err("the server stopped with an error (see the log)".into()),
+                }
             })) {
                 Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
@@ -75,7 +77,10 @@ fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
     // path in it (the same as the install folder, unless SERVERCTOPC_INI names the file).
     let config = loaded.namespace.config();
     let mut log_options = config.server.clone();
-    log_options.log_directory = log_options.log_directory.as_deref().map(|d| config.resolve_path(d).to_string_lossy().into_owned());
+    log_options.log_directory = log_options
+        .log_directory
+        .as_deref()
+        .map(|d| config.resolve_path(d).to_string_lossy().into_owned());
     let _guard = logging::init(&dir, &log_options);
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "ServerCTOPC starting");
     match host::serve_as(loaded, Box::new(backend::make), mode) {

@@ -64,7 +64,13 @@ mod bench {
     fn bench_config() -> Res<std::path::PathBuf> {
         let exe = std::env::current_exe().map_err(|e| format!("current_exe: {e}"))?;
         let dir = exe.parent().ok_or("no folder")?;
-        let db = dir.join("..").join("..").join("..").join("demo").join("wytwornia_kwasu").join("wytwornia_kwasu.zez");
+        let db = dir
+            .join("..")
+            .join("..")
+            .join("..")
+            .join("demo")
+            .join("wytwornia_kwasu")
+            .join("wytwornia_kwasu.zez");
         let ini = format!(
             "; Written by bench-com.exe: the embedded demo with a faster MinUpdateRate.\r\n[Server]\r\nSimulateCurrentData = tak\r\nMinUpdateRate = {RATE_MS}\r\nLogLevel = warn\r\n[Channel:*]\r\nItemsDatabase = {}\r\nCheckLimits = tak\r\nCheckControlVariables = tak\r\n",
             db.display()
@@ -93,7 +99,11 @@ mod bench {
         let args: Vec<String> = std::env::args().skip(1).collect();
         let quick = args.iter().any(|a| a == "--quick");
         let num = |name: &str, default: usize| {
-            args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
+            args.iter()
+                .position(|a| a == name)
+                .and_then(|i| args.get(i + 1))
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(default)
         };
         Opts {
             runs: if quick { 5 } else { 15 },
@@ -174,7 +184,15 @@ mod bench {
         let mut states: *mut OPCITEMSTATE = std::ptr::null_mut();
         let mut errors: *mut HRESULT = std::ptr::null_mut();
         // SAFETY: valid arrays and out-pointers.
-        let hr = unsafe { sync.Read(source, handles.len() as u32, handles.as_ptr(), &mut states, &mut errors) };
+        let hr = unsafe {
+            sync.Read(
+                source,
+                handles.len() as u32,
+                handles.as_ptr(),
+                &mut states,
+                &mut errors,
+            )
+        };
         let mut failed = 0;
         if !states.is_null() {
             // SAFETY: `len` OPCITEMSTATEs from the server; VARIANTs cleared, blocks freed once.
@@ -182,7 +200,10 @@ mod bench {
                 for s in std::slice::from_raw_parts_mut(states, handles.len()) {
                     let _ = VariantClear(&mut s.vDataValue);
                 }
-                failed = std::slice::from_raw_parts(errors, handles.len()).iter().filter(|e| e.is_err()).count();
+                failed = std::slice::from_raw_parts(errors, handles.len())
+                    .iter()
+                    .filter(|e| e.is_err())
+                    .count();
             }
         }
         free(states);
@@ -193,11 +214,21 @@ mod bench {
     fn write_raw(sync: &IOPCSyncIO, handles: &[u32], values: &[VARIANT]) -> (HRESULT, usize) {
         let mut errors: *mut HRESULT = std::ptr::null_mut();
         // SAFETY: valid arrays and out-pointer.
-        let hr = unsafe { sync.Write(handles.len() as u32, handles.as_ptr(), values.as_ptr(), &mut errors) };
+        let hr = unsafe {
+            sync.Write(
+                handles.len() as u32,
+                handles.as_ptr(),
+                values.as_ptr(),
+                &mut errors,
+            )
+        };
         let mut failed = 0;
         if !errors.is_null() {
             // SAFETY: `len` HRESULTs from the server.
-            failed = unsafe { std::slice::from_raw_parts(errors, handles.len()) }.iter().filter(|e| e.is_err()).count();
+            failed = unsafe { std::slice::from_raw_parts(errors, handles.len()) }
+                .iter()
+                .filter(|e| e.is_err())
+                .count();
         }
         free(errors);
         (hr, failed)
@@ -211,7 +242,10 @@ mod bench {
     }
 
     fn defs(ids: &[String]) -> Defs {
-        let wide: Vec<Vec<u16>> = ids.iter().map(|s| s.encode_utf16().chain(std::iter::once(0)).collect()).collect();
+        let wide: Vec<Vec<u16>> = ids
+            .iter()
+            .map(|s| s.encode_utf16().chain(std::iter::once(0)).collect())
+            .collect();
         let mut path = vec![0u16];
         let defs = wide
             .iter()
@@ -224,7 +258,11 @@ mod bench {
                 ..Default::default()
             })
             .collect();
-        Defs { _ids: wide, _path: path, defs }
+        Defs {
+            _ids: wide,
+            _path: path,
+            defs,
+        }
     }
 
     /// AddItems of `defs` (raw): the server handles and the number of failed items.
@@ -232,7 +270,8 @@ mod bench {
         let mut results: *mut OPCITEMRESULT = std::ptr::null_mut();
         let mut errors: *mut HRESULT = std::ptr::null_mut();
         // SAFETY: `defs` and the strings it points at live for the call; valid out-pointers.
-        let hr = unsafe { mgt.AddItems(defs.len() as u32, defs.as_ptr(), &mut results, &mut errors) };
+        let hr =
+            unsafe { mgt.AddItems(defs.len() as u32, defs.as_ptr(), &mut results, &mut errors) };
         if hr.is_err() || results.is_null() || errors.is_null() {
             return Err(format!("AddItems: {hr:?}"));
         }
@@ -243,7 +282,10 @@ mod bench {
             for x in r {
                 free(x.pBlob);
             }
-            (r.iter().map(|x| x.hServer).collect(), e.iter().filter(|e| e.is_err()).count())
+            (
+                r.iter().map(|x| x.hServer).collect(),
+                e.iter().filter(|e| e.is_err()).count(),
+            )
         };
         free(results);
         free(errors);
@@ -310,13 +352,20 @@ mod bench {
             .all()
             .into_iter()
             .filter_map(|c| match c {
-                Callback::DataChange { transaction: 0, items, .. } => Some(items.iter().map(|i| i.client_handle).collect()),
+                Callback::DataChange {
+                    transaction: 0,
+                    items,
+                    ..
+                } => Some(items.iter().map(|i| i.client_handle).collect()),
                 _ => None,
             })
             .collect();
         let _ = remove_group(server, g.server_handle);
         if updates.len() < 3 {
-            return Err(format!("only {} OnDataChange callbacks in 8 update periods", updates.len()));
+            return Err(format!(
+                "only {} OnDataChange callbacks in 8 update periods",
+                updates.len()
+            ));
         }
         let later = &updates[1..];
         let changing = names
@@ -377,7 +426,7 @@ mod bench {
         fn find() -> Res<ServerProcess> {
             const TH32CS_SNAPPROCESS: u32 = 2;
             const ACCESS: u32 = 0x0400 | 0x0010; // PROCESS_QUERY_INFORMATION | PROCESS_VM_READ
-            // SAFETY: plain Win32 calls with a correctly sized entry; the snapshot is closed.
+                                                 // SAFETY: plain Win32 calls with a correctly sized entry; the snapshot is closed.
             unsafe {
                 let snap = CreateToolhelp32Snapshot(TH32CS_SNAPPROCESS, 0);
                 if snap == -1 || snap == 0 {
@@ -406,7 +455,10 @@ mod bench {
         }
 
         fn counters(&self) -> Res<MemoryCounters> {
-            let mut c = MemoryCounters { cb: std::mem::size_of::<MemoryCounters>() as u32, ..Default::default() };
+            let mut c = MemoryCounters {
+                cb: std::mem::size_of::<MemoryCounters>() as u32,
+                ..Default::default()
+            };
             // SAFETY: a process handle with query rights and a correctly sized struct.
             if unsafe { K32GetProcessMemoryInfo(self.0, &mut c, c.cb) } == 0 {
                 return Err("K32GetProcessMemoryInfo failed".into());
@@ -439,7 +491,13 @@ mod bench {
 
     /// Values per second delivered by subscription callbacks to `clients` clients with
     /// `items` items each (cycling over `vars`): medians of several windows.
-    fn throughput(clients: usize, items: usize, vars: &[String], windows: usize, window: Duration) -> Res<(Vec<f64>, usize)> {
+    fn throughput(
+        clients: usize,
+        items: usize,
+        vars: &[String],
+        windows: usize,
+        window: Duration,
+    ) -> Res<(Vec<f64>, usize)> {
         let ids = cycle(vars, items);
         let mut conns = Vec::new();
         let mut recs = Vec::new();
@@ -448,15 +506,23 @@ mod bench {
             let g = group(&server, RATE_MS)?;
             add_all(&g, &ids)?;
             let rec = Recorder::counting();
-            ctopc_com::client::advise_data_callback(&g.unknown, &TestSink::create(&rec)).map_err(err("Advise"))?;
+            ctopc_com::client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
+                .map_err(err("Advise"))?;
             recs.push(rec);
             conns.push((server, g));
             trace(&format!("client {} of {clients} subscribed", conns.len()));
         }
-        let total = |recs: &[Arc<Recorder>]| recs.iter().map(|r| r.data_change_items.load(Ordering::Relaxed)).sum::<u64>();
+        let total = |recs: &[Arc<Recorder>]| {
+            recs.iter()
+                .map(|r| r.data_change_items.load(Ordering::Relaxed))
+                .sum::<u64>()
+        };
         // Warm-up: the first callback of each client carries every item, changed or not.
         let deadline = Instant::now() + Duration::from_secs(60);
-        while recs.iter().any(|r| r.data_changes.load(Ordering::Relaxed) < 2) {
+        while recs
+            .iter()
+            .any(|r| r.data_changes.load(Ordering::Relaxed) < 2)
+        {
             if Instant::now() > deadline {
                 return Err("subscription callbacks did not start".into());
             }
@@ -469,7 +535,10 @@ mod bench {
             let (t1, n1) = (Instant::now(), total(&recs));
             rates.push((n1 - n0) as f64 / (t1 - t0).as_secs_f64());
         }
-        let callbacks = recs.iter().map(|r| r.data_changes.load(Ordering::Relaxed) as usize).sum();
+        let callbacks = recs
+            .iter()
+            .map(|r| r.data_changes.load(Ordering::Relaxed) as usize)
+            .sum();
         trace("measured; disconnecting the clients");
         drop(conns);
         trace("disconnected");
@@ -487,13 +556,22 @@ mod bench {
         let main = Server::connect(PROGID).map_err(err("connect"))?;
         let vars = demo_vars();
         let ids: Vec<String> = match what {
-            "write" => vars.iter().filter(|v| v.writable && v.r4).map(|v| v.name.clone()).collect(),
+            "write" => vars
+                .iter()
+                .filter(|v| v.writable && v.r4)
+                .map(|v| v.name.clone())
+                .collect(),
             _ => vars.iter().map(|v| v.name.clone()).collect(),
         };
         let g = group(&main, 1000)?;
         let handles = add_all(&g, &cycle(&ids, N))?;
         let sync: IOPCSyncIO = g.unknown.cast().map_err(err("IOPCSyncIO"))?;
-        let values: Vec<VARIANT> = (0..N).map(|i| ctopc_com::variant::to_variant(&ctopc_core::Value::R4((i % 10) as f32)).unwrap_or_default()).collect();
+        let values: Vec<VARIANT> = (0..N)
+            .map(|i| {
+                ctopc_com::variant::to_variant(&ctopc_core::Value::R4((i % 10) as f32))
+                    .unwrap_or_default()
+            })
+            .collect();
         std::thread::sleep(Duration::from_secs(2));
         let mut runs = Vec::with_capacity(n);
         for _ in 0..n {
@@ -538,7 +616,11 @@ mod bench {
                 let main = Server::connect(PROGID).map_err(err("connect"))?;
                 let changing = changing_vars(&main, &demo_vars())?;
                 let (rates, cbs) = throughput(n, o.items_per_client, &changing, 5, o.window)?;
-                println!("OnDataChange {n} clients x {}: median {:.0} values/s ({cbs} callbacks)", o.items_per_client, median(rates));
+                println!(
+                    "OnDataChange {n} clients x {}: median {:.0} values/s ({cbs} callbacks)",
+                    o.items_per_client,
+                    median(rates)
+                );
                 return Ok(());
             }
             return profile_loop(what, n);
@@ -548,7 +630,10 @@ mod bench {
         println!("ServerCTOPC COM benchmark (demo plant, simulated, MinUpdateRate {RATE_MS} ms, config {}; Wine; medians of {} runs unless noted)", ini.display(), o.runs);
         let t = Instant::now();
         let main = Server::connect(PROGID).map_err(err("first CoCreateInstance"))?;
-        println!("first activation (starts the server process): {:.0} ms", ms(t.elapsed()));
+        println!(
+            "first activation (starts the server process): {:.0} ms",
+            ms(t.elapsed())
+        );
 
         // Baseline: a null round trip.
         for _ in 0..200 {
@@ -562,8 +647,15 @@ mod bench {
             })
             .collect();
         let baseline_ms = median(base.clone());
-        let mut rep = Report { baseline_ms, lines: Vec::new() };
-        rep.note(format!("{:<44} median {baseline_ms:>9.3} ms  (n={})", "baseline: null round trip (GetLocaleID)", base.len()));
+        let mut rep = Report {
+            baseline_ms,
+            lines: Vec::new(),
+        };
+        rep.note(format!(
+            "{:<44} median {baseline_ms:>9.3} ms  (n={})",
+            "baseline: null round trip (GetLocaleID)",
+            base.len()
+        ));
 
         let vars = demo_vars();
         let names: Vec<String> = vars.iter().map(|v| v.name.clone()).collect();
@@ -576,22 +668,44 @@ mod bench {
                 let m0 = settled(&proc_)?;
                 add_all(&g, &cycle(&names, o.memory_items))?;
                 let m1 = settled(&proc_)?;
-                let distinct: Vec<String> = (0..o.memory_items).map(|i| format!("asmen.BENCH.V{i:06}.R4")).collect();
+                let distinct: Vec<String> = (0..o.memory_items)
+                    .map(|i| format!("asmen.BENCH.V{i:06}.R4"))
+                    .collect();
                 let g2 = group(&main, 1000)?;
                 add_all(&g2, &distinct)?;
                 let m2 = settled(&proc_)?;
                 let per = |a: usize, b: usize| (b as f64 - a as f64) / o.memory_items as f64;
                 for (what, a, b) in [
-                    (format!("{} items over the demo's {} variables", o.memory_items, names.len()), m0, m1),
-                    (format!("{} distinct items (descriptive IDs)", o.memory_items), m1, m2),
+                    (
+                        format!(
+                            "{} items over the demo's {} variables",
+                            o.memory_items,
+                            names.len()
+                        ),
+                        m0,
+                        m1,
+                    ),
+                    (
+                        format!("{} distinct items (descriptive IDs)", o.memory_items),
+                        m1,
+                        m2,
+                    ),
                 ] {
                     let private = per(a.private_usage, b.private_usage);
                     let ws = per(a.working_set_size, b.working_set_size);
                     // Wine reports no private bytes for another process (0): then the
                     // working set's growth stands in for them.
-                    let (basis, x) = if a.private_usage == 0 && b.private_usage == 0 { ("working set", ws) } else { ("private bytes", private) };
+                    let (basis, x) = if a.private_usage == 0 && b.private_usage == 0 {
+                        ("working set", ws)
+                    } else {
+                        ("private bytes", private)
+                    };
                     let verdict = if x <= 300.0 { "met" } else { "NOT met" };
-                    let private = if basis == "private bytes" { format!("{private:>7.0} B/item") } else { "not reported (Wine)".into() };
+                    let private = if basis == "private bytes" {
+                        format!("{private:>7.0} B/item")
+                    } else {
+                        "not reported (Wine)".into()
+                    };
                     rep.note(format!(
                         "{:<44} working set {ws:>7.0} B/item, private bytes {private}   goal <= 300 B/item ({basis}): {verdict}   [{what}]",
                         "server memory per item"
@@ -623,7 +737,10 @@ mod bench {
         // AddItems of 10,000 items in one call (a fresh group each run).
         let distinct: Vec<String> = (0..N).map(|i| format!("asmen.BENCH.A{i:05}.R4")).collect();
         let demo_cycle = cycle(&names, N);
-        for (what, ids) in [("AddItems 10,000 (distinct descriptive IDs)", &distinct), ("AddItems 10,000 (demo variables, repeated)", &demo_cycle)] {
+        for (what, ids) in [
+            ("AddItems 10,000 (distinct descriptive IDs)", &distinct),
+            ("AddItems 10,000 (demo variables, repeated)", &demo_cycle),
+        ] {
             let d = defs(ids);
             let mut runs = Vec::new();
             for _ in 0..o.runs.min(9) {
@@ -648,17 +765,29 @@ mod bench {
         let deadline = Instant::now() + Duration::from_secs(20);
         loop {
             let (hr, failed) = read_raw(&sync, OPC_DS_CACHE, &handles);
-            let (_, items) = ctopc_com::client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()]).map_err(err("Read"))?;
-            if hr.is_ok() && failed == 0 && items.iter().all(|i| i.quality & 0xC0 == 0xC0 || i.quality == 0x10) {
+            let (_, items) =
+                ctopc_com::client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()])
+                    .map_err(err("Read"))?;
+            if hr.is_ok()
+                && failed == 0
+                && items
+                    .iter()
+                    .all(|i| i.quality & 0xC0 == 0xC0 || i.quality == 0x10)
+            {
                 break;
             }
             if Instant::now() > deadline {
-                rep.note("  (cache read: not every item reached GOOD quality; timing anyway)".into());
+                rep.note(
+                    "  (cache read: not every item reached GOOD quality; timing anyway)".into(),
+                );
                 break;
             }
             std::thread::sleep(Duration::from_millis(200));
         }
-        for (what, source, goal) in [("Read 10,000 from CACHE", OPC_DS_CACHE, Some(15.0)), ("Read 10,000 from DEVICE", OPC_DS_DEVICE, None)] {
+        for (what, source, goal) in [
+            ("Read 10,000 from CACHE", OPC_DS_CACHE, Some(15.0)),
+            ("Read 10,000 from DEVICE", OPC_DS_DEVICE, None),
+        ] {
             let _ = read_raw(&sync, source, &handles);
             let mut runs = Vec::new();
             for _ in 0..o.runs {
@@ -684,11 +813,20 @@ mod bench {
         let _ = remove_group(&main, g.server_handle);
 
         // Write of 10,000 items: the demo's few writable R4 set points, repeated.
-        let writable: Vec<String> = vars.iter().filter(|v| v.writable && v.r4).map(|v| v.name.clone()).collect();
+        let writable: Vec<String> = vars
+            .iter()
+            .filter(|v| v.writable && v.r4)
+            .map(|v| v.name.clone())
+            .collect();
         let g = group(&main, 1000)?;
         let handles = add_all(&g, &cycle(&writable, N))?;
         let sync: IOPCSyncIO = g.unknown.cast().map_err(err("IOPCSyncIO"))?;
-        let values: Vec<VARIANT> = (0..N).map(|i| ctopc_com::variant::to_variant(&ctopc_core::Value::R4((i % 10) as f32)).unwrap_or_default()).collect();
+        let values: Vec<VARIANT> = (0..N)
+            .map(|i| {
+                ctopc_com::variant::to_variant(&ctopc_core::Value::R4((i % 10) as f32))
+                    .unwrap_or_default()
+            })
+            .collect();
         let _ = write_raw(&sync, &handles, &values);
         let mut runs = Vec::new();
         for _ in 0..o.runs {
@@ -699,7 +837,11 @@ mod bench {
                 return Err(format!("Write: {hr:?}, {failed} items failed"));
             }
         }
-        rep.time(&format!("Write 10,000 ({} set points repeated)", writable.len()), &runs, Some(9.0));
+        rep.time(
+            &format!("Write 10,000 ({} set points repeated)", writable.len()),
+            &runs,
+            Some(9.0),
+        );
         let invalid: Vec<u32> = (0..N as u32).map(|i| 0xF000_0000 + i).collect();
         let mut runs = Vec::new();
         for _ in 0..o.runs {
@@ -741,7 +883,10 @@ mod bench {
         );
         let (rates, cbs) = throughput(o.clients, o.items_per_client, &changing, windows, o.window)?;
         rep.rate(
-            &format!("OnDataChange, {} clients x {} items", o.clients, o.items_per_client),
+            &format!(
+                "OnDataChange, {} clients x {} items",
+                o.clients, o.items_per_client
+            ),
             &rates,
             Some(1_200_000.0),
             &format!("({cbs} callbacks)"),

@@ -6,7 +6,7 @@ use ctopc_com::client::{ItemDef, OpcGroup, Server};
 use e2e_tests::interfaces::*;
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
-use windows::core::{implement, Interface, IUnknown, BOOL, HRESULT, HSTRING, PCWSTR};
+use windows::core::{implement, IUnknown, Interface, BOOL, HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
 use windows::Win32::System::Variant::VARIANT;
@@ -23,7 +23,6 @@ pub const VT_BSTR: u16 = 8;
 pub const VT_DISPATCH: u16 = 9;
 pub const VT_ARRAY: u16 = 0x2000;
 
-
 /// A group made with IOPCServer::AddGroup (update rate 1000 ms, English, no deadband).
 pub struct G {
     pub group: OpcGroup,
@@ -39,7 +38,13 @@ impl std::ops::Deref for G {
 }
 
 /// IOPCServer::AddGroup, asking for IUnknown.
-pub fn try_add_group(server: &Server, name: &str, active: bool, rate: u32, client: u32) -> windows::core::Result<G> {
+pub fn try_add_group(
+    server: &Server,
+    name: &str,
+    active: bool,
+    rate: u32,
+    client: u32,
+) -> windows::core::Result<G> {
     let name = HSTRING::from(name);
     let (mut handle, mut revised) = (0u32, 0u32);
     let mut unk: Option<IUnknown> = None;
@@ -62,8 +67,13 @@ pub fn try_add_group(server: &Server, name: &str, active: bool, rate: u32, clien
         )
     };
     hr.ok()?;
-    let unknown = unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
-    Ok(G { group: OpcGroup::from_unknown(unknown)?, server_handle: handle, revised_rate: revised })
+    let unknown =
+        unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
+    Ok(G {
+        group: OpcGroup::from_unknown(unknown)?,
+        server_handle: handle,
+        revised_rate: revised,
+    })
 }
 
 pub fn add_group(server: &Server, name: &str, active: bool, client: u32) -> G {
@@ -82,22 +92,32 @@ pub fn item(id: &str, client: u32) -> ItemDef {
 }
 
 pub fn item_in(id: &str, path: &str, client: u32) -> ItemDef {
-    ItemDef { access_path: path.into(), ..ItemDef::new(id, client) }
+    ItemDef {
+        access_path: path.into(),
+        ..ItemDef::new(id, client)
+    }
 }
 
 pub fn item_typed(id: &str, client: u32, vt: u16) -> ItemDef {
-    ItemDef { requested_type: vt, ..ItemDef::new(id, client) }
+    ItemDef {
+        requested_type: vt,
+        ..ItemDef::new(id, client)
+    }
 }
 
 pub fn inactive(id: &str, client: u32) -> ItemDef {
-    ItemDef { active: false, ..ItemDef::new(id, client) }
+    ItemDef {
+        active: false,
+        ..ItemDef::new(id, client)
+    }
 }
 
 /// The group's IOPCDataCallback connection point.
 pub fn data_point(g: &OpcGroup) -> IConnectionPoint {
     let cpc: IConnectionPointContainer = g.unknown.cast().expect("IConnectionPointContainer");
     // SAFETY: valid IID.
-    unsafe { cpc.FindConnectionPoint(&IOPCDataCallback::IID) }.expect("FindConnectionPoint(IOPCDataCallback)")
+    unsafe { cpc.FindConnectionPoint(&IOPCDataCallback::IID) }
+        .expect("FindConnectionPoint(IOPCDataCallback)")
 }
 
 // ---- the sink ------------------------------------------------------------------------------
@@ -194,14 +214,22 @@ impl IOPCDataCallback_Impl for Sink_Impl {
                 unsafe {
                     items.push((
                         *h.add(i),
-                        ctopc_com::variant::from_variant(&*v.add(i)).unwrap_or(ctopc_core::Value::Empty),
+                        ctopc_com::variant::from_variant(&*v.add(i))
+                            .unwrap_or(ctopc_core::Value::Empty),
                         *q.add(i),
                         *e.add(i),
                     ));
                 }
             }
         }
-        let c = Change { transaction, group, master_quality, master_error, items, at: Instant::now() };
+        let c = Change {
+            transaction,
+            group,
+            master_quality,
+            master_error,
+            items,
+            at: Instant::now(),
+        };
         self.0.changes.lock().unwrap().push(c);
         self.0.cv.notify_all();
         let until = Instant::now() + *self.0.hold_limit.lock().unwrap();
@@ -225,7 +253,15 @@ impl IOPCDataCallback_Impl for Sink_Impl {
     ) -> windows::core::Result<()> {
         Ok(())
     }
-    unsafe fn OnWriteComplete(&self, _: u32, _: u32, _: HRESULT, _: u32, _: *const u32, _: *const HRESULT) -> windows::core::Result<()> {
+    unsafe fn OnWriteComplete(
+        &self,
+        _: u32,
+        _: u32,
+        _: HRESULT,
+        _: u32,
+        _: *const u32,
+        _: *const HRESULT,
+    ) -> windows::core::Result<()> {
         Ok(())
     }
     unsafe fn OnCancelComplete(&self, _: u32, _: u32) -> windows::core::Result<()> {

@@ -12,7 +12,9 @@ use std::sync::Mutex;
 use windows::core::{implement, BOOL, HRESULT};
 use windows::Win32::Foundation::{FILETIME, SYSTEMTIME};
 use windows::Win32::System::Console::SetConsoleCtrlHandler;
-use windows::Win32::System::Time::{FileTimeToSystemTime, SystemTimeToFileTime, SystemTimeToTzSpecificLocalTime};
+use windows::Win32::System::Time::{
+    FileTimeToSystemTime, SystemTimeToFileTime, SystemTimeToTzSpecificLocalTime,
+};
 use windows::Win32::System::Variant::VARIANT;
 
 /// One OnDataChange, owned. `items[i].client_handle` is the item's client handle.
@@ -94,7 +96,13 @@ impl IOPCDataCallback_Impl for ChangeSink_Impl {
     ) -> windows::core::Result<()> {
         // SAFETY: the stub passes `n`-element arrays for the duration of the call.
         let items = unsafe { callback_items(n, h, v, q, t, e) };
-        let change = DataChange { transaction, group, master_quality, master_error, items };
+        let change = DataChange {
+            transaction,
+            group,
+            master_quality,
+            master_error,
+            items,
+        };
         if let Ok(tx) = self.tx.lock() {
             let _ = tx.send(change);
         }
@@ -117,7 +125,15 @@ impl IOPCDataCallback_Impl for ChangeSink_Impl {
         Ok(())
     }
 
-    unsafe fn OnWriteComplete(&self, _: u32, _: u32, _: HRESULT, _: u32, _: *const u32, _: *const HRESULT) -> windows::core::Result<()> {
+    unsafe fn OnWriteComplete(
+        &self,
+        _: u32,
+        _: u32,
+        _: HRESULT,
+        _: u32,
+        _: *const u32,
+        _: *const HRESULT,
+    ) -> windows::core::Result<()> {
         Ok(())
     }
 
@@ -155,7 +171,10 @@ pub fn ctrl_c_pressed() -> bool {
 /// winter), from the Windows time zone settings including daylight saving time.
 pub fn utc_offset_minutes(t: Timestamp) -> windows::core::Result<i32> {
     let (lo, hi) = t.filetime_parts();
-    let ft = FILETIME { dwLowDateTime: lo, dwHighDateTime: hi };
+    let ft = FILETIME {
+        dwLowDateTime: lo,
+        dwHighDateTime: hi,
+    };
     let mut utc = SYSTEMTIME::default();
     let mut local = SYSTEMTIME::default();
     let mut local_ft = FILETIME::default();

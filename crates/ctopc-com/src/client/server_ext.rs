@@ -9,9 +9,11 @@ use crate::interfaces::*;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::Value;
 use std::ffi::c_void;
-use windows::core::{Interface, IUnknown, BOOL, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
+use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::FILETIME;
-use windows::Win32::System::Com::{CoTaskMemFree, IConnectionPointContainer, IEnumString, IEnumUnknown};
+use windows::Win32::System::Com::{
+    CoTaskMemFree, IConnectionPointContainer, IEnumString, IEnumUnknown,
+};
 use windows::Win32::System::Variant::VARIANT;
 
 /// The result of AddGroup, owned.
@@ -41,7 +43,15 @@ pub struct GroupSpec {
 impl GroupSpec {
     /// An active group with a 1000 ms rate, NULL bias and deadband, English.
     pub fn new(name: &str) -> GroupSpec {
-        GroupSpec { name: name.into(), active: true, rate_ms: 1000, client_handle: 1, time_bias: None, deadband: None, lcid: 0x0409 }
+        GroupSpec {
+            name: name.into(),
+            active: true,
+            rate_ms: 1000,
+            client_handle: 1,
+            time_bias: None,
+            deadband: None,
+            lcid: 0x0409,
+        }
     }
 }
 
@@ -91,7 +101,11 @@ pub struct BrowseArgs {
 impl BrowseArgs {
     /// Every element of `item_id`, no properties.
     pub fn all(item_id: &str) -> BrowseArgs {
-        BrowseArgs { item_id: item_id.into(), filter: OPC_BROWSE_FILTER_ALL.0, ..Default::default() }
+        BrowseArgs {
+            item_id: item_id.into(),
+            filter: OPC_BROWSE_FILTER_ALL.0,
+            ..Default::default()
+        }
     }
 }
 
@@ -136,11 +150,16 @@ fn take_value(v: &mut VARIANT) -> Value {
 
 /// Takes an OPCITEMPROPERTIES (its array and strings; not the struct itself).
 fn take_item_properties(p: &mut OPCITEMPROPERTIES) -> ItemProperties {
-    let mut out = ItemProperties { error: p.hrErrorID, properties: Vec::new() };
+    let mut out = ItemProperties {
+        error: p.hrErrorID,
+        properties: Vec::new(),
+    };
     if !p.pItemProperties.is_null() {
         // SAFETY: the server allocated `dwNumProperties` initialised elements; each is
         // taken once, then the block is freed once.
-        let props = unsafe { std::slice::from_raw_parts_mut(p.pItemProperties, p.dwNumProperties as usize) };
+        let props = unsafe {
+            std::slice::from_raw_parts_mut(p.pItemProperties, p.dwNumProperties as usize)
+        };
         for prop in props.iter_mut() {
             out.properties.push(Property {
                 id: prop.dwPropertyID,
@@ -217,7 +236,9 @@ impl Server {
                 spec.rate_ms,
                 spec.client_handle,
                 bias.as_ref().map_or(std::ptr::null(), |b| b as *const i32),
-                deadband.as_ref().map_or(std::ptr::null(), |d| d as *const f32),
+                deadband
+                    .as_ref()
+                    .map_or(std::ptr::null(), |d| d as *const f32),
                 spec.lcid,
                 &mut handle,
                 &mut revised,
@@ -226,8 +247,14 @@ impl Server {
             )
         };
         let _ = ok_or_s_false(hr)?;
-        let object = unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
-        Ok(AddedGroup { code: hr, server_handle: handle, revised_rate: revised, object })
+        let object =
+            unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
+        Ok(AddedGroup {
+            code: hr,
+            server_handle: handle,
+            revised_rate: revised,
+            object,
+        })
     }
 
     /// IOPCServer::AddGroup asking for IUnknown.
@@ -240,7 +267,10 @@ impl Server {
         let name = HSTRING::from(name);
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid pointers for the call.
-        unsafe { self.server.GetGroupByName(PCWSTR(name.as_ptr()), riid, &mut unk)? };
+        unsafe {
+            self.server
+                .GetGroupByName(PCWSTR(name.as_ptr()), riid, &mut unk)?
+        };
         unk.ok_or_else(|| windows::Win32::Foundation::E_POINTER.into())
     }
 
@@ -256,21 +286,35 @@ impl Server {
     }
 
     /// IOPCServer::CreateGroupEnumerator for `riid`, raw: (S_OK or S_FALSE, the enumerator).
-    pub fn group_enumerator(&self, scope: OPCENUMSCOPE, riid: &GUID) -> windows::core::Result<(HRESULT, IUnknown)> {
+    pub fn group_enumerator(
+        &self,
+        scope: OPCENUMSCOPE,
+        riid: &GUID,
+    ) -> windows::core::Result<(HRESULT, IUnknown)> {
         let mut unk: Option<IUnknown> = None;
         // SAFETY: valid pointers for the call.
-        let hr = ok_or_s_false(unsafe { self.server.CreateGroupEnumerator(scope, riid, &mut unk) })?;
-        Ok((hr, unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?))
+        let hr =
+            ok_or_s_false(unsafe { self.server.CreateGroupEnumerator(scope, riid, &mut unk) })?;
+        Ok((
+            hr,
+            unk.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?,
+        ))
     }
 
     /// The names of the groups in `scope` (IEnumString), with the call's code.
-    pub fn group_names(&self, scope: OPCENUMSCOPE) -> windows::core::Result<(HRESULT, Vec<String>)> {
+    pub fn group_names(
+        &self,
+        scope: OPCENUMSCOPE,
+    ) -> windows::core::Result<(HRESULT, Vec<String>)> {
         let (hr, e) = self.group_enumerator(scope, &IEnumString::IID)?;
         Ok((hr, enum_strings(&e.cast()?)?))
     }
 
     /// The group objects in `scope` (IEnumUnknown), with the call's code.
-    pub fn group_objects(&self, scope: OPCENUMSCOPE) -> windows::core::Result<(HRESULT, Vec<IUnknown>)> {
+    pub fn group_objects(
+        &self,
+        scope: OPCENUMSCOPE,
+    ) -> windows::core::Result<(HRESULT, Vec<IUnknown>)> {
         let (hr, e) = self.group_enumerator(scope, &IEnumUnknown::IID)?;
         Ok((hr, enum_unknowns(&e.cast()?)?))
     }
@@ -288,21 +332,41 @@ impl Server {
         Ok(ns)
     }
 
-    pub fn change_browse_position(&self, direction: OPCBROWSEDIRECTION, name: &str) -> windows::core::Result<()> {
+    pub fn change_browse_position(
+        &self,
+        direction: OPCBROWSEDIRECTION,
+        name: &str,
+    ) -> windows::core::Result<()> {
         let name = HSTRING::from(name);
         // SAFETY: valid string for the call.
-        unsafe { self.address_space()?.ChangeBrowsePosition(direction, PCWSTR(name.as_ptr())) }
+        unsafe {
+            self.address_space()?
+                .ChangeBrowsePosition(direction, PCWSTR(name.as_ptr()))
+        }
     }
 
     /// BrowseOPCItemIDs: (S_OK or S_FALSE, the strings).
-    pub fn browse_item_ids(&self, browse_type: OPCBROWSETYPE, filter: &str, vt: u16, rights: u32) -> windows::core::Result<(HRESULT, Vec<String>)> {
+    pub fn browse_item_ids(
+        &self,
+        browse_type: OPCBROWSETYPE,
+        filter: &str,
+        vt: u16,
+        rights: u32,
+    ) -> windows::core::Result<(HRESULT, Vec<String>)> {
         let filter = HSTRING::from(filter);
         let mut e: Option<IEnumString> = None;
         // SAFETY: valid pointers for the call.
         let hr = ok_or_s_false(unsafe {
-            self.address_space()?.BrowseOPCItemIDs(browse_type, PCWSTR(filter.as_ptr()), windows::Win32::System::Variant::VARENUM(vt), rights, &mut e)
+            self.address_space()?.BrowseOPCItemIDs(
+                browse_type,
+                PCWSTR(filter.as_ptr()),
+                windows::Win32::System::Variant::VARENUM(vt),
+                rights,
+                &mut e,
+            )
         })?;
-        let e = e.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
+        let e =
+            e.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
         Ok((hr, enum_strings(&e)?))
     }
 
@@ -310,7 +374,10 @@ impl Server {
         let s = HSTRING::from(item_data_id);
         let mut p = PWSTR::null();
         // SAFETY: valid pointers for the call.
-        unsafe { self.address_space()?.GetItemID(PCWSTR(s.as_ptr()), &mut p)? };
+        unsafe {
+            self.address_space()?
+                .GetItemID(PCWSTR(s.as_ptr()), &mut p)?
+        };
         Ok(take_wstr(p))
     }
 
@@ -319,7 +386,10 @@ impl Server {
         let s = HSTRING::from(item_id);
         let mut e: Option<IEnumString> = None;
         // SAFETY: valid pointers for the call.
-        ok_or_s_false(unsafe { self.address_space()?.BrowseAccessPaths(PCWSTR(s.as_ptr()), &mut e) })
+        ok_or_s_false(unsafe {
+            self.address_space()?
+                .BrowseAccessPaths(PCWSTR(s.as_ptr()), &mut e)
+        })
     }
 
     // ---- IOPCItemProperties -------------------------------------------------------------
@@ -329,25 +399,58 @@ impl Server {
     }
 
     /// QueryAvailableProperties: (ID, description, VARTYPE) per property.
-    pub fn query_available_properties(&self, item_id: &str) -> windows::core::Result<Vec<(u32, Option<String>, u16)>> {
+    pub fn query_available_properties(
+        &self,
+        item_id: &str,
+    ) -> windows::core::Result<Vec<(u32, Option<String>, u16)>> {
         let s = HSTRING::from(item_id);
         let mut n = 0u32;
-        let (mut ids, mut descs, mut types) = (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut());
+        let (mut ids, mut descs, mut types) = (
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
         // SAFETY: valid out-pointers; the arrays are CoTaskMem owned by us afterwards.
-        unsafe { self.item_properties_itf()?.QueryAvailableProperties(PCWSTR(s.as_ptr()), &mut n, &mut ids, &mut descs, &mut types)? };
+        unsafe {
+            self.item_properties_itf()?.QueryAvailableProperties(
+                PCWSTR(s.as_ptr()),
+                &mut n,
+                &mut ids,
+                &mut descs,
+                &mut types,
+            )?
+        };
         let ids = take_array(ids, n as usize);
-        let descs: Vec<Option<String>> = take_array(descs, n as usize).into_iter().map(take_wstr).collect();
+        let descs: Vec<Option<String>> = take_array(descs, n as usize)
+            .into_iter()
+            .map(take_wstr)
+            .collect();
         let types: Vec<VARTYPE> = take_array(types, n as usize);
-        Ok(ids.into_iter().zip(descs).zip(types).map(|((i, d), t)| (i, d, t.0)).collect())
+        Ok(ids
+            .into_iter()
+            .zip(descs)
+            .zip(types)
+            .map(|((i, d), t)| (i, d, t.0))
+            .collect())
     }
 
     /// GetItemProperties: (S_OK or S_FALSE, (value, error) per ID).
-    pub fn get_item_properties(&self, item_id: &str, ids: &[u32]) -> windows::core::Result<(HRESULT, Vec<(Value, HRESULT)>)> {
+    pub fn get_item_properties(
+        &self,
+        item_id: &str,
+        ids: &[u32],
+    ) -> windows::core::Result<(HRESULT, Vec<(Value, HRESULT)>)> {
         let s = HSTRING::from(item_id);
         let (mut data, mut errors) = (std::ptr::null_mut(), std::ptr::null_mut());
         // SAFETY: `ids` holds `ids.len()` elements; valid out-pointers.
         let hr = ok_or_s_false(unsafe {
-            self.item_properties_itf()?.GetItemProperties(PCWSTR(s.as_ptr()), ids.len() as u32, ids.as_ptr(), &mut data, &mut errors)
+            self.item_properties_itf()?.GetItemProperties(
+                PCWSTR(s.as_ptr()),
+                ids.len() as u32,
+                ids.as_ptr(),
+                &mut data,
+                &mut errors,
+            )
         })?;
         let values = take_variants(data, ids.len());
         let errors: Vec<HRESULT> = take_array(errors, ids.len());
@@ -355,14 +458,27 @@ impl Server {
     }
 
     /// LookupItemIDs: (S_OK or S_FALSE, (item ID, error) per ID).
-    pub fn lookup_item_ids(&self, item_id: &str, ids: &[u32]) -> windows::core::Result<(HRESULT, Vec<NewItemId>)> {
+    pub fn lookup_item_ids(
+        &self,
+        item_id: &str,
+        ids: &[u32],
+    ) -> windows::core::Result<(HRESULT, Vec<NewItemId>)> {
         let s = HSTRING::from(item_id);
         let (mut new_ids, mut errors) = (std::ptr::null_mut(), std::ptr::null_mut());
         // SAFETY: `ids` holds `ids.len()` elements; valid out-pointers.
         let hr = ok_or_s_false(unsafe {
-            self.item_properties_itf()?.LookupItemIDs(PCWSTR(s.as_ptr()), ids.len() as u32, ids.as_ptr(), &mut new_ids, &mut errors)
+            self.item_properties_itf()?.LookupItemIDs(
+                PCWSTR(s.as_ptr()),
+                ids.len() as u32,
+                ids.as_ptr(),
+                &mut new_ids,
+                &mut errors,
+            )
         })?;
-        let new_ids: Vec<Option<String>> = take_array(new_ids, ids.len()).into_iter().map(take_wstr).collect();
+        let new_ids: Vec<Option<String>> = take_array(new_ids, ids.len())
+            .into_iter()
+            .map(take_wstr)
+            .collect();
         let errors: Vec<HRESULT> = take_array(errors, ids.len());
         Ok((hr, new_ids.into_iter().zip(errors).collect()))
     }
@@ -374,15 +490,31 @@ impl Server {
     }
 
     /// IOPCBrowse::GetProperties: (S_OK or S_FALSE, one entry per item).
-    pub fn get_properties(&self, item_ids: &[&str], values: bool, property_ids: &[u32]) -> windows::core::Result<(HRESULT, Vec<ItemProperties>)> {
+    pub fn get_properties(
+        &self,
+        item_ids: &[&str],
+        values: bool,
+        property_ids: &[u32],
+    ) -> windows::core::Result<(HRESULT, Vec<ItemProperties>)> {
         let strings = WideStrings::new(item_ids);
         let ptrs = strings.pointers();
         let mut out: *mut OPCITEMPROPERTIES = std::ptr::null_mut();
         let dummy = 0u32;
-        let pids = if property_ids.is_empty() { &dummy as *const u32 } else { property_ids.as_ptr() };
+        let pids = if property_ids.is_empty() {
+            &dummy as *const u32
+        } else {
+            property_ids.as_ptr()
+        };
         // SAFETY: the arrays hold the counts passed; valid out-pointer.
         let hr = ok_or_s_false(unsafe {
-            self.browse_itf()?.GetProperties(ptrs.len() as u32, ptrs.as_ptr(), BOOL::from(values), property_ids.len() as u32, pids, &mut out)
+            self.browse_itf()?.GetProperties(
+                ptrs.len() as u32,
+                ptrs.as_ptr(),
+                BOOL::from(values),
+                property_ids.len() as u32,
+                pids,
+                &mut out,
+            )
         })?;
         let mut result = Vec::new();
         if !out.is_null() {
@@ -409,7 +541,11 @@ impl Server {
         let mut count = 0u32;
         let mut elements: *mut OPCBROWSEELEMENT = std::ptr::null_mut();
         let dummy = 0u32;
-        let pids = if a.property_ids.is_empty() { &dummy as *const u32 } else { a.property_ids.as_ptr() };
+        let pids = if a.property_ids.is_empty() {
+            &dummy as *const u32
+        } else {
+            a.property_ids.as_ptr()
+        };
         // SAFETY: valid pointers for the call; `cp` is a CoTaskMem string (or NULL) that the
         // server may free and replace ([in, out]).
         let hr = unsafe {
@@ -447,7 +583,12 @@ impl Server {
             // SAFETY: as above.
             unsafe { CoTaskMemFree(Some(elements as *const c_void)) };
         }
-        Ok(BrowsePage { code: hr, continuation_point, more_elements: more.as_bool(), elements: out })
+        Ok(BrowsePage {
+            code: hr,
+            continuation_point,
+            more_elements: more.as_bool(),
+            elements: out,
+        })
     }
 
     // ---- IOPCItemIO ---------------------------------------------------------------------
@@ -457,16 +598,31 @@ impl Server {
     }
 
     /// IOPCItemIO::Read: (S_OK or S_FALSE, one item per `(item ID, MaxAge)`).
-    pub fn item_read(&self, items: &[(&str, u32)]) -> windows::core::Result<(HRESULT, Vec<ReadItem>)> {
+    pub fn item_read(
+        &self,
+        items: &[(&str, u32)],
+    ) -> windows::core::Result<(HRESULT, Vec<ReadItem>)> {
         let ids: Vec<&str> = items.iter().map(|(id, _)| *id).collect();
         let strings = WideStrings::new(&ids);
         let ptrs = strings.pointers();
         let ages: Vec<u32> = items.iter().map(|(_, a)| *a).collect();
-        let (mut values, mut qualities, mut times, mut errors) =
-            (std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut());
+        let (mut values, mut qualities, mut times, mut errors) = (
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+            std::ptr::null_mut(),
+        );
         // SAFETY: the arrays hold `items.len()` elements; valid out-pointers.
         let hr = ok_or_s_false(unsafe {
-            self.item_io()?.Read(ptrs.len() as u32, ptrs.as_ptr(), ages.as_ptr(), &mut values, &mut qualities, &mut times, &mut errors)
+            self.item_io()?.Read(
+                ptrs.len() as u32,
+                ptrs.as_ptr(),
+                ages.as_ptr(),
+                &mut values,
+                &mut qualities,
+                &mut times,
+                &mut errors,
+            )
         })?;
         let n = items.len();
         let values = take_variants(values, n);
@@ -487,7 +643,10 @@ impl Server {
     }
 
     /// IOPCItemIO::WriteVQT: (S_OK or S_FALSE, per-item codes).
-    pub fn item_write_vqt(&self, items: &[(&str, ItemVqt)]) -> windows::core::Result<(HRESULT, Vec<HRESULT>)> {
+    pub fn item_write_vqt(
+        &self,
+        items: &[(&str, ItemVqt)],
+    ) -> windows::core::Result<(HRESULT, Vec<HRESULT>)> {
         let ids: Vec<&str> = items.iter().map(|(id, _)| *id).collect();
         let strings = WideStrings::new(&ids);
         let ptrs = strings.pointers();
@@ -502,7 +661,9 @@ impl Server {
                     wReserved: 0,
                     bTimeStampSpecified: BOOL::from(v.timestamp.is_some()),
                     dwReserved: 0,
-                    ftTimeStamp: v.timestamp.map_or_else(FILETIME::default, crate::mem::filetime),
+                    ftTimeStamp: v
+                        .timestamp
+                        .map_or_else(FILETIME::default, crate::mem::filetime),
                 }),
                 Err(e) => {
                     result = Err(e);
@@ -513,7 +674,14 @@ impl Server {
         let call = result.and_then(|_| {
             let mut errors = std::ptr::null_mut();
             // SAFETY: the arrays hold `items.len()` elements; valid out-pointer.
-            let hr = ok_or_s_false(unsafe { self.item_io()?.WriteVQT(ptrs.len() as u32, ptrs.as_ptr(), vqts.as_ptr(), &mut errors) })?;
+            let hr = ok_or_s_false(unsafe {
+                self.item_io()?.WriteVQT(
+                    ptrs.len() as u32,
+                    ptrs.as_ptr(),
+                    vqts.as_ptr(),
+                    &mut errors,
+                )
+            })?;
             Ok((hr, take_array(errors, items.len())))
         });
         for v in &mut vqts {

@@ -30,7 +30,8 @@ use crate::mem::{self, TaskMem};
 use crate::runtime::SYNC_WAIT_MARGIN;
 use crate::variant;
 use ctopc_core::model::{
-    AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
+    AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome,
+    SyncResult, WriteResults,
 };
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
 use std::time::Duration;
@@ -119,7 +120,10 @@ struct VariantArray<T> {
 
 impl<T> VariantArray<T> {
     fn zeroed(len: usize, var: fn(&mut T) -> &mut VARIANT) -> ComResult<Self> {
-        Ok(VariantArray { mem: Some(TaskMem::zeroed(len)?), var })
+        Ok(VariantArray {
+            mem: Some(TaskMem::zeroed(len)?),
+            var,
+        })
     }
     fn as_mut_slice(&mut self) -> &mut [T] {
         match self.mem.as_mut() {
@@ -128,7 +132,9 @@ impl<T> VariantArray<T> {
         }
     }
     fn into_raw(mut self) -> *mut T {
-        self.mem.take().map_or(std::ptr::null_mut(), TaskMem::into_raw)
+        self.mem
+            .take()
+            .map_or(std::ptr::null_mut(), TaskMem::into_raw)
     }
 }
 
@@ -150,7 +156,9 @@ fn value_variant(v: &Value) -> ComResult<Result<VARIANT, OpcError>> {
     match variant::to_variant(v) {
         Ok(var) => Ok(Ok(var)),
         Err(e) if e.code() == E_OUTOFMEMORY => Err(e),
-        Err(e) => Ok(Err(OpcError::from_hresult(e.code().0).unwrap_or(OpcError::BadType))),
+        Err(e) => Ok(Err(
+            OpcError::from_hresult(e.code().0).unwrap_or(OpcError::BadType)
+        )),
     }
 }
 
@@ -171,10 +179,16 @@ fn complete<T>(
     };
     let limit = Duration::from_millis(u64::from(source_timeout_ms)) + SYNC_WAIT_MARGIN;
     match g.ctx.runtime.wait_for(limit, |e| e.take_sync_result(id)) {
-        Some(r) => pick(r).ok_or_else(|| mem::error(E_FAIL, "synchronous result of the wrong kind")),
+        Some(r) => {
+            pick(r).ok_or_else(|| mem::error(E_FAIL, "synchronous result of the wrong kind"))
+        }
         None => {
             g.ctx.runtime.with_engine(|e, _| e.abandon_sync(id));
-            tracing::warn!("group {}: a synchronous operation got no answer in {} ms; abandoned", g.handle.0, limit.as_millis());
+            tracing::warn!(
+                "group {}: a synchronous operation got no answer in {} ms; abandoned",
+                g.handle.0,
+                limit.as_millis()
+            );
             Ok(timed_out(n))
         }
     }
@@ -215,7 +229,11 @@ impl PreErrors {
         match variant::from_variant(v) {
             Ok(v) => v,
             Err(e) => {
-                let e = if e == OpcError::Overflow { OpcError::Range } else { e };
+                let e = if e == OpcError::Overflow {
+                    OpcError::Range
+                } else {
+                    e
+                };
                 self.0.push((i, e));
                 Value::Empty
             }
@@ -245,19 +263,37 @@ fn vqt_items(handles: &[u32], vqts: &[OPCITEMVQT], pre: &mut PreErrors) -> Vec<(
         .map(|(i, (&h, q))| {
             let value = pre.value(i, &q.vDataValue);
             let quality = q.bQualitySpecified.as_bool().then_some(Quality(q.wQuality));
-            let timestamp = q.bTimeStampSpecified.as_bool().then(|| vqt_timestamp(q.ftTimeStamp));
-            (h, ItemVqt { value, quality, timestamp })
+            let timestamp = q
+                .bTimeStampSpecified
+                .as_bool()
+                .then(|| vqt_timestamp(q.ftTimeStamp));
+            (
+                h,
+                ItemVqt {
+                    value,
+                    quality,
+                    timestamp,
+                },
+            )
         })
         .collect()
 }
 
 /// The items of a Write call (value only; a 3-element array is the extended write).
 fn value_items(handles: &[u32], values: &[VARIANT], pre: &mut PreErrors) -> Vec<(u32, ItemVqt)> {
-    handles.iter().zip(values).enumerate().map(|(i, (&h, v))| (h, ItemVqt::value(pre.value(i, v)))).collect()
+    handles
+        .iter()
+        .zip(values)
+        .enumerate()
+        .map(|(i, (&h, v))| (h, ItemVqt::value(pre.value(i, v))))
+        .collect()
 }
 
 /// Fills ppErrors from per-item results; returns S_OK or S_FALSE.
-fn errors_out<R>(pp_errors: *mut *mut HRESULT, results: &[Result<R, OpcError>]) -> ComResult<HRESULT> {
+fn errors_out<R>(
+    pp_errors: *mut *mut HRESULT,
+    results: &[Result<R, OpcError>],
+) -> ComResult<HRESULT> {
     let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
     let mut failed = false;
     for (dst, r) in errors.as_mut_slice().iter_mut().zip(results) {
@@ -270,24 +306,59 @@ fn errors_out<R>(pp_errors: *mut *mut HRESULT, results: &[Result<R, OpcError>]) 
 
 impl Group_Impl {
     /// A synchronous write (Write, WriteVQT): one engine call, then the wait.
-    fn sync_write(&self, items: Vec<(u32, ItemVqt)>, pre: PreErrors, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn sync_write(
+        &self,
+        items: Vec<(u32, ItemVqt)>,
+        pre: PreErrors,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         let n = items.len();
-        let (outcome, timeout) =
-            self.ctx.runtime.with_engine(|e, now| (e.write_vqt(now, self.handle, &items), e.config().source_timeout_ms));
+        let (outcome, timeout) = self.ctx.runtime.with_engine(|e, now| {
+            (
+                e.write_vqt(now, self.handle, &items),
+                e.config().source_timeout_ms,
+            )
+        });
         drop(items);
-        let mut results = complete(self, outcome.map_err(mem::to_com)?, timeout, n, pick_write, write_timed_out)?;
+        let mut results = complete(
+            self,
+            outcome.map_err(mem::to_com)?,
+            timeout,
+            n,
+            pick_write,
+            write_timed_out,
+        )?;
         pre.apply(&mut results);
         errors_out(pp_errors, &results)
     }
 
     /// A synchronous read (Read, ReadMaxAge): one engine call, then the wait.
-    fn sync_read(&self, n: usize, call: impl FnOnce(&mut Engine, Timestamp) -> Result<SyncOutcome<ReadResults>, OpcError>) -> ComResult<ReadResults> {
-        let (outcome, timeout) = self.ctx.runtime.with_engine(|e, now| (call(e, now), e.config().source_timeout_ms));
-        complete(self, outcome.map_err(mem::to_com)?, timeout, n, pick_read, read_timed_out)
+    fn sync_read(
+        &self,
+        n: usize,
+        call: impl FnOnce(&mut Engine, Timestamp) -> Result<SyncOutcome<ReadResults>, OpcError>,
+    ) -> ComResult<ReadResults> {
+        let (outcome, timeout) = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| (call(e, now), e.config().source_timeout_ms));
+        complete(
+            self,
+            outcome.map_err(mem::to_com)?,
+            timeout,
+            n,
+            pick_read,
+            read_timed_out,
+        )
     }
 
     /// An asynchronous call: writes the cancel ID and the per-item errors.
-    fn async_out(&self, started: Result<AsyncStarted, OpcError>, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn async_out(
+        &self,
+        started: Result<AsyncStarted, OpcError>,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         let started = started.map_err(mem::to_com)?;
         let hr = errors_out(pp_errors, &started.results)?;
         // SAFETY: checked non-null by the caller before the engine call.
@@ -304,19 +375,39 @@ fn cancel_out(p: *mut u32) -> ComResult<()> {
 // ---- IOPCSyncIO -------------------------------------------------------------------------
 
 impl Group_Impl {
-    fn read_impl(&self, source: OPCDATASOURCE, count: u32, ph_server: *const OPCHANDLE, pp_values: *mut *mut OPCITEMSTATE, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn read_impl(
+        &self,
+        source: OPCDATASOURCE,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        pp_values: *mut *mut OPCITEMSTATE,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_values)?;
         null_out(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let source = data_source(source)?;
-        let results = self.sync_read(handles.len(), |e, now| e.read(now, self.handle, source, handles))?;
+        let results = self.sync_read(handles.len(), |e, now| {
+            e.read(now, self.handle, source, handles)
+        })?;
 
-        let mut states = VariantArray::<OPCITEMSTATE>::zeroed(results.len(), |s| &mut s.vDataValue)?;
+        let mut states =
+            VariantArray::<OPCITEMSTATE>::zeroed(results.len(), |s| &mut s.vDataValue)?;
         let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
         let mut failed = false;
-        for ((st, err), r) in states.as_mut_slice().iter_mut().zip(errors.as_mut_slice()).zip(&results) {
+        for ((st, err), r) in states
+            .as_mut_slice()
+            .iter_mut()
+            .zip(errors.as_mut_slice())
+            .zip(&results)
+        {
             let outcome = match r {
-                Ok(ItemState { client_handle, value, quality, timestamp }) => value_variant(value)?.map(|v| {
+                Ok(ItemState {
+                    client_handle,
+                    value,
+                    quality,
+                    timestamp,
+                }) => value_variant(value)?.map(|v| {
                     st.hClient = *client_handle;
                     st.ftTimeStamp = mem::filetime(*timestamp);
                     st.wQuality = quality.0;
@@ -334,7 +425,13 @@ impl Group_Impl {
         Ok(s_ok_or_false(failed))
     }
 
-    fn write_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn write_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_values: *const VARIANT,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let values = in_array(p_values, count)?;
@@ -345,11 +442,24 @@ impl Group_Impl {
 }
 
 impl IOPCSyncIO_Impl for Group_Impl {
-    unsafe fn Read(&self, source: OPCDATASOURCE, count: u32, ph_server: *const OPCHANDLE, pp_values: *mut *mut OPCITEMSTATE, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn Read(
+        &self,
+        source: OPCDATASOURCE,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        pp_values: *mut *mut OPCITEMSTATE,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.read_impl(source, count, ph_server, pp_values, pp_errors))
     }
 
-    unsafe fn Write(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn Write(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_values: *const VARIANT,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.write_impl(count, ph_server, p_values, pp_errors))
     }
 }
@@ -375,7 +485,9 @@ impl Group_Impl {
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
-        let results = self.sync_read(items.len(), |e, now| e.read_max_age(now, self.handle, &items))?;
+        let results = self.sync_read(items.len(), |e, now| {
+            e.read_max_age(now, self.handle, &items)
+        })?;
         drop(items);
 
         let n = results.len();
@@ -384,7 +496,12 @@ impl Group_Impl {
         let mut times = TaskMem::<FILETIME>::zeroed(n)?;
         let mut errors = TaskMem::<HRESULT>::zeroed(n)?;
         let mut failed = false;
-        let outs = values.as_mut_slice().iter_mut().zip(qualities.as_mut_slice()).zip(times.as_mut_slice()).zip(errors.as_mut_slice());
+        let outs = values
+            .as_mut_slice()
+            .iter_mut()
+            .zip(qualities.as_mut_slice())
+            .zip(times.as_mut_slice())
+            .zip(errors.as_mut_slice());
         for ((((v, q), t), err), r) in outs.zip(&results) {
             let outcome = match r {
                 Ok(s) => value_variant(&s.value)?.map(|var| {
@@ -408,7 +525,13 @@ impl Group_Impl {
         Ok(s_ok_or_false(failed))
     }
 
-    fn write_vqt_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn write_vqt_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_vqt: *const OPCITEMVQT,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let vqts = in_array(p_vqt, count)?;
@@ -429,10 +552,24 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.read_max_age_impl(count, ph_server, p_max_age, pp_values, pp_qualities, pp_times, pp_errors))
+        hr(self.read_max_age_impl(
+            count,
+            ph_server,
+            p_max_age,
+            pp_values,
+            pp_qualities,
+            pp_times,
+            pp_errors,
+        ))
     }
 
-    unsafe fn WriteVQT(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn WriteVQT(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_vqt: *const OPCITEMVQT,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
     }
 }
@@ -440,26 +577,58 @@ impl IOPCSyncIO2_Impl for Group_Impl {
 // ---- IOPCAsyncIO2 -----------------------------------------------------------------------
 
 impl Group_Impl {
-    fn async_read_impl(&self, count: u32, ph_server: *const OPCHANDLE, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn async_read_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
-        let started = self.ctx.runtime.with_engine(|e, now| e.async_read(now, self.handle, transaction, handles));
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.async_read(now, self.handle, transaction, handles));
         self.async_out(started, p_cancel, pp_errors)
     }
 
-    fn async_write_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn async_write_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_values: *const VARIANT,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let values = in_array(p_values, count)?;
         let mut pre = PreErrors::default();
         let items = value_items(handles, values, &mut pre);
-        let started = self.ctx.runtime.with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
-        self.async_out(started.map(|mut s| { pre.apply(&mut s.results); s }), p_cancel, pp_errors)
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        self.async_out(
+            started.map(|mut s| {
+                pre.apply(&mut s.results);
+                s
+            }),
+            p_cancel,
+            pp_errors,
+        )
     }
 
-    fn refresh_impl(&self, p_cancel: *mut u32, call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>) -> ComResult<()> {
+    fn refresh_impl(
+        &self,
+        p_cancel: *mut u32,
+        call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>,
+    ) -> ComResult<()> {
         cancel_out(p_cancel)?;
         let cancel_id = self.ctx.runtime.with_engine(call).map_err(mem::to_com)?;
         write_out(p_cancel, cancel_id)
@@ -467,32 +636,64 @@ impl Group_Impl {
 }
 
 impl IOPCAsyncIO2_Impl for Group_Impl {
-    unsafe fn Read(&self, count: u32, ph_server: *const OPCHANDLE, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn Read(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
     }
 
-    unsafe fn Write(&self, count: u32, ph_server: *const OPCHANDLE, p_values: *const VARIANT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn Write(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_values: *const VARIANT,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.async_write_impl(count, ph_server, p_values, transaction, p_cancel, pp_errors))
     }
 
-    unsafe fn Refresh2(&self, source: OPCDATASOURCE, transaction: u32, p_cancel: *mut u32) -> windows::core::Result<()> {
+    unsafe fn Refresh2(
+        &self,
+        source: OPCDATASOURCE,
+        transaction: u32,
+        p_cancel: *mut u32,
+    ) -> windows::core::Result<()> {
         let source = data_source(source)?;
-        self.refresh_impl(p_cancel, |e, now| e.refresh2(now, self.handle, source, transaction))
+        self.refresh_impl(p_cancel, |e, now| {
+            e.refresh2(now, self.handle, source, transaction)
+        })
     }
 
     unsafe fn Cancel2(&self, cancel_id: u32) -> windows::core::Result<()> {
-        self.ctx.runtime.with_engine(|e, _| e.cancel2(self.handle, cancel_id)).map_err(mem::to_com)
+        self.ctx
+            .runtime
+            .with_engine(|e, _| e.cancel2(self.handle, cancel_id))
+            .map_err(mem::to_com)
     }
 
     unsafe fn SetEnable(&self, enable: BOOL) -> windows::core::Result<()> {
-        self.ctx.runtime.with_engine(|e, now| e.set_enable(now, self.handle, enable.as_bool())).map_err(mem::to_com)
+        self.ctx
+            .runtime
+            .with_engine(|e, now| e.set_enable(now, self.handle, enable.as_bool()))
+            .map_err(mem::to_com)
     }
 
     unsafe fn GetEnable(&self, p_enable: *mut BOOL) -> windows::core::Result<()> {
         if p_enable.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let enabled = self.ctx.runtime.with_engine(|e, _| e.get_enable(self.handle)).map_err(mem::to_com)?;
+        let enabled = self
+            .ctx
+            .runtime
+            .with_engine(|e, _| e.get_enable(self.handle))
+            .map_err(mem::to_com)?;
         write_out(p_enable, BOOL::from(enabled))
     }
 }
@@ -500,38 +701,97 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
 // ---- IOPCAsyncIO3 -----------------------------------------------------------------------
 
 impl Group_Impl {
-    fn async_read_max_age_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_max_age: *const u32, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn async_read_max_age_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_max_age: *const u32,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
-        let started = self.ctx.runtime.with_engine(|e, now| e.async_read_max_age(now, self.handle, transaction, &items));
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.async_read_max_age(now, self.handle, transaction, &items));
         self.async_out(started, p_cancel, pp_errors)
     }
 
-    fn async_write_vqt_impl(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> ComResult<HRESULT> {
+    fn async_write_vqt_impl(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_vqt: *const OPCITEMVQT,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> ComResult<HRESULT> {
         null_out(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let vqts = in_array(p_vqt, count)?;
         let mut pre = PreErrors::default();
         let items = vqt_items(handles, vqts, &mut pre);
-        let started = self.ctx.runtime.with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
-        self.async_out(started.map(|mut s| { pre.apply(&mut s.results); s }), p_cancel, pp_errors)
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        self.async_out(
+            started.map(|mut s| {
+                pre.apply(&mut s.results);
+                s
+            }),
+            p_cancel,
+            pp_errors,
+        )
     }
 }
 
 impl IOPCAsyncIO3_Impl for Group_Impl {
-    unsafe fn ReadMaxAge(&self, count: u32, ph_server: *const OPCHANDLE, p_max_age: *const u32, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
-        hr(self.async_read_max_age_impl(count, ph_server, p_max_age, transaction, p_cancel, pp_errors))
+    unsafe fn ReadMaxAge(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_max_age: *const u32,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
+        hr(self.async_read_max_age_impl(
+            count,
+            ph_server,
+            p_max_age,
+            transaction,
+            p_cancel,
+            pp_errors,
+        ))
     }
 
-    unsafe fn WriteVQT(&self, count: u32, ph_server: *const OPCHANDLE, p_vqt: *const OPCITEMVQT, transaction: u32, p_cancel: *mut u32, pp_errors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn WriteVQT(
+        &self,
+        count: u32,
+        ph_server: *const OPCHANDLE,
+        p_vqt: *const OPCITEMVQT,
+        transaction: u32,
+        p_cancel: *mut u32,
+        pp_errors: *mut *mut HRESULT,
+    ) -> HRESULT {
         hr(self.async_write_vqt_impl(count, ph_server, p_vqt, transaction, p_cancel, pp_errors))
     }
 
-    unsafe fn RefreshMaxAge(&self, max_age: u32, transaction: u32, p_cancel: *mut u32) -> windows::core::Result<()> {
-        self.refresh_impl(p_cancel, |e, now| e.refresh_max_age(now, self.handle, max_age, transaction))
+    unsafe fn RefreshMaxAge(
+        &self,
+        max_age: u32,
+        transaction: u32,
+        p_cancel: *mut u32,
+    ) -> windows::core::Result<()> {
+        self.refresh_impl(p_cancel, |e, now| {
+            e.refresh_max_age(now, self.handle, max_age, transaction)
+        })
     }
 }

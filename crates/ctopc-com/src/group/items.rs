@@ -64,7 +64,10 @@ impl Defs {
             let item = if d.szItemID.is_null() {
                 Err(OpcError::InvalidItemId)
             } else {
-                match (push_wstr(&mut buf, d.szItemID), push_wstr(&mut buf, d.szAccessPath)) {
+                match (
+                    push_wstr(&mut buf, d.szItemID),
+                    push_wstr(&mut buf, d.szAccessPath),
+                ) {
                     (Some(id), Some(path)) => Ok((id, path)),
                     (None, _) => Err(OpcError::InvalidItemId),
                     (_, None) => Err(OpcError::UnknownPath),
@@ -165,7 +168,11 @@ impl IOPCItemMgt_Impl for Group_Impl {
             results,
             errors,
             |e, now, g| {
-                let core = if core_defs.is_empty() { Vec::new() } else { e.add_items(now, g, &core_defs)? };
+                let core = if core_defs.is_empty() {
+                    Vec::new()
+                } else {
+                    e.add_items(now, g, &core_defs)?
+                };
                 Ok(decoded.merge(core))
             },
             item_result,
@@ -191,17 +198,28 @@ impl IOPCItemMgt_Impl for Group_Impl {
             results,
             errors,
             |e, _, g| {
-                let core = if core_defs.is_empty() { Vec::new() } else { e.validate_items(g, &core_defs)? };
+                let core = if core_defs.is_empty() {
+                    Vec::new()
+                } else {
+                    e.validate_items(g, &core_defs)?
+                };
                 Ok(decoded.merge(core))
             },
             item_result,
         )
     }
 
-    unsafe fn RemoveItems(&self, dwcount: u32, phserver: *const OPCHANDLE, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn RemoveItems(
+        &self,
+        dwcount: u32,
+        phserver: *const OPCHANDLE,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
-        self.per_item(handles.len(), errors, |e, now, g| e.remove_items(now, g, handles))
+        self.per_item(handles.len(), errors, |e, now, g| {
+            e.remove_items(now, g, handles)
+        })
     }
 
     unsafe fn SetActiveState(
@@ -214,7 +232,9 @@ impl IOPCItemMgt_Impl for Group_Impl {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
         let active = bactive.as_bool();
-        self.per_item(handles.len(), errors, |e, now, g| e.set_active_state(now, g, handles, active))
+        self.per_item(handles.len(), errors, |e, now, g| {
+            e.set_active_state(now, g, handles, active)
+        })
     }
 
     unsafe fn SetClientHandles(
@@ -227,8 +247,14 @@ impl IOPCItemMgt_Impl for Group_Impl {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
         let clients = check!(in_array_n(handles.len(), phclient));
-        let pairs: Vec<(u32, u32)> = handles.iter().copied().zip(clients.iter().copied()).collect();
-        self.per_item(handles.len(), errors, |e, _, g| e.set_client_handles(g, &pairs))
+        let pairs: Vec<(u32, u32)> = handles
+            .iter()
+            .copied()
+            .zip(clients.iter().copied())
+            .collect();
+        self.per_item(handles.len(), errors, |e, _, g| {
+            e.set_client_handles(g, &pairs)
+        })
     }
 
     unsafe fn SetDatatypes(
@@ -241,7 +267,11 @@ impl IOPCItemMgt_Impl for Group_Impl {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
         let types = check!(in_array_n(handles.len(), prequesteddatatypes));
-        let pairs: Vec<(u32, VarType)> = handles.iter().copied().zip(types.iter().map(|t| VarType(t.0))).collect();
+        let pairs: Vec<(u32, VarType)> = handles
+            .iter()
+            .copied()
+            .zip(types.iter().map(|t| VarType(t.0)))
+            .collect();
         self.per_item(handles.len(), errors, |e, _, g| e.set_datatypes(g, &pairs))
     }
 
@@ -287,7 +317,11 @@ pub struct ItemAttributesEnum {
 
 impl ItemAttributesEnum {
     pub fn create(items: Vec<ItemAttributes>) -> IEnumOPCItemAttributes {
-        ItemAttributesEnum { cursor: Cursor::new(items), _guard: ObjectGuard::new() }.into()
+        ItemAttributesEnum {
+            cursor: Cursor::new(items),
+            _guard: ObjectGuard::new(),
+        }
+        .into()
     }
 }
 
@@ -353,7 +387,12 @@ fn attributes(a: &ItemAttributes, out: &mut OPCITEMATTRIBUTES) -> windows::core:
 }
 
 impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
-    unsafe fn Next(&self, celt: u32, ppitemarray: *mut *mut OPCITEMATTRIBUTES, pceltfetched: *mut u32) -> HRESULT {
+    unsafe fn Next(
+        &self,
+        celt: u32,
+        ppitemarray: *mut *mut OPCITEMATTRIBUTES,
+        pceltfetched: *mut u32,
+    ) -> HRESULT {
         if let Err(hr) = check_next(celt, ppitemarray, pceltfetched) {
             return hr;
         }
@@ -367,7 +406,10 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
             };
             let mut building = Building(Some(block));
             if let Some(block) = &mut building.0 {
-                for (src, dst) in self.cursor.items()[pos..end].iter().zip(block.as_mut_slice().iter_mut()) {
+                for (src, dst) in self.cursor.items()[pos..end]
+                    .iter()
+                    .zip(block.as_mut_slice().iter_mut())
+                {
                     if let Err(e) = attributes(src, dst) {
                         return e.code();
                     }
@@ -399,11 +441,18 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
         Ok(())
     }
 
-    unsafe fn Clone(&self, ppenumitemattributes: *mut Option<IEnumOPCItemAttributes>) -> windows::core::Result<()> {
+    unsafe fn Clone(
+        &self,
+        ppenumitemattributes: *mut Option<IEnumOPCItemAttributes>,
+    ) -> windows::core::Result<()> {
         if ppenumitemattributes.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let clone: IEnumOPCItemAttributes = ItemAttributesEnum { cursor: self.cursor.fork(), _guard: ObjectGuard::new() }.into();
+        let clone: IEnumOPCItemAttributes = ItemAttributesEnum {
+            cursor: self.cursor.fork(),
+            _guard: ObjectGuard::new(),
+        }
+        .into();
         // SAFETY: checked non-null; an [out] interface pointer.
         unsafe { ppenumitemattributes.write(Some(clone)) };
         Ok(())
@@ -425,8 +474,14 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
         let deadbands = check!(in_array_n(handles.len(), ppercentdeadband));
-        let pairs: Vec<(u32, f32)> = handles.iter().copied().zip(deadbands.iter().copied()).collect();
-        self.per_item(handles.len(), errors, |e, _, g| e.set_item_deadband(g, &pairs))
+        let pairs: Vec<(u32, f32)> = handles
+            .iter()
+            .copied()
+            .zip(deadbands.iter().copied())
+            .collect();
+        self.per_item(handles.len(), errors, |e, _, g| {
+            e.set_item_deadband(g, &pairs)
+        })
     }
 
     unsafe fn GetItemDeadband(
@@ -439,13 +494,26 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
         let values = check!(OutArray::new(pppercentdeadband));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
-        self.per_item_values(handles.len(), values, errors, |e, _, g| e.get_item_deadband(g, handles), plain)
+        self.per_item_values(
+            handles.len(),
+            values,
+            errors,
+            |e, _, g| e.get_item_deadband(g, handles),
+            plain,
+        )
     }
 
-    unsafe fn ClearItemDeadband(&self, dwcount: u32, phserver: *const OPCHANDLE, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn ClearItemDeadband(
+        &self,
+        dwcount: u32,
+        phserver: *const OPCHANDLE,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
-        self.per_item(handles.len(), errors, |e, _, g| e.clear_item_deadband(g, handles))
+        self.per_item(handles.len(), errors, |e, _, g| {
+            e.clear_item_deadband(g, handles)
+        })
     }
 }
 
@@ -491,13 +559,26 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         let values = check!(OutArray::new(ppdwsamplingrate));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
-        self.per_item_values(handles.len(), values, errors, |e, _, g| e.get_item_sampling_rate(g, handles), plain)
+        self.per_item_values(
+            handles.len(),
+            values,
+            errors,
+            |e, _, g| e.get_item_sampling_rate(g, handles),
+            plain,
+        )
     }
 
-    unsafe fn ClearItemSamplingRate(&self, dwcount: u32, phserver: *const OPCHANDLE, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn ClearItemSamplingRate(
+        &self,
+        dwcount: u32,
+        phserver: *const OPCHANDLE,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
-        self.per_item(handles.len(), errors, |e, _, g| e.clear_item_sampling_rate(g, handles))
+        self.per_item(handles.len(), errors, |e, _, g| {
+            e.clear_item_sampling_rate(g, handles)
+        })
     }
 
     /// Buffering is not implemented (see the core's documented limits): enabling answers
@@ -512,8 +593,14 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(dwcount, phserver));
         let enable = check!(in_array_n(handles.len(), pbenable));
-        let pairs: Vec<(u32, bool)> = handles.iter().copied().zip(enable.iter().map(|b| b.as_bool())).collect();
-        self.per_item(handles.len(), errors, |e, _, g| e.set_item_buffer_enable(g, &pairs))
+        let pairs: Vec<(u32, bool)> = handles
+            .iter()
+            .copied()
+            .zip(enable.iter().map(|b| b.as_bool()))
+            .collect();
+        self.per_item(handles.len(), errors, |e, _, g| {
+            e.set_item_buffer_enable(g, &pairs)
+        })
     }
 
     unsafe fn GetItemBufferEnable(

@@ -26,10 +26,13 @@ use ctopc_core::model::{Engine, GroupHandle, SessionHandle, SetGroupState};
 use ctopc_core::{OpcError, Timestamp};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex, MutexGuard};
-use windows::core::{implement, IUnknown, IUnknownImpl, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
+use windows::core::{
+    implement, IUnknown, IUnknownImpl, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR,
+};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl, IEnumConnectionPoints,
+    IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl,
+    IEnumConnectionPoints,
 };
 use windows_core::Weak;
 
@@ -78,14 +81,22 @@ fn registry() -> MutexGuard<'static, BTreeMap<GroupHandle, Entry>> {
 /// A new COM object for the engine group `group` (AddGroup, CloneGroup): takes an engine
 /// reference, registers the object's callback slot with the runtime and makes it the
 /// group's identity for [`lookup_or_create`].
-pub fn create(ctx: &'static Context, session: SessionHandle, group: GroupHandle) -> windows::core::Result<IUnknown> {
+pub fn create(
+    ctx: &'static Context,
+    session: SessionHandle,
+    group: GroupHandle,
+) -> windows::core::Result<IUnknown> {
     let mut reg = registry();
     create_locked(&mut reg, ctx, session, group)
 }
 
 /// The COM object of the engine group `group`: the live one if there is one (same
 /// identity for every caller), else a new one as [`create`] makes.
-pub fn lookup_or_create(ctx: &'static Context, session: SessionHandle, group: GroupHandle) -> windows::core::Result<IUnknown> {
+pub fn lookup_or_create(
+    ctx: &'static Context,
+    session: SessionHandle,
+    group: GroupHandle,
+) -> windows::core::Result<IUnknown> {
     let mut reg = registry();
     if let Some(live) = reg.get(&group).and_then(|e| e.object.upgrade()) {
         // Returned to the caller: not dropped under the lock.
@@ -100,10 +111,23 @@ fn create_locked(
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
-    ctx.runtime.with_engine(|e, _| e.group_add_ref(group)).map_err(mem::to_com)?;
+    ctx.runtime
+        .with_engine(|e, _| e.group_add_ref(group))
+        .map_err(mem::to_com)?;
     let sink = Arc::new(SinkSlot::<IOPCDataCallback>::default());
-    let point: Arc<dyn Slot> = Arc::new(DataCallbackPoint { ctx, group, slot: Arc::clone(&sink) });
-    let object = Group { ctx, session, handle: group, sink: Arc::clone(&sink), point, _guard: ObjectGuard::new() };
+    let point: Arc<dyn Slot> = Arc::new(DataCallbackPoint {
+        ctx,
+        group,
+        slot: Arc::clone(&sink),
+    });
+    let object = Group {
+        ctx,
+        session,
+        handle: group,
+        sink: Arc::clone(&sink),
+        point,
+        _guard: ObjectGuard::new(),
+    };
     let unknown: IUnknown = object.into();
     // Nothing below may fail: dropping `unknown` here would run `Drop`, which locks the
     // registry. Without a weak reference (not expected: every #[implement] object has
@@ -111,14 +135,23 @@ fn create_locked(
     let weak = match unknown.downgrade() {
         Ok(w) => w,
         Err(e) => {
-            tracing::error!("group {}: no weak reference ({e}); its COM identity is not shared", group.0);
+            tracing::error!(
+                "group {}: no weak reference ({e}); its COM identity is not shared",
+                group.0
+            );
             Weak::new()
         }
     };
     // A previous entry's object is dead, or dying (its `Drop` waits for the lock and then
     // leaves the new entry alone). Dropping its weak reference releases only the weak
     // tear-off, never a group object.
-    reg.insert(group, Entry { object: weak, slot: Arc::clone(&sink) });
+    reg.insert(
+        group,
+        Entry {
+            object: weak,
+            slot: Arc::clone(&sink),
+        },
+    );
     ctx.runtime.set_group_sink(group, sink);
     Ok(unknown)
 }
@@ -130,7 +163,10 @@ impl Drop for Group {
         // have replaced it between its last Release and this Drop).
         let (mine, old) = {
             let mut reg = registry();
-            if reg.get(&handle).is_some_and(|e| Arc::ptr_eq(&e.slot, &self.sink)) {
+            if reg
+                .get(&handle)
+                .is_some_and(|e| Arc::ptr_eq(&e.slot, &self.sink))
+            {
                 self.ctx.runtime.remove_group_sink(handle);
                 (true, reg.remove(&handle))
             } else {
@@ -240,10 +276,15 @@ impl Group_Impl {
         n: usize,
         values: OutArray<V>,
         errors: OutArray<HRESULT>,
-        call: impl FnOnce(&mut Engine, Timestamp, GroupHandle) -> Result<Vec<Result<R, OpcError>>, OpcError>,
+        call: impl FnOnce(
+            &mut Engine,
+            Timestamp,
+            GroupHandle,
+        ) -> Result<Vec<Result<R, OpcError>>, OpcError>,
         map: impl Fn(Result<R, OpcError>) -> (V, HRESULT),
     ) -> HRESULT {
-        let (Ok(mut vals), Ok(mut errs)) = (TaskMem::<V>::zeroed(n), TaskMem::<HRESULT>::zeroed(n)) else {
+        let (Ok(mut vals), Ok(mut errs)) = (TaskMem::<V>::zeroed(n), TaskMem::<HRESULT>::zeroed(n))
+        else {
             return E_OUTOFMEMORY;
         };
         let results = match self.engine(call) {
@@ -253,7 +294,11 @@ impl Group_Impl {
         if results.len() != n {
             return E_FAIL;
         }
-        for ((r, v), e) in results.into_iter().zip(vals.as_mut_slice().iter_mut()).zip(errs.as_mut_slice().iter_mut()) {
+        for ((r, v), e) in results
+            .into_iter()
+            .zip(vals.as_mut_slice().iter_mut())
+            .zip(errs.as_mut_slice().iter_mut())
+        {
             let (value, hr) = map(r);
             *v = value;
             *e = hr;
@@ -269,7 +314,11 @@ impl Group_Impl {
         &self,
         n: usize,
         errors: OutArray<HRESULT>,
-        call: impl FnOnce(&mut Engine, Timestamp, GroupHandle) -> Result<Vec<Result<(), OpcError>>, OpcError>,
+        call: impl FnOnce(
+            &mut Engine,
+            Timestamp,
+            GroupHandle,
+        ) -> Result<Vec<Result<(), OpcError>>, OpcError>,
     ) -> HRESULT {
         let Ok(mut errs) = TaskMem::<HRESULT>::zeroed(n) else {
             return E_OUTOFMEMORY;
@@ -340,7 +389,9 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         }
         // SAFETY: checked non-null above.
         unsafe { ppname.write(PWSTR::null()) };
-        let s = self.engine(|e, _, g| e.group_state(g)).map_err(mem::to_com)?;
+        let s = self
+            .engine(|e, _, g| e.group_state(g))
+            .map_err(mem::to_com)?;
         let name = mem::alloc_wstr(&s.name)?;
         // SAFETY: every pointer was checked non-null above; all allocation has succeeded.
         unsafe {
@@ -389,10 +440,16 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
 
     unsafe fn SetName(&self, szname: PCWSTR) -> windows::core::Result<()> {
         let name = read_name(szname)?;
-        self.engine(|e, _, g| e.set_group_name(g, &name)).map_err(mem::to_com)
+        self.engine(|e, _, g| e.set_group_name(g, &name))
+            .map_err(mem::to_com)
     }
 
-    unsafe fn CloneGroup(&self, szname: PCWSTR, riid: *const GUID, ppunk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+    unsafe fn CloneGroup(
+        &self,
+        szname: PCWSTR,
+        riid: *const GUID,
+        ppunk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<()> {
         if riid.is_null() || ppunk.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -401,10 +458,15 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         let name = read_name(szname)?;
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
-        let new = self.engine(|e, now, g| e.clone_group(now, g, &name)).map_err(mem::to_com)?;
+        let new = self
+            .engine(|e, now, g| e.clone_group(now, g, &name))
+            .map_err(mem::to_com)?;
         let session = self.session;
         let undo = || {
-            let _ = self.ctx.runtime.with_engine(|e, now| e.remove_group(now, session, new, true));
+            let _ = self
+                .ctx
+                .runtime
+                .with_engine(|e, now| e.remove_group(now, session, new, true));
         };
         let object = match create(self.ctx, session, new) {
             Ok(o) => o,
@@ -431,7 +493,11 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
 }
 
 impl IOPCGroupStateMgt2_Impl for Group_Impl {
-    unsafe fn SetKeepAlive(&self, dwkeepalivetime: u32, pdwrevisedkeepalivetime: *mut u32) -> HRESULT {
+    unsafe fn SetKeepAlive(
+        &self,
+        dwkeepalivetime: u32,
+        pdwrevisedkeepalivetime: *mut u32,
+    ) -> HRESULT {
         if pdwrevisedkeepalivetime.is_null() {
             return E_INVALIDARG;
         }
@@ -449,7 +515,9 @@ impl IOPCGroupStateMgt2_Impl for Group_Impl {
         if pdwkeepalivetime.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let t = self.engine(|e, _, g| e.keep_alive(g)).map_err(mem::to_com)?;
+        let t = self
+            .engine(|e, _, g| e.keep_alive(g))
+            .map_err(mem::to_com)?;
         write_out(pdwkeepalivetime, t).map_err(Into::into)
     }
 }
@@ -470,7 +538,11 @@ impl Slot for DataCallbackPoint {
     fn advise(&self, unk: &IUnknown) -> windows::core::Result<u32> {
         let cookie = Slot::advise(&*self.slot, unk)?;
         let group = self.group;
-        if let Err(e) = self.ctx.runtime.with_engine(|e, now| e.set_callback_connected(now, group, true)) {
+        if let Err(e) = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.set_callback_connected(now, group, true))
+        {
             // The group was removed: no connection (the sink is released, no lock held).
             let _ = Slot::unadvise(&*self.slot, cookie);
             return Err(mem::to_com(e));
@@ -481,7 +553,10 @@ impl Slot for DataCallbackPoint {
     fn unadvise(&self, cookie: u32) -> windows::core::Result<()> {
         Slot::unadvise(&*self.slot, cookie)?;
         let group = self.group;
-        let _ = self.ctx.runtime.with_engine(|e, now| e.set_callback_connected(now, group, false));
+        let _ = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.set_callback_connected(now, group, false));
         Ok(())
     }
 
@@ -498,10 +573,17 @@ impl Group_Impl {
 
 impl IConnectionPointContainer_Impl for Group_Impl {
     fn EnumConnectionPoints(&self) -> windows::core::Result<IEnumConnectionPoints> {
-        Ok(connpoint::enumerate(self.to_interface::<IConnectionPointContainer>(), &self.points()))
+        Ok(connpoint::enumerate(
+            self.to_interface::<IConnectionPointContainer>(),
+            &self.points(),
+        ))
     }
 
     fn FindConnectionPoint(&self, riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
-        connpoint::find(self.to_interface::<IConnectionPointContainer>(), &self.points(), riid)
+        connpoint::find(
+            self.to_interface::<IConnectionPointContainer>(),
+            &self.points(),
+            riid,
+        )
     }
 }

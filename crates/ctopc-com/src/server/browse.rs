@@ -18,7 +18,10 @@ use super::OpcServer_Impl;
 use crate::enums::StringEnum;
 use crate::interfaces::*;
 use crate::mem;
-use ctopc_core::browse::{BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType, PropertySelection};
+use ctopc_core::browse::{
+    BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
+    PropertySelection,
+};
 use ctopc_core::{OpcError, OpcResult};
 use windows::core::{BOOL, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_NOTIMPL, S_FALSE, S_OK};
@@ -26,7 +29,9 @@ use windows::Win32::System::Com::IEnumString;
 
 /// An enumeration argument: values outside the IDL's are E_INVALIDARG.
 fn enum_arg<T: TryFrom<u32, Error = OpcError>>(v: i32) -> windows::core::Result<T> {
-    u32::try_from(v).map_err(|_| out::invalid_arg()).and_then(|v| T::try_from(v).map_err(out::com_err))
+    u32::try_from(v)
+        .map_err(|_| out::invalid_arg())
+        .and_then(|v| T::try_from(v).map_err(out::com_err))
 }
 
 impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
@@ -38,10 +43,16 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         Ok(())
     }
 
-    unsafe fn ChangeBrowsePosition(&self, direction: OPCBROWSEDIRECTION, pname: PCWSTR) -> windows::core::Result<()> {
+    unsafe fn ChangeBrowsePosition(
+        &self,
+        direction: OPCBROWSEDIRECTION,
+        pname: PCWSTR,
+    ) -> windows::core::Result<()> {
         let direction: BrowseDirection = enum_arg(direction.0)?;
         let name = in_string(pname, OpcError::InvalidArg)?;
-        self.cursor().change_browse_position(direction, &name).map_err(out::com_err)
+        self.cursor()
+            .change_browse_position(direction, &name)
+            .map_err(out::com_err)
     }
 
     unsafe fn BrowseOPCItemIDs(
@@ -62,7 +73,12 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
             let filter = in_string(pfilter, OpcError::InvalidFilter)?;
             let names = self
                 .cursor()
-                .browse_opc_item_ids(browse_type, &filter, data_type_filter.0, access_rights_filter)
+                .browse_opc_item_ids(
+                    browse_type,
+                    &filter,
+                    data_type_filter.0,
+                    access_rights_filter,
+                )
                 .map_err(out::com_err)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
             // SAFETY: checked non-null.
@@ -71,7 +87,11 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         })())
     }
 
-    unsafe fn GetItemID(&self, pdata_id: PCWSTR, pitem_id: *mut PWSTR) -> windows::core::Result<()> {
+    unsafe fn GetItemID(
+        &self,
+        pdata_id: PCWSTR,
+        pitem_id: *mut PWSTR,
+    ) -> windows::core::Result<()> {
         clear(pitem_id, PWSTR::null());
         nonnull(pitem_id)?;
         let data_id = in_string(pdata_id, OpcError::InvalidArg)?;
@@ -82,12 +102,18 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         Ok(())
     }
 
-    unsafe fn BrowseAccessPaths(&self, pitem_id: PCWSTR, ppenum: *mut Option<IEnumString>) -> HRESULT {
+    unsafe fn BrowseAccessPaths(
+        &self,
+        pitem_id: PCWSTR,
+        ppenum: *mut Option<IEnumString>,
+    ) -> HRESULT {
         clear(ppenum, None);
         out::hresult((|| {
             nonnull(ppenum)?;
             let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
-            self.cursor().browse_access_paths(&item_id).map_err(out::com_err)?;
+            self.cursor()
+                .browse_access_paths(&item_id)
+                .map_err(out::com_err)?;
             Err(E_NOTIMPL.into())
         })())
     }
@@ -112,14 +138,20 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
             if count == 0 {
                 return Err(out::invalid_arg());
             }
-            let item_ids: Vec<OpcResult<String>> = in_slice(pitem_ids, count)?.iter().map(|p| out::item_id_at(*p)).collect();
+            let item_ids: Vec<OpcResult<String>> = in_slice(pitem_ids, count)?
+                .iter()
+                .map(|p| out::item_id_at(*p))
+                .collect();
             let ids = in_slice(pproperty_ids, property_count)?;
             let ids = (!ids.is_empty()).then_some(ids);
             let with_values = return_values.as_bool();
             let cx = self.props_ctx();
             let mut results: Vec<OpcResult<Vec<Prop>>> = item_ids
                 .iter()
-                .map(|id| id.clone().and_then(|id| props::static_properties(&cx, &id, ids, with_values)))
+                .map(|id| {
+                    id.clone()
+                        .and_then(|id| props::static_properties(&cx, &id, ids, with_values))
+                })
                 .collect();
             if with_values {
                 let mut wanted: Vec<(&str, &mut Vec<Prop>)> = item_ids
@@ -176,7 +208,8 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                 String::new()
             } else {
                 // SAFETY: a non-null [in, out, string] is a NUL-terminated UTF-16 string.
-                unsafe { incoming.to_string() }.map_err(|_| out::com_err(OpcError::InvalidContinuationPoint))?
+                unsafe { incoming.to_string() }
+                    .map_err(|_| out::com_err(OpcError::InvalidContinuationPoint))?
             };
             let ids = in_slice(pproperty_ids, property_count)?;
             let selection = PropertySelection::from_args(return_all_properties.as_bool(), ids);
@@ -196,7 +229,13 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                     elements: r
                         .elements
                         .into_iter()
-                        .map(|e| BrowseElement { name: e.name, item_id: e.item_id, has_children: e.has_children, is_item: e.is_item, properties: None })
+                        .map(|e| BrowseElement {
+                            name: e.name,
+                            item_id: e.item_id,
+                            has_children: e.has_children,
+                            is_item: e.is_item,
+                            properties: None,
+                        })
                         .collect(),
                     continuation_point: r.continuation_point,
                     more_elements: r.more_elements,
@@ -206,7 +245,9 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                         PropertySelection::All => None,
                         PropertySelection::Ids(ids) => Some(ids),
                     };
-                    space.browse_with_properties(&req, |id| props::static_properties(&cx, id, ids, with_values))
+                    space.browse_with_properties(&req, |id| {
+                        props::static_properties(&cx, id, ids, with_values)
+                    })
                 }
             }
             .map_err(out::com_err)?;

@@ -35,7 +35,7 @@ use crate::interfaces::*;
 use crate::mem;
 use ctopc_core::model::{GroupHandle, GroupParams, RemoveGroupOutcome, SessionHandle};
 use ctopc_core::OpcError;
-use windows::core::{Interface, IUnknown, BOOL, GUID, HRESULT, PCWSTR};
+use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{E_NOINTERFACE, S_FALSE, S_OK};
 use windows::Win32::Globalization::{IsValidLocale, LCID_SUPPORTED};
 use windows::Win32::System::Com::{IEnumString, IEnumUnknown};
@@ -43,12 +43,20 @@ use windows::Win32::System::Time::{GetTimeZoneInformation, TIME_ZONE_INFORMATION
 
 /// The COM object of an engine group: the existing one while it lives, else a new one
 /// (`crate::group`'s registry keeps one identity per group).
-fn group_object(ctx: &'static Context, session: SessionHandle, group: GroupHandle) -> windows::core::Result<IUnknown> {
+fn group_object(
+    ctx: &'static Context,
+    session: SessionHandle,
+    group: GroupHandle,
+) -> windows::core::Result<IUnknown> {
     crate::group::lookup_or_create(ctx, session, group)
 }
 
 /// A new COM object for a group just added (it becomes the group's identity).
-fn new_group_object(ctx: &'static Context, session: SessionHandle, group: GroupHandle) -> windows::core::Result<IUnknown> {
+fn new_group_object(
+    ctx: &'static Context,
+    session: SessionHandle,
+    group: GroupHandle,
+) -> windows::core::Result<IUnknown> {
     crate::group::create(ctx, session, group)
 }
 
@@ -93,7 +101,10 @@ fn opt_in<T: Copy>(p: *const T) -> Option<T> {
 
 impl OpcServer {
     fn remove_forced(&self, group: GroupHandle) {
-        let _ = self.ctx.runtime.with_engine(|e, now| e.remove_group(now, self.handle, group, true));
+        let _ = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.remove_group(now, self.handle, group, true));
     }
 
     pub(super) fn add_group(
@@ -124,7 +135,11 @@ impl OpcServer {
             percent_deadband: opt_in(a.deadband).unwrap_or(0.0),
             lcid: a.lcid,
         };
-        let added = self.ctx.runtime.with_engine(|e, now| e.add_group(now, self.handle, &params)).map_err(out::com_err)?;
+        let added = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.add_group(now, self.handle, &params))
+            .map_err(out::com_err)?;
         let object = match new_group_object(self.ctx, self.handle, added.group) {
             Ok(o) => o,
             Err(e) => {
@@ -145,21 +160,38 @@ impl OpcServer {
         Ok(added.update_rate.code().map_or(S_OK, mem::hresult))
     }
 
-    pub(super) fn group_by_name(&self, pname: PCWSTR, riid: *const GUID, ppunk: *mut Option<IUnknown>) -> windows::core::Result<()> {
+    pub(super) fn group_by_name(
+        &self,
+        pname: PCWSTR,
+        riid: *const GUID,
+        ppunk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<()> {
         clear(ppunk, None);
         nonnull(riid)?;
         nonnull(ppunk)?;
         let name = in_string(pname, OpcError::InvalidArg)?;
-        let group = self.ctx.runtime.lock().engine.group_by_name(self.handle, &name).map_err(out::com_err)?;
+        let group = self
+            .ctx
+            .runtime
+            .lock()
+            .engine
+            .group_by_name(self.handle, &name)
+            .map_err(out::com_err)?;
         let object = group_object(self.ctx, self.handle, group)?;
         query_out(&object, riid, ppunk)
     }
 
-    pub(super) fn remove_group(&self, server_group: u32, force: BOOL) -> windows::core::Result<HRESULT> {
+    pub(super) fn remove_group(
+        &self,
+        server_group: u32,
+        force: BOOL,
+    ) -> windows::core::Result<HRESULT> {
         let outcome = self
             .ctx
             .runtime
-            .with_engine(|e, now| e.remove_group(now, self.handle, GroupHandle(server_group), force.as_bool()))
+            .with_engine(|e, now| {
+                e.remove_group(now, self.handle, GroupHandle(server_group), force.as_bool())
+            })
             .map_err(out::com_err)?;
         Ok(match outcome {
             RemoveGroupOutcome::Removed => S_OK,
@@ -167,25 +199,45 @@ impl OpcServer {
         })
     }
 
-    pub(super) fn group_enumerator(&self, scope: OPCENUMSCOPE, riid: *const GUID, ppunk: *mut Option<IUnknown>) -> windows::core::Result<HRESULT> {
+    pub(super) fn group_enumerator(
+        &self,
+        scope: OPCENUMSCOPE,
+        riid: *const GUID,
+        ppunk: *mut Option<IUnknown>,
+    ) -> windows::core::Result<HRESULT> {
         clear(ppunk, None);
         nonnull(riid)?;
         nonnull(ppunk)?;
         let private = match scope {
-            OPC_ENUM_PRIVATE_CONNECTIONS | OPC_ENUM_ALL_CONNECTIONS | OPC_ENUM_PRIVATE | OPC_ENUM_ALL => true,
+            OPC_ENUM_PRIVATE_CONNECTIONS
+            | OPC_ENUM_ALL_CONNECTIONS
+            | OPC_ENUM_PRIVATE
+            | OPC_ENUM_ALL => true,
             OPC_ENUM_PUBLIC_CONNECTIONS | OPC_ENUM_PUBLIC => false,
             _ => return Err(out::invalid_arg()),
         };
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
-        let groups = if private { self.ctx.runtime.lock().engine.groups(self.handle).map_err(out::com_err)? } else { Vec::new() };
+        let groups = if private {
+            self.ctx
+                .runtime
+                .lock()
+                .engine
+                .groups(self.handle)
+                .map_err(out::com_err)?
+        } else {
+            Vec::new()
+        };
         let (enumerator, count): (IUnknown, usize) = if iid == IEnumString::IID {
             let names: Vec<String> = groups.into_iter().map(|(_, name)| name).collect();
             let n = names.len();
             (StringEnum::create(names).into(), n)
         } else if iid == IEnumUnknown::IID {
             // Objects are made outside the engine lock; a group removed meanwhile is skipped.
-            let objects: Vec<IUnknown> = groups.into_iter().filter_map(|(g, _)| group_object(self.ctx, self.handle, g).ok()).collect();
+            let objects: Vec<IUnknown> = groups
+                .into_iter()
+                .filter_map(|(g, _)| group_object(self.ctx, self.handle, g).ok())
+                .collect();
             let n = objects.len();
             (UnknownEnum::create(objects).into(), n)
         } else {

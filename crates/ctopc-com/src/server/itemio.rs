@@ -9,13 +9,17 @@
 //! is stuck), the call abandons the request and answers ASKOM_E_NetAnswerTimeout for the
 //! items itself.
 
-use super::out::{self, clear, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any, OwnedArray};
+use super::out::{
+    self, clear, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any, OwnedArray,
+};
 use super::{OpcServer, OpcServer_Impl};
 use crate::interfaces::*;
 use crate::mem::{self, TaskMem};
 use crate::runtime;
 use crate::variant;
-use ctopc_core::model::{ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults};
+use ctopc_core::model::{
+    ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
+};
 use ctopc_core::{OpcError, Quality};
 use std::time::Duration;
 use windows::core::{HRESULT, PCWSTR};
@@ -43,7 +47,10 @@ impl OpcServer {
     /// IOPCItemIO::Read in the core: per item `(item ID, MaxAge)`, `items` non-empty.
     pub(super) fn item_io_read(&self, items: &[(&str, u32)]) -> ReadResults {
         let n = items.len();
-        let started = self.ctx.runtime.with_engine(|e, now| e.item_io_read(now, self.handle, items));
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.item_io_read(now, self.handle, items));
         match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait_sync(id) {
@@ -58,7 +65,10 @@ impl OpcServer {
     /// IOPCItemIO::WriteVQT in the core, `items` non-empty.
     fn item_io_write(&self, items: &[(&str, ItemVqt)]) -> WriteResults {
         let n = items.len();
-        let started = self.ctx.runtime.with_engine(|e, now| e.item_io_write_vqt(now, self.handle, items));
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.item_io_write_vqt(now, self.handle, items));
         match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait_sync(id) {
@@ -73,7 +83,10 @@ impl OpcServer {
 
 /// Runs `call` over the items that passed the COM-side checks (`pre[i]` Ok) and merges
 /// its results back into input order; items that failed the checks keep their error.
-fn merge<I, T>(pre: Vec<Result<I, OpcError>>, call: impl FnOnce(&[I]) -> Vec<Result<T, OpcError>>) -> Vec<Result<T, OpcError>> {
+fn merge<I, T>(
+    pre: Vec<Result<I, OpcError>>,
+    call: impl FnOnce(&[I]) -> Vec<Result<T, OpcError>>,
+) -> Vec<Result<T, OpcError>> {
     let mut slots: Vec<Result<Option<T>, OpcError>> = Vec::with_capacity(pre.len());
     let mut valid = Vec::new();
     for p in pre {
@@ -85,7 +98,12 @@ fn merge<I, T>(pre: Vec<Result<I, OpcError>>, call: impl FnOnce(&[I]) -> Vec<Res
             Err(e) => slots.push(Err(e)),
         }
     }
-    let mut results = if valid.is_empty() { Vec::new() } else { call(&valid) }.into_iter();
+    let mut results = if valid.is_empty() {
+        Vec::new()
+    } else {
+        call(&valid)
+    }
+    .into_iter();
     slots
         .into_iter()
         .map(|s| match s {
@@ -125,9 +143,14 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
             }
             let ids = item_ids(pitem_ids, count)?;
             let ages = in_slice(pmax_age, count)?;
-            let pre: Vec<Result<(String, u32), OpcError>> = ids.into_iter().zip(ages).map(|(id, &age)| id.map(|id| (id, age))).collect();
+            let pre: Vec<Result<(String, u32), OpcError>> = ids
+                .into_iter()
+                .zip(ages)
+                .map(|(id, &age)| id.map(|id| (id, age)))
+                .collect();
             let results: Vec<Result<ItemState, OpcError>> = merge(pre, |valid| {
-                let items: Vec<(&str, u32)> = valid.iter().map(|(id, age)| (id.as_str(), *age)).collect();
+                let items: Vec<(&str, u32)> =
+                    valid.iter().map(|(id, age)| (id.as_str(), *age)).collect();
                 self.item_io_read(&items)
             });
             let n = results.len();
@@ -160,7 +183,13 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         })())
     }
 
-    unsafe fn WriteVQT(&self, count: u32, pitem_ids: *const PCWSTR, pvqt: *const OPCITEMVQT, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn WriteVQT(
+        &self,
+        count: u32,
+        pitem_ids: *const PCWSTR,
+        pvqt: *const OPCITEMVQT,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         clear(pperrors, std::ptr::null_mut());
         out::hresult((|| {
             nonnull(pperrors)?;
@@ -176,12 +205,27 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
                     let id = id?;
                     let value = variant::from_variant(&v.vDataValue)?;
                     let quality = v.bQualitySpecified.as_bool().then_some(Quality(v.wQuality));
-                    let timestamp = v.bTimeStampSpecified.as_bool().then(|| ctopc_core::Timestamp::from_filetime_parts(v.ftTimeStamp.dwLowDateTime, v.ftTimeStamp.dwHighDateTime));
-                    Ok((id, ItemVqt { value, quality, timestamp }))
+                    let timestamp = v.bTimeStampSpecified.as_bool().then(|| {
+                        ctopc_core::Timestamp::from_filetime_parts(
+                            v.ftTimeStamp.dwLowDateTime,
+                            v.ftTimeStamp.dwHighDateTime,
+                        )
+                    });
+                    Ok((
+                        id,
+                        ItemVqt {
+                            value,
+                            quality,
+                            timestamp,
+                        },
+                    ))
                 })
                 .collect();
             let results = merge(pre, |valid| {
-                let items: Vec<(&str, ItemVqt)> = valid.iter().map(|(id, v)| (id.as_str(), v.clone())).collect();
+                let items: Vec<(&str, ItemVqt)> = valid
+                    .iter()
+                    .map(|(id, v)| (id.as_str(), v.clone()))
+                    .collect();
                 self.item_io_write(&items)
             });
             let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
@@ -205,7 +249,10 @@ mod tests {
         let pre = vec![Ok(1), Err(OpcError::InvalidItemId), Ok(3)];
         let r = merge(pre, |v: &[i32]| v.iter().map(|x| Ok(x * 10)).collect());
         assert_eq!(r, vec![Ok(10), Err(OpcError::InvalidItemId), Ok(30)]);
-        let none: Vec<Result<i32, OpcError>> = merge(vec![Err(OpcError::InvalidItemId)], |_: &[i32]| panic!("not called"));
+        let none: Vec<Result<i32, OpcError>> =
+            merge(vec![Err(OpcError::InvalidItemId)], |_: &[i32]| {
+                panic!("not called")
+            });
         assert_eq!(none, vec![Err(OpcError::InvalidItemId)]);
     }
 }

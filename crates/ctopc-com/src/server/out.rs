@@ -98,7 +98,11 @@ pub fn in_slice<'a, T>(p: *const T, count: u32) -> windows::core::Result<&'a [T]
 /// Hands `object` out as interface `riid` through an `[out, iid_is(riid)] IUnknown**`
 /// (checked non-null by the caller). E_NOINTERFACE (and NULL written) when the object does
 /// not implement `riid`.
-pub fn query_out(object: &IUnknown, riid: *const GUID, out: *mut Option<IUnknown>) -> windows::core::Result<()> {
+pub fn query_out(
+    object: &IUnknown,
+    riid: *const GUID,
+    out: *mut Option<IUnknown>,
+) -> windows::core::Result<()> {
     nonnull(riid)?;
     nonnull(out)?;
     // SAFETY: both pointers checked non-null; QueryInterface writes a pointer of interface
@@ -186,7 +190,9 @@ pub struct OwnedArray<T: OwnsTaskMem> {
 
 impl<T: OwnsTaskMem> OwnedArray<T> {
     pub fn zeroed(n: usize) -> windows::core::Result<Self> {
-        Ok(OwnedArray { mem: Some(TaskMem::zeroed(n)?) })
+        Ok(OwnedArray {
+            mem: Some(TaskMem::zeroed(n)?),
+        })
     }
 
     pub fn as_mut_slice(&mut self) -> &mut [T] {
@@ -197,7 +203,9 @@ impl<T: OwnsTaskMem> OwnedArray<T> {
     }
 
     pub fn into_raw(mut self) -> *mut T {
-        self.mem.take().map_or(std::ptr::null_mut(), TaskMem::into_raw)
+        self.mem
+            .take()
+            .map_or(std::ptr::null_mut(), TaskMem::into_raw)
     }
 }
 

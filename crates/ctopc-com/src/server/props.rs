@@ -25,7 +25,9 @@
 //! 2 function requires an error code in this case"): a property "is defined for the item"
 //! in LookupItemIDs' sense only when it has an item ID.
 
-use super::out::{self, clear, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray, OwnedWstr};
+use super::out::{
+    self, clear, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray, OwnedWstr,
+};
 use super::{OpcServer, OpcServer_Impl};
 use crate::interfaces::*;
 use crate::mem::{self, TaskMem};
@@ -92,7 +94,11 @@ pub fn resolve(cx: &Ctx<'_>, item_id: &str) -> OpcResult<ItemInfo> {
         return Err(OpcError::InvalidItemId);
     }
     let (def, attrs) = cx.ns.resolve_with_attributes(item_id)?;
-    Ok(ItemInfo { item_id: item_id.to_owned(), def, attrs })
+    Ok(ItemInfo {
+        item_id: item_id.to_owned(),
+        def,
+        attrs,
+    })
 }
 
 fn non_empty(s: &Option<String>) -> Option<&str> {
@@ -134,7 +140,12 @@ pub fn available_ids(info: &ItemInfo, lang: Lang) -> Vec<u32> {
 }
 
 /// HiHi, Hi, Lo, LoLo Limit, ascending.
-const LIMIT_IDS: [u32; 4] = [p::OPC_PROPERTY_HIHI_LIMIT, p::OPC_PROPERTY_HI_LIMIT, p::OPC_PROPERTY_LO_LIMIT, p::OPC_PROPERTY_LOLO_LIMIT];
+const LIMIT_IDS: [u32; 4] = [
+    p::OPC_PROPERTY_HIHI_LIMIT,
+    p::OPC_PROPERTY_HI_LIMIT,
+    p::OPC_PROPERTY_LO_LIMIT,
+    p::OPC_PROPERTY_LOLO_LIMIT,
+];
 
 /// The asix limit behind a limit property (307-310), when the item has it as a number.
 fn limit(info: &ItemInfo, id: u32) -> Option<f64> {
@@ -150,7 +161,10 @@ fn limit(info: &ItemInfo, id: u32) -> Option<f64> {
 
 /// True for the properties whose values come from a read (value, quality, timestamp).
 pub fn is_live(id: u32) -> bool {
-    matches!(id, p::OPC_PROPERTY_VALUE | p::OPC_PROPERTY_QUALITY | p::OPC_PROPERTY_TIMESTAMP)
+    matches!(
+        id,
+        p::OPC_PROPERTY_VALUE | p::OPC_PROPERTY_QUALITY | p::OPC_PROPERTY_TIMESTAMP
+    )
 }
 
 /// The value of a property that does not need a read; `None` when the item lacks it.
@@ -164,7 +178,9 @@ fn static_value(info: &ItemInfo, id: u32, cx: &Ctx<'_>) -> Option<Value> {
         p::OPC_PROPERTY_DATATYPE => Value::I2(info.def.canonical_type.0 as i16),
         p::OPC_PROPERTY_ACCESS_RIGHTS => Value::I4(info.def.access_rights as i32),
         p::OPC_PROPERTY_SCAN_RATE => Value::R4(cx.scan_rate_ms as f32),
-        p::OPC_PROPERTY_EU_TYPE if info.attrs.eu != EuInfo::None => Value::I4(eu_type(&info.attrs.eu)),
+        p::OPC_PROPERTY_EU_TYPE if info.attrs.eu != EuInfo::None => {
+            Value::I4(eu_type(&info.attrs.eu))
+        }
         p::OPC_PROPERTY_EU_INFO => match &info.attrs.eu {
             EuInfo::Enumerated(texts) => Value::Array(ArrayValue {
                 element_type: VarType::BSTR,
@@ -206,7 +222,10 @@ pub fn property_item_id(info: &ItemInfo, id: u32, cx: &Ctx<'_>) -> Option<String
         return None;
     }
     let base = info.item_id.strip_suffix(".CV").unwrap_or(&info.item_id);
-    let same = cx.ns.resolves(base).is_ok_and(|d| d.source_key == info.def.source_key && d.constant.is_none());
+    let same = cx
+        .ns
+        .resolves(base)
+        .is_ok_and(|d| d.source_key == info.def.source_key && d.constant.is_none());
     if !same {
         return None;
     }
@@ -218,7 +237,14 @@ pub fn property_item_id(info: &ItemInfo, id: u32, cx: &Ctx<'_>) -> Option<String
 /// not OPC properties or that the item does not have. With `with_values` the static value
 /// is filled in; live values (2-4) stay VT_EMPTY for [`fill_live`].
 pub fn property(info: &ItemInfo, id: u32, with_values: bool, cx: &Ctx<'_>) -> Prop {
-    let mut prop = Prop { id, var_type: VarType::EMPTY, description: "", item_id: None, value: Value::Empty, error: None };
+    let mut prop = Prop {
+        id,
+        var_type: VarType::EMPTY,
+        description: "",
+        item_id: None,
+        value: Value::Empty,
+        error: None,
+    };
     let pinfo = match require_property(id) {
         Ok(pi) => pi,
         Err(e) => {
@@ -231,7 +257,11 @@ pub fn property(info: &ItemInfo, id: u32, with_values: bool, cx: &Ctx<'_>) -> Pr
         return prop;
     }
     prop.description = pinfo.description(cx.lang);
-    prop.var_type = if id == p::OPC_PROPERTY_VALUE { info.def.canonical_type } else { pinfo.var_type };
+    prop.var_type = if id == p::OPC_PROPERTY_VALUE {
+        info.def.canonical_type
+    } else {
+        pinfo.var_type
+    };
     prop.item_id = property_item_id(info, id, cx);
     if with_values && !is_live(id) {
         match static_value(info, id, cx) {
@@ -244,7 +274,10 @@ pub fn property(info: &ItemInfo, id: u32, with_values: bool, cx: &Ctx<'_>) -> Pr
 
 /// Fills the live properties (2-4) of one item from its read result.
 pub fn fill_live(props: &mut [Prop], read: &Result<ItemState, OpcError>) {
-    for prop in props.iter_mut().filter(|p| p.error.is_none() && is_live(p.id)) {
+    for prop in props
+        .iter_mut()
+        .filter(|p| p.error.is_none() && is_live(p.id))
+    {
         match read {
             Ok(s) => {
                 prop.value = match prop.id {
@@ -288,13 +321,21 @@ impl OpcServer {
 
 /// One item's properties for GetProperties / Browse: `ids` `None` means every property
 /// the item has. Live values are left for [`OpcServer::fill_live_values`].
-pub fn static_properties(cx: &Ctx<'_>, item_id: &str, ids: Option<&[u32]>, with_values: bool) -> OpcResult<Vec<Prop>> {
+pub fn static_properties(
+    cx: &Ctx<'_>,
+    item_id: &str,
+    ids: Option<&[u32]>,
+    with_values: bool,
+) -> OpcResult<Vec<Prop>> {
     let info = resolve(cx, item_id)?;
     let ids = match ids {
         Some(ids) => ids.to_vec(),
         None => available_ids(&info, cx.lang),
     };
-    Ok(ids.into_iter().map(|id| property(&info, id, with_values, cx)).collect())
+    Ok(ids
+        .into_iter()
+        .map(|id| property(&info, id, with_values, cx))
+        .collect())
 }
 
 /// The item-level code of GetProperties / Browse: the item's error, S_FALSE when a
@@ -326,18 +367,29 @@ pub fn item_properties(r: &OpcResult<Vec<Prop>>) -> windows::core::Result<OPCITE
             slot.vValue = variant::to_variant(&prop.value)?;
         }
     }
-    Ok(OPCITEMPROPERTIES { hrErrorID: hr, dwNumProperties: props.len() as u32, pItemProperties: arr.into_raw(), dwReserved: 0 })
+    Ok(OPCITEMPROPERTIES {
+        hrErrorID: hr,
+        dwNumProperties: props.len() as u32,
+        pItemProperties: arr.into_raw(),
+        dwReserved: 0,
+    })
 }
 
 impl OpcServer {
     /// The context for property lookups in this session.
     pub(super) fn props_ctx(&self) -> Ctx<'_> {
-        Ctx { ns: &*self.ctx.namespace, lang: self.lang(), scan_rate_ms: self.scan_rate_ms() }
+        Ctx {
+            ns: &*self.ctx.namespace,
+            lang: self.lang(),
+            scan_rate_ms: self.scan_rate_ms(),
+        }
     }
 
     /// Fills the live properties (2-4) of every item that asked for them, with one read.
     pub(super) fn fill_live_values(&self, items: &mut [(&str, &mut Vec<Prop>)]) {
-        let wanted: Vec<usize> = (0..items.len()).filter(|&i| needs_read(items[i].1)).collect();
+        let wanted: Vec<usize> = (0..items.len())
+            .filter(|&i| needs_read(items[i].1))
+            .collect();
         let ids: Vec<&str> = wanted.iter().map(|&i| items[i].0).collect();
         let reads = self.read_values(&ids);
         for (&i, read) in wanted.iter().zip(&reads) {
@@ -385,7 +437,14 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         Ok(())
     }
 
-    unsafe fn GetItemProperties(&self, pitem_id: PCWSTR, count: u32, pids: *const u32, ppdata: *mut *mut VARIANT, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn GetItemProperties(
+        &self,
+        pitem_id: PCWSTR,
+        count: u32,
+        pids: *const u32,
+        ppdata: *mut *mut VARIANT,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         clear(ppdata, std::ptr::null_mut());
         clear(pperrors, std::ptr::null_mut());
         out::hresult((|| {
@@ -397,7 +456,8 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
             let ids = in_slice(pids, count)?;
             let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
             let cx = self.props_ctx();
-            let mut props = static_properties(&cx, &item_id, Some(ids), true).map_err(out::com_err)?;
+            let mut props =
+                static_properties(&cx, &item_id, Some(ids), true).map_err(out::com_err)?;
             self.fill_live_values(&mut [(item_id.as_str(), &mut props)]);
             let mut data = OwnedArray::<VARIANT>::zeroed(props.len())?;
             let mut errors = TaskMem::<HRESULT>::zeroed(props.len())?;
@@ -417,7 +477,14 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         })())
     }
 
-    unsafe fn LookupItemIDs(&self, pitem_id: PCWSTR, count: u32, pids: *const u32, ppnew_ids: *mut *mut PWSTR, pperrors: *mut *mut HRESULT) -> HRESULT {
+    unsafe fn LookupItemIDs(
+        &self,
+        pitem_id: PCWSTR,
+        count: u32,
+        pids: *const u32,
+        ppnew_ids: *mut *mut PWSTR,
+        pperrors: *mut *mut HRESULT,
+    ) -> HRESULT {
         clear(ppnew_ids, std::ptr::null_mut());
         clear(pperrors, std::ptr::null_mut());
         out::hresult((|| {
@@ -468,24 +535,42 @@ mod tests {
                 channel: "*".into(),
                 canonical_type: VarType::R4,
                 access_rights: 1,
-                eu: EuInfo::Analog { low: 0.0, high: 8.0 },
+                eu: EuInfo::Analog {
+                    low: 0.0,
+                    high: 8.0,
+                },
                 constant: None,
             };
             let attrs = ItemAttributes {
                 description: Some("Poziom".into()),
                 description_en: Some("Level".into()),
                 eu_units: Some("m".into()),
-                eu: EuInfo::Analog { low: 0.0, high: 8.0 },
-                limits: ctopc_core::asix::LimitProps { hihi: Some(7.5), hi: Some(7.0), lo: Some(1.0), lolo: None },
+                eu: EuInfo::Analog {
+                    low: 0.0,
+                    high: 8.0,
+                },
+                limits: ctopc_core::asix::LimitProps {
+                    hihi: Some(7.5),
+                    hi: Some(7.0),
+                    lo: Some(1.0),
+                    lolo: None,
+                },
             };
             match item_id {
                 "V" | "V.CV" | "A" => Ok((var("V"), attrs)),
-                "V.DESC" | "V.EU_UNIT" | "V.HI_EU" | "V.LO_EU" | "A.DESC" | "V.AlarmHigh.CV" | "V.WarnLow.CV" => {
+                "V.DESC" | "V.EU_UNIT" | "V.HI_EU" | "V.LO_EU" | "A.DESC" | "V.AlarmHigh.CV"
+                | "V.WarnLow.CV" => {
                     let mut d = var(item_id);
                     d.constant = Some(Value::Bstr("x".into()));
                     Ok((d, ItemAttributes::default()))
                 }
-                "V.PercentageCV" => Ok((var("V.PercentageCV"), ItemAttributes { eu_units: Some("%".into()), ..Default::default() })),
+                "V.PercentageCV" => Ok((
+                    var("V.PercentageCV"),
+                    ItemAttributes {
+                        eu_units: Some("%".into()),
+                        ..Default::default()
+                    },
+                )),
                 "" | "V." => Err(OpcError::InvalidItemId),
                 _ => Err(OpcError::UnknownItemId),
             }
@@ -496,14 +581,21 @@ mod tests {
     }
 
     fn cx(lang: Lang) -> Ctx<'static> {
-        Ctx { ns: &Fake, lang, scan_rate_ms: 1000 }
+        Ctx {
+            ns: &Fake,
+            lang,
+            scan_rate_ms: 1000,
+        }
     }
 
     #[test]
     fn available_properties_follow_the_item() {
         let c = cx(Lang::English);
         let v = resolve(&c, "V").unwrap();
-        assert_eq!(available_ids(&v, c.lang), [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309]);
+        assert_eq!(
+            available_ids(&v, c.lang),
+            [1, 2, 3, 4, 5, 6, 7, 100, 101, 102, 103, 307, 308, 309]
+        );
         let pct = resolve(&c, "V.PercentageCV").unwrap();
         assert_eq!(available_ids(&pct, c.lang), [1, 2, 3, 4, 5, 6, 100]);
         assert_eq!(resolve(&c, "").err(), Some(OpcError::InvalidItemId));
@@ -515,20 +607,52 @@ mod tests {
         let en = cx(Lang::English);
         let v = resolve(&en, "V").unwrap();
         let d = property(&v, 101, true, &en);
-        assert_eq!((d.value.clone(), d.description, d.error), (Value::Bstr("Level".into()), "Item Description", None));
+        assert_eq!(
+            (d.value.clone(), d.description, d.error),
+            (Value::Bstr("Level".into()), "Item Description", None)
+        );
         let pl = cx(Lang::Polish);
         let d = property(&v, 101, true, &pl);
-        assert_eq!((d.value, d.description), (Value::Bstr("Poziom".into()), "Opis elementu"));
+        assert_eq!(
+            (d.value, d.description),
+            (Value::Bstr("Poziom".into()), "Opis elementu")
+        );
         assert_eq!(property(&v, 102, true, &en).value, Value::R8(8.0));
-        assert_eq!((property(&v, 307, true, &en).value, property(&v, 307, true, &en).description), (Value::R8(7.5), "HiHi Limit"));
-        assert_eq!((property(&v, 308, true, &en).value, property(&v, 309, true, &en).value), (Value::R8(7.0), Value::R8(1.0)));
-        assert_eq!(property(&v, 310, true, &en).error, Some(OpcError::InvalidPid), "no LoLo limit");
-        assert_eq!(property(&v, 1, true, &en).value, Value::I2(VarType::R4.0 as i16));
+        assert_eq!(
+            (
+                property(&v, 307, true, &en).value,
+                property(&v, 307, true, &en).description
+            ),
+            (Value::R8(7.5), "HiHi Limit")
+        );
+        assert_eq!(
+            (
+                property(&v, 308, true, &en).value,
+                property(&v, 309, true, &en).value
+            ),
+            (Value::R8(7.0), Value::R8(1.0))
+        );
+        assert_eq!(
+            property(&v, 310, true, &en).error,
+            Some(OpcError::InvalidPid),
+            "no LoLo limit"
+        );
+        assert_eq!(
+            property(&v, 1, true, &en).value,
+            Value::I2(VarType::R4.0 as i16)
+        );
         assert_eq!(property(&v, 6, true, &en).value, Value::R4(1000.0));
         assert_eq!(property(&v, 2, true, &en).var_type, VarType::R4);
         assert_eq!(property(&v, 2, true, &en).value, Value::Empty);
-        assert_eq!(property(&v, 8, true, &en).error, Some(OpcError::InvalidPid), "analog: no EU info");
-        assert_eq!(property(&v, 9999, true, &en).error, Some(OpcError::InvalidPid));
+        assert_eq!(
+            property(&v, 8, true, &en).error,
+            Some(OpcError::InvalidPid),
+            "analog: no EU info"
+        );
+        assert_eq!(
+            property(&v, 9999, true, &en).error,
+            Some(OpcError::InvalidPid)
+        );
         assert_eq!(property(&v, 101, false, &en).value, Value::Empty);
     }
 
@@ -539,12 +663,26 @@ mod tests {
         assert_eq!(property_item_id(&v, 101, &c).as_deref(), Some("V.DESC"));
         assert_eq!(property_item_id(&v, 100, &c).as_deref(), Some("V.EU_UNIT"));
         assert_eq!(property_item_id(&v, 2, &c), None);
-        assert_eq!(property_item_id(&v, 307, &c).as_deref(), Some("V.AlarmHigh.CV"));
-        assert_eq!(property_item_id(&v, 309, &c).as_deref(), Some("V.WarnLow.CV"));
-        assert_eq!(property_item_id(&v, 308, &c), None, "V.WarnHigh.CV does not resolve here");
+        assert_eq!(
+            property_item_id(&v, 307, &c).as_deref(),
+            Some("V.AlarmHigh.CV")
+        );
+        assert_eq!(
+            property_item_id(&v, 309, &c).as_deref(),
+            Some("V.WarnLow.CV")
+        );
+        assert_eq!(
+            property_item_id(&v, 308, &c),
+            None,
+            "V.WarnHigh.CV does not resolve here"
+        );
         let a = resolve(&c, "A").unwrap();
         assert_eq!(property_item_id(&a, 101, &c).as_deref(), Some("A.DESC"));
-        assert_eq!(property_item_id(&a, 100, &c), None, "A.EU_UNIT does not resolve");
+        assert_eq!(
+            property_item_id(&a, 100, &c),
+            None,
+            "A.EU_UNIT does not resolve"
+        );
         let pct = resolve(&c, "V.PercentageCV").unwrap();
         assert_eq!(property_item_id(&pct, 100, &c), None);
     }
@@ -553,16 +691,30 @@ mod tests {
     fn live_values_come_from_the_read() {
         let c = cx(Lang::English);
         let v = resolve(&c, "V").unwrap();
-        let mut props: Vec<Prop> = [2, 3, 4, 5].iter().map(|&id| property(&v, id, true, &c)).collect();
+        let mut props: Vec<Prop> = [2, 3, 4, 5]
+            .iter()
+            .map(|&id| property(&v, id, true, &c))
+            .collect();
         assert!(needs_read(&props));
         let t = ctopc_core::Timestamp::from_unix_millis(1_700_000_000_000);
-        let state = ItemState { client_handle: 0, value: Value::R4(2.5), quality: Quality::GOOD, timestamp: t };
+        let state = ItemState {
+            client_handle: 0,
+            value: Value::R4(2.5),
+            quality: Quality::GOOD,
+            timestamp: t,
+        };
         fill_live(&mut props, &Ok(state));
         assert_eq!(props[0].value, Value::R4(2.5));
         assert_eq!(props[1].value, Value::I2(0xC0));
         assert_eq!(props[2].value, Value::date_from(t));
-        let mut props: Vec<Prop> = [2, 5].iter().map(|&id| property(&v, id, true, &c)).collect();
+        let mut props: Vec<Prop> = [2, 5]
+            .iter()
+            .map(|&id| property(&v, id, true, &c))
+            .collect();
         fill_live(&mut props, &Err(OpcError::NetAnswerTimeout));
-        assert_eq!((props[0].error, props[1].error), (Some(OpcError::NetAnswerTimeout), None));
+        assert_eq!(
+            (props[0].error, props[1].error),
+            (Some(OpcError::NetAnswerTimeout), None)
+        );
     }
 }

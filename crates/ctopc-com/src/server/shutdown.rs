@@ -8,11 +8,17 @@ use crate::connpoint::{self, Slot};
 use crate::interfaces::IOPCShutdown;
 use std::sync::Arc;
 use windows::core::{IUnknownImpl, Interface, GUID};
-use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl, IEnumConnectionPoints};
+use windows::Win32::System::Com::{
+    IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl,
+    IEnumConnectionPoints,
+};
 
 impl OpcServer_Impl {
     fn points(&self) -> [(GUID, Arc<dyn Slot>); 1] {
-        [(IOPCShutdown::IID, Arc::clone(&self.shutdown) as Arc<dyn Slot>)]
+        [(
+            IOPCShutdown::IID,
+            Arc::clone(&self.shutdown) as Arc<dyn Slot>,
+        )]
     }
 }
 

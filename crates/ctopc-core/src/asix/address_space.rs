@@ -16,8 +16,14 @@ pub fn build_address_space(ns: &AsixNamespace) -> Result<AddressSpace, BuildErro
     let mut b = AddressSpace::builder();
     let mut ids: HashMap<Vec<String>, NodeId> = HashMap::new();
     for node in ns.browse_nodes() {
-        let Some((name, parent_path)) = node.path.split_last() else { continue };
-        let parent = if parent_path.is_empty() { NodeId::ROOT } else { ids.get(parent_path).copied().unwrap_or(NodeId::ROOT) };
+        let Some((name, parent_path)) = node.path.split_last() else {
+            continue;
+        };
+        let parent = if parent_path.is_empty() {
+            NodeId::ROOT
+        } else {
+            ids.get(parent_path).copied().unwrap_or(NodeId::ROOT)
+        };
         let id = match (&node.item_id, node.is_leaf) {
             (Some(item), true) => b.add_leaf(parent, name, item)?,
             (Some(item), false) => {
@@ -40,8 +46,14 @@ mod tests {
     use std::sync::Arc;
 
     fn demo(attributes_as_items: bool) -> AsixNamespace {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
-        let ini = format!("[Server]\nAttributesAsItems = {}\n[Channel:*]\nItemsDatabase = {dir}\n", if attributes_as_items { "tak" } else { "nie" });
+        let dir = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez"
+        );
+        let ini = format!(
+            "[Server]\nAttributesAsItems = {}\n[Channel:*]\nItemsDatabase = {dir}\n",
+            if attributes_as_items { "tak" } else { "nie" }
+        );
         let (cfg, _) = parse_config(ini.as_bytes(), "test.ini").unwrap();
         let (ns, _) = AsixNamespace::load(cfg);
         assert!(matches!(ns.database_state("*"), ChannelDatabase::Loaded(_)));
@@ -54,14 +66,18 @@ mod tests {
         let mut c = BrowseCursor::new(space);
         let top = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
         assert!(top.iter().any(|n| n == "Magazyn siarki"), "{top:?}");
-        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki").unwrap();
-        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101").unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki")
+            .unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101")
+            .unwrap();
         let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
         assert!(!leaves.is_empty());
         // GetItemID returns the bare variable ID (names are unique).
         let id = c.get_item_id(&leaves[0]).unwrap();
         assert!(!id.contains('/'), "{id}");
-        let flat = BrowseCursor::new(Arc::new(build_address_space(&demo(false)).unwrap())).browse_opc_item_ids(BrowseType::Flat, "", 0, 0).unwrap();
+        let flat = BrowseCursor::new(Arc::new(build_address_space(&demo(false)).unwrap()))
+            .browse_opc_item_ids(BrowseType::Flat, "", 0, 0)
+            .unwrap();
         assert!(flat.len() >= 200, "{}", flat.len());
     }
 
@@ -69,14 +85,20 @@ mod tests {
     fn attributes_as_items_makes_variables_branches_with_attribute_leaves() {
         let space = Arc::new(build_address_space(&demo(true)).unwrap());
         let mut c = BrowseCursor::new(Arc::clone(&space));
-        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki").unwrap();
-        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101").unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Magazyn siarki")
+            .unwrap();
+        c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101")
+            .unwrap();
         let vars = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
         assert!(!vars.is_empty());
-        c.change_browse_position(BrowseDirection::Down, &vars[0]).unwrap();
+        c.change_browse_position(BrowseDirection::Down, &vars[0])
+            .unwrap();
         let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
         for want in ["CV", "DESC", "EU_UNIT"] {
-            assert!(leaves.iter().any(|l| l == want), "{want} missing in {leaves:?}");
+            assert!(
+                leaves.iter().any(|l| l == want),
+                "{want} missing in {leaves:?}"
+            );
         }
     }
 }

@@ -729,7 +729,10 @@ mod tests {
         assert_eq!(c.server, ServerOptions::default());
         assert_eq!(c.server.min_update_rate_ms, 1000);
         assert!(!c.server.attributes_as_items);
-        assert_eq!(c.server.source_timeout_ms, crate::model::DEFAULT_SOURCE_TIMEOUT_MS);
+        assert_eq!(
+            c.server.source_timeout_ms,
+            crate::model::DEFAULT_SOURCE_TIMEOUT_MS
+        );
         assert_eq!(c.server.simulation_device_delay_ms, 0);
         assert_eq!(c.channels.len(), 1);
     }
@@ -877,14 +880,18 @@ mod tests {
             ("LogKeepFiles", "7", |o| o.log_keep_files == 7),
             ("SourceTimeout", "1000", |o| o.source_timeout_ms == 1000),
             ("SourceTimeout", "100", |o| o.source_timeout_ms == 100),
-            ("SourceTimeout", "600000", |o| o.source_timeout_ms == 600_000),
+            ("SourceTimeout", "600000", |o| {
+                o.source_timeout_ms == 600_000
+            }),
             ("SourceTimeout", "", |o| {
                 o.source_timeout_ms == crate::model::DEFAULT_SOURCE_TIMEOUT_MS
             }),
             ("SimulationDeviceDelay", "1500", |o| {
                 o.simulation_device_delay_ms == 1500
             }),
-            ("SimulationDeviceDelay", "0", |o| o.simulation_device_delay_ms == 0),
+            ("SimulationDeviceDelay", "0", |o| {
+                o.simulation_device_delay_ms == 0
+            }),
             ("SimulationDeviceDelay", "600000", |o| {
                 o.simulation_device_delay_ms == 600_000
             }),
@@ -923,8 +930,17 @@ mod tests {
     fn server_options_reach_the_engine_config() {
         use crate::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
         let (c, _) = parse("").unwrap();
-        assert_eq!(c.server.engine_config(), EngineConfig { max_pending_data_changes: 2, ..EngineConfig::default() });
-        assert_eq!(c.server.engine_config().source_timeout_ms, DEFAULT_SOURCE_TIMEOUT_MS);
+        assert_eq!(
+            c.server.engine_config(),
+            EngineConfig {
+                max_pending_data_changes: 2,
+                ..EngineConfig::default()
+            }
+        );
+        assert_eq!(
+            c.server.engine_config().source_timeout_ms,
+            DEFAULT_SOURCE_TIMEOUT_MS
+        );
         let (c, _) = parse("[Server]\nSourceTimeout = 1000\nMinUpdateRate = 250\n").unwrap();
         let e = c.server.engine_config();
         assert_eq!((e.source_timeout_ms, e.min_update_rate_ms), (1000, 250));

@@ -1033,17 +1033,35 @@ fn value_items_carry_their_numeric_limits_for_the_limit_properties() {
     let ns = example_namespace();
     let limits = |id: &str| ns.resolve_with_attributes(id, "").map(|(_, a)| a.limits);
     // KW_A000: WarnLow 1, WarnHigh 7, AlarmLow 0.5, AlarmHigh 7.5.
-    let a000 = LimitProps { hihi: Some(7.5), hi: Some(7.0), lo: Some(1.0), lolo: Some(0.5) };
+    let a000 = LimitProps {
+        hihi: Some(7.5),
+        hi: Some(7.0),
+        lo: Some(1.0),
+        lolo: Some(0.5),
+    };
     assert_eq!(limits("KW_A000"), Ok(a000));
     assert_eq!(limits("KW_A000.CV"), Ok(a000));
     // KW_A100: the high limits are held in variables (KW_L001, KW_L002): not properties.
-    assert_eq!(limits("KW_A100"), Ok(LimitProps { hihi: None, hi: None, lo: Some(900.0), lolo: Some(850.0) }));
+    assert_eq!(
+        limits("KW_A100"),
+        Ok(LimitProps {
+            hihi: None,
+            hi: None,
+            lo: Some(900.0),
+            lolo: Some(850.0)
+        })
+    );
     // No limits: a binary signal; attribute and derived items never have them.
     assert_eq!(limits("KW_D000"), Ok(LimitProps::default()));
     assert_eq!(limits("KW_A000.DESC"), Ok(LimitProps::default()));
     assert_eq!(limits("KW_A000.PercentageCV"), Ok(LimitProps::default()));
     // The limit properties' item IDs (LookupItemIDs) are the numeric attributes as items.
-    for (id, v) in [("KW_A000.AlarmHigh.CV", 7.5), ("KW_A000.WarnHigh.CV", 7.0), ("KW_A000.WarnLow.CV", 1.0), ("KW_A000.AlarmLow.CV", 0.5)] {
+    for (id, v) in [
+        ("KW_A000.AlarmHigh.CV", 7.5),
+        ("KW_A000.WarnHigh.CV", 7.0),
+        ("KW_A000.WarnLow.CV", 1.0),
+        ("KW_A000.AlarmLow.CV", 0.5),
+    ] {
         let d = Namespace::resolve(&ns, id, "").unwrap();
         assert_eq!(d.constant, Some(Value::R8(v)), "{id}");
     }

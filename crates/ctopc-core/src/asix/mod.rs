@@ -31,6 +31,8 @@ pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarIte
 pub use namespace::{
     AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
 };
-pub use quality_rules::{apply_quality_rules, apply_quality_rules_with, check_write_value, RuleOptions};
+pub use quality_rules::{
+    apply_quality_rules, apply_quality_rules_with, check_write_value, RuleOptions,
+};
 pub use text::Warning;
 pub use vardb::{load_database_file, DbError, Limit, VarDatabase, Variable};

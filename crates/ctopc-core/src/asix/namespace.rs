@@ -86,7 +86,12 @@ pub struct LimitProps {
 impl LimitProps {
     fn of(var: &Variable) -> LimitProps {
         let n = |l: &Option<crate::asix::vardb::Limit>| l.as_ref().and_then(|l| l.value());
-        LimitProps { hihi: n(&var.alarm_high), hi: n(&var.warn_high), lo: n(&var.warn_low), lolo: n(&var.alarm_low) }
+        LimitProps {
+            hihi: n(&var.alarm_high),
+            hi: n(&var.warn_high),
+            lo: n(&var.warn_low),
+            lolo: n(&var.alarm_low),
+        }
     }
 }
 

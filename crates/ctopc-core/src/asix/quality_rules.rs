@@ -512,17 +512,26 @@ mod variable_limit_tests {
     #[test]
     fn a_limit_held_as_a_variable_name_is_checked_with_that_variables_value() {
         let var = var_with_alarm_high_variable();
-        let opts = RuleOptions { check_limits: true, check_control_variables: false };
+        let opts = RuleOptions {
+            check_limits: true,
+            check_control_variables: false,
+        };
         let lookup = |name: &str| (name == "T_ALARM").then_some(150.0);
         // Above the warning limit only.
-        let q = apply_quality_rules_with(&var, &Value::R4(120.0), Quality::GOOD, None, opts, &lookup);
+        let q =
+            apply_quality_rules_with(&var, &Value::R4(120.0), Quality::GOOD, None, opts, &lookup);
         assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH));
         // Above the alarm limit read from T_ALARM: high and Second Limit.
-        let q = apply_quality_rules_with(&var, &Value::R4(160.0), Quality::GOOD, None, opts, &lookup);
-        assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH).with_vendor(Quality::VENDOR_SECOND_LIMIT));
+        let q =
+            apply_quality_rules_with(&var, &Value::R4(160.0), Quality::GOOD, None, opts, &lookup);
+        assert_eq!(
+            q,
+            Quality::GOOD
+                .with_limit(Quality::LIMIT_HIGH)
+                .with_vendor(Quality::VENDOR_SECOND_LIMIT)
+        );
         // Without a lookup (or an unknown limit variable) that limit is not checked.
         let q = apply_quality_rules(&var, &Value::R4(160.0), Quality::GOOD, None, opts);
         assert_eq!(q, Quality::GOOD.with_limit(Quality::LIMIT_HIGH));
     }
 }
-

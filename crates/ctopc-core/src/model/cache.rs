@@ -43,7 +43,10 @@ fn num_bits(v: &Value) -> Option<(VarType, u64)> {
 }
 
 impl CachedValue {
-    pub const EMPTY: CachedValue = CachedValue::Num { vt: VarType::EMPTY, bits: 0 };
+    pub const EMPTY: CachedValue = CachedValue::Num {
+        vt: VarType::EMPTY,
+        bits: 0,
+    };
 
     pub fn from_value(v: Value) -> Self {
         match num_bits(&v) {
@@ -91,13 +94,14 @@ impl CachedValue {
             CachedValue::Shared(a) => a.as_f64(),
         }
     }
-
 }
 
 impl PartialEq for CachedValue {
     fn eq(&self, other: &Self) -> bool {
         match (self, other) {
-            (CachedValue::Num { vt: a, bits: x }, CachedValue::Num { vt: b, bits: y }) => a == b && x == y,
+            (CachedValue::Num { vt: a, bits: x }, CachedValue::Num { vt: b, bits: y }) => {
+                a == b && x == y
+            }
             (CachedValue::Shared(a), CachedValue::Shared(b)) => Arc::ptr_eq(a, b) || **a == **b,
             _ => false,
         }
@@ -111,7 +115,10 @@ impl PartialEq for CachedValue {
 pub(crate) enum RateSet {
     #[default]
     Empty,
-    One { rate: u32, count: u32 },
+    One {
+        rate: u32,
+        count: u32,
+    },
     /// Index into `SourceTable::many_rates`.
     Many(u32),
 }
@@ -162,7 +169,10 @@ impl SourceEntry {
         } else if self.sub_count == 0 {
             RateSet::Empty
         } else {
-            RateSet::One { rate: self.sub_rate, count: self.sub_count }
+            RateSet::One {
+                rate: self.sub_rate,
+                count: self.sub_count,
+            }
         }
     }
 
@@ -252,7 +262,12 @@ impl SourceTable {
                 now,
                 LIVE | CONSTANT,
             ),
-            None => (CachedValue::EMPTY, Quality::BAD_WAITING_FOR_INITIAL_DATA, NEVER, LIVE),
+            None => (
+                CachedValue::EMPTY,
+                Quality::BAD_WAITING_FOR_INITIAL_DATA,
+                NEVER,
+                LIVE,
+            ),
         };
         let eu_range = match &def.eu {
             EuInfo::Analog { low, high } => {
@@ -286,14 +301,18 @@ impl SourceTable {
         let idx = match self.free.pop() {
             Some(idx) => {
                 let generation = self.entries[idx as usize].generation;
-                self.entries[idx as usize] = SourceEntry { generation, ..entry };
+                self.entries[idx as usize] = SourceEntry {
+                    generation,
+                    ..entry
+                };
                 idx
             }
             None => {
                 if self.entries.len() == self.entries.capacity() {
                     // Grow by a quarter, not double: the entries are most of the memory of
                     // a large configuration, and doubling would leave up to half unused.
-                    self.entries.reserve_exact((self.entries.len() / 4).max(1024));
+                    self.entries
+                        .reserve_exact((self.entries.len() / 4).max(1024));
                 }
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
@@ -309,10 +328,13 @@ impl SourceTable {
 
     fn intern_range(&mut self, low: f64, high: f64) -> u32 {
         let ranges = &mut self.eu_ranges;
-        *self.eu_range_ids.entry((low.to_bits(), high.to_bits())).or_insert_with(|| {
-            ranges.push((low, high));
-            (ranges.len() - 1) as u32
-        })
+        *self
+            .eu_range_ids
+            .entry((low.to_bits(), high.to_bits()))
+            .or_insert_with(|| {
+                ranges.push((low, high));
+                (ranges.len() - 1) as u32
+            })
     }
 
     /// The EU range of an entry when it is analog (percent deadband applies).
@@ -379,7 +401,10 @@ impl SourceTable {
         let e = &mut self.entries[idx as usize];
         let set = match e.rates() {
             RateSet::Empty => RateSet::One { rate, count: 1 },
-            RateSet::One { rate: r, count } if r == rate => RateSet::One { rate, count: count + 1 },
+            RateSet::One { rate: r, count } if r == rate => RateSet::One {
+                rate,
+                count: count + 1,
+            },
             RateSet::One { rate: r, count } => {
                 let v = vec![(r, count), (rate, 1)];
                 let slot = match self.free_many.pop() {
@@ -414,7 +439,10 @@ impl SourceTable {
             RateSet::Empty => RateSet::Empty,
             RateSet::One { rate: r, count } if r == rate => {
                 if count > 1 {
-                    RateSet::One { rate, count: count - 1 }
+                    RateSet::One {
+                        rate,
+                        count: count - 1,
+                    }
                 } else {
                     RateSet::Empty
                 }
@@ -430,7 +458,12 @@ impl SourceTable {
                 }
                 match v.len() {
                     0 | 1 => {
-                        let set = v.first().map_or(RateSet::Empty, |&(rate, count)| RateSet::One { rate, count });
+                        let set = v
+                            .first()
+                            .map_or(RateSet::Empty, |&(rate, count)| RateSet::One {
+                                rate,
+                                count,
+                            });
                         self.many_rates[slot as usize] = Vec::new();
                         self.free_many.push(slot);
                         set
@@ -448,7 +481,11 @@ impl SourceTable {
         match self.entries[idx as usize].rates() {
             RateSet::Empty => 0,
             RateSet::One { rate, .. } => rate,
-            RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(r, _)| *r).min().unwrap_or(0),
+            RateSet::Many(slot) => self.many_rates[slot as usize]
+                .iter()
+                .map(|(r, _)| *r)
+                .min()
+                .unwrap_or(0),
         }
     }
 
@@ -489,7 +526,10 @@ impl SourceTable {
                 let key = SourceKey::new(idx, e.generation);
                 if e.announced_rate == 0 {
                     e.announced_rate = want;
-                    subscribe.push(Subscription { item: self.source_item(idx), sampling_rate_ms: want });
+                    subscribe.push(Subscription {
+                        item: self.source_item(idx),
+                        sampling_rate_ms: want,
+                    });
                 } else if want == 0 {
                     e.announced_rate = 0;
                     unsubscribe.push(key);
@@ -700,7 +740,13 @@ mod tests {
         t.remove_rate(i, 1000);
         t.remove_rate(i, 1000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (5000, 1));
-        assert_eq!(t.entries[i as usize].rates(), RateSet::One { rate: 5000, count: 1 });
+        assert_eq!(
+            t.entries[i as usize].rates(),
+            RateSet::One {
+                rate: 5000,
+                count: 1
+            }
+        );
         t.remove_rate(i, 5000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
     }
@@ -716,12 +762,47 @@ mod tests {
             eu,
             constant: None,
         };
-        let a = t.find_or_insert(&def("A", EuInfo::Analog { low: 0.0, high: 100.0 }), Timestamp(0));
-        let b = t.find_or_insert(&def("B", EuInfo::Analog { low: -5.0, high: 5.0 }), Timestamp(0));
-        let c = t.find_or_insert(&def("C", EuInfo::Analog { low: 0.0, high: 100.0 }), Timestamp(0));
+        let a = t.find_or_insert(
+            &def(
+                "A",
+                EuInfo::Analog {
+                    low: 0.0,
+                    high: 100.0,
+                },
+            ),
+            Timestamp(0),
+        );
+        let b = t.find_or_insert(
+            &def(
+                "B",
+                EuInfo::Analog {
+                    low: -5.0,
+                    high: 5.0,
+                },
+            ),
+            Timestamp(0),
+        );
+        let c = t.find_or_insert(
+            &def(
+                "C",
+                EuInfo::Analog {
+                    low: 0.0,
+                    high: 100.0,
+                },
+            ),
+            Timestamp(0),
+        );
         let d = t.find_or_insert(&def("D", EuInfo::None), Timestamp(0));
         let range = |i: u32| t.analog_range(&t.entries[i as usize]);
-        assert_eq!((range(a), range(b), range(c), range(d)), (Some((0.0, 100.0)), Some((-5.0, 5.0)), Some((0.0, 100.0)), None));
+        assert_eq!(
+            (range(a), range(b), range(c), range(d)),
+            (
+                Some((0.0, 100.0)),
+                Some((-5.0, 5.0)),
+                Some((0.0, 100.0)),
+                None
+            )
+        );
         assert_eq!(t.eu_ranges.len(), 2);
         assert!(matches!(t.eu_info(b), EuInfo::Analog { low, high } if (low, high) == (-5.0, 5.0)));
         assert!(matches!(t.eu_info(d), EuInfo::None));
@@ -729,7 +810,11 @@ mod tests {
 
     #[test]
     fn entries_stay_small() {
-        assert!(std::mem::size_of::<SourceEntry>() <= 96, "{}", std::mem::size_of::<SourceEntry>());
+        assert!(
+            std::mem::size_of::<SourceEntry>() <= 96,
+            "{}",
+            std::mem::size_of::<SourceEntry>()
+        );
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
     }
 
@@ -761,4 +846,3 @@ mod tests {
         assert!(!CachedValue::from_value(Value::I4(1)).same_as(&Value::I2(1)));
     }
 }
-

@@ -86,7 +86,11 @@ pub struct ItemVqt {
 
 impl ItemVqt {
     pub fn value(value: Value) -> Self {
-        ItemVqt { value, quality: None, timestamp: None }
+        ItemVqt {
+            value,
+            quality: None,
+            timestamp: None,
+        }
     }
 }
 
@@ -97,13 +101,22 @@ pub enum SourceRequest {
     SetSamplingRate(Vec<(SourceKey, u32)>),
     Unsubscribe(Vec<SourceKey>),
     /// Read from the device; answer with `handle_source_read_result(req_id, ..)`.
-    Read { req_id: SourceReqId, items: Vec<SourceItem> },
+    Read {
+        req_id: SourceReqId,
+        items: Vec<SourceItem>,
+    },
     /// Write values (already converted to the canonical type); answer with
     /// `handle_source_write_result(req_id, ..)`.
-    Write { req_id: SourceReqId, items: Vec<(SourceItem, Value)> },
+    Write {
+        req_id: SourceReqId,
+        items: Vec<(SourceItem, Value)>,
+    },
     /// Write values with quality and/or timestamp (WriteVQT, or the asix extended write
     /// through a 3-element array); answer with `handle_source_write_result(req_id, ..)`.
-    WriteVqt { req_id: SourceReqId, items: Vec<(SourceItem, ItemVqt)> },
+    WriteVqt {
+        req_id: SourceReqId,
+        items: Vec<(SourceItem, ItemVqt)>,
+    },
 }
 
 impl Engine {
@@ -115,7 +128,9 @@ impl Engine {
         I: IntoIterator<Item = (SourceKey, Vqt)>,
     {
         for (key, vqt) in updates {
-            let Some(e) = self.sources.get_mut(key) else { continue };
+            let Some(e) = self.sources.get_mut(key) else {
+                continue;
+            };
             if e.is_constant() {
                 continue;
             }
@@ -148,8 +163,12 @@ impl Engine {
         req_id: SourceReqId,
         results: Vec<Result<Vqt, OpcError>>,
     ) {
-        let Some(tid) = self.txns.by_req.remove(&req_id.0) else { return };
-        let Some(mut txn) = self.txns.map.remove(&tid) else { return };
+        let Some(tid) = self.txns.by_req.remove(&req_id.0) else {
+            return;
+        };
+        let Some(mut txn) = self.txns.map.remove(&tid) else {
+            return;
+        };
         let remote = std::mem::take(&mut txn.remote);
         let mut results = results.into_iter();
         for slot_idx in remote {
@@ -165,7 +184,11 @@ impl Engine {
                                 self.change_seq += 1;
                                 e.changed_seq = self.change_seq;
                             }
-                            SlotOut::Raw { value: e.value.clone(), quality: e.quality, timestamp: e.timestamp }
+                            SlotOut::Raw {
+                                value: e.value.clone(),
+                                quality: e.quality,
+                                timestamp: e.timestamp,
+                            }
                         }
                         _ => SlotOut::Raw {
                             value: CachedValue::from_value(vqt.value),
@@ -187,8 +210,12 @@ impl Engine {
         req_id: SourceReqId,
         results: Vec<Result<(), OpcError>>,
     ) {
-        let Some(tid) = self.txns.by_req.remove(&req_id.0) else { return };
-        let Some(mut txn) = self.txns.map.remove(&tid) else { return };
+        let Some(tid) = self.txns.by_req.remove(&req_id.0) else {
+            return;
+        };
+        let Some(mut txn) = self.txns.map.remove(&tid) else {
+            return;
+        };
         let remote = std::mem::take(&mut txn.remote);
         let mut results = results.into_iter();
         for slot_idx in remote {
@@ -200,12 +227,19 @@ impl Engine {
 
     /// Fails every item still waiting in a source request (timeout).
     pub(crate) fn fail_source_request(&mut self, now: Timestamp, req: u64, error: OpcError) {
-        let Some(tid) = self.txns.by_req.remove(&req) else { return };
-        let Some(mut txn) = self.txns.map.remove(&tid) else { return };
+        let Some(tid) = self.txns.by_req.remove(&req) else {
+            return;
+        };
+        let Some(mut txn) = self.txns.map.remove(&tid) else {
+            return;
+        };
         let write = txn.kind.is_write();
         for slot_idx in std::mem::take(&mut txn.remote) {
-            txn.slots[slot_idx as usize].out =
-                if write { SlotOut::Written(Some(error)) } else { SlotOut::Err(error) };
+            txn.slots[slot_idx as usize].out = if write {
+                SlotOut::Written(Some(error))
+            } else {
+                SlotOut::Err(error)
+            };
         }
         self.complete_txn(now, tid, txn);
     }

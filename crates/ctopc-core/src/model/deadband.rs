@@ -23,7 +23,13 @@ pub fn valid_percent(percent: f32) -> bool {
 /// True when `new` differs from `last` by more than `percent`% of the EU span
 /// `eu_high - eu_low`. A NaN or infinite value counts as a change when it differs
 /// bit-for-bit (so NaN -> NaN is no change, 1.0 -> NaN is).
-pub fn exceeds_percent_deadband(new: f64, last: f64, percent: f64, eu_low: f64, eu_high: f64) -> bool {
+pub fn exceeds_percent_deadband(
+    new: f64,
+    last: f64,
+    percent: f64,
+    eu_low: f64,
+    eu_high: f64,
+) -> bool {
     if !new.is_finite() || !last.is_finite() {
         return new.to_bits() != last.to_bits();
     }
@@ -36,7 +42,11 @@ pub(crate) type Band = Option<(f64, f64, f64)>;
 
 /// The band for an item: its own deadband if set, else the group's; only for analog items
 /// and a percent above zero.
-pub(crate) fn band(item_deadband: Option<f32>, group_deadband: f32, analog: Option<(f64, f64)>) -> Band {
+pub(crate) fn band(
+    item_deadband: Option<f32>,
+    group_deadband: f32,
+    analog: Option<(f64, f64)>,
+) -> Band {
     let (low, high) = analog?;
     let percent = f64::from(item_deadband.unwrap_or(group_deadband));
     (percent > 0.0).then_some((percent, low, high))
@@ -47,7 +57,9 @@ pub(crate) fn value_changed(new: &CachedValue, last: &CachedValue, band: Band) -
     if new == last {
         return false;
     }
-    let Some((percent, low, high)) = band else { return true };
+    let Some((percent, low, high)) = band else {
+        return true;
+    };
     match (new, last) {
         (CachedValue::Num { .. }, CachedValue::Num { .. }) => match (new.as_f64(), last.as_f64()) {
             (Some(a), Some(b)) => exceeds_percent_deadband(a, b, percent, low, high),
@@ -56,9 +68,13 @@ pub(crate) fn value_changed(new: &CachedValue, last: &CachedValue, band: Band) -
         (CachedValue::Shared(a), CachedValue::Shared(b)) => match (&**a, &**b) {
             (Value::Array(x), Value::Array(y)) => {
                 x.elements.len() != y.elements.len()
-                    || x.elements.iter().zip(&y.elements).any(|(p, q)| match (p.as_f64(), q.as_f64()) {
-                        (Some(p), Some(q)) => exceeds_percent_deadband(p, q, percent, low, high),
-                        _ => p != q,
+                    || x.elements.iter().zip(&y.elements).any(|(p, q)| {
+                        match (p.as_f64(), q.as_f64()) {
+                            (Some(p), Some(q)) => {
+                                exceeds_percent_deadband(p, q, percent, low, high)
+                            }
+                            _ => p != q,
+                        }
                     })
             }
             _ => true,
@@ -93,7 +109,10 @@ mod tests {
         assert_eq!(band(None, 10.0, None), None);
         assert_eq!(band(None, 0.0, Some((0.0, 100.0))), None);
         assert_eq!(band(Some(0.0), 10.0, Some((0.0, 100.0))), None);
-        assert_eq!(band(Some(5.0), 10.0, Some((0.0, 100.0))), Some((5.0, 0.0, 100.0)));
+        assert_eq!(
+            band(Some(5.0), 10.0, Some((0.0, 100.0))),
+            Some((5.0, 0.0, 100.0))
+        );
         assert!(value_changed(&r8(1.0), &r8(1.000001), None));
         assert!(!value_changed(&r8(1.0), &r8(1.0), None));
     }
@@ -134,7 +153,13 @@ mod tests {
     #[test]
     fn nan_is_a_change_from_a_number_but_not_from_nan() {
         assert!(exceeds_percent_deadband(f64::NAN, 1.0, 10.0, 0.0, 100.0));
-        assert!(!exceeds_percent_deadband(f64::NAN, f64::NAN, 10.0, 0.0, 100.0));
+        assert!(!exceeds_percent_deadband(
+            f64::NAN,
+            f64::NAN,
+            10.0,
+            0.0,
+            100.0
+        ));
     }
 
     proptest! {

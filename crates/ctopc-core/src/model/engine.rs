@@ -182,13 +182,22 @@ impl Engine {
         self.next_session = self.next_session.wrapping_add(1).max(1);
         self.sessions.insert(
             h,
-            Session { names: HashMap::new(), groups: Vec::new(), last_update: Timestamp(0), name_counter: 0 },
+            Session {
+                names: HashMap::new(),
+                groups: Vec::new(),
+                last_update: Timestamp(0),
+                name_counter: 0,
+            },
         );
         SessionHandle(h)
     }
 
     /// Releases a server object: every group is removed (as with bForce).
-    pub fn close_session(&mut self, now: Timestamp, session: SessionHandle) -> Result<(), OpcError> {
+    pub fn close_session(
+        &mut self,
+        now: Timestamp,
+        session: SessionHandle,
+    ) -> Result<(), OpcError> {
         let s = self.sessions.get(&session.0).ok_or(OpcError::InvalidArg)?;
         for g in s.groups.clone() {
             if let Some(&slot) = self.group_slots.get(&g.0) {
@@ -202,7 +211,10 @@ impl Engine {
     /// The last time an OnDataChange with data was queued for this session's groups
     /// (IOPCServer::GetStatus ftLastUpdateTime); `Timestamp(0)` before the first.
     pub fn last_update_time(&self, session: SessionHandle) -> Result<Timestamp, OpcError> {
-        self.sessions.get(&session.0).map(|s| s.last_update).ok_or(OpcError::InvalidArg)
+        self.sessions
+            .get(&session.0)
+            .map(|s| s.last_update)
+            .ok_or(OpcError::InvalidArg)
     }
 
     // ---- lookups -------------------------------------------------------------------
@@ -228,7 +240,11 @@ impl Engine {
     /// A new item server handle: from a process-wide counter (never 0, never reused until
     /// the counter wraps), greater than every handle in `items` so they stay sorted; after
     /// a wrap the group falls back to linear search.
-    pub(crate) fn alloc_item_handle(counter: &mut u32, items: &[GroupItem], sorted: &mut bool) -> u32 {
+    pub(crate) fn alloc_item_handle(
+        counter: &mut u32,
+        items: &[GroupItem],
+        sorted: &mut bool,
+    ) -> u32 {
         loop {
             let h = *counter;
             *counter = counter.wrapping_add(1).max(1);
@@ -249,17 +265,29 @@ impl Engine {
     /// A requested rate raised to the minimum.
     pub(crate) fn revise_rate(&self, requested: u32) -> super::Revised {
         let value = requested.max(self.cfg.min_update_rate_ms);
-        super::Revised { value, revised: value != requested }
+        super::Revised {
+            value,
+            revised: value != requested,
+        }
     }
 
     // ---- subscriptions ---------------------------------------------------------------
 
     /// Brings one item's subscription in line with its state: subscribed while the item is
     /// active in an active, live group and not constant.
-    pub(crate) fn sync_sub(sources: &mut SourceTable, group_on: bool, group_rate: u32, it: &mut GroupItem) {
+    pub(crate) fn sync_sub(
+        sources: &mut SourceTable,
+        group_on: bool,
+        group_rate: u32,
+        it: &mut GroupItem,
+    ) {
         let want = group_on && it.active() && !sources.entries[it.source as usize].is_constant();
         let has = it.flags & SUBSCRIBED != 0;
-        let rate = if it.sampling != 0 { it.sampling } else { group_rate };
+        let rate = if it.sampling != 0 {
+            it.sampling
+        } else {
+            group_rate
+        };
         if want && !has {
             sources.add_rate(it.source, rate);
             it.flags |= SUBSCRIBED;
@@ -271,7 +299,9 @@ impl Engine {
 
     /// Re-evaluates the subscriptions of every item of a group.
     pub(crate) fn sync_group_subs(&mut self, slot: usize) {
-        let Engine { groups, sources, .. } = self;
+        let Engine {
+            groups, sources, ..
+        } = self;
         let g = groups[slot].as_mut().expect("group");
         let on = g.active && !g.deleted;
         let rate = g.update_rate;

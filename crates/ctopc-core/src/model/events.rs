@@ -40,7 +40,10 @@ impl DataChangeKind {
     /// Produced by the update scheduler (paced by delivery with
     /// `EngineConfig::max_pending_data_changes`), not in answer to a client's request.
     pub fn is_scheduled(self) -> bool {
-        matches!(self, DataChangeKind::Subscription | DataChangeKind::KeepAlive)
+        matches!(
+            self,
+            DataChangeKind::Subscription | DataChangeKind::KeepAlive
+        )
     }
 }
 
@@ -145,7 +148,15 @@ impl Event {
 
 /// hrMasterquality and hrMastererror for a list of items.
 pub(crate) fn master_codes(items: &[ItemValue]) -> (Option<OpcError>, Option<OpcError>) {
-    let quality = if items.iter().all(|i| i.quality.is_good()) { None } else { Some(OpcError::False) };
-    let error = if items.iter().all(|i| i.error.is_none()) { None } else { Some(OpcError::False) };
+    let quality = if items.iter().all(|i| i.quality.is_good()) {
+        None
+    } else {
+        Some(OpcError::False)
+    };
+    let error = if items.iter().all(|i| i.error.is_none()) {
+        None
+    } else {
+        Some(OpcError::False)
+    };
     (quality, error)
 }

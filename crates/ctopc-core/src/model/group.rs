@@ -25,7 +25,15 @@ pub struct GroupParams<'a> {
 
 impl Default for GroupParams<'_> {
     fn default() -> Self {
-        GroupParams { name: "", active: true, update_rate: 1000, client_handle: 0, time_bias: 0, percent_deadband: 0.0, lcid: 0 }
+        GroupParams {
+            name: "",
+            active: true,
+            update_rate: 1000,
+            client_handle: 0,
+            time_bias: 0,
+            percent_deadband: 0.0,
+            lcid: 0,
+        }
     }
 }
 
@@ -125,7 +133,10 @@ impl Group {
             let guess = handle.wrapping_sub(self.items.first()?.handle) as usize;
             match self.items.get(guess) {
                 Some(it) if it.handle == handle => guess,
-                _ => self.items.binary_search_by_key(&handle, |it| it.handle).ok()?,
+                _ => self
+                    .items
+                    .binary_search_by_key(&handle, |it| it.handle)
+                    .ok()?,
             }
         } else {
             self.items.iter().position(|it| it.handle == handle)?
@@ -262,11 +273,18 @@ impl Engine {
             update_missed: false,
         };
         self.insert_group(group);
-        Ok(AddGroupResult { group: handle, update_rate: rate })
+        Ok(AddGroupResult {
+            group: handle,
+            update_rate: rate,
+        })
     }
 
     /// IOPCServer::GetGroupByName (E_INVALIDARG when the session has no such group).
-    pub fn group_by_name(&self, session: SessionHandle, name: &str) -> Result<GroupHandle, OpcError> {
+    pub fn group_by_name(
+        &self,
+        session: SessionHandle,
+        name: &str,
+    ) -> Result<GroupHandle, OpcError> {
         let s = self.sessions.get(&session.0).ok_or(OpcError::Fail)?;
         s.names.get(name).copied().ok_or(OpcError::InvalidArg)
     }
@@ -377,7 +395,12 @@ impl Engine {
 
     /// The COM layer advised (`true`) or unadvised (`false`) an IOPCDataCallback sink.
     /// A new sink gets every active item at the next update.
-    pub fn set_callback_connected(&mut self, now: Timestamp, group: GroupHandle, connected: bool) -> Result<(), OpcError> {
+    pub fn set_callback_connected(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        connected: bool,
+    ) -> Result<(), OpcError> {
         let slot = self.live_slot(group)?;
         let g = self.group_mut(slot);
         if g.connected == connected {
@@ -414,7 +437,12 @@ impl Engine {
     /// IOPCGroupStateMgt::SetState. Returns the (revised) update rate, which is also
     /// reported when no rate was requested. E_INVALIDARG (and nothing changed) for a
     /// deadband outside 0..100.
-    pub fn set_group_state(&mut self, now: Timestamp, group: GroupHandle, state: &SetGroupState) -> Result<Revised, OpcError> {
+    pub fn set_group_state(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        state: &SetGroupState,
+    ) -> Result<Revised, OpcError> {
         let slot = self.live_slot(group)?;
         if let Some(d) = state.percent_deadband {
             if !valid_percent(d) {
@@ -422,7 +450,9 @@ impl Engine {
             }
         }
         let revised = state.update_rate.map(|r| self.revise_rate(r));
-        let Engine { groups, sources, .. } = self;
+        let Engine {
+            groups, sources, ..
+        } = self;
         let g = groups[slot].as_mut().expect("group");
         let mut reschedule = false;
         let mut immediate = false;
@@ -473,7 +503,10 @@ impl Engine {
         if reschedule {
             self.schedule_group(slot, now, immediate);
         }
-        Ok(revised.unwrap_or(Revised { value: current, revised: false }))
+        Ok(revised.unwrap_or(Revised {
+            value: current,
+            revised: false,
+        }))
     }
 
     /// IOPCGroupStateMgt::SetName. E_INVALIDARG for an empty name, OPC_E_DUPLICATENAME
@@ -503,13 +536,22 @@ impl Engine {
     /// IOPCGroupStateMgt::CloneGroup: a new, inactive group with the same properties and
     /// items (client handles, requested types, deadbands, sampling rates, active flags) and
     /// new server handles. An empty name generates one.
-    pub fn clone_group(&mut self, now: Timestamp, group: GroupHandle, name: &str) -> Result<GroupHandle, OpcError> {
+    pub fn clone_group(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        name: &str,
+    ) -> Result<GroupHandle, OpcError> {
         let slot = self.live_slot(group)?;
         let session = self.group(slot).session;
         let name = if name.is_empty() {
             self.generate_name(session)?
         } else {
-            if self.sessions.get(&session.0).is_some_and(|s| s.names.contains_key(name)) {
+            if self
+                .sessions
+                .get(&session.0)
+                .is_some_and(|s| s.names.contains_key(name))
+            {
                 return Err(OpcError::DuplicateName);
             }
             name.to_owned()
@@ -545,7 +587,11 @@ impl Engine {
         };
         let items: Vec<GroupItem> = src.items.clone();
         for mut it in items {
-            it.handle = Self::alloc_item_handle(&mut self.next_item_handle, &clone.items, &mut clone.sorted);
+            it.handle = Self::alloc_item_handle(
+                &mut self.next_item_handle,
+                &clone.items,
+                &mut clone.sorted,
+            );
             it.flags &= !(SENT | SUBSCRIBED);
             self.sources.add_ref(it.source);
             if it.flags & ALIAS != 0 {
@@ -559,9 +605,21 @@ impl Engine {
 
     /// IOPCGroupStateMgt2::SetKeepAlive: 0 disables; other times are raised to the minimum
     /// update rate (OPC_S_UNSUPPORTEDRATE when revised).
-    pub fn set_keep_alive(&mut self, now: Timestamp, group: GroupHandle, keep_alive_ms: u32) -> Result<Revised, OpcError> {
+    pub fn set_keep_alive(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        keep_alive_ms: u32,
+    ) -> Result<Revised, OpcError> {
         let slot = self.live_slot(group)?;
-        let r = if keep_alive_ms == 0 { Revised { value: 0, revised: false } } else { self.revise_rate(keep_alive_ms) };
+        let r = if keep_alive_ms == 0 {
+            Revised {
+                value: 0,
+                revised: false,
+            }
+        } else {
+            self.revise_rate(keep_alive_ms)
+        };
         let g = self.group_mut(slot);
         g.keep_alive = r.value;
         self.schedule_group(slot, now, false);
@@ -576,7 +634,12 @@ impl Engine {
     /// IOPCAsyncIO2::SetEnable: enables or disables subscription callbacks (OnDataChange
     /// with transaction ID 0, keep-alives included; refreshes are not affected).
     /// CONNECT_E_NOCONNECTION without a callback sink.
-    pub fn set_enable(&mut self, now: Timestamp, group: GroupHandle, enable: bool) -> Result<(), OpcError> {
+    pub fn set_enable(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        enable: bool,
+    ) -> Result<(), OpcError> {
         let slot = self.live_slot(group)?;
         let g = self.group_mut(slot);
         if !g.connected {

@@ -114,7 +114,11 @@ impl NameTable {
             return id;
         }
         let s: Arc<str> = Arc::from(item_id);
-        let entry = NameEntry { item_id: s.clone(), path, refs: 1 };
+        let entry = NameEntry {
+            item_id: s.clone(),
+            path,
+            refs: 1,
+        };
         let id = match self.free.pop() {
             Some(id) => {
                 self.entries[id as usize] = entry;
@@ -158,7 +162,8 @@ pub(crate) fn requested_type_ok(canonical: VarType, requested: VarType) -> bool 
     if requested == VarType::EMPTY || requested == VarType::VARIANT {
         return true;
     }
-    if !crate::convert::is_supported_type(requested) || requested.is_array() != canonical.is_array() {
+    if !crate::convert::is_supported_type(requested) || requested.is_array() != canonical.is_array()
+    {
         return false;
     }
     let (c, r) = (canonical.element(), requested.element());
@@ -277,7 +282,9 @@ impl Engine {
                 last_quality: Quality::BAD,
                 flags: alias | if d.active { ACTIVE } else { 0 },
             };
-            let Engine { groups, sources, .. } = self;
+            let Engine {
+                groups, sources, ..
+            } = self;
             let g = groups[slot].as_mut().expect("group");
             Self::sync_sub(sources, g.active, g.update_rate, &mut it);
             if d.active {
@@ -325,7 +332,9 @@ impl Engine {
         let mut out = Vec::with_capacity(handles.len());
         let mut removed = Vec::new();
         {
-            let Engine { groups, sources, .. } = self;
+            let Engine {
+                groups, sources, ..
+            } = self;
             let g = groups[slot].as_mut().expect("group");
             let rate = g.update_rate;
             for &h in handles {
@@ -365,7 +374,9 @@ impl Engine {
             return Err(OpcError::InvalidArg);
         }
         let slot = self.live_slot(group)?;
-        let Engine { groups, sources, .. } = self;
+        let Engine {
+            groups, sources, ..
+        } = self;
         let g = groups[slot].as_mut().expect("group");
         let on = g.active;
         let rate = g.update_rate;
@@ -489,7 +500,11 @@ impl Engine {
 
     /// IOPCItemDeadbandMgt::GetItemDeadband: OPC_E_DEADBANDNOTSUPPORTED for non-analog
     /// items, OPC_E_DEADBANDNOTSET when no item deadband is set.
-    pub fn get_item_deadband(&self, group: GroupHandle, handles: &[u32]) -> Result<Vec<Result<f32, OpcError>>, OpcError> {
+    pub fn get_item_deadband(
+        &self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<Vec<Result<f32, OpcError>>, OpcError> {
         if handles.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -507,7 +522,11 @@ impl Engine {
     }
 
     /// IOPCItemDeadbandMgt::ClearItemDeadband: the group deadband applies again.
-    pub fn clear_item_deadband(&mut self, group: GroupHandle, handles: &[u32]) -> Result<Vec<Result<(), OpcError>>, OpcError> {
+    pub fn clear_item_deadband(
+        &mut self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<Vec<Result<(), OpcError>>, OpcError> {
         let sources = &self.sources;
         let r = per_item!(self, group, handles, |g, i, _arg| {
             let it = &mut g.items[i];
@@ -536,12 +555,20 @@ impl Engine {
         items: &[(u32, u32)],
     ) -> Result<Vec<Result<Revised, OpcError>>, OpcError> {
         let min = self.cfg.min_update_rate_ms;
-        let Engine { groups, sources, group_slots, .. } = self;
+        let Engine {
+            groups,
+            sources,
+            group_slots,
+            ..
+        } = self;
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
         let slot = *group_slots.get(&group.0).ok_or(OpcError::Fail)? as usize;
-        let g = groups[slot].as_mut().filter(|g| !g.deleted).ok_or(OpcError::Fail)?;
+        let g = groups[slot]
+            .as_mut()
+            .filter(|g| !g.deleted)
+            .ok_or(OpcError::Fail)?;
         let rate = g.update_rate;
         Ok(items
             .iter()
@@ -552,13 +579,20 @@ impl Engine {
                 let old = if it.sampling != 0 { it.sampling } else { rate };
                 Self::move_rate(sources, it, old, value);
                 it.sampling = value;
-                Ok(Revised { value, revised: value != requested })
+                Ok(Revised {
+                    value,
+                    revised: value != requested,
+                })
             })
             .collect())
     }
 
     /// IOPCItemSamplingMgt::GetItemSamplingRate (OPC_E_RATENOTSET when not set).
-    pub fn get_item_sampling_rate(&self, group: GroupHandle, handles: &[u32]) -> Result<Vec<Result<u32, OpcError>>, OpcError> {
+    pub fn get_item_sampling_rate(
+        &self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<Vec<Result<u32, OpcError>>, OpcError> {
         if handles.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -578,13 +612,25 @@ impl Engine {
 
     /// IOPCItemSamplingMgt::ClearItemSamplingRate: the group update rate applies again
     /// (OPC_E_RATENOTSET when not set).
-    pub fn clear_item_sampling_rate(&mut self, group: GroupHandle, handles: &[u32]) -> Result<Vec<Result<(), OpcError>>, OpcError> {
-        let Engine { groups, sources, group_slots, .. } = self;
+    pub fn clear_item_sampling_rate(
+        &mut self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<Vec<Result<(), OpcError>>, OpcError> {
+        let Engine {
+            groups,
+            sources,
+            group_slots,
+            ..
+        } = self;
         if handles.is_empty() {
             return Err(OpcError::InvalidArg);
         }
         let slot = *group_slots.get(&group.0).ok_or(OpcError::Fail)? as usize;
-        let g = groups[slot].as_mut().filter(|g| !g.deleted).ok_or(OpcError::Fail)?;
+        let g = groups[slot]
+            .as_mut()
+            .filter(|g| !g.deleted)
+            .ok_or(OpcError::Fail)?;
         let rate = g.update_rate;
         Ok(handles
             .iter()
@@ -618,12 +664,19 @@ impl Engine {
     }
 
     /// IOPCItemSamplingMgt::GetItemBufferEnable: always false.
-    pub fn get_item_buffer_enable(&self, group: GroupHandle, handles: &[u32]) -> Result<Vec<Result<bool, OpcError>>, OpcError> {
+    pub fn get_item_buffer_enable(
+        &self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<Vec<Result<bool, OpcError>>, OpcError> {
         if handles.is_empty() {
             return Err(OpcError::InvalidArg);
         }
         let g = self.group(self.live_slot(group)?);
-        Ok(handles.iter().map(|&h| g.find(h).map(|_| false).ok_or(OpcError::InvalidHandle)).collect())
+        Ok(handles
+            .iter()
+            .map(|&h| g.find(h).map(|_| false).ok_or(OpcError::InvalidHandle))
+            .collect())
     }
 }
 

@@ -86,16 +86,19 @@ mod util;
 
 pub use datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription};
 pub use engine::{
-    Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle, DEFAULT_MAX_TRANSACTIONS_PER_GROUP,
-    DEFAULT_MIN_UPDATE_RATE_MS, DEFAULT_SOURCE_TIMEOUT_MS, SERVER_PENDING_DATA_CHANGES,
+    Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle,
+    DEFAULT_MAX_TRANSACTIONS_PER_GROUP, DEFAULT_MIN_UPDATE_RATE_MS, DEFAULT_SOURCE_TIMEOUT_MS,
+    SERVER_PENDING_DATA_CHANGES,
 };
 pub use events::{
-    CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue, ReadComplete, WriteComplete,
-    WriteResult,
+    CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue, ReadComplete,
+    WriteComplete, WriteResult,
 };
 pub use group::{AddGroupResult, GroupParams, GroupState, RemoveGroupOutcome, SetGroupState};
 pub use item::{ItemAttributes, ItemDefinition, ItemResult};
-pub use transactions::{AsyncStarted, DataSource, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults};
+pub use transactions::{
+    AsyncStarted, DataSource, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
+};
 
 use crate::OpcError;
 

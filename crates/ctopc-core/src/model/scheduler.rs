@@ -52,7 +52,9 @@ impl Engine {
         if !matches!(g.wake, Some(w) if w <= due) {
             g.sched_seq = g.sched_seq.wrapping_add(1);
             g.wake = Some(due);
-            self.sched.groups.push(Reverse((due, slot as u32, g.sched_seq)));
+            self.sched
+                .groups
+                .push(Reverse((due, slot as u32, g.sched_seq)));
         }
     }
 
@@ -119,9 +121,13 @@ impl Engine {
     /// next tick. Unknown groups are ignored (the group may have gone while its callback
     /// was under way).
     pub fn data_change_delivered(&mut self, now: Timestamp, group: super::GroupHandle) {
-        let Some(&slot) = self.group_slots.get(&group.0) else { return };
+        let Some(&slot) = self.group_slots.get(&group.0) else {
+            return;
+        };
         let slot = slot as usize;
-        let Some(g) = self.groups[slot].as_mut() else { return };
+        let Some(g) = self.groups[slot].as_mut() else {
+            return;
+        };
         g.delivering = g.delivering.saturating_sub(1);
         if std::mem::take(&mut g.update_missed) {
             g.next_update = g.next_update.min(now);
@@ -178,7 +184,15 @@ impl Engine {
     /// quality changed or whose value changed beyond the deadband since it was last sent.
     /// True when something was sent.
     fn scan_group(&mut self, slot: usize, now: Timestamp) -> bool {
-        let Engine { groups, sources, events, sessions, change_seq, cfg, .. } = self;
+        let Engine {
+            groups,
+            sources,
+            events,
+            sessions,
+            change_seq,
+            cfg,
+            ..
+        } = self;
         let g = groups[slot].as_mut().expect("group");
         if !g.needs_scan && g.scanned_seq == *change_seq {
             return false;
@@ -198,11 +212,22 @@ impl Engine {
             if it.flags & SENT != 0
                 && (e.changed_seq <= scanned
                     || (e.quality == it.last_quality
-                        && !value_changed(&e.value, &it.last, band(it.item_deadband(), group_deadband, sources.analog_range(e)))))
+                        && !value_changed(
+                            &e.value,
+                            &it.last,
+                            band(it.item_deadband(), group_deadband, sources.analog_range(e)),
+                        )))
             {
                 continue;
             }
-            items.push(item_value(it.client, &e.value, e.quality, e.timestamp, it.req_type, locale));
+            items.push(item_value(
+                it.client,
+                &e.value,
+                e.quality,
+                e.timestamp,
+                it.req_type,
+                locale,
+            ));
             it.last = e.value.clone();
             it.last_quality = e.quality;
             it.flags |= SENT;

@@ -21,8 +21,8 @@ use super::cache::{CachedValue, SourceEntry};
 use super::datasource::{fresh, ItemVqt, SourceItem, SourceReqId, SourceRequest};
 use super::engine::{Engine, GroupHandle, SessionHandle};
 use super::events::{
-    master_codes, CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue, ReadComplete,
-    WriteComplete, WriteResult,
+    master_codes, CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue,
+    ReadComplete, WriteComplete, WriteResult,
 };
 use super::group::Group;
 use super::item::SENT;
@@ -92,7 +92,11 @@ impl TxnKind {
 #[derive(Debug)]
 pub(crate) enum SlotOut {
     Pending,
-    Raw { value: CachedValue, quality: Quality, timestamp: Timestamp },
+    Raw {
+        value: CachedValue,
+        quality: Quality,
+        timestamp: Timestamp,
+    },
     Err(OpcError),
     Written(Option<OpcError>),
 }
@@ -158,8 +162,12 @@ impl Txns {
     /// Drops the asynchronous transactions of a removed group (synchronous ones still
     /// complete: a COM thread waits for them).
     pub fn drop_group(&mut self, group: GroupHandle) {
-        let ids: Vec<u64> =
-            self.map.iter().filter(|(_, t)| t.group == group && !t.kind.is_sync()).map(|(id, _)| *id).collect();
+        let ids: Vec<u64> = self
+            .map
+            .iter()
+            .filter(|(_, t)| t.group == group && !t.kind.is_sync())
+            .map(|(id, _)| *id)
+            .collect();
         for id in ids {
             if let Some(t) = self.map.remove(&id) {
                 self.by_cancel.remove(&t.cancel_id);
@@ -179,19 +187,43 @@ pub(crate) fn item_value(
     locale: Locale,
 ) -> ItemValue {
     let v = value.to_value();
-    let converted =
-        if req == VarType::EMPTY || req == VarType::VARIANT || req == v.var_type() { Ok(v) } else { v.convert_in(req, locale) };
+    let converted = if req == VarType::EMPTY || req == VarType::VARIANT || req == v.var_type() {
+        Ok(v)
+    } else {
+        v.convert_in(req, locale)
+    };
     match converted {
-        Ok(value) => ItemValue { client_handle: client, value, quality, timestamp, error: None },
-        Err(e) => ItemValue { client_handle: client, value: Value::Empty, quality: Quality::BAD, timestamp, error: Some(e) },
+        Ok(value) => ItemValue {
+            client_handle: client,
+            value,
+            quality,
+            timestamp,
+            error: None,
+        },
+        Err(e) => ItemValue {
+            client_handle: client,
+            value: Value::Empty,
+            quality: Quality::BAD,
+            timestamp,
+            error: Some(e),
+        },
     }
 }
 
 fn slot_item_value(slot: &Slot, locale: Locale) -> ItemValue {
     match &slot.out {
-        SlotOut::Raw { value, quality, timestamp } => {
-            item_value(slot.client, value, *quality, *timestamp, slot.req_type, locale)
-        }
+        SlotOut::Raw {
+            value,
+            quality,
+            timestamp,
+        } => item_value(
+            slot.client,
+            value,
+            *quality,
+            *timestamp,
+            slot.req_type,
+            locale,
+        ),
         SlotOut::Err(e) => ItemValue {
             client_handle: slot.client,
             value: Value::Empty,
@@ -236,16 +268,32 @@ fn conversion_error_for_write(e: OpcError) -> OpcError {
 /// the asix extended write [value, quality (I4), timestamp (DATE)]. The value as the
 /// client sent it must pass the namespace's [`Namespace::check_write_value`] (asix:
 /// integers and reals only) before it is converted to the canonical type.
-fn prepare_write(ns: &dyn Namespace, e: &SourceEntry, w: &ItemVqt, locale: Locale) -> Result<PreparedWrite, OpcError> {
+fn prepare_write(
+    ns: &dyn Namespace,
+    e: &SourceEntry,
+    w: &ItemVqt,
+    locale: Locale,
+) -> Result<PreparedWrite, OpcError> {
     if !e.writable() {
         return Err(OpcError::BadRights);
     }
     let (value, mut quality, mut timestamp) = (&w.value, w.quality, w.timestamp);
     let value = match value {
-        Value::Array(a) if !e.canonical.is_array() && a.elements.len() == 3 && quality.is_none() && timestamp.is_none() => {
-            let q = a.elements[1].convert_in(VarType::I4, locale).map_err(|_| OpcError::BadType)?;
-            let t = a.elements[2].convert_in(VarType::DATE, locale).map_err(|_| OpcError::BadType)?;
-            let (Value::I4(q), Value::Date(t)) = (q, t) else { return Err(OpcError::BadType) };
+        Value::Array(a)
+            if !e.canonical.is_array()
+                && a.elements.len() == 3
+                && quality.is_none()
+                && timestamp.is_none() =>
+        {
+            let q = a.elements[1]
+                .convert_in(VarType::I4, locale)
+                .map_err(|_| OpcError::BadType)?;
+            let t = a.elements[2]
+                .convert_in(VarType::DATE, locale)
+                .map_err(|_| OpcError::BadType)?;
+            let (Value::I4(q), Value::Date(t)) = (q, t) else {
+                return Err(OpcError::BadType);
+            };
             quality = Some(Quality(q as u16));
             timestamp = Some(Timestamp::from_ole_date(t).ok_or(OpcError::BadType)?);
             &a.elements[0]
@@ -259,14 +307,24 @@ fn prepare_write(ns: &dyn Namespace, e: &SourceEntry, w: &ItemVqt, locale: Local
     let value = if value.var_type() == e.canonical {
         value.clone()
     } else {
-        value.convert_in(e.canonical, locale).map_err(conversion_error_for_write)?
+        value
+            .convert_in(e.canonical, locale)
+            .map_err(conversion_error_for_write)?
     };
-    Ok(PreparedWrite { value, quality, timestamp })
+    Ok(PreparedWrite {
+        value,
+        quality,
+        timestamp,
+    })
 }
 
 impl Engine {
     fn txn_header(&mut self, kind: TxnKind, slot: usize, transaction_id: u32) -> Txn {
-        let cancel_id = if kind.is_sync() { 0 } else { self.txns.new_cancel() };
+        let cancel_id = if kind.is_sync() {
+            0
+        } else {
+            self.txns.new_cancel()
+        };
         let g = self.group(slot);
         Txn {
             kind,
@@ -297,7 +355,14 @@ impl Engine {
     /// A read slot for one item: answered from the cache (or constant), or pending.
     fn read_slot(&self, g: &Group, handle: u32, mode: ReadMode, now: Timestamp) -> Slot {
         let Some(i) = g.find(handle) else {
-            return Slot { item: handle, client: 0, source: u32::MAX, source_gen: 0, req_type: VarType::EMPTY, out: SlotOut::Err(OpcError::InvalidHandle) };
+            return Slot {
+                item: handle,
+                client: 0,
+                source: u32::MAX,
+                source_gen: 0,
+                req_type: VarType::EMPTY,
+                out: SlotOut::Err(OpcError::InvalidHandle),
+            };
         };
         let it = &g.items[i];
         let e = &self.sources.entries[it.source as usize];
@@ -317,7 +382,9 @@ impl Engine {
             ReadMode::Cache => true,
             ReadMode::Device => e.is_constant(),
             ReadMode::MaxAge(age) => {
-                e.is_constant() || age == MAX_AGE_CACHE || (age != 0 && fresh(e.refreshed_at, now, age))
+                e.is_constant()
+                    || age == MAX_AGE_CACHE
+                    || (age != 0 && fresh(e.refreshed_at, now, age))
             }
         };
         if from_cache {
@@ -325,7 +392,11 @@ impl Engine {
             if matches!(mode, ReadMode::Cache) && (!g.active || !it.active()) {
                 quality = Quality::BAD_OUT_OF_SERVICE;
             }
-            slot.out = SlotOut::Raw { value: e.value.clone(), quality, timestamp: e.timestamp };
+            slot.out = SlotOut::Raw {
+                value: e.value.clone(),
+                quality,
+                timestamp: e.timestamp,
+            };
         }
         slot
     }
@@ -342,7 +413,13 @@ impl Engine {
     }
 
     /// Registers a transaction whose slots in `remote` wait for `request`.
-    fn launch(&mut self, now: Timestamp, mut txn: Txn, remote: Vec<u32>, request: impl FnOnce(SourceReqId) -> SourceRequest) -> u64 {
+    fn launch(
+        &mut self,
+        now: Timestamp,
+        mut txn: Txn,
+        remote: Vec<u32>,
+        request: impl FnOnce(SourceReqId) -> SourceRequest,
+    ) -> u64 {
         let req = self.txns.new_req();
         let tid = self.txns.new_id();
         txn.remote = remote;
@@ -353,41 +430,76 @@ impl Engine {
         self.txns.by_req.insert(req, tid);
         self.txns.map.insert(tid, txn);
         self.requests.push_back(request(SourceReqId(req)));
-        self.sched.timeouts.push(std::cmp::Reverse((now.add_millis(u64::from(self.cfg.source_timeout_ms)), req)));
+        self.sched.timeouts.push(std::cmp::Reverse((
+            now.add_millis(u64::from(self.cfg.source_timeout_ms)),
+            req,
+        )));
         tid
     }
 
     /// Starts a read-type transaction from prepared slots.
     fn start_read(&mut self, now: Timestamp, txn: Txn) -> Result<u64, Txn> {
-        let remote: Vec<u32> =
-            txn.slots.iter().enumerate().filter(|(_, s)| matches!(s.out, SlotOut::Pending)).map(|(i, _)| i as u32).collect();
+        let remote: Vec<u32> = txn
+            .slots
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| matches!(s.out, SlotOut::Pending))
+            .map(|(i, _)| i as u32)
+            .collect();
         if remote.is_empty() {
             return Err(txn);
         }
-        let items: Vec<SourceItem> = remote.iter().map(|&i| self.sources.source_item(txn.slots[i as usize].source)).collect();
-        Ok(self.launch(now, txn, remote, |req_id| SourceRequest::Read { req_id, items }))
+        let items: Vec<SourceItem> = remote
+            .iter()
+            .map(|&i| self.sources.source_item(txn.slots[i as usize].source))
+            .collect();
+        Ok(self.launch(now, txn, remote, |req_id| SourceRequest::Read {
+            req_id,
+            items,
+        }))
     }
 
     /// Starts a write-type transaction: `writes` are (slot index, prepared value).
-    fn start_write(&mut self, now: Timestamp, txn: Txn, writes: Vec<(u32, PreparedWrite)>) -> Result<u64, Txn> {
+    fn start_write(
+        &mut self,
+        now: Timestamp,
+        txn: Txn,
+        writes: Vec<(u32, PreparedWrite)>,
+    ) -> Result<u64, Txn> {
         if writes.is_empty() {
             return Err(txn);
         }
         let remote: Vec<u32> = writes.iter().map(|(i, _)| *i).collect();
-        let vqt = writes.iter().any(|(_, w)| w.quality.is_some() || w.timestamp.is_some());
-        let items: Vec<(SourceItem, PreparedWrite)> =
-            writes.into_iter().map(|(i, w)| (self.sources.source_item(txn.slots[i as usize].source), w)).collect();
+        let vqt = writes
+            .iter()
+            .any(|(_, w)| w.quality.is_some() || w.timestamp.is_some());
+        let items: Vec<(SourceItem, PreparedWrite)> = writes
+            .into_iter()
+            .map(|(i, w)| (self.sources.source_item(txn.slots[i as usize].source), w))
+            .collect();
         Ok(self.launch(now, txn, remote, move |req_id| {
             if vqt {
                 SourceRequest::WriteVqt {
                     req_id,
                     items: items
                         .into_iter()
-                        .map(|(s, w)| (s, ItemVqt { value: w.value, quality: w.quality, timestamp: w.timestamp }))
+                        .map(|(s, w)| {
+                            (
+                                s,
+                                ItemVqt {
+                                    value: w.value,
+                                    quality: w.quality,
+                                    timestamp: w.timestamp,
+                                },
+                            )
+                        })
                         .collect(),
                 }
             } else {
-                SourceRequest::Write { req_id, items: items.into_iter().map(|(s, w)| (s, w.value)).collect() }
+                SourceRequest::Write {
+                    req_id,
+                    items: items.into_iter().map(|(s, w)| (s, w.value)).collect(),
+                }
             }
         }))
     }
@@ -399,7 +511,12 @@ impl Engine {
                 let v = slot_item_value(s, txn.locale);
                 match v.error {
                     Some(e) => Err(e),
-                    None => Ok(ItemState { client_handle: v.client_handle, value: v.value, quality: v.quality, timestamp: v.timestamp }),
+                    None => Ok(ItemState {
+                        client_handle: v.client_handle,
+                        value: v.value,
+                        quality: v.quality,
+                        timestamp: v.timestamp,
+                    }),
                 }
             })
             .collect()
@@ -424,11 +541,15 @@ impl Engine {
         self.release_txn_refs(&txn);
         match txn.kind {
             TxnKind::SyncRead => {
-                self.txns.sync_done.insert(tid, SyncResult::Read(Self::sync_read_results(&txn)));
+                self.txns
+                    .sync_done
+                    .insert(tid, SyncResult::Read(Self::sync_read_results(&txn)));
                 self.txns.sync_completed.push_back(SyncId(tid));
             }
             TxnKind::SyncWrite => {
-                self.txns.sync_done.insert(tid, SyncResult::Write(Self::sync_write_results(&txn)));
+                self.txns
+                    .sync_done
+                    .insert(tid, SyncResult::Write(Self::sync_write_results(&txn)));
                 self.txns.sync_completed.push_back(SyncId(tid));
             }
             _ => self.finish_async(now, txn),
@@ -439,7 +560,9 @@ impl Engine {
     fn finish_async(&mut self, now: Timestamp, txn: Txn) {
         // The group's current client handle (SetState may have changed it).
         let slot = self.group_slots.get(&txn.group.0).map(|&s| s as usize);
-        let client_group = slot.and_then(|s| self.groups[s].as_ref()).map_or(txn.client_group, |g| g.client_handle);
+        let client_group = slot
+            .and_then(|s| self.groups[s].as_ref())
+            .map_or(txn.client_group, |g| g.client_handle);
         let event = match txn.kind {
             TxnKind::Write => {
                 let items: Vec<WriteResult> = txn
@@ -454,7 +577,10 @@ impl Engine {
                         },
                     })
                     .collect();
-                let master_error = items.iter().any(|i| i.error.is_some()).then_some(OpcError::False);
+                let master_error = items
+                    .iter()
+                    .any(|i| i.error.is_some())
+                    .then_some(OpcError::False);
                 Event::WriteComplete(WriteComplete {
                     session: txn.session,
                     group: txn.group,
@@ -466,13 +592,19 @@ impl Engine {
                 })
             }
             TxnKind::Read | TxnKind::Refresh => {
-                let items: Vec<ItemValue> = txn.slots.iter().map(|s| slot_item_value(s, txn.locale)).collect();
+                let items: Vec<ItemValue> = txn
+                    .slots
+                    .iter()
+                    .map(|s| slot_item_value(s, txn.locale))
+                    .collect();
                 let (master_quality, master_error) = master_codes(&items);
                 if txn.kind == TxnKind::Refresh {
                     // Refreshed values become the last values sent (OPC DA 2.05a Refresh2).
                     if let Some(g) = slot.and_then(|s| self.groups[s].as_mut()) {
                         for s in &txn.slots {
-                            if let (SlotOut::Raw { value, quality, .. }, Some(i)) = (&s.out, g.find(s.item)) {
+                            if let (SlotOut::Raw { value, quality, .. }, Some(i)) =
+                                (&s.out, g.find(s.item))
+                            {
                                 let it = &mut g.items[i];
                                 it.last = value.clone();
                                 it.last_quality = *quality;
@@ -516,14 +648,22 @@ impl Engine {
 
     // ---- synchronous I/O -------------------------------------------------------------
 
-    fn sync_read(&mut self, now: Timestamp, group: GroupHandle, items: &[(u32, ReadMode)]) -> Result<SyncOutcome<ReadResults>, OpcError> {
+    fn sync_read(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        items: &[(u32, ReadMode)],
+    ) -> Result<SyncOutcome<ReadResults>, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
         let slot = self.live_slot(group)?;
         let mut txn = self.txn_header(TxnKind::SyncRead, slot, 0);
         let g = self.group(slot);
-        txn.slots = items.iter().map(|&(h, mode)| self.read_slot(g, h, mode, now)).collect();
+        txn.slots = items
+            .iter()
+            .map(|&(h, mode)| self.read_slot(g, h, mode, now))
+            .collect();
         match self.start_read(now, txn) {
             Ok(tid) => Ok(SyncOutcome::Pending(SyncId(tid))),
             Err(txn) => Ok(SyncOutcome::Ready(Self::sync_read_results(&txn))),
@@ -533,7 +673,13 @@ impl Engine {
     /// IOPCSyncIO::Read. From CACHE, items that are inactive or in an inactive group read
     /// with quality BAD Out of Service (value and timestamp from the cache); from DEVICE the
     /// data source is asked (constants answer at once).
-    pub fn read(&mut self, now: Timestamp, group: GroupHandle, source: DataSource, handles: &[u32]) -> Result<SyncOutcome<ReadResults>, OpcError> {
+    pub fn read(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        source: DataSource,
+        handles: &[u32],
+    ) -> Result<SyncOutcome<ReadResults>, OpcError> {
         let mode = match source {
             DataSource::Cache => ReadMode::Cache,
             DataSource::Device => ReadMode::Device,
@@ -545,12 +691,25 @@ impl Engine {
     /// IOPCSyncIO2::ReadMaxAge: per item `(server handle, MaxAge ms)`; from the cache when
     /// it was refreshed within MaxAge ([`MAX_AGE_CACHE`]: always), else from the device
     /// ([`super::MAX_AGE_DEVICE`]: always).
-    pub fn read_max_age(&mut self, now: Timestamp, group: GroupHandle, items: &[(u32, u32)]) -> Result<SyncOutcome<ReadResults>, OpcError> {
-        let items: Vec<(u32, ReadMode)> = items.iter().map(|&(h, a)| (h, ReadMode::MaxAge(a))).collect();
+    pub fn read_max_age(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        items: &[(u32, u32)],
+    ) -> Result<SyncOutcome<ReadResults>, OpcError> {
+        let items: Vec<(u32, ReadMode)> = items
+            .iter()
+            .map(|&(h, a)| (h, ReadMode::MaxAge(a)))
+            .collect();
         self.sync_read(now, group, &items)
     }
 
-    fn sync_write(&mut self, now: Timestamp, group: GroupHandle, items: &[(u32, ItemVqt)]) -> Result<SyncOutcome<WriteResults>, OpcError> {
+    fn sync_write(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        items: &[(u32, ItemVqt)],
+    ) -> Result<SyncOutcome<WriteResults>, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -560,7 +719,14 @@ impl Engine {
         let mut writes = Vec::with_capacity(items.len());
         let g = self.group(slot);
         for (n, (h, w)) in items.iter().enumerate() {
-            let mut s = Slot { item: *h, client: 0, source: u32::MAX, source_gen: 0, req_type: VarType::EMPTY, out: SlotOut::Pending };
+            let mut s = Slot {
+                item: *h,
+                client: 0,
+                source: u32::MAX,
+                source_gen: 0,
+                req_type: VarType::EMPTY,
+                out: SlotOut::Pending,
+            };
             match g.find(*h) {
                 None => s.out = SlotOut::Err(OpcError::InvalidHandle),
                 Some(i) => {
@@ -587,13 +753,26 @@ impl Engine {
     /// constant), OPC_E_BADTYPE / OPC_E_RANGE (no conversion to the canonical type), or
     /// the data source's answer. A 3-element array [value, quality, timestamp] written to
     /// a scalar item is the asix extended write (sent as [`SourceRequest::WriteVqt`]).
-    pub fn write(&mut self, now: Timestamp, group: GroupHandle, items: &[(u32, Value)]) -> Result<SyncOutcome<WriteResults>, OpcError> {
-        let items: Vec<(u32, ItemVqt)> = items.iter().map(|(h, v)| (*h, ItemVqt::value(v.clone()))).collect();
+    pub fn write(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        items: &[(u32, Value)],
+    ) -> Result<SyncOutcome<WriteResults>, OpcError> {
+        let items: Vec<(u32, ItemVqt)> = items
+            .iter()
+            .map(|(h, v)| (*h, ItemVqt::value(v.clone())))
+            .collect();
         self.sync_write(now, group, &items)
     }
 
     /// IOPCSyncIO2::WriteVQT (quality and timestamp optional per item).
-    pub fn write_vqt(&mut self, now: Timestamp, group: GroupHandle, items: &[(u32, ItemVqt)]) -> Result<SyncOutcome<WriteResults>, OpcError> {
+    pub fn write_vqt(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        items: &[(u32, ItemVqt)],
+    ) -> Result<SyncOutcome<WriteResults>, OpcError> {
         self.sync_write(now, group, items)
     }
 
@@ -642,8 +821,19 @@ impl Engine {
 
     /// Resolves an item ID for IOPCItemIO and takes a cache reference on it.
     fn item_io_slot(&mut self, now: Timestamp, item_id: &str) -> Slot {
-        let mut slot = Slot { item: 0, client: 0, source: u32::MAX, source_gen: 0, req_type: VarType::EMPTY, out: SlotOut::Pending };
-        let def = if item_id.is_empty() { Err(OpcError::InvalidItemId) } else { self.ns.resolve(item_id, "") };
+        let mut slot = Slot {
+            item: 0,
+            client: 0,
+            source: u32::MAX,
+            source_gen: 0,
+            req_type: VarType::EMPTY,
+            out: SlotOut::Pending,
+        };
+        let def = if item_id.is_empty() {
+            Err(OpcError::InvalidItemId)
+        } else {
+            self.ns.resolve(item_id, "")
+        };
         match def {
             Err(e) => slot.out = SlotOut::Err(e),
             Ok(def) => {
@@ -659,7 +849,12 @@ impl Engine {
     /// IOPCItemIO::Read: per item `(item ID, MaxAge ms)`, in the canonical type; item IDs
     /// resolve on the basic channel (IOPCItemIO has no access paths). Per-item namespace
     /// errors as for AddItems.
-    pub fn item_io_read(&mut self, now: Timestamp, session: SessionHandle, items: &[(&str, u32)]) -> Result<SyncOutcome<ReadResults>, OpcError> {
+    pub fn item_io_read(
+        &mut self,
+        now: Timestamp,
+        session: SessionHandle,
+        items: &[(&str, u32)],
+    ) -> Result<SyncOutcome<ReadResults>, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -673,8 +868,15 @@ impl Engine {
                 let e = &self.sources.entries[slot.source as usize];
                 if !e.readable() {
                     slot.out = SlotOut::Err(OpcError::BadRights);
-                } else if e.is_constant() || max_age == MAX_AGE_CACHE || (max_age != 0 && fresh(e.refreshed_at, now, max_age)) {
-                    slot.out = SlotOut::Raw { value: e.value.clone(), quality: e.quality, timestamp: e.timestamp };
+                } else if e.is_constant()
+                    || max_age == MAX_AGE_CACHE
+                    || (max_age != 0 && fresh(e.refreshed_at, now, max_age))
+                {
+                    slot.out = SlotOut::Raw {
+                        value: e.value.clone(),
+                        quality: e.quality,
+                        timestamp: e.timestamp,
+                    };
                 }
             }
             txn.slots.push(slot);
@@ -689,7 +891,12 @@ impl Engine {
     }
 
     /// IOPCItemIO::WriteVQT: per item `(item ID, value with optional quality/timestamp)`.
-    pub fn item_io_write_vqt(&mut self, now: Timestamp, session: SessionHandle, items: &[(&str, ItemVqt)]) -> Result<SyncOutcome<WriteResults>, OpcError> {
+    pub fn item_io_write_vqt(
+        &mut self,
+        now: Timestamp,
+        session: SessionHandle,
+        items: &[(&str, ItemVqt)],
+    ) -> Result<SyncOutcome<WriteResults>, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -702,7 +909,12 @@ impl Engine {
         for (n, (id, w)) in items.iter().enumerate() {
             let mut slot = self.item_io_slot(now, id);
             if slot.source != u32::MAX {
-                match prepare_write(&*self.ns, &self.sources.entries[slot.source as usize], w, txn.locale) {
+                match prepare_write(
+                    &*self.ns,
+                    &self.sources.entries[slot.source as usize],
+                    w,
+                    txn.locale,
+                ) {
                     Ok(p) => writes.push((n as u32, p)),
                     Err(e) => slot.out = SlotOut::Err(e),
                 }
@@ -720,7 +932,13 @@ impl Engine {
 
     // ---- asynchronous I/O ------------------------------------------------------------
 
-    fn async_read_impl(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, items: &[(u32, ReadMode)]) -> Result<AsyncStarted, OpcError> {
+    fn async_read_impl(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        items: &[(u32, ReadMode)],
+    ) -> Result<AsyncStarted, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -732,7 +950,9 @@ impl Engine {
         for &(h, mode) in items {
             let s = self.read_slot(g, h, mode, now);
             match s.out {
-                SlotOut::Err(e) if matches!(e, OpcError::InvalidHandle | OpcError::BadRights) => results.push(Err(e)),
+                SlotOut::Err(e) if matches!(e, OpcError::InvalidHandle | OpcError::BadRights) => {
+                    results.push(Err(e))
+                }
                 _ => {
                     results.push(Ok(()));
                     txn.slots.push(s);
@@ -743,9 +963,19 @@ impl Engine {
     }
 
     /// Queues an asynchronous transaction (or completes it at once from the cache).
-    fn start_async(&mut self, now: Timestamp, slot: usize, txn: Txn, writes: Option<Vec<(u32, PreparedWrite)>>, results: Vec<Result<(), OpcError>>) -> AsyncStarted {
+    fn start_async(
+        &mut self,
+        now: Timestamp,
+        slot: usize,
+        txn: Txn,
+        writes: Option<Vec<(u32, PreparedWrite)>>,
+        results: Vec<Result<(), OpcError>>,
+    ) -> AsyncStarted {
         if txn.slots.is_empty() {
-            return AsyncStarted { cancel_id: 0, results };
+            return AsyncStarted {
+                cancel_id: 0,
+                results,
+            };
         }
         let cancel_id = txn.cancel_id;
         self.group_mut(slot).outstanding += 1;
@@ -763,18 +993,39 @@ impl Engine {
     /// callback is OnReadComplete with `transaction_id`. CONNECT_E_NOCONNECTION without a
     /// callback sink, CONNECT_E_ADVISELIMIT when the group has too many outstanding
     /// transactions.
-    pub fn async_read(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, handles: &[u32]) -> Result<AsyncStarted, OpcError> {
+    pub fn async_read(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        handles: &[u32],
+    ) -> Result<AsyncStarted, OpcError> {
         let items: Vec<(u32, ReadMode)> = handles.iter().map(|&h| (h, ReadMode::Device)).collect();
         self.async_read_impl(now, group, transaction_id, &items)
     }
 
     /// IOPCAsyncIO3::ReadMaxAge: per item `(server handle, MaxAge ms)`.
-    pub fn async_read_max_age(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, items: &[(u32, u32)]) -> Result<AsyncStarted, OpcError> {
-        let items: Vec<(u32, ReadMode)> = items.iter().map(|&(h, a)| (h, ReadMode::MaxAge(a))).collect();
+    pub fn async_read_max_age(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        items: &[(u32, u32)],
+    ) -> Result<AsyncStarted, OpcError> {
+        let items: Vec<(u32, ReadMode)> = items
+            .iter()
+            .map(|&(h, a)| (h, ReadMode::MaxAge(a)))
+            .collect();
         self.async_read_impl(now, group, transaction_id, &items)
     }
 
-    fn async_write_impl(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, items: &[(u32, ItemVqt)]) -> Result<AsyncStarted, OpcError> {
+    fn async_write_impl(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        items: &[(u32, ItemVqt)],
+    ) -> Result<AsyncStarted, OpcError> {
         if items.is_empty() {
             return Err(OpcError::InvalidArg);
         }
@@ -812,17 +1063,38 @@ impl Engine {
 
     /// IOPCAsyncIO2::Write; completes with OnWriteComplete. Call-time per-item errors as
     /// for [`Engine::write`].
-    pub fn async_write(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, items: &[(u32, Value)]) -> Result<AsyncStarted, OpcError> {
-        let items: Vec<(u32, ItemVqt)> = items.iter().map(|(h, v)| (*h, ItemVqt::value(v.clone()))).collect();
+    pub fn async_write(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        items: &[(u32, Value)],
+    ) -> Result<AsyncStarted, OpcError> {
+        let items: Vec<(u32, ItemVqt)> = items
+            .iter()
+            .map(|(h, v)| (*h, ItemVqt::value(v.clone())))
+            .collect();
         self.async_write_impl(now, group, transaction_id, &items)
     }
 
     /// IOPCAsyncIO3::WriteVQT.
-    pub fn async_write_vqt(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, items: &[(u32, ItemVqt)]) -> Result<AsyncStarted, OpcError> {
+    pub fn async_write_vqt(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        items: &[(u32, ItemVqt)],
+    ) -> Result<AsyncStarted, OpcError> {
         self.async_write_impl(now, group, transaction_id, items)
     }
 
-    fn refresh_impl(&mut self, now: Timestamp, group: GroupHandle, transaction_id: u32, mode: ReadMode) -> Result<u32, OpcError> {
+    fn refresh_impl(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        mode: ReadMode,
+    ) -> Result<u32, OpcError> {
         let slot = self.live_slot(group)?;
         if !self.group(slot).connected {
             return Err(OpcError::NoConnection);
@@ -834,14 +1106,25 @@ impl Engine {
         self.check_async(slot)?;
         let mut txn = self.txn_header(TxnKind::Refresh, slot, transaction_id);
         let g = self.group(slot);
-        txn.slots = g.items.iter().filter(|it| it.active()).map(|it| self.read_slot(g, it.handle, mode, now)).collect();
+        txn.slots = g
+            .items
+            .iter()
+            .filter(|it| it.active())
+            .map(|it| self.read_slot(g, it.handle, mode, now))
+            .collect();
         Ok(self.start_async(now, slot, txn, None, Vec::new()).cancel_id)
     }
 
     /// IOPCAsyncIO2::Refresh2: an OnDataChange with `transaction_id` for every active item,
     /// changed or not, from the cache or the device; the values become the last sent.
     /// E_FAIL when the group is inactive or has no active items.
-    pub fn refresh2(&mut self, now: Timestamp, group: GroupHandle, source: DataSource, transaction_id: u32) -> Result<u32, OpcError> {
+    pub fn refresh2(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        source: DataSource,
+        transaction_id: u32,
+    ) -> Result<u32, OpcError> {
         let mode = match source {
             DataSource::Cache => ReadMode::Cache,
             DataSource::Device => ReadMode::Device,
@@ -851,7 +1134,13 @@ impl Engine {
 
     /// IOPCAsyncIO3::RefreshMaxAge: as Refresh2, each item from the cache when refreshed
     /// within `max_age` ms, else from the device.
-    pub fn refresh_max_age(&mut self, now: Timestamp, group: GroupHandle, max_age: u32, transaction_id: u32) -> Result<u32, OpcError> {
+    pub fn refresh_max_age(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        max_age: u32,
+        transaction_id: u32,
+    ) -> Result<u32, OpcError> {
         self.refresh_impl(now, group, transaction_id, ReadMode::MaxAge(max_age))
     }
 
@@ -878,9 +1167,14 @@ impl Engine {
             }
         }
         let queued = self.events.iter().position(|e| {
-            e.group() == group && e.cancel_id() == cancel_id && cancel_id != 0 && !matches!(e, Event::CancelComplete(_))
+            e.group() == group
+                && e.cancel_id() == cancel_id
+                && cancel_id != 0
+                && !matches!(e, Event::CancelComplete(_))
         });
-        let Some(pos) = queued else { return Err(OpcError::Fail) };
+        let Some(pos) = queued else {
+            return Err(OpcError::Fail);
+        };
         let (session, transaction_id, refresh) = match &self.events[pos] {
             Event::DataChange(d) => (d.session, d.transaction_id, true),
             Event::ReadComplete(r) => (r.session, r.transaction_id, false),
@@ -888,7 +1182,13 @@ impl Engine {
             Event::CancelComplete(_) => return Err(OpcError::Fail),
         };
         let client_group = self.group(slot).client_handle;
-        self.events[pos] = Event::CancelComplete(CancelComplete { session, group, client_group, transaction_id, cancel_id });
+        self.events[pos] = Event::CancelComplete(CancelComplete {
+            session,
+            group,
+            client_group,
+            transaction_id,
+            cancel_id,
+        });
         if refresh {
             // The refreshed values never reach the client: they are not the last sent.
             self.group_mut(slot).resend_all();

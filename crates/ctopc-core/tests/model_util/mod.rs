@@ -41,14 +41,28 @@ impl Namespace for FakeNs {
             eu,
             constant,
         };
-        let analog = EuInfo::Analog { low: 0.0, high: 100.0 };
+        let analog = EuInfo::Analog {
+            low: 0.0,
+            high: 100.0,
+        };
         match id {
             "RO" => Ok(def(VarType::R8, OPC_READABLE, analog, None)),
-            "CONST" => Ok(def(VarType::R8, OPC_READABLE, EuInfo::None, Some(Value::R8(42.0)))),
+            "CONST" => Ok(def(
+                VarType::R8,
+                OPC_READABLE,
+                EuInfo::None,
+                Some(Value::R8(42.0)),
+            )),
             "ARR" => Ok(def(VarType::array_of(VarType::R8), rw, analog, None)),
-            _ if id.starts_with('A') && id[1..].parse::<u32>().is_ok() => Ok(def(VarType::R8, rw, analog, None)),
-            _ if id.starts_with('D') && id[1..].parse::<u32>().is_ok() => Ok(def(VarType::R4, rw, EuInfo::None, None)),
-            _ if id.starts_with('S') && id[1..].parse::<u32>().is_ok() => Ok(def(VarType::BSTR, rw, EuInfo::None, None)),
+            _ if id.starts_with('A') && id[1..].parse::<u32>().is_ok() => {
+                Ok(def(VarType::R8, rw, analog, None))
+            }
+            _ if id.starts_with('D') && id[1..].parse::<u32>().is_ok() => {
+                Ok(def(VarType::R4, rw, EuInfo::None, None))
+            }
+            _ if id.starts_with('S') && id[1..].parse::<u32>().is_ok() => {
+                Ok(def(VarType::BSTR, rw, EuInfo::None, None))
+            }
             _ => Err(OpcError::UnknownItemId),
         }
     }
@@ -133,7 +147,8 @@ impl Sim {
                 SourceRequest::Subscribe(subs) => {
                     for s in subs {
                         self.keys.insert(s.item.item_id.to_string(), s.item.key);
-                        self.subscribed.insert(s.item.item_id.to_string(), s.sampling_rate_ms);
+                        self.subscribed
+                            .insert(s.item.item_id.to_string(), s.sampling_rate_ms);
                     }
                     self.sub_log.push(r);
                 }
@@ -174,13 +189,20 @@ impl Sim {
     }
 
     fn id_of(&self, k: SourceKey) -> String {
-        self.keys.iter().find(|(_, v)| **v == k).map(|(id, _)| id.clone()).expect("known key")
+        self.keys
+            .iter()
+            .find(|(_, v)| **v == k)
+            .map(|(id, _)| id.clone())
+            .expect("known key")
     }
 
     /// The data source pushes a sample of a subscribed item.
     pub fn push(&mut self, id: &str, value: Value, quality: Quality) {
         self.pump();
-        let key = *self.keys.get(id).unwrap_or_else(|| panic!("{id} has no key"));
+        let key = *self
+            .keys
+            .get(id)
+            .unwrap_or_else(|| panic!("{id} has no key"));
         let vqt = Vqt::new(value, quality, self.now);
         self.e.handle_source_updates(self.now, [(key, vqt)]);
     }
@@ -192,7 +214,11 @@ impl Sim {
     /// The last device read request taken from the engine.
     pub fn take_read(&mut self) -> (SourceReqId, Vec<SourceItem>) {
         self.pump();
-        let pos = self.io.iter().rposition(|r| matches!(r, SourceRequest::Read { .. })).expect("a read request");
+        let pos = self
+            .io
+            .iter()
+            .rposition(|r| matches!(r, SourceRequest::Read { .. }))
+            .expect("a read request");
         match self.io.remove(pos) {
             SourceRequest::Read { req_id, items } => (req_id, items),
             _ => unreachable!(),
@@ -207,9 +233,21 @@ impl Sim {
     pub fn group(&mut self, s: SessionHandle, name: &str, rate: u32, deadband: f32) -> GroupHandle {
         let r = self
             .e
-            .add_group(self.now, s, &GroupParams { name, update_rate: rate, percent_deadband: deadband, client_handle: 7, ..Default::default() })
+            .add_group(
+                self.now,
+                s,
+                &GroupParams {
+                    name,
+                    update_rate: rate,
+                    percent_deadband: deadband,
+                    client_handle: 7,
+                    ..Default::default()
+                },
+            )
             .unwrap();
-        self.e.set_callback_connected(self.now, r.group, true).unwrap();
+        self.e
+            .set_callback_connected(self.now, r.group, true)
+            .unwrap();
         r.group
     }
 
@@ -234,5 +272,8 @@ impl Sim {
 
 /// (client handle, value) pairs of a callback.
 pub fn values(d: &DataChange) -> Vec<(u32, Value)> {
-    d.items.iter().map(|i| (i.client_handle, i.value.clone())).collect()
+    d.items
+        .iter()
+        .map(|i| (i.client_handle, i.value.clone()))
+        .collect()
 }

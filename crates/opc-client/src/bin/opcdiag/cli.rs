@@ -139,12 +139,34 @@ pub struct Global {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Command {
     Status,
-    Browse { flat: bool, branch: Option<String>, depth: Option<usize> },
-    Props { item: String },
-    Read { items: Vec<String>, device: bool, path: String },
-    Write { item: String, value: String, vt: Option<VarType>, path: String },
-    Subscribe { items: Vec<String>, rate_ms: u32, for_secs: Option<f64>, path: String },
-    Demo { for_secs: Option<f64> },
+    Browse {
+        flat: bool,
+        branch: Option<String>,
+        depth: Option<usize>,
+    },
+    Props {
+        item: String,
+    },
+    Read {
+        items: Vec<String>,
+        device: bool,
+        path: String,
+    },
+    Write {
+        item: String,
+        value: String,
+        vt: Option<VarType>,
+        path: String,
+    },
+    Subscribe {
+        items: Vec<String>,
+        rate_ms: u32,
+        for_secs: Option<f64>,
+        path: String,
+    },
+    Demo {
+        for_secs: Option<f64>,
+    },
 }
 
 /// What the command line asks for.
@@ -162,7 +184,15 @@ pub struct UsageError {
     pub help: &'static str,
 }
 
-const COMMANDS: &[&str] = &["status", "browse", "props", "read", "write", "subscribe", "demo"];
+const COMMANDS: &[&str] = &[
+    "status",
+    "browse",
+    "props",
+    "read",
+    "write",
+    "subscribe",
+    "demo",
+];
 
 /// The LCID for `--lang`: en, pl, or a number (decimal or 0x hex).
 pub fn parse_lcid(s: &str) -> Option<u32> {
@@ -206,7 +236,10 @@ fn parse_secs(s: &str) -> Option<f64> {
 
 /// Parses the arguments after the program name.
 pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
-    let mut global = Global { server: DEFAULT_SERVER.to_string(), lcid: None };
+    let mut global = Global {
+        server: DEFAULT_SERVER.to_string(),
+        lcid: None,
+    };
     let mut command: Option<&str> = None;
     let mut positional: Vec<String> = Vec::new();
     let mut flat = false;
@@ -221,11 +254,16 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
     // Options given, to reject those the command does not take.
     let mut seen: Vec<&'static str> = Vec::new();
 
-    let err = |command: Option<&str>, message: String| UsageError { message, help: help(command) };
+    let err = |command: Option<&str>, message: String| UsageError {
+        message,
+        help: help(command),
+    };
     let mut it = args.iter();
     while let Some(a) = it.next() {
         let mut value = |name: &str| {
-            it.next().cloned().ok_or_else(|| err(command, format!("{name} needs a value")))
+            it.next()
+                .cloned()
+                .ok_or_else(|| err(command, format!("{name} needs a value")))
         };
         match a.as_str() {
             "-h" | "--help" | "/?" => want_help = true,
@@ -236,11 +274,21 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
                 }
             }
             "--host" | "--node" => {
-                return Err(err(command, format!("{a}: remote servers are not supported; run opcdiag on the server's computer")))
+                return Err(err(
+                    command,
+                    format!(
+                    "{a}: remote servers are not supported; run opcdiag on the server's computer"
+                ),
+                ))
             }
             "--lang" => {
                 let v = value("--lang")?;
-                global.lcid = Some(parse_lcid(&v).ok_or_else(|| err(command, format!("--lang: unknown language {v:?} (en, pl or an LCID)")))?);
+                global.lcid = Some(parse_lcid(&v).ok_or_else(|| {
+                    err(
+                        command,
+                        format!("--lang: unknown language {v:?} (en, pl or an LCID)"),
+                    )
+                })?);
             }
             "--flat" => {
                 flat = true;
@@ -256,7 +304,12 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
             }
             "--depth" => {
                 let v = value("--depth")?;
-                depth = Some(v.parse::<usize>().ok().filter(|d| *d > 0).ok_or_else(|| err(command, format!("--depth: expected a number > 0, got {v:?}")))?);
+                depth = Some(v.parse::<usize>().ok().filter(|d| *d > 0).ok_or_else(|| {
+                    err(
+                        command,
+                        format!("--depth: expected a number > 0, got {v:?}"),
+                    )
+                })?);
                 seen.push("--depth");
             }
             "--path" => {
@@ -265,17 +318,24 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
             }
             "--type" => {
                 let v = value("--type")?;
-                vt = Some(parse_vartype(&v).ok_or_else(|| err(command, format!("--type: unknown data type {v:?}")))?);
+                vt = Some(
+                    parse_vartype(&v)
+                        .ok_or_else(|| err(command, format!("--type: unknown data type {v:?}")))?,
+                );
                 seen.push("--type");
             }
             "--rate" => {
                 let v = value("--rate")?;
-                rate_ms = v.parse::<u32>().map_err(|_| err(command, format!("--rate: expected milliseconds, got {v:?}")))?;
+                rate_ms = v.parse::<u32>().map_err(|_| {
+                    err(command, format!("--rate: expected milliseconds, got {v:?}"))
+                })?;
                 seen.push("--rate");
             }
             "--for" => {
                 let v = value("--for")?;
-                for_secs = Some(parse_secs(&v).ok_or_else(|| err(command, format!("--for: expected seconds > 0, got {v:?}")))?);
+                for_secs = Some(parse_secs(&v).ok_or_else(|| {
+                    err(command, format!("--for: expected seconds > 0, got {v:?}"))
+                })?);
                 seen.push("--for");
             }
             s if s.starts_with("--") => return Err(err(command, format!("unknown option {s}"))),
@@ -330,24 +390,44 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
         }
         "browse" => {
             arity(0, Some(0), "no arguments besides its options")?;
-            Command::Browse { flat, branch, depth }
+            Command::Browse {
+                flat,
+                branch,
+                depth,
+            }
         }
         "props" => {
             arity(1, Some(1), "one ITEMID")?;
-            Command::Props { item: positional.remove(0) }
+            Command::Props {
+                item: positional.remove(0),
+            }
         }
         "read" => {
             arity(1, None, "at least one ITEMID")?;
-            Command::Read { items: positional, device, path }
+            Command::Read {
+                items: positional,
+                device,
+                path,
+            }
         }
         "write" => {
             arity(2, Some(2), "ITEMID and VALUE")?;
             let value = positional.remove(1);
-            Command::Write { item: positional.remove(0), value, vt, path }
+            Command::Write {
+                item: positional.remove(0),
+                value,
+                vt,
+                path,
+            }
         }
         "subscribe" => {
             arity(1, None, "at least one ITEMID")?;
-            Command::Subscribe { items: positional, rate_ms, for_secs, path }
+            Command::Subscribe {
+                items: positional,
+                rate_ms,
+                for_secs,
+                path,
+            }
         }
         "demo" => {
             arity(0, Some(0), "no arguments besides --for")?;
@@ -383,7 +463,13 @@ mod tests {
     #[test]
     fn status_defaults_to_servertopc_and_the_servers_language() {
         let (g, c) = run("status");
-        assert_eq!(g, Global { server: "ServerCTOPC.App".into(), lcid: None });
+        assert_eq!(
+            g,
+            Global {
+                server: "ServerCTOPC.App".into(),
+                lcid: None
+            }
+        );
         assert_eq!(c, Command::Status);
     }
 
@@ -398,10 +484,21 @@ mod tests {
 
     #[test]
     fn browse_options() {
-        assert_eq!(run("browse").1, Command::Browse { flat: false, branch: None, depth: None });
+        assert_eq!(
+            run("browse").1,
+            Command::Browse {
+                flat: false,
+                branch: None,
+                depth: None
+            }
+        );
         assert_eq!(
             run("browse --flat --branch Magazyn --depth 2").1,
-            Command::Browse { flat: true, branch: Some("Magazyn".into()), depth: Some(2) }
+            Command::Browse {
+                flat: true,
+                branch: Some("Magazyn".into()),
+                depth: Some(2)
+            }
         );
     }
 
@@ -409,18 +506,42 @@ mod tests {
     fn read_takes_several_items_a_source_and_an_access_path() {
         assert_eq!(
             run("read KW_A000 KW_A001 --device --path Demo_Wytwornia_Kwasu").1,
-            Command::Read { items: vec!["KW_A000".into(), "KW_A001".into()], device: true, path: "Demo_Wytwornia_Kwasu".into() }
+            Command::Read {
+                items: vec!["KW_A000".into(), "KW_A001".into()],
+                device: true,
+                path: "Demo_Wytwornia_Kwasu".into()
+            }
         );
-        assert_eq!(run("read KW_A000").1, Command::Read { items: vec!["KW_A000".into()], device: false, path: String::new() });
+        assert_eq!(
+            run("read KW_A000").1,
+            Command::Read {
+                items: vec!["KW_A000".into()],
+                device: false,
+                path: String::new()
+            }
+        );
     }
 
     #[test]
     fn write_takes_an_item_a_value_and_an_optional_type() {
         assert_eq!(
             run("write KW_A110 12.5 --type r4").1,
-            Command::Write { item: "KW_A110".into(), value: "12.5".into(), vt: Some(VarType::R4), path: String::new() }
+            Command::Write {
+                item: "KW_A110".into(),
+                value: "12.5".into(),
+                vt: Some(VarType::R4),
+                path: String::new()
+            }
         );
-        assert_eq!(run("write X -3 --type VT_I2").1, Command::Write { item: "X".into(), value: "-3".into(), vt: Some(VarType::I2), path: String::new() });
+        assert_eq!(
+            run("write X -3 --type VT_I2").1,
+            Command::Write {
+                item: "X".into(),
+                value: "-3".into(),
+                vt: Some(VarType::I2),
+                path: String::new()
+            }
+        );
         assert!(usage_error("write KW_A110").contains("ITEMID and VALUE"));
         assert!(usage_error("write A 1 2").contains("ITEMID and VALUE"));
         assert!(usage_error("write A 1 --type R5").contains("unknown data type"));
@@ -430,9 +551,22 @@ mod tests {
     fn subscribe_rate_and_duration() {
         assert_eq!(
             run("subscribe A B --rate 250 --for 2.5").1,
-            Command::Subscribe { items: vec!["A".into(), "B".into()], rate_ms: 250, for_secs: Some(2.5), path: String::new() }
+            Command::Subscribe {
+                items: vec!["A".into(), "B".into()],
+                rate_ms: 250,
+                for_secs: Some(2.5),
+                path: String::new()
+            }
         );
-        assert_eq!(run("subscribe A").1, Command::Subscribe { items: vec!["A".into()], rate_ms: 1000, for_secs: None, path: String::new() });
+        assert_eq!(
+            run("subscribe A").1,
+            Command::Subscribe {
+                items: vec!["A".into()],
+                rate_ms: 1000,
+                for_secs: None,
+                path: String::new()
+            }
+        );
         assert!(usage_error("subscribe A --for 0").contains("seconds > 0"));
         assert!(usage_error("subscribe A --for x").contains("seconds > 0"));
         assert!(usage_error("subscribe A --rate fast").contains("milliseconds"));
@@ -442,7 +576,12 @@ mod tests {
     #[test]
     fn demo_and_its_duration() {
         assert_eq!(run("demo").1, Command::Demo { for_secs: None });
-        assert_eq!(run("demo --for 15").1, Command::Demo { for_secs: Some(15.0) });
+        assert_eq!(
+            run("demo --for 15").1,
+            Command::Demo {
+                for_secs: Some(15.0)
+            }
+        );
     }
 
     #[test]
@@ -450,7 +589,10 @@ mod tests {
         assert_eq!(parse(&args("--help")), Ok(Parsed::Help(USAGE)));
         assert_eq!(parse(&args("help")), Ok(Parsed::Help(USAGE)));
         assert_eq!(parse(&args("help write")), Ok(Parsed::Help(WRITE_HELP)));
-        assert_eq!(parse(&args("subscribe --help")), Ok(Parsed::Help(SUBSCRIBE_HELP)));
+        assert_eq!(
+            parse(&args("subscribe --help")),
+            Ok(Parsed::Help(SUBSCRIBE_HELP))
+        );
         assert_eq!(parse(&args("read -h")), Ok(Parsed::Help(READ_HELP)));
         for c in COMMANDS {
             let text = help(Some(c));
@@ -467,7 +609,10 @@ mod tests {
         let e = parse(&args("frobnicate")).unwrap_err();
         assert!(e.message.contains("unknown command"));
         let e = parse(&args("read A --flat")).unwrap_err();
-        assert_eq!((e.message.as_str(), e.help), ("read does not take --flat", READ_HELP));
+        assert_eq!(
+            (e.message.as_str(), e.help),
+            ("read does not take --flat", READ_HELP)
+        );
         assert!(usage_error("status extra").contains("no arguments"));
         assert!(usage_error("props").contains("one ITEMID"));
         assert!(usage_error("read A --bogus").contains("unknown option --bogus"));
@@ -479,7 +624,13 @@ mod tests {
 
     #[test]
     fn vartype_names() {
-        for (s, vt) in [("R8", VarType::R8), ("vt_bstr", VarType::BSTR), ("bool", VarType::BOOL), ("UI4", VarType::UI4), ("float", VarType::R4)] {
+        for (s, vt) in [
+            ("R8", VarType::R8),
+            ("vt_bstr", VarType::BSTR),
+            ("bool", VarType::BOOL),
+            ("UI4", VarType::UI4),
+            ("float", VarType::R4),
+        ] {
             assert_eq!(parse_vartype(s), Some(vt), "{s}");
         }
         assert_eq!(parse_vartype("VT_VARIANT"), None);

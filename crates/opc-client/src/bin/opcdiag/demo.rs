@@ -46,7 +46,16 @@ pub fn run(s: &Session, for_secs: Option<f64>) -> Result<u8, String> {
     say!("Variables:");
     for item in &items {
         let (desc, unit) = describe(s, item);
-        say!("  {}  {}{}", text::pad(item, 7), desc, if unit.is_empty() { String::new() } else { format!(" [{unit}]") });
+        say!(
+            "  {}  {}{}",
+            text::pad(item, 7),
+            desc,
+            if unit.is_empty() {
+                String::new()
+            } else {
+                format!(" [{unit}]")
+            }
+        );
         units.push(unit);
     }
     for (name, err) in &sub.failed {
@@ -57,10 +66,21 @@ pub fn run(s: &Session, for_secs: Option<f64>) -> Result<u8, String> {
         Some(secs) => format!("for {secs} s"),
         None => "press Ctrl+C to stop".into(),
     };
-    say!("Live values (update rate {} ms, {until}):", sub.revised_rate);
+    say!(
+        "Live values (update rate {} ms, {until}):",
+        sub.revised_rate
+    );
     let n = sub.run(for_secs, |name, r| {
-        let unit = items.iter().position(|i| i == name).and_then(|i| units.get(i)).map_or("", String::as_str);
-        let value = if r.error.is_err() { format!("error {}", s.error_text(r.error)) } else { format!("{} {unit}", text::value_rounded(&r.value, 2)) };
+        let unit = items
+            .iter()
+            .position(|i| i == name)
+            .and_then(|i| units.get(i))
+            .map_or("", String::as_str);
+        let value = if r.error.is_err() {
+            format!("error {}", s.error_text(r.error))
+        } else {
+            format!("{} {unit}", text::value_rounded(&r.value, 2))
+        };
         // Short enough for an 80-column console: the quality without its hex bits.
         say!(
             "  {}  {}  {}  {}",
@@ -83,7 +103,10 @@ fn describe(s: &Session, item: &str) -> (String, String) {
         Value::Bstr(t) => t.clone(),
         _ => String::new(),
     };
-    match s.server.get_item_properties(item, &[OPC_PROPERTY_DESCRIPTION, OPC_PROPERTY_EU_UNITS]) {
+    match s
+        .server
+        .get_item_properties(item, &[OPC_PROPERTY_DESCRIPTION, OPC_PROPERTY_EU_UNITS])
+    {
         Ok((_, v)) if v.len() == 2 => (text_of(&v[0].0), text_of(&v[1].0)),
         _ => (String::new(), String::new()),
     }

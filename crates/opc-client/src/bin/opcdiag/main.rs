@@ -16,10 +16,10 @@ macro_rules! say {
 
 mod cli;
 #[cfg(windows)]
+mod demo;
+#[cfg(windows)]
 mod out;
 mod text;
-#[cfg(windows)]
-mod demo;
 #[cfg(windows)]
 mod win;
 

@@ -168,8 +168,16 @@ fn civil(t: Timestamp, offset_min: i32) -> (String, String) {
     let days = ms.div_euclid(86_400_000);
     let in_day = ms.rem_euclid(86_400_000);
     let (y, m, d) = civil_from_days(days);
-    let (h, min, s, milli) = (in_day / 3_600_000, in_day / 60_000 % 60, in_day / 1000 % 60, in_day % 1000);
-    (format!("{y:04}-{m:02}-{d:02}"), format!("{h:02}:{min:02}:{s:02}.{milli:03}"))
+    let (h, min, s, milli) = (
+        in_day / 3_600_000,
+        in_day / 60_000 % 60,
+        in_day / 1000 % 60,
+        in_day % 1000,
+    );
+    (
+        format!("{y:04}-{m:02}-{d:02}"),
+        format!("{h:02}:{min:02}:{s:02}.{milli:03}"),
+    )
 }
 
 /// `t` in local time as ISO 8601 with milliseconds and the offset:
@@ -256,7 +264,11 @@ pub fn render_tree(lines: &[TreeLine]) -> String {
 
 /// Splits `--branch` into names to walk down (separators '/' and '\'; empty parts dropped).
 pub fn branch_steps(path: &str) -> Vec<String> {
-    path.split(['/', '\\']).map(str::trim).filter(|s| !s.is_empty()).map(String::from).collect()
+    path.split(['/', '\\'])
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(String::from)
+        .collect()
 }
 
 /// The access rights (OPC_READABLE 1, OPC_WRITEABLE 2) as text.
@@ -304,15 +316,24 @@ mod tests {
         assert_eq!(value_text(&Value::I2(-3)), "-3");
         assert_eq!(value_text(&Value::UI4(4_000_000_000)), "4000000000");
         assert_eq!(value_text(&Value::Bool(true)), "true");
-        assert_eq!(value_text(&Value::Bstr("Zbiornik \"Z101\"".into())), "\"Zbiornik \\\"Z101\\\"\"");
+        assert_eq!(
+            value_text(&Value::Bstr("Zbiornik \"Z101\"".into())),
+            "\"Zbiornik \\\"Z101\\\"\""
+        );
         assert_eq!(value_text(&Value::Empty), "(empty)");
         assert_eq!(value_text(&Value::Cy(12_500)), "1.25");
         assert_eq!(value_text(&Value::Cy(-20_000)), "-2");
-        assert_eq!(value_text(&Value::Error(0xC004_0007u32 as i32)), "error 0xC0040007");
+        assert_eq!(
+            value_text(&Value::Error(0xC004_0007u32 as i32)),
+            "error 0xC0040007"
+        );
         // 2026-01-05 13:04:05 as an OLE date.
         let t = Timestamp::from_unix_millis(1_767_618_245_000);
         assert_eq!(value_text(&Value::date_from(t)), "2026-01-05 13:04:05");
-        let a = Value::Array(ArrayValue::new(VarType::I2, vec![Value::I2(1), Value::I2(2)]));
+        let a = Value::Array(ArrayValue::new(
+            VarType::I2,
+            vec![Value::I2(1), Value::I2(2)],
+        ));
         assert_eq!(value_text(&a), "[1, 2]");
         assert_eq!(value_rounded(&Value::R4(5.396_091_5), 2), "5.40");
         assert_eq!(value_rounded(&Value::R8(-0.004), 2), "0.00");
@@ -335,10 +356,22 @@ mod tests {
         assert_eq!(parse_value("-7", VarType::I2), Ok(Value::I2(-7)));
         assert_eq!(parse_value("true", VarType::BOOL), Ok(Value::Bool(true)));
         assert_eq!(parse_value("0", VarType::BOOL), Ok(Value::Bool(false)));
-        assert_eq!(parse_value("12,5", VarType::BSTR), Ok(Value::Bstr("12,5".into())));
-        assert_eq!(parse_value("x", VarType::EMPTY), Ok(Value::Bstr("x".into())));
-        assert_eq!(parse_value("300", VarType::UI1), Err("\"300\" is out of range for UI1".into()));
-        assert_eq!(parse_value("abc", VarType::R8), Err("\"abc\" is not a valid value for R8".into()));
+        assert_eq!(
+            parse_value("12,5", VarType::BSTR),
+            Ok(Value::Bstr("12,5".into()))
+        );
+        assert_eq!(
+            parse_value("x", VarType::EMPTY),
+            Ok(Value::Bstr("x".into()))
+        );
+        assert_eq!(
+            parse_value("300", VarType::UI1),
+            Err("\"300\" is out of range for UI1".into())
+        );
+        assert_eq!(
+            parse_value("abc", VarType::R8),
+            Err("\"abc\" is not a valid value for R8".into())
+        );
     }
 
     #[test]
@@ -346,8 +379,14 @@ mod tests {
         assert_eq!(quality_text(0xC0), "GOOD");
         assert_eq!(quality_text(0x19), "BAD Comm Failure [Low limit] (0x0019)");
         assert_eq!(quality_text(0x20), "BAD Waiting for Initial Data (0x0020)");
-        assert_eq!(quality_text(0x08C2), "GOOD [High limit] +SecondLimit (0x08C2)");
-        assert_eq!(quality_text(0x56), "UNCERTAIN EU Units Exceeded [High limit] (0x0056)");
+        assert_eq!(
+            quality_text(0x08C2),
+            "GOOD [High limit] +SecondLimit (0x08C2)"
+        );
+        assert_eq!(
+            quality_text(0x56),
+            "UNCERTAIN EU Units Exceeded [High limit] (0x0056)"
+        );
     }
 
     #[test]
@@ -360,8 +399,14 @@ mod tests {
         assert_eq!(local_time_of_day(t, 120), "15:04:05.120");
         assert_eq!(local_iso(Timestamp(0), 60), "(none)");
         // Leap day and the turn of a century.
-        assert_eq!(local_iso(Timestamp::from_unix_millis(951_782_400_000), 0), "2000-02-29T00:00:00.000+00:00");
-        assert_eq!(local_iso(Timestamp::from_unix_millis(-1), 0), "1969-12-31T23:59:59.999+00:00");
+        assert_eq!(
+            local_iso(Timestamp::from_unix_millis(951_782_400_000), 0),
+            "2000-02-29T00:00:00.000+00:00"
+        );
+        assert_eq!(
+            local_iso(Timestamp::from_unix_millis(-1), 0),
+            "1969-12-31T23:59:59.999+00:00"
+        );
     }
 
     #[test]
@@ -370,10 +415,19 @@ mod tests {
             hresult_text(0xC004_0007u32 as i32, Some("The item ID is not defined.")),
             "0xC0040007 OPC_E_UNKNOWNITEMID: The item ID is not defined."
         );
-        assert_eq!(hresult_text(0x8004_01F3u32 as i32, Some("Invalid class string\r\n")), "0x800401F3 CO_E_CLASSSTRING: Invalid class string");
+        assert_eq!(
+            hresult_text(0x8004_01F3u32 as i32, Some("Invalid class string\r\n")),
+            "0x800401F3 CO_E_CLASSSTRING: Invalid class string"
+        );
         assert_eq!(hresult_text(0x8123_4567u32 as i32, None), "0x81234567");
-        assert_eq!(hresult_text(0x8123_4567u32 as i32, Some("  ")), "0x81234567");
-        assert_eq!(hresult_symbol(0xC004_0006u32 as i32), Some("OPC_E_BADRIGHTS"));
+        assert_eq!(
+            hresult_text(0x8123_4567u32 as i32, Some("  ")),
+            "0x81234567"
+        );
+        assert_eq!(
+            hresult_symbol(0xC004_0006u32 as i32),
+            Some("OPC_E_BADRIGHTS")
+        );
         assert_eq!(hresult_symbol(0), Some("S_OK"));
     }
 
@@ -389,16 +443,39 @@ mod tests {
     #[test]
     fn the_tree_is_indented_with_branches_marked() {
         let lines = vec![
-            TreeLine { depth: 0, name: "Magazyn siarki".into(), item_id: None, branch: true },
-            TreeLine { depth: 1, name: "Zbiornik Z101".into(), item_id: None, branch: true },
-            TreeLine { depth: 2, name: "KW_A000".into(), item_id: Some("KW_A000".into()), branch: false },
-            TreeLine { depth: 2, name: "LI101".into(), item_id: Some("asmen.X.KW_A000".into()), branch: false },
+            TreeLine {
+                depth: 0,
+                name: "Magazyn siarki".into(),
+                item_id: None,
+                branch: true,
+            },
+            TreeLine {
+                depth: 1,
+                name: "Zbiornik Z101".into(),
+                item_id: None,
+                branch: true,
+            },
+            TreeLine {
+                depth: 2,
+                name: "KW_A000".into(),
+                item_id: Some("KW_A000".into()),
+                branch: false,
+            },
+            TreeLine {
+                depth: 2,
+                name: "LI101".into(),
+                item_id: Some("asmen.X.KW_A000".into()),
+                branch: false,
+            },
         ];
         assert_eq!(
             render_tree(&lines),
             "Magazyn siarki/\n  Zbiornik Z101/\n    KW_A000\n    LI101  = asmen.X.KW_A000\n"
         );
-        assert_eq!(branch_steps("/Magazyn siarki/ Zbiornik Z101 /"), vec!["Magazyn siarki", "Zbiornik Z101"]);
+        assert_eq!(
+            branch_steps("/Magazyn siarki/ Zbiornik Z101 /"),
+            vec!["Magazyn siarki", "Zbiornik Z101"]
+        );
         assert_eq!(branch_steps("A\\B"), vec!["A", "B"]);
     }
 

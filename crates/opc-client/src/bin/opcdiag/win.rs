@@ -25,11 +25,29 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
     let s = Session::connect(global)?;
     match command {
         Command::Status => s.status().map(|()| EXIT_OK),
-        Command::Browse { flat, branch, depth } => s.browse(flat, branch.as_deref(), depth),
+        Command::Browse {
+            flat,
+            branch,
+            depth,
+        } => s.browse(flat, branch.as_deref(), depth),
         Command::Props { item } => s.props(&item),
-        Command::Read { items, device, path } => s.read(&items, device, &path),
-        Command::Write { item, value, vt, path } => s.write(&item, &value, vt, &path),
-        Command::Subscribe { items, rate_ms, for_secs, path } => s.subscribe(&items, rate_ms, for_secs, &path),
+        Command::Read {
+            items,
+            device,
+            path,
+        } => s.read(&items, device, &path),
+        Command::Write {
+            item,
+            value,
+            vt,
+            path,
+        } => s.write(&item, &value, vt, &path),
+        Command::Subscribe {
+            items,
+            rate_ms,
+            for_secs,
+            path,
+        } => s.subscribe(&items, rate_ms, for_secs, &path),
         Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
     }
 }
@@ -47,7 +65,12 @@ fn system_text(hr: HRESULT) -> Option<String> {
 
 impl Session {
     pub fn connect(g: &Global) -> Result<Session, String> {
-        let com = ComThread::mta().map_err(|e| format!("cannot initialise COM: {}", text::hresult_text(e.code().0, system_text(e.code()).as_deref())))?;
+        let com = ComThread::mta().map_err(|e| {
+            format!(
+                "cannot initialise COM: {}",
+                text::hresult_text(e.code().0, system_text(e.code()).as_deref())
+            )
+        })?;
         let server = Server::connect(&g.server).map_err(|e| {
             let hr = e.code();
             let hint = match hr.0 as u32 {
@@ -60,18 +83,32 @@ impl Session {
             };
             format!("cannot connect to {}: {}{hint}", g.server, text::hresult_text(hr.0, system_text(hr).as_deref()))
         })?;
-        let s = Session { server, progid: g.server.clone(), _com: com };
+        let s = Session {
+            server,
+            progid: g.server.clone(),
+            _com: com,
+        };
         // Only for the server's log: a server that does not support it still works.
         let _ = s.server.set_client_name("opcdiag");
         if let Some(lcid) = g.lcid {
-            s.server.set_locale(lcid).map_err(|e| format!("the server does not support the language 0x{lcid:04X}: {}", s.error_text(e.code())))?;
+            s.server.set_locale(lcid).map_err(|e| {
+                format!(
+                    "the server does not support the language 0x{lcid:04X}: {}",
+                    s.error_text(e.code())
+                )
+            })?;
         }
         Ok(s)
     }
 
     /// An HRESULT with the server's text for it (GetErrorString), else the system's.
     pub fn error_text(&self, hr: HRESULT) -> String {
-        let server = self.server.error_string(hr).ok().flatten().filter(|t| !t.trim().is_empty());
+        let server = self
+            .server
+            .error_string(hr)
+            .ok()
+            .flatten()
+            .filter(|t| !t.trim().is_empty());
         text::hresult_text(hr.0, server.or_else(|| system_text(hr)).as_deref())
     }
 
@@ -82,17 +119,36 @@ impl Session {
     // ---- status ------------------------------------------------------------------------
 
     pub fn status(&self) -> Result<(), String> {
-        let st = self.server.status().map_err(|e| self.failed("IOPCServer::GetStatus failed", e))?;
+        let st = self
+            .server
+            .status()
+            .map_err(|e| self.failed("IOPCServer::GetStatus failed", e))?;
         let t = |ts: Timestamp| text::local_iso(ts, offset(ts));
         say!("Server        {}", self.progid);
-        say!("Vendor        {}", st.vendor_info.as_deref().unwrap_or("(none)"));
-        say!("Version       {}.{}.{}", st.version.0, st.version.1, st.version.2);
-        say!("State         {} ({})", text::state_name(st.state), text::state_meaning(st.state));
+        say!(
+            "Vendor        {}",
+            st.vendor_info.as_deref().unwrap_or("(none)")
+        );
+        say!(
+            "Version       {}.{}.{}",
+            st.version.0,
+            st.version.1,
+            st.version.2
+        );
+        say!(
+            "State         {} ({})",
+            text::state_name(st.state),
+            text::state_meaning(st.state)
+        );
         say!("Start time    {}", t(st.start_time));
         say!("Current time  {}", t(st.current_time));
         say!("Last update   {}", t(st.last_update_time));
         say!("Groups        {}", st.group_count);
-        let bw = if st.band_width == u32::MAX { "unknown".to_string() } else { format!("{} %", st.band_width) };
+        let bw = if st.band_width == u32::MAX {
+            "unknown".to_string()
+        } else {
+            format!("{} %", st.band_width)
+        };
         say!("Band width    {bw}");
         Ok(())
     }
@@ -100,47 +156,89 @@ impl Session {
     // ---- browse ------------------------------------------------------------------------
 
     fn browse_names(&self, kind: OPCBROWSETYPE) -> Result<Vec<String>, String> {
-        self.server.browse_item_ids(kind, "", 0, 0).map(|(_, v)| v).map_err(|e| self.failed("BrowseOPCItemIDs failed", e))
+        self.server
+            .browse_item_ids(kind, "", 0, 0)
+            .map(|(_, v)| v)
+            .map_err(|e| self.failed("BrowseOPCItemIDs failed", e))
     }
 
     /// Moves the browse position to `path`: a branch item ID (TO), else its names from
     /// the root (DOWN step by step).
     fn go_to_branch(&self, path: &str) -> Result<(), String> {
-        if self.server.change_browse_position(OPC_BROWSE_TO, path).is_ok() {
+        if self
+            .server
+            .change_browse_position(OPC_BROWSE_TO, path)
+            .is_ok()
+        {
             return Ok(());
         }
-        self.server.change_browse_position(OPC_BROWSE_TO, "").map_err(|e| self.failed("ChangeBrowsePosition(TO root) failed", e))?;
+        self.server
+            .change_browse_position(OPC_BROWSE_TO, "")
+            .map_err(|e| self.failed("ChangeBrowsePosition(TO root) failed", e))?;
         for step in text::branch_steps(path) {
             self.server
                 .change_browse_position(OPC_BROWSE_DOWN, &step)
-                .map_err(|e| self.failed(&format!("branch {path:?} not found (no branch {step:?})"), e))?;
+                .map_err(|e| {
+                    self.failed(
+                        &format!("branch {path:?} not found (no branch {step:?})"),
+                        e,
+                    )
+                })?;
         }
         Ok(())
     }
 
     /// The tree below the current browse position, `max_depth` levels deep.
-    pub fn tree(&self, depth: usize, max_depth: Option<usize>, out: &mut Vec<TreeLine>) -> Result<(), String> {
+    pub fn tree(
+        &self,
+        depth: usize,
+        max_depth: Option<usize>,
+        out: &mut Vec<TreeLine>,
+    ) -> Result<(), String> {
         for b in self.browse_names(OPC_BRANCH)? {
-            out.push(TreeLine { depth, name: b.clone(), item_id: None, branch: true });
+            out.push(TreeLine {
+                depth,
+                name: b.clone(),
+                item_id: None,
+                branch: true,
+            });
             if !matches!(max_depth, Some(m) if depth + 1 >= m) {
-                self.server.change_browse_position(OPC_BROWSE_DOWN, &b).map_err(|e| self.failed(&format!("ChangeBrowsePosition(DOWN {b:?}) failed"), e))?;
+                self.server
+                    .change_browse_position(OPC_BROWSE_DOWN, &b)
+                    .map_err(|e| {
+                        self.failed(&format!("ChangeBrowsePosition(DOWN {b:?}) failed"), e)
+                    })?;
                 let r = self.tree(depth + 1, max_depth, out);
-                self.server.change_browse_position(OPC_BROWSE_UP, "").map_err(|e| self.failed("ChangeBrowsePosition(UP) failed", e))?;
+                self.server
+                    .change_browse_position(OPC_BROWSE_UP, "")
+                    .map_err(|e| self.failed("ChangeBrowsePosition(UP) failed", e))?;
                 r?;
             }
         }
         for leaf in self.browse_names(OPC_LEAF)? {
             let item_id = self.server.get_item_id(&leaf).ok().flatten();
-            out.push(TreeLine { depth, name: leaf, item_id, branch: false });
+            out.push(TreeLine {
+                depth,
+                name: leaf,
+                item_id,
+                branch: false,
+            });
         }
         Ok(())
     }
 
-    pub fn browse(&self, flat: bool, branch: Option<&str>, depth: Option<usize>) -> Result<u8, String> {
-        let org = self
-            .server
-            .query_organization()
-            .map_err(|e| self.failed("the server does not support browsing (IOPCBrowseServerAddressSpace)", e))?;
+    pub fn browse(
+        &self,
+        flat: bool,
+        branch: Option<&str>,
+        depth: Option<usize>,
+    ) -> Result<u8, String> {
+        let org = self.server.query_organization().map_err(|e| {
+            self.failed(
+                "the server does not support browsing (IOPCBrowseServerAddressSpace)",
+                e,
+            )
+        })?;
         let hierarchical = org == OPC_NS_HIERARCHIAL;
         if let Some(path) = branch {
             if !hierarchical {
@@ -168,11 +266,22 @@ impl Session {
     // ---- props -------------------------------------------------------------------------
 
     pub fn props(&self, item: &str) -> Result<u8, String> {
-        let available = self.server.query_available_properties(item).map_err(|e| self.failed(&format!("{item}: QueryAvailableProperties failed"), e))?;
+        let available = self
+            .server
+            .query_available_properties(item)
+            .map_err(|e| self.failed(&format!("{item}: QueryAvailableProperties failed"), e))?;
         let ids: Vec<u32> = available.iter().map(|p| p.0).collect();
-        let (_, values) = self.server.get_item_properties(item, &ids).map_err(|e| self.failed(&format!("{item}: GetItemProperties failed"), e))?;
+        let (_, values) = self
+            .server
+            .get_item_properties(item, &ids)
+            .map_err(|e| self.failed(&format!("{item}: GetItemProperties failed"), e))?;
         say!("Properties of {item}:");
-        say!("{:>5}  {}  {}  Value", "ID", text::pad("Description", 32), text::pad("Type", 6));
+        say!(
+            "{:>5}  {}  {}  Value",
+            "ID",
+            text::pad("Description", 32),
+            text::pad("Type", 6)
+        );
         let mut code = EXIT_OK;
         for ((id, desc, vt), (value, err)) in available.iter().zip(values) {
             let shown = if err.is_err() {
@@ -181,7 +290,11 @@ impl Session {
             } else {
                 text::property_value_text(*id, &value)
             };
-            say!("{id:>5}  {}  {}  {shown}", text::pad(desc.as_deref().unwrap_or(""), 32), text::pad(&text::vartype_name(*vt), 6));
+            say!(
+                "{id:>5}  {}  {}  {shown}",
+                text::pad(desc.as_deref().unwrap_or(""), 32),
+                text::pad(&text::vartype_name(*vt), 6)
+            );
         }
         Ok(code)
     }
@@ -189,7 +302,13 @@ impl Session {
     // ---- groups ------------------------------------------------------------------------
 
     /// A new private group with `items` added (client handle = index + 1).
-    fn group_with(&self, items: &[String], path: &str, active: bool, rate_ms: u32) -> Result<TempGroup, String> {
+    fn group_with(
+        &self,
+        items: &[String],
+        path: &str,
+        active: bool,
+        rate_ms: u32,
+    ) -> Result<TempGroup, String> {
         let spec = GroupSpec {
             name: format!("opcdiag-{}", std::process::id()),
             active,
@@ -199,8 +318,16 @@ impl Session {
             deadband: None,
             lcid: 0x0409,
         };
-        let added = self.server.add_group(&spec).map_err(|e| self.failed("IOPCServer::AddGroup failed", e))?;
-        let mut group = TempGroup { handle: added.server_handle, revised_rate: added.revised_rate, group: None, outcomes: Vec::new() };
+        let added = self
+            .server
+            .add_group(&spec)
+            .map_err(|e| self.failed("IOPCServer::AddGroup failed", e))?;
+        let mut group = TempGroup {
+            handle: added.server_handle,
+            revised_rate: added.revised_rate,
+            group: None,
+            outcomes: Vec::new(),
+        };
         let g = match OpcGroup::from_unknown(added.object) {
             Ok(g) => g,
             Err(e) => {
@@ -211,7 +338,13 @@ impl Session {
         let defs: Vec<ItemDef> = items
             .iter()
             .enumerate()
-            .map(|(i, id)| ItemDef { item_id: id.clone(), access_path: path.to_string(), active: true, client_handle: i as u32 + 1, requested_type: 0 })
+            .map(|(i, id)| ItemDef {
+                item_id: id.clone(),
+                access_path: path.to_string(),
+                active: true,
+                client_handle: i as u32 + 1,
+                requested_type: 0,
+            })
             .collect();
         let result = g.add_items(&defs);
         group.group = Some(g);
@@ -240,17 +373,30 @@ impl Session {
     fn read_in(&self, g: &TempGroup, items: &[String], device: bool) -> Result<u8, String> {
         let mut code = EXIT_OK;
         let width = items.iter().map(|i| i.chars().count()).max().unwrap_or(0);
-        let ok: Vec<(usize, u32)> = g.outcomes.iter().enumerate().filter(|(_, o)| o.error.is_ok()).map(|(i, o)| (i, o.server_handle)).collect();
+        let ok: Vec<(usize, u32)> = g
+            .outcomes
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| o.error.is_ok())
+            .map(|(i, o)| (i, o.server_handle))
+            .collect();
         let mut results: Vec<Option<ReadItem>> = vec![None; items.len()];
         if !ok.is_empty() {
-            let io: IOPCSyncIO = g.unknown()?.cast().map_err(|e| self.failed("the group lacks IOPCSyncIO", e))?;
+            let io: IOPCSyncIO = g
+                .unknown()?
+                .cast()
+                .map_err(|e| self.failed("the group lacks IOPCSyncIO", e))?;
             let handles: Vec<u32> = ok.iter().map(|x| x.1).collect();
             let source = if device { OPC_DS_DEVICE } else { OPC_DS_CACHE };
             // A cache read right after AddItems may come before the first value: wait for it.
             let deadline = Instant::now() + Duration::from_secs(3);
             loop {
-                let (_, read) = client::sync_read(&io, source, &handles).map_err(|e| self.failed("IOPCSyncIO::Read failed", e))?;
-                let waiting = read.iter().any(|r| r.error.is_ok() && r.quality == ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA.0);
+                let (_, read) = client::sync_read(&io, source, &handles)
+                    .map_err(|e| self.failed("IOPCSyncIO::Read failed", e))?;
+                let waiting = read.iter().any(|r| {
+                    r.error.is_ok()
+                        && r.quality == ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA.0
+                });
                 for ((i, _), r) in ok.iter().zip(read) {
                     results[*i] = Some(r);
                 }
@@ -291,19 +437,34 @@ impl Session {
 
     // ---- write -------------------------------------------------------------------------
 
-    pub fn write(&self, item: &str, value: &str, vt: Option<VarType>, path: &str) -> Result<u8, String> {
+    pub fn write(
+        &self,
+        item: &str,
+        value: &str,
+        vt: Option<VarType>,
+        path: &str,
+    ) -> Result<u8, String> {
         let g = self.group_with(&[item.to_string()], path, false, 1000)?;
         let r = self.write_in(&g, item, value, vt);
         g.remove(self);
         r
     }
 
-    fn write_in(&self, g: &TempGroup, item: &str, value: &str, vt: Option<VarType>) -> Result<u8, String> {
+    fn write_in(
+        &self,
+        g: &TempGroup,
+        item: &str,
+        value: &str,
+        vt: Option<VarType>,
+    ) -> Result<u8, String> {
         let Some(outcome) = g.outcomes.first() else {
             return Err(format!("{item}: AddItems returned no result"));
         };
         if outcome.error.is_err() {
-            say!("{item}: cannot add the item: {}", self.error_text(outcome.error));
+            say!(
+                "{item}: cannot add the item: {}",
+                self.error_text(outcome.error)
+            );
             return Ok(EXIT_FAILED);
         }
         let target = vt.unwrap_or(VarType(outcome.canonical_type));
@@ -314,10 +475,18 @@ impl Session {
                 return Ok(EXIT_USAGE);
             }
         };
-        let io: IOPCSyncIO = g.unknown()?.cast().map_err(|e| self.failed("the group lacks IOPCSyncIO", e))?;
-        let (_, errors) = client::sync_write(&io, &[(outcome.server_handle, v.clone())]).map_err(|e| self.failed("IOPCSyncIO::Write failed", e))?;
+        let io: IOPCSyncIO = g
+            .unknown()?
+            .cast()
+            .map_err(|e| self.failed("the group lacks IOPCSyncIO", e))?;
+        let (_, errors) = client::sync_write(&io, &[(outcome.server_handle, v.clone())])
+            .map_err(|e| self.failed("IOPCSyncIO::Write failed", e))?;
         let result = errors.first().copied().unwrap_or(HRESULT(0));
-        let shown = format!("{} ({})", text::value_text(&v), text::vartype_name(v.var_type().0));
+        let shown = format!(
+            "{} ({})",
+            text::value_text(&v),
+            text::vartype_name(v.var_type().0)
+        );
         if result.is_err() {
             say!("{item}: write {shown} failed: {}", self.error_text(result));
             Ok(EXIT_FAILED)
@@ -332,7 +501,13 @@ impl Session {
 
     // ---- subscribe ---------------------------------------------------------------------
 
-    pub fn subscribe(&self, items: &[String], rate_ms: u32, for_secs: Option<f64>, path: &str) -> Result<u8, String> {
+    pub fn subscribe(
+        &self,
+        items: &[String],
+        rate_ms: u32,
+        for_secs: Option<f64>,
+        path: &str,
+    ) -> Result<u8, String> {
         let sub = Subscription::start(self, items, path, rate_ms)?;
         let mut code = EXIT_OK;
         for (name, err) in &sub.failed {
@@ -344,11 +519,22 @@ impl Session {
             Some(s) => format!("for {s} s"),
             None => "until Ctrl+C".into(),
         };
-        let rate = if sub.revised_rate == rate_ms { format!("{rate_ms} ms") } else { format!("{} ms (asked for {rate_ms})", sub.revised_rate) };
-        say!("Subscribed to {} item(s), update rate {rate}, {until}:", sub.names.len() - sub.failed.len());
+        let rate = if sub.revised_rate == rate_ms {
+            format!("{rate_ms} ms")
+        } else {
+            format!("{} ms (asked for {rate_ms})", sub.revised_rate)
+        };
+        say!(
+            "Subscribed to {} item(s), update rate {rate}, {until}:",
+            sub.names.len() - sub.failed.len()
+        );
         let started = Instant::now();
         let n = sub.run(for_secs, |name, r| {
-            let value = if r.error.is_err() { format!("error {}", self.error_text(r.error)) } else { text::value_text(&r.value) };
+            let value = if r.error.is_err() {
+                format!("error {}", self.error_text(r.error))
+            } else {
+                text::value_text(&r.value)
+            };
             say!(
                 "{}  {}  {}  {}",
                 text::local_time_of_day(r.timestamp, offset(r.timestamp)),
@@ -374,7 +560,10 @@ pub struct TempGroup {
 
 impl TempGroup {
     fn unknown(&self) -> Result<&windows::core::IUnknown, String> {
-        self.group.as_ref().map(|g| &g.unknown).ok_or_else(|| "the group is gone".to_string())
+        self.group
+            .as_ref()
+            .map(|g| &g.unknown)
+            .ok_or_else(|| "the group is gone".to_string())
     }
 
     /// Releases the group's interfaces, then removes it from the server.
@@ -397,18 +586,33 @@ pub struct Subscription {
 }
 
 impl Subscription {
-    pub fn start(s: &Session, items: &[String], path: &str, rate_ms: u32) -> Result<Subscription, String> {
+    pub fn start(
+        s: &Session,
+        items: &[String],
+        path: &str,
+        rate_ms: u32,
+    ) -> Result<Subscription, String> {
         let group = s.group_with(items, path, true, rate_ms)?;
-        let failed: Vec<(String, HRESULT)> =
-            items.iter().zip(&group.outcomes).filter(|(_, o)| o.error.is_err()).map(|(n, o)| (n.clone(), o.error)).collect();
+        let failed: Vec<(String, HRESULT)> = items
+            .iter()
+            .zip(&group.outcomes)
+            .filter(|(_, o)| o.error.is_err())
+            .map(|(n, o)| (n.clone(), o.error))
+            .collect();
         if failed.len() == items.len() {
-            let reasons: Vec<String> = failed.iter().map(|(n, e)| format!("  {n}: {}", s.error_text(*e))).collect();
+            let reasons: Vec<String> = failed
+                .iter()
+                .map(|(n, e)| format!("  {n}: {}", s.error_text(*e)))
+                .collect();
             group.remove(s);
             return Err(format!("no item could be added:\n{}", reasons.join("\n")));
         }
         let (tx, rx) = mpsc::channel();
         let sink = diag::data_change_sink(tx);
-        let cookie = match group.unknown().and_then(|u| client::advise_data_callback(u, &sink).map_err(|e| s.failed("IOPCDataCallback Advise failed", e))) {
+        let cookie = match group.unknown().and_then(|u| {
+            client::advise_data_callback(u, &sink)
+                .map_err(|e| s.failed("IOPCDataCallback Advise failed", e))
+        }) {
             Ok(c) => c,
             Err(e) => {
                 group.remove(s);
@@ -419,7 +623,14 @@ impl Subscription {
         // and its callback connection behind in the server).
         let _ = diag::catch_ctrl_c();
         let revised_rate = group.revised_rate;
-        Ok(Subscription { group, cookie, rx, names: items.to_vec(), failed, revised_rate })
+        Ok(Subscription {
+            group,
+            cookie,
+            rx,
+            names: items.to_vec(),
+            failed,
+            revised_rate,
+        })
     }
 
     /// Calls `each(item, value)` for every item of every OnDataChange until Ctrl+C or
@@ -444,7 +655,10 @@ impl Subscription {
             match self.rx.recv_timeout(wait) {
                 Ok(change) => {
                     for item in &change.items {
-                        let name = self.names.get((item.client_handle as usize).wrapping_sub(1)).map_or("?", String::as_str);
+                        let name = self
+                            .names
+                            .get((item.client_handle as usize).wrapping_sub(1))
+                            .map_or("?", String::as_str);
                         each(name, item);
                         n += 1;
                     }
