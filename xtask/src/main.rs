@@ -24,6 +24,9 @@ commands:
   build   build the Windows artifacts (ServerCTOPC.exe, opc_ps.dll, clients) into
           target/x86_64-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
+  e2e     the Windows build, registration, then only the Wine tests named by its
+          cargo arguments, e.g. `cargo xtask e2e -p e2e-tests --test group_io`
+          (default `-p e2e-tests -p ctopc-com`; after `--`, test-binary arguments)
   demo    the server with the demo plant Wytwornia_Kwasu, read over the asix network from
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
@@ -47,6 +50,7 @@ fn main() -> ExitCode {
         "setup" => setup::run(rest),
         "build" => build::run(rest).map(|_| ()),
         "test" => test::run(rest),
+        "e2e" => test::e2e(rest),
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),

@@ -52,6 +52,42 @@ pub fn run(args: &[String]) -> Result<(), String> {
     result
 }
 
+/// `cargo xtask e2e [ARGS...]`: the Windows build, registration in the project's prefix,
+/// then `cargo test --release --target x86_64-pc-windows-gnu ARGS -- --test-threads=1`
+/// under Wine (default ARGS: `-p e2e-tests -p ctopc-com`), e.g.
+/// `cargo xtask e2e -p e2e-tests --test group_io` or `cargo xtask e2e -p ctopc-com`.
+/// Arguments after a `--` go to the test binaries (a name filter, say). For working on
+/// one part; `cargo xtask test` stays the one command that runs everything.
+pub fn e2e(args: &[String]) -> Result<(), String> {
+    setup::run(&[])?;
+    let artifacts = build::run(&[])?;
+    let (cargo_args, test_args) = match args.iter().position(|a| a == "--") {
+        Some(i) => (&args[..i], &args[i + 1..]),
+        None => (args, &[][..]),
+    };
+    wine::kill_all();
+    let result = (|| {
+        register(&artifacts)?;
+        let mut c = util::cargo();
+        c.args(["test", "--release", "--target", setup::TARGET]);
+        if cargo_args.is_empty() {
+            c.args(["-p", "e2e-tests", "-p", "ctopc-com"]);
+        } else {
+            c.args(cargo_args);
+        }
+        c.arg("--").arg("--test-threads=1").args(test_args);
+        c.env("CTOPC_BIN_DIR", &artifacts.dir);
+        let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("end-to-end tests failed: {status}"))
+        }
+    })();
+    wine::kill_all();
+    result
+}
+
 /// Registers the proxy/stub DLL (its own DllRegisterServer, through regsvr32) and the
 /// server (/RegServer) in the prefix.
 pub fn register(a: &build::Artifacts) -> Result<(), String> {
