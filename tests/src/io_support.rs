@@ -350,7 +350,8 @@ pub fn add_items(
         return Err(hr.into());
     }
     let n = items.len();
-    let errs = ctopc_com::client::take_array(errors, n);
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let errs = unsafe { ctopc_com::client::take_array(errors, n) };
     let mut out = Vec::with_capacity(n);
     if !results.is_null() {
         // SAFETY: the server allocated `n` OPCITEMRESULTs; blobs and the block freed once.

@@ -3,10 +3,13 @@
 //! The tests drive the real ServerCTOPC.exe out of process through COM, through the
 //! project's own proxy/stub DLL, both registered in the test Wine prefix by xtask. Tests
 //! that pass deliberately invalid raw pointers call the interfaces directly (`unsafe`):
-//! that is what they test.
+//! that is what they test. [`probe`] is the marshal probe, the test COM server of
+//! `marshal-probe.exe` (its `unsafe` blocks carry `// SAFETY:` comments, checked by the
+//! tidy test as in the COM crate).
 #![cfg(windows)]
 
 pub mod io_support;
+pub mod probe;
 
 pub use ctopc_com::client::{ComThread, Server};
 pub use ctopc_com::interfaces;

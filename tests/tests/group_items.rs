@@ -132,8 +132,10 @@ fn add_items_rejects_count_zero_and_null_pointers() {
     // SAFETY: valid pointers; the definition's strings are NULL.
     let hr = unsafe { g.item_mgt.AddItems(1, &def, &mut results, &mut errors) };
     assert_eq!(hr, S_FALSE);
-    let errs = ctopc_com::client::take_array(errors, 1);
-    ctopc_com::client::take_array(results, 1);
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let errs = unsafe { ctopc_com::client::take_array(errors, 1) };
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    unsafe { ctopc_com::client::take_array(results, 1) };
     assert_eq!(errs, vec![OPC_E_INVALIDITEMID]);
     assert_alive(&server);
 }

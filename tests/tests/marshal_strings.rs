@@ -7,7 +7,7 @@
 //! `cargo xtask proxy` re-points them).
 //!
 //! The server is `marshal-probe.exe` (ProgID `ServerCTOPC.MarshalProbe`, crate e2e-tests,
-//! objects in `ctopc_com::probe`): every string it returns is `"<parameter> – Wytwórnia
+//! objects in `e2e_tests::probe`): every string it returns is `"<parameter> – Wytwórnia
 //! Kwasu żółć 🏭"` with the parameter named as in the table below (`[i]` appended for the
 //! elements of arrays). The test registers it itself (`/RegServer`, once per run) and
 //! connects with CLSCTX_LOCAL_SERVER; the proxy/stub DLL must be registered in the prefix
@@ -167,7 +167,7 @@ const BSAS_ACCESS_PATHS: &str =
     "IOPCBrowseServerAddressSpace::BrowseAccessPaths(ppIEnumString)->IEnumString::Next(rgelt)";
 
 /// What the probe returns in the string named `param` (stated here independently of
-/// `ctopc_com::probe::text`, so that the test pins the exact text).
+/// `e2e_tests::probe::text`, so that the test pins the exact text).
 fn expected(param: &str) -> String {
     format!("{param} – Wytwórnia Kwasu żółć 🏭")
 }
@@ -529,7 +529,7 @@ fn table_lists_every_string_output_declared_in_idl() {
 mod through_the_proxy {
     use super::*;
     use ctopc_com::client::{ComThread, Server};
-    use ctopc_com::probe::{self, client as read};
+    use e2e_tests::probe::{self, client as read};
     use e2e_tests::{artifact, code, interfaces::*};
     use std::process::Command;
     use std::sync::OnceLock;

@@ -561,5 +561,6 @@ fn browse_null_pointers() {
         assert_alive(&server);
     }
     ctopc_com::client::take_wstr(cp);
-    ctopc_com::client::take_array(elements, count as usize);
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    unsafe { ctopc_com::client::take_array(elements, count as usize) };
 }

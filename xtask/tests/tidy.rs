@@ -1,9 +1,11 @@
 //! Tidy: the code rules of DEVELOPERS.md that a machine can check.
-//! - `unsafe` only in crates/ctopc-com (and in the end-to-end tests under tests/, which
-//!   pass deliberately invalid raw pointers to the server);
-//! - every `unsafe {` block in ctopc-com has a `// SAFETY:` comment just above it (or on
-//!   the line);
-//! - no `.unwrap()` / `.expect(` in ctopc-com outside tests (a panic would cross COM);
+//! - `unsafe` only in crates/ctopc-com and in the end-to-end tests under tests/ (which
+//!   pass deliberately invalid raw pointers to the server, and hold the marshal probe's
+//!   COM server in tests/src/probe);
+//! - every `unsafe {` block in ctopc-com and in tests/src/probe has a `// SAFETY:` comment
+//!   just above it (or on the line);
+//! - no `.unwrap()` / `.expect(` in ctopc-com or tests/src/probe outside tests (a panic
+//!   would cross COM);
 //! - the core crate forbids unsafe code and has no `windows` dependency.
 
 use std::path::{Path, PathBuf};
@@ -76,6 +78,9 @@ fn has_unsafe_token(code: &str) -> bool {
         && !code.contains("\"")
 }
 
+/// The code of COM objects: the COM crate and the marshal probe of the e2e tests.
+const COM_SERVER_CODE: [&str; 2] = ["crates/ctopc-com/src", "tests/src/probe"];
+
 #[test]
 fn unsafe_code_lives_only_in_the_com_crate() {
     let root = root();
@@ -114,7 +119,9 @@ fn unsafe_code_lives_only_in_the_com_crate() {
 fn every_unsafe_block_in_the_com_crate_has_a_safety_comment() {
     let root = root();
     let mut files = Vec::new();
-    rust_files(&root.join("crates/ctopc-com/src"), &mut files);
+    for dir in COM_SERVER_CODE {
+        rust_files(&root.join(dir), &mut files);
+    }
     let mut bad = Vec::new();
     for f in files {
         let rel = f
@@ -149,7 +156,9 @@ fn every_unsafe_block_in_the_com_crate_has_a_safety_comment() {
 fn the_com_crate_does_not_unwrap_outside_tests() {
     let root = root();
     let mut files = Vec::new();
-    rust_files(&root.join("crates/ctopc-com/src"), &mut files);
+    for dir in COM_SERVER_CODE {
+        rust_files(&root.join(dir), &mut files);
+    }
     let mut bad = Vec::new();
     for f in files {
         let rel = f
@@ -172,12 +181,15 @@ fn the_com_crate_does_not_unwrap_outside_tests() {
 }
 
 /// `windows::core::Error::new(code, message)` calls RoOriginateErrorW, which Wine 8 only
-/// stubs: the process aborts. Errors with a message go through `ctopc_com::mem::error`.
+/// stubs: the process aborts. Errors with a message go through `ctopc_com::error::error`
+/// (CreateErrorInfo), and core errors through `ctopc_com::error::to_com`.
 #[test]
-fn com_errors_with_messages_go_through_mem_error() {
+fn com_errors_with_messages_go_through_error_error() {
     let root = root();
     let mut files = Vec::new();
-    rust_files(&root.join("crates/ctopc-com/src"), &mut files);
+    for dir in COM_SERVER_CODE {
+        rust_files(&root.join(dir), &mut files);
+    }
     rust_files(&root.join("crates/server/src"), &mut files);
     let mut bad = Vec::new();
     for f in files {
@@ -186,7 +198,7 @@ fn com_errors_with_messages_go_through_mem_error() {
             .unwrap()
             .to_string_lossy()
             .into_owned();
-        if rel.ends_with("ctopc-com/src/mem.rs") {
+        if rel.ends_with("ctopc-com/src/error.rs") {
             continue;
         }
         let text = std::fs::read_to_string(&f).unwrap();
@@ -198,7 +210,7 @@ fn com_errors_with_messages_go_through_mem_error() {
     }
     assert!(
         bad.is_empty(),
-        "use ctopc_com::mem::error (Error::new aborts under Wine):\n{}",
+        "use ctopc_com::error::error (Error::new aborts under Wine):\n{}",
         bad.join("\n")
     );
 }

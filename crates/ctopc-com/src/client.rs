@@ -50,7 +50,11 @@ pub fn take_wstr(p: PWSTR) -> Option<String> {
 }
 
 /// Takes ownership of a CoTaskMem array of `n` elements: copies it out and frees it.
-pub fn take_array<T: Copy>(p: *mut T, n: usize) -> Vec<T> {
+///
+/// # Safety
+/// `p` is NULL or a CoTaskMem block of at least `n` initialised elements that the caller
+/// owns (an out-array a call has just handed out) and does not use afterwards.
+pub unsafe fn take_array<T: Copy>(p: *mut T, n: usize) -> Vec<T> {
     if p.is_null() {
         return Vec::new();
     }
@@ -117,7 +121,8 @@ impl Server {
         // SAFETY: non-null block of one OPCSERVERSTATUS from the server.
         let s = unsafe { *p };
         let vendor_info = take_wstr(s.szVendorInfo);
-        take_array(p, 1);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        unsafe { take_array(p, 1) };
         Ok(ServerStatus {
             start_time: timestamp(s.ftStartTime),
             current_time: timestamp(s.ftCurrentTime),
@@ -147,7 +152,8 @@ impl Server {
         let mut p: *mut u32 = std::ptr::null_mut();
         // SAFETY: valid out-pointers; the array is CoTaskMem owned by us afterwards.
         unsafe { self.common.QueryAvailableLocaleIDs(&mut n, &mut p)? };
-        Ok(take_array(p, n as usize))
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        Ok(unsafe { take_array(p, n as usize) })
     }
 
     pub fn set_client_name(&self, name: &str) -> windows::core::Result<()> {
@@ -209,7 +215,10 @@ fn per_item_hr(hr: windows::core::HRESULT) -> windows::core::Result<windows::cor
 }
 
 /// Takes a CoTaskMem VARIANT array of `n` elements: converts, clears and frees it.
-pub fn take_variants(
+///
+/// # Safety
+/// As [`take_array`], the elements initialised VARIANTs.
+pub unsafe fn take_variants(
     p: *mut windows::Win32::System::Variant::VARIANT,
     n: usize,
 ) -> Vec<(u16, ctopc_core::Value)> {
@@ -277,7 +286,8 @@ pub fn sync_read(
         )
     })?;
     let n = handles.len();
-    let errors = take_array(errors, n);
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let errors = unsafe { take_array(errors, n) };
     let mut out = Vec::with_capacity(n);
     if !states.is_null() {
         // SAFETY: the server allocated `n` OPCITEMSTATEs; each VARIANT is read and cleared
@@ -318,7 +328,8 @@ pub fn sync_write(
             &mut errors,
         )
     })?;
-    Ok((hr, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// IOPCSyncIO2::ReadMaxAge for `(server handle, MaxAge ms)` items.
@@ -345,10 +356,14 @@ pub fn read_max_age(
             &mut errors,
         )
     })?;
-    let values = take_variants(values, n);
-    let qualities = take_array(qualities, n);
-    let times = take_array(times, n);
-    let errors = take_array(errors, n);
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let values = unsafe { take_variants(values, n) };
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let qualities = unsafe { take_array(qualities, n) };
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let times = unsafe { take_array(times, n) };
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    let errors = unsafe { take_array(errors, n) };
     let out = (0..n)
         .map(|i| {
             let (vt, value) = values
@@ -414,7 +429,8 @@ pub fn write_vqt(
             &mut errors,
         )
     })?;
-    Ok((hr, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// What an asynchronous call returns: S_OK or S_FALSE, the server's cancel ID, per-item
@@ -439,7 +455,8 @@ pub fn async_read(
             &mut errors,
         )
     })?;
-    Ok((hr, cancel, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, cancel, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// IOPCAsyncIO2::Write.
@@ -463,7 +480,8 @@ pub fn async_write(
             &mut errors,
         )
     })?;
-    Ok((hr, cancel, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, cancel, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// IOPCAsyncIO2::Refresh2: the server's cancel ID.
@@ -507,7 +525,8 @@ pub fn async_read_max_age(
             &mut errors,
         )
     })?;
-    Ok((hr, cancel, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, cancel, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// IOPCAsyncIO3::WriteVQT.
@@ -532,7 +551,8 @@ pub fn async_write_vqt(
             &mut errors,
         )
     })?;
-    Ok((hr, cancel, take_array(errors, handles.len())))
+    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+    Ok((hr, cancel, unsafe { take_array(errors, handles.len()) }))
 }
 
 /// IOPCAsyncIO3::RefreshMaxAge: the server's cancel ID.
@@ -715,8 +735,10 @@ impl OpcGroup {
             &mut errors,
         ))?;
         let n = items.len();
-        let errors = take_array(errors, n);
-        let results = take_array(results, n);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors = unsafe { take_array(errors, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let results = unsafe { take_array(results, n) };
         let out = (0..n)
             .map(|i| {
                 let r = results.get(i).copied().unwrap_or_default();
@@ -764,7 +786,8 @@ impl OpcGroup {
     ) -> windows::core::Result<(windows::core::HRESULT, Vec<windows::core::HRESULT>)> {
         let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
         let hr = group_call_hr(f(&mut errors))?;
-        Ok((hr, take_array(errors, n)))
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        Ok((hr, unsafe { take_array(errors, n) }))
     }
 
     fn values_call<T: Copy>(
@@ -774,8 +797,10 @@ impl OpcGroup {
         let mut values: *mut T = std::ptr::null_mut();
         let mut errors: *mut windows::core::HRESULT = std::ptr::null_mut();
         let hr = group_call_hr(f(&mut values, &mut errors))?;
-        let values = take_array(values, n);
-        let errors = take_array(errors, n);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let values = unsafe { take_array(values, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors = unsafe { take_array(errors, n) };
         Ok((hr, values.into_iter().zip(errors).collect()))
     }
 

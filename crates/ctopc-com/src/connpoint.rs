@@ -160,7 +160,10 @@ impl IConnectionPoint_Impl for ConnectionPoint_Impl {
 }
 
 /// FindConnectionPoint for a container with the given (iid, slot) points.
-pub fn find(
+///
+/// # Safety
+/// `riid` is NULL or points to a GUID (the method's `[in] REFIID`).
+pub unsafe fn find(
     container: IConnectionPointContainer,
     points: &[(GUID, Arc<dyn Slot>)],
     riid: *const GUID,

@@ -2,7 +2,6 @@
 //! IEnumConnections): the list is taken when the enumerator is created; clones share it
 //! and copy the position.
 
-use crate::mem;
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};
@@ -90,7 +89,11 @@ pub fn check_next<T>(celt: u32, rgelt: *mut T, fetched: *mut u32) -> Result<(), 
     Ok(())
 }
 
-fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
+/// Writes `*pceltFetched` (if asked for) and answers S_OK or S_FALSE.
+///
+/// # Safety
+/// `fetched` is NULL or writable storage for one `u32` (IEnum*::Next's `pceltFetched`).
+unsafe fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
     if !fetched.is_null() {
         // SAFETY: a non-null pceltFetched points to caller storage.
         unsafe { *fetched = got as u32 };
@@ -104,7 +107,11 @@ fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
 
 /// IEnum*::Next for elements that cannot fail to copy (interface pointers, AddRef'd by
 /// `make`): the next `celt` elements into `rgelt`.
-fn next_into<T, U>(
+///
+/// # Safety
+/// IEnum*::Next's contract: `rgelt` is NULL or room for `celt` elements, `fetched` NULL or
+/// writable storage for one `u32`.
+unsafe fn next_into<T, U>(
     cursor: &Cursor<T>,
     celt: u32,
     rgelt: *mut U,
@@ -121,7 +128,8 @@ fn next_into<T, U>(
         unsafe { rgelt.add(i).write(make(item)) };
     }
     cursor.commit(end);
-    finish(fetched, end - pos, celt)
+    // SAFETY: contract of this function.
+    unsafe { finish(fetched, end - pos, celt) }
 }
 
 #[implement(IEnumString)]
@@ -134,6 +142,10 @@ impl StringEnum {
 }
 
 impl IEnumString_Impl for StringEnum_Impl {
+    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
+    // runtime passes them under the interface's contract; they are dereferenced only in
+    // the `unsafe fn`s of this module, each with its SAFETY argument.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn Next(&self, celt: u32, rgelt: *mut PWSTR, fetched: *mut u32) -> HRESULT {
         if let Err(hr) = check_next(celt, rgelt, fetched) {
             return hr;
@@ -141,10 +153,10 @@ impl IEnumString_Impl for StringEnum_Impl {
         let (pos, end) = self.0.peek(celt);
         let mut out: Vec<PWSTR> = Vec::with_capacity(end - pos);
         for s in &self.0.items()[pos..end] {
-            match mem::alloc_wstr(s) {
+            match crate::abi::alloc_wstr(s) {
                 Ok(p) => out.push(p),
                 Err(e) => {
-                    out.into_iter().for_each(mem::free_wstr);
+                    out.into_iter().for_each(crate::abi::free_wstr);
                     return e.code();
                 }
             }
@@ -154,7 +166,8 @@ impl IEnumString_Impl for StringEnum_Impl {
             unsafe { *rgelt.add(i) = *p };
         }
         self.0.commit(end);
-        finish(fetched, end - pos, celt)
+        // SAFETY: `fetched` is this method's pceltFetched.
+        unsafe { finish(fetched, end - pos, celt) }
     }
     fn Skip(&self, celt: u32) -> HRESULT {
         self.0.skip(celt)
@@ -178,8 +191,13 @@ impl UnknownEnum {
 }
 
 impl IEnumUnknown_Impl for UnknownEnum_Impl {
+    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
+    // runtime passes them under the interface's contract; they are dereferenced only in
+    // the `unsafe fn`s of this module, each with its SAFETY argument.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn Next(&self, celt: u32, rgelt: *mut Option<IUnknown>, fetched: *mut u32) -> HRESULT {
-        next_into(&self.0, celt, rgelt, fetched, |u| Some(u.clone()))
+        // SAFETY: this method's parameters, under the IEnum*::Next contract.
+        unsafe { next_into(&self.0, celt, rgelt, fetched, |u| Some(u.clone())) }
     }
     fn Skip(&self, celt: u32) -> windows::core::Result<()> {
         self.0.skip_result(celt)
@@ -203,8 +221,13 @@ impl ConnectionPointEnum {
 }
 
 impl IEnumConnectionPoints_Impl for ConnectionPointEnum_Impl {
+    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
+    // runtime passes them under the interface's contract; they are dereferenced only in
+    // the `unsafe fn`s of this module, each with its SAFETY argument.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn Next(&self, celt: u32, rgelt: *mut Option<IConnectionPoint>, fetched: *mut u32) -> HRESULT {
-        next_into(&self.0, celt, rgelt, fetched, |cp| Some(cp.clone()))
+        // SAFETY: this method's parameters, under the IEnum*::Next contract.
+        unsafe { next_into(&self.0, celt, rgelt, fetched, |cp| Some(cp.clone())) }
     }
     fn Skip(&self, celt: u32) -> windows::core::Result<()> {
         self.0.skip_result(celt)
@@ -229,11 +252,18 @@ impl ConnectionEnum {
 }
 
 impl IEnumConnections_Impl for ConnectionEnum_Impl {
+    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
+    // runtime passes them under the interface's contract; they are dereferenced only in
+    // the `unsafe fn`s of this module, each with its SAFETY argument.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn Next(&self, celt: u32, rgcd: *mut CONNECTDATA, fetched: *mut u32) -> HRESULT {
-        next_into(&self.0, celt, rgcd, fetched, |(cookie, unk)| CONNECTDATA {
-            pUnk: std::mem::ManuallyDrop::new(Some(unk.clone())),
-            dwCookie: *cookie,
-        })
+        // SAFETY: this method's parameters, under the IEnum*::Next contract.
+        unsafe {
+            next_into(&self.0, celt, rgcd, fetched, |(cookie, unk)| CONNECTDATA {
+                pUnk: std::mem::ManuallyDrop::new(Some(unk.clone())),
+                dwCookie: *cookie,
+            })
+        }
     }
     fn Skip(&self, celt: u32) -> windows::core::Result<()> {
         self.0.skip_result(celt)

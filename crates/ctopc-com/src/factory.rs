@@ -22,6 +22,9 @@ impl ClassFactory {
 }
 
 impl IClassFactory_Impl for ClassFactory_Impl {
+    // windows-rs declares IClassFactory's methods safe although they take raw pointers: the
+    // COM runtime passes them under the interface's contract (checked non-null here).
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn CreateInstance(
         &self,
         outer: Ref<IUnknown>,

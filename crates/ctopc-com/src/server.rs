@@ -18,25 +18,27 @@
 //!   (AddGroup's pTimeBias and pPercentDeadband) may be NULL and mean "the default".
 //! - A count of 0 is E_INVALIDARG; enumeration values outside the IDL's are E_INVALIDARG.
 //! - Out-parameters are cleared first (NULL / 0), then filled only after everything of the
-//!   call has succeeded (`server/out.rs`): all or nothing.
+//!   call has succeeded (`crate::abi`): all or nothing.
 //! - Per-item operations return S_FALSE when any item failed, with per-item codes.
-//! - Core errors become HRESULTs only through `mem::hresult` (`out::com_err`: without
-//!   the message object `mem::to_com` would originate, which aborts under Wine 8).
+//! - Core errors become COM errors only through `crate::error::to_com` (the crate's one
+//!   mapping, shared with the group objects; its message object is made with
+//!   `CreateErrorInfo`, never with `RoOriginateErrorW`, which aborts under Wine 8), and
+//!   per-item codes through `crate::error::hresult`.
 //! - No client is called and no COM object is created while the engine lock is held
 //!   (`ctx.runtime.with_engine` sections are short, pure engine calls).
 
 mod browse;
 mod groups;
 mod itemio;
-pub(crate) mod out;
 mod props;
 mod shutdown;
 
+use crate::abi::{self, write_out, OutArray, TaskMem};
+use crate::clock;
 use crate::connpoint::SinkSlot;
 use crate::context::{self, Context};
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
-use crate::mem::{self, TaskMem};
 use ctopc_core::browse::BrowseCursor;
 use ctopc_core::lang::Lang;
 use ctopc_core::model::SessionHandle;
@@ -78,10 +80,8 @@ pub struct OpcServer {
 /// The class factory's constructor: a new server object (and engine session) for one client.
 pub fn create_instance() -> windows::core::Result<IUnknown> {
     let Some(ctx) = context::get() else {
-        // (No message object: windows-rs would originate it with RoOriginateErrorW, which
-        // aborts under Wine 8; see `out::com_err`.)
         tracing::error!("a server object was asked for before the server started");
-        return Err(windows::core::Error::from_hresult(E_FAIL));
+        return Err(crate::error::error(E_FAIL, "the server has not started"));
     };
     let handle = ctx.runtime.open_session();
     let shutdown = Arc::new(SinkSlot::<IOPCShutdown>::default());
@@ -138,15 +138,6 @@ fn error_text(code: HRESULT, lang: Lang) -> windows::core::Result<String> {
     }
 }
 
-fn write_out<T>(ptr: *mut T, value: T) -> windows::core::Result<()> {
-    if ptr.is_null() {
-        return Err(E_INVALIDARG.into());
-    }
-    // SAFETY: checked non-null; COM out-parameters point to caller-owned storage.
-    unsafe { ptr.write(value) };
-    Ok(())
-}
-
 impl IOPCCommon_Impl for OpcServer_Impl {
     unsafe fn SetLocaleID(&self, lcid: u32) -> windows::core::Result<()> {
         lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
@@ -156,7 +147,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
 
     unsafe fn GetLocaleID(&self, plcid: *mut u32) -> windows::core::Result<()> {
         let lcid = self.session().lcid;
-        write_out(plcid, lcid)
+        // SAFETY: `plcid` is this method's [out] parameter.
+        unsafe { write_out(plcid, lcid) }
     }
 
     unsafe fn QueryAvailableLocaleIDs(
@@ -187,17 +179,14 @@ impl IOPCCommon_Impl for OpcServer_Impl {
             return Err(E_INVALIDARG.into());
         }
         let lang = lang_for(self.session().lcid).unwrap_or(self.ctx.default_lang);
-        let text = mem::alloc_wstr(&error_text(code, lang)?)?;
-        write_out(pstring, text)
+        let text = abi::OwnedWstr::new(&error_text(code, lang)?)?;
+        // SAFETY: `pstring` is this method's [out] parameter (checked non-null above).
+        unsafe { write_out(pstring, text.into_raw()) }
     }
 
     unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
-        if name.is_null() {
-            return Err(E_INVALIDARG.into());
-        }
-        // SAFETY: a non-null [in, string] parameter is a NUL-terminated UTF-16 string.
-        let name =
-            unsafe { name.to_string() }.map_err(|_| windows::core::Error::from(E_INVALIDARG))?;
+        // SAFETY: `name` is this method's [in, string] parameter.
+        let name = unsafe { abi::in_string(name, OpcError::InvalidArg) }?;
         self.session().client_name = Some(name);
         Ok(())
     }
@@ -227,7 +216,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
             deadband,
             lcid,
         };
-        out::hresult(self.add_group(&args, server, revised, riid, unk))
+        abi::hresult(self.add_group(&args, server, revised, riid, unk))
     }
 
     unsafe fn GetErrorString(
@@ -240,8 +229,9 @@ impl IOPCServer_Impl for OpcServer_Impl {
             return Err(E_INVALIDARG.into());
         }
         let lang = lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
-        let text = mem::alloc_wstr(&error_text(code, lang)?)?;
-        write_out(pstring, text)
+        let text = abi::OwnedWstr::new(&error_text(code, lang)?)?;
+        // SAFETY: `pstring` is this method's [out] parameter (checked non-null above).
+        unsafe { write_out(pstring, text.into_raw()) }
     }
 
     unsafe fn GetGroupByName(
@@ -254,9 +244,9 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
-        if pstatus.is_null() {
-            return Err(E_INVALIDARG.into());
-        }
+        // Cleared first (NULL), before any allocation can fail.
+        // SAFETY: `pstatus` is this method's [out] parameter.
+        let out = unsafe { OutArray::new(pstatus) }?;
         let ctx = self.ctx;
         let (groups, last_update) = ctx.runtime.with_engine(|e, _| {
             (
@@ -271,14 +261,14 @@ impl IOPCServer_Impl for OpcServer_Impl {
                 .and_then(|s| s.parse::<u16>().ok())
                 .unwrap_or(0)
         };
-        let now = mem::now();
+        let now = clock::now();
         let mut block = TaskMem::<OPCSERVERSTATUS>::zeroed(1)?;
-        let vendor = mem::alloc_wstr(VENDOR_INFO)?;
+        let vendor = abi::alloc_wstr(VENDOR_INFO)?;
         block.as_mut_slice()[0] = OPCSERVERSTATUS {
-            ftStartTime: mem::filetime(ctx.runtime.start_time),
-            ftCurrentTime: mem::filetime(now),
+            ftStartTime: clock::filetime(ctx.runtime.start_time),
+            ftCurrentTime: clock::filetime(now),
             // The last data callback sent to this client (the start time before the first).
-            ftLastUpdateTime: mem::filetime(
+            ftLastUpdateTime: clock::filetime(
                 last_update
                     .filter(|t| t.0 > 0)
                     .unwrap_or(ctx.runtime.start_time),
@@ -292,13 +282,13 @@ impl IOPCServer_Impl for OpcServer_Impl {
             wReserved: 0,
             szVendorInfo: vendor,
         };
-        // SAFETY: checked non-null; every allocation has succeeded.
-        unsafe { *pstatus = block.into_raw() };
+        // Every allocation has succeeded.
+        out.set(block);
         Ok(())
     }
 
     unsafe fn RemoveGroup(&self, server_group: u32, force: BOOL) -> HRESULT {
-        out::hresult(self.remove_group(server_group, force))
+        abi::hresult(self.remove_group(server_group, force))
     }
 
     unsafe fn CreateGroupEnumerator(
@@ -307,6 +297,6 @@ impl IOPCServer_Impl for OpcServer_Impl {
         riid: *const GUID,
         unk: *mut Option<IUnknown>,
     ) -> HRESULT {
-        out::hresult(self.group_enumerator(scope, riid, unk))
+        abi::hresult(self.group_enumerator(scope, riid, unk))
     }
 }

@@ -1,6 +1,6 @@
 //! marshal-probe.exe: the test COM server `ServerCTOPC.MarshalProbe`, whose objects return a
 //! distinct non-ASCII text in every string out-parameter of every OPC interface
-//! (`ctopc_com::probe`). Driven out of process by `tests/tests/marshal_strings.rs`, which
+//! (`e2e_tests::probe`). Driven out of process by `tests/tests/marshal_strings.rs`, which
 //! registers it with `/RegServer`; COM starts it with `-Embedding`.
 //!
 //! Switches as ServerCTOPC.exe: case-insensitive, starting with `/` or `-`.
@@ -9,7 +9,7 @@ const USAGE: &str = "usage: marshal-probe.exe /RegServer | /UnregServer | -Embed
 
 #[cfg(windows)]
 fn main() -> std::process::ExitCode {
-    use ctopc_com::probe;
+    use e2e_tests::probe;
     use std::process::ExitCode;
 
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -420,12 +420,15 @@ impl Server {
                 &mut types,
             )?
         };
-        let ids = take_array(ids, n as usize);
-        let descs: Vec<Option<String>> = take_array(descs, n as usize)
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let ids = unsafe { take_array(ids, n as usize) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let descs: Vec<Option<String>> = unsafe { take_array(descs, n as usize) }
             .into_iter()
             .map(take_wstr)
             .collect();
-        let types: Vec<VARTYPE> = take_array(types, n as usize);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let types: Vec<VARTYPE> = unsafe { take_array(types, n as usize) };
         Ok(ids
             .into_iter()
             .zip(descs)
@@ -452,8 +455,10 @@ impl Server {
                 &mut errors,
             )
         })?;
-        let values = take_variants(data, ids.len());
-        let errors: Vec<HRESULT> = take_array(errors, ids.len());
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let values = unsafe { take_variants(data, ids.len()) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors: Vec<HRESULT> = unsafe { take_array(errors, ids.len()) };
         Ok((hr, values.into_iter().map(|(_, v)| v).zip(errors).collect()))
     }
 
@@ -475,11 +480,13 @@ impl Server {
                 &mut errors,
             )
         })?;
-        let new_ids: Vec<Option<String>> = take_array(new_ids, ids.len())
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let new_ids: Vec<Option<String>> = unsafe { take_array(new_ids, ids.len()) }
             .into_iter()
             .map(take_wstr)
             .collect();
-        let errors: Vec<HRESULT> = take_array(errors, ids.len());
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors: Vec<HRESULT> = unsafe { take_array(errors, ids.len()) };
         Ok((hr, new_ids.into_iter().zip(errors).collect()))
     }
 
@@ -625,10 +632,14 @@ impl Server {
             )
         })?;
         let n = items.len();
-        let values = take_variants(values, n);
-        let qualities: Vec<u16> = take_array(qualities, n);
-        let times: Vec<FILETIME> = take_array(times, n);
-        let errors: Vec<HRESULT> = take_array(errors, n);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let values = unsafe { take_variants(values, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let qualities: Vec<u16> = unsafe { take_array(qualities, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let times: Vec<FILETIME> = unsafe { take_array(times, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors: Vec<HRESULT> = unsafe { take_array(errors, n) };
         let out = (0..n)
             .map(|i| ReadItem {
                 client_handle: 0,
@@ -682,7 +693,8 @@ impl Server {
                     &mut errors,
                 )
             })?;
-            Ok((hr, take_array(errors, items.len())))
+            // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+            Ok((hr, unsafe { take_array(errors, items.len()) }))
         });
         for v in &mut vqts {
             crate::variant::clear(&mut v.vDataValue);

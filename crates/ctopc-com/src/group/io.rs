@@ -3,8 +3,8 @@
 //! Every method has the same shape: check the arguments (NULL required pointers and a
 //! zero count are E_INVALIDARG; out-pointers are set to NULL first), one engine call
 //! through `Runtime::with_engine` (the engine is locked once per call), `?` on the
-//! whole-call error (mapped in `mem::to_com`), then the out-parameters are filled
-//! all-or-nothing: CoTaskMem arrays are owned by `TaskMem` / [`VariantArray`] until every
+//! whole-call error (mapped in `error::to_com`), then the out-parameters are filled
+//! all-or-nothing: CoTaskMem arrays are owned by `TaskMem` / `OwnedArray` until every
 //! allocation of the call has succeeded, and VARIANTs already written are cleared when a
 //! later allocation fails. Per-item failures are written to `ppErrors` and the call
 //! returns S_FALSE.
@@ -25,10 +25,13 @@
 //! source as a value-quality-timestamp write.
 
 use super::Group_Impl;
+use crate::abi::{
+    self, in_array, item_hr, s_false_if, write_out, ComResult, OutArray, OwnedArray, TaskMem,
+};
 use crate::interfaces::*;
-use crate::mem::{self, TaskMem};
 use crate::runtime::SYNC_WAIT_MARGIN;
 use crate::variant;
+use crate::{clock, error};
 use ctopc_core::model::{
     AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome,
     SyncResult, WriteResults,
@@ -36,116 +39,16 @@ use ctopc_core::model::{
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
 use std::time::Duration;
 use windows::core::{BOOL, HRESULT};
-use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, FILETIME, S_FALSE, S_OK};
+use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, FILETIME};
 use windows::Win32::System::Variant::VARIANT;
 
-type ComResult<T> = windows::core::Result<T>;
-
 // ---- argument checks --------------------------------------------------------------
-
-/// An `[in, size_is(count)]` array; E_INVALIDARG for a NULL pointer or a zero count.
-fn in_array<'a, T>(p: *const T, count: u32) -> ComResult<&'a [T]> {
-    if p.is_null() || count == 0 {
-        return Err(E_INVALIDARG.into());
-    }
-    // SAFETY: a non-null [in, size_is(count)] array of the call: `count` initialised
-    // elements that stay valid (and unchanged) for the duration of the call.
-    Ok(unsafe { std::slice::from_raw_parts(p, count as usize) })
-}
-
-/// Sets a required out-pointer's target to NULL (so that a failed call leaves nothing
-/// behind); E_INVALIDARG when the out-pointer itself is NULL.
-fn null_out<T>(pp: *mut *mut T) -> ComResult<()> {
-    if pp.is_null() {
-        return Err(E_INVALIDARG.into());
-    }
-    // SAFETY: checked non-null; an out-parameter points at caller storage for a pointer.
-    unsafe { pp.write(std::ptr::null_mut()) };
-    Ok(())
-}
-
-/// Writes a plain out-value; E_INVALIDARG for a NULL pointer.
-fn write_out<T>(p: *mut T, value: T) -> ComResult<()> {
-    if p.is_null() {
-        return Err(E_INVALIDARG.into());
-    }
-    // SAFETY: checked non-null; an out-parameter points at caller storage for one T.
-    unsafe { p.write(value) };
-    Ok(())
-}
-
-/// Hands a finished CoTaskMem array to a (checked, non-null) out-pointer.
-fn hand_out<T>(pp: *mut *mut T, p: *mut T) {
-    // SAFETY: every caller passed `pp` through `null_out` first (non-null, writable).
-    unsafe { pp.write(p) };
-}
 
 fn data_source(s: OPCDATASOURCE) -> ComResult<DataSource> {
     match s {
         OPC_DS_CACHE => Ok(DataSource::Cache),
         OPC_DS_DEVICE => Ok(DataSource::Device),
         _ => Err(E_INVALIDARG.into()),
-    }
-}
-
-/// The HRESULT of a COM method that returns S_OK / S_FALSE or a failure.
-fn hr(r: ComResult<HRESULT>) -> HRESULT {
-    r.unwrap_or_else(|e| e.code())
-}
-
-fn item_hr(r: &Result<impl Sized, OpcError>) -> HRESULT {
-    match r {
-        Ok(_) => S_OK,
-        Err(e) => mem::hresult(*e),
-    }
-}
-
-fn s_ok_or_false(any_failed: bool) -> HRESULT {
-    if any_failed {
-        S_FALSE
-    } else {
-        S_OK
-    }
-}
-
-// ---- out-arrays holding VARIANTs ----------------------------------------------------
-
-/// A zeroed CoTaskMem array of elements that contain a VARIANT: until handed out, drop
-/// clears every VARIANT (zeroed ones are VT_EMPTY: clearing them is a no-op) and frees
-/// the block.
-struct VariantArray<T> {
-    mem: Option<TaskMem<T>>,
-    var: fn(&mut T) -> &mut VARIANT,
-}
-
-impl<T> VariantArray<T> {
-    fn zeroed(len: usize, var: fn(&mut T) -> &mut VARIANT) -> ComResult<Self> {
-        Ok(VariantArray {
-            mem: Some(TaskMem::zeroed(len)?),
-            var,
-        })
-    }
-    fn as_mut_slice(&mut self) -> &mut [T] {
-        match self.mem.as_mut() {
-            Some(m) => m.as_mut_slice(),
-            None => &mut [],
-        }
-    }
-    fn into_raw(mut self) -> *mut T {
-        self.mem
-            .take()
-            .map_or(std::ptr::null_mut(), TaskMem::into_raw)
-    }
-}
-
-impl<T> Drop for VariantArray<T> {
-    fn drop(&mut self) {
-        let var = self.var;
-        if let Some(m) = self.mem.as_mut() {
-            for e in m.as_mut_slice() {
-                variant::clear(var(e));
-            }
-        }
     }
 }
 
@@ -180,7 +83,7 @@ fn complete<T>(
     let limit = Duration::from_millis(u64::from(source_timeout_ms)) + SYNC_WAIT_MARGIN;
     match g.ctx.runtime.wait_for(limit, |e| e.take_sync_result(id)) {
         Some(r) => {
-            pick(r).ok_or_else(|| mem::error(E_FAIL, "synchronous result of the wrong kind"))
+            pick(r).ok_or_else(|| error::error(E_FAIL, "synchronous result of the wrong kind"))
         }
         None => {
             g.ctx.runtime.with_engine(|e, _| e.abandon_sync(id));
@@ -291,7 +194,7 @@ fn value_items(handles: &[u32], values: &[VARIANT], pre: &mut PreErrors) -> Vec<
 
 /// Fills ppErrors from per-item results; returns S_OK or S_FALSE.
 fn errors_out<R>(
-    pp_errors: *mut *mut HRESULT,
+    pp_errors: OutArray<HRESULT>,
     results: &[Result<R, OpcError>],
 ) -> ComResult<HRESULT> {
     let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
@@ -300,8 +203,8 @@ fn errors_out<R>(
         *dst = item_hr(r);
         failed |= r.is_err();
     }
-    hand_out(pp_errors, errors.into_raw());
-    Ok(s_ok_or_false(failed))
+    pp_errors.set(errors);
+    Ok(s_false_if(failed))
 }
 
 impl Group_Impl {
@@ -310,7 +213,7 @@ impl Group_Impl {
         &self,
         items: Vec<(u32, ItemVqt)>,
         pre: PreErrors,
-        pp_errors: *mut *mut HRESULT,
+        pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
         let n = items.len();
         let (outcome, timeout) = self.ctx.runtime.with_engine(|e, now| {
@@ -322,7 +225,7 @@ impl Group_Impl {
         drop(items);
         let mut results = complete(
             self,
-            outcome.map_err(mem::to_com)?,
+            outcome.map_err(error::to_com)?,
             timeout,
             n,
             pick_write,
@@ -344,7 +247,7 @@ impl Group_Impl {
             .with_engine(|e, now| (call(e, now), e.config().source_timeout_ms));
         complete(
             self,
-            outcome.map_err(mem::to_com)?,
+            outcome.map_err(error::to_com)?,
             timeout,
             n,
             pick_read,
@@ -353,13 +256,17 @@ impl Group_Impl {
     }
 
     /// An asynchronous call: writes the cancel ID and the per-item errors.
-    fn async_out(
+    ///
+    /// # Safety
+    /// `p_cancel` was checked non-null and zeroed by [`cancel_out`] (the method's `[out]`
+    /// parameter).
+    unsafe fn async_out(
         &self,
         started: Result<AsyncStarted, OpcError>,
         p_cancel: *mut u32,
-        pp_errors: *mut *mut HRESULT,
+        pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
-        let started = started.map_err(mem::to_com)?;
+        let started = started.map_err(error::to_com)?;
         let hr = errors_out(pp_errors, &started.results)?;
         // SAFETY: checked non-null by the caller before the engine call.
         unsafe { p_cancel.write(started.cancel_id) };
@@ -368,14 +275,20 @@ impl Group_Impl {
 }
 
 /// Checks the cancel-ID out-pointer of an asynchronous call and zeroes it.
-fn cancel_out(p: *mut u32) -> ComResult<()> {
-    write_out(p, 0)
+///
+/// # Safety
+/// As [`abi::write_out`]: `p` is the method's `[out]` parameter.
+unsafe fn cancel_out(p: *mut u32) -> ComResult<()> {
+    // SAFETY: contract of this function.
+    unsafe { write_out(p, 0) }
 }
 
 // ---- IOPCSyncIO -------------------------------------------------------------------------
 
 impl Group_Impl {
-    fn read_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn read_impl(
         &self,
         source: OPCDATASOURCE,
         count: u32,
@@ -383,16 +296,15 @@ impl Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_values)?;
-        null_out(pp_errors)?;
+        let pp_values = OutArray::new(pp_values)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let source = data_source(source)?;
         let results = self.sync_read(handles.len(), |e, now| {
             e.read(now, self.handle, source, handles)
         })?;
 
-        let mut states =
-            VariantArray::<OPCITEMSTATE>::zeroed(results.len(), |s| &mut s.vDataValue)?;
+        let mut states = OwnedArray::<OPCITEMSTATE>::zeroed(results.len())?;
         let mut errors = TaskMem::<HRESULT>::zeroed(results.len())?;
         let mut failed = false;
         for ((st, err), r) in states
@@ -409,30 +321,32 @@ impl Group_Impl {
                     timestamp,
                 }) => value_variant(value)?.map(|v| {
                     st.hClient = *client_handle;
-                    st.ftTimeStamp = mem::filetime(*timestamp);
+                    st.ftTimeStamp = clock::filetime(*timestamp);
                     st.wQuality = quality.0;
                     st.vDataValue = v;
                 }),
                 Err(e) => Err(*e),
             };
             if let Err(e) = outcome {
-                *err = mem::hresult(e);
+                *err = error::hresult(e);
                 failed = true;
             }
         }
-        hand_out(pp_values, states.into_raw());
-        hand_out(pp_errors, errors.into_raw());
-        Ok(s_ok_or_false(failed))
+        pp_values.set(states);
+        pp_errors.set(errors);
+        Ok(s_false_if(failed))
     }
 
-    fn write_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn write_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let values = in_array(p_values, count)?;
         let mut pre = PreErrors::default();
@@ -450,7 +364,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.read_impl(source, count, ph_server, pp_values, pp_errors))
+        abi::hresult(self.read_impl(source, count, ph_server, pp_values, pp_errors))
     }
 
     unsafe fn Write(
@@ -460,7 +374,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.write_impl(count, ph_server, p_values, pp_errors))
+        abi::hresult(self.write_impl(count, ph_server, p_values, pp_errors))
     }
 }
 
@@ -468,7 +382,9 @@ impl IOPCSyncIO_Impl for Group_Impl {
 
 impl Group_Impl {
     #[allow(clippy::too_many_arguments)]
-    fn read_max_age_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn read_max_age_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
@@ -478,10 +394,10 @@ impl Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_values)?;
-        null_out(pp_qualities)?;
-        null_out(pp_times)?;
-        null_out(pp_errors)?;
+        let pp_values = OutArray::new(pp_values)?;
+        let pp_qualities = OutArray::new(pp_qualities)?;
+        let pp_times = OutArray::new(pp_times)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
@@ -491,7 +407,7 @@ impl Group_Impl {
         drop(items);
 
         let n = results.len();
-        let mut values = VariantArray::<VARIANT>::zeroed(n, |v| v)?;
+        let mut values = OwnedArray::<VARIANT>::zeroed(n)?;
         let mut qualities = TaskMem::<u16>::zeroed(n)?;
         let mut times = TaskMem::<FILETIME>::zeroed(n)?;
         let mut errors = TaskMem::<HRESULT>::zeroed(n)?;
@@ -507,32 +423,34 @@ impl Group_Impl {
                 Ok(s) => value_variant(&s.value)?.map(|var| {
                     *v = var;
                     *q = s.quality.0;
-                    *t = mem::filetime(s.timestamp);
+                    *t = clock::filetime(s.timestamp);
                 }),
                 Err(e) => Err(*e),
             };
             if let Err(e) = outcome {
                 // A failed item reads VT_EMPTY with quality BAD (OPC DA 3.0 ReadMaxAge).
                 *q = Quality::BAD.0;
-                *err = mem::hresult(e);
+                *err = error::hresult(e);
                 failed = true;
             }
         }
-        hand_out(pp_values, values.into_raw());
-        hand_out(pp_qualities, qualities.into_raw());
-        hand_out(pp_times, times.into_raw());
-        hand_out(pp_errors, errors.into_raw());
-        Ok(s_ok_or_false(failed))
+        pp_values.set(values);
+        pp_qualities.set(qualities);
+        pp_times.set(times);
+        pp_errors.set(errors);
+        Ok(s_false_if(failed))
     }
 
-    fn write_vqt_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn write_vqt_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         let handles = in_array(ph_server, count)?;
         let vqts = in_array(p_vqt, count)?;
         let mut pre = PreErrors::default();
@@ -552,7 +470,7 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.read_max_age_impl(
+        abi::hresult(self.read_max_age_impl(
             count,
             ph_server,
             p_max_age,
@@ -570,14 +488,16 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
+        abi::hresult(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
     }
 }
 
 // ---- IOPCAsyncIO2 -----------------------------------------------------------------------
 
 impl Group_Impl {
-    fn async_read_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn async_read_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
@@ -585,7 +505,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let started = self
@@ -595,7 +515,9 @@ impl Group_Impl {
         self.async_out(started, p_cancel, pp_errors)
     }
 
-    fn async_write_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn async_write_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
@@ -604,7 +526,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let values = in_array(p_values, count)?;
@@ -624,13 +546,15 @@ impl Group_Impl {
         )
     }
 
-    fn refresh_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn refresh_impl(
         &self,
         p_cancel: *mut u32,
         call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>,
     ) -> ComResult<()> {
         cancel_out(p_cancel)?;
-        let cancel_id = self.ctx.runtime.with_engine(call).map_err(mem::to_com)?;
+        let cancel_id = self.ctx.runtime.with_engine(call).map_err(error::to_com)?;
         write_out(p_cancel, cancel_id)
     }
 }
@@ -644,7 +568,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
+        abi::hresult(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
     }
 
     unsafe fn Write(
@@ -656,7 +580,14 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.async_write_impl(count, ph_server, p_values, transaction, p_cancel, pp_errors))
+        abi::hresult(self.async_write_impl(
+            count,
+            ph_server,
+            p_values,
+            transaction,
+            p_cancel,
+            pp_errors,
+        ))
     }
 
     unsafe fn Refresh2(
@@ -675,14 +606,14 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         self.ctx
             .runtime
             .with_engine(|e, _| e.cancel2(self.handle, cancel_id))
-            .map_err(mem::to_com)
+            .map_err(error::to_com)
     }
 
     unsafe fn SetEnable(&self, enable: BOOL) -> windows::core::Result<()> {
         self.ctx
             .runtime
             .with_engine(|e, now| e.set_enable(now, self.handle, enable.as_bool()))
-            .map_err(mem::to_com)
+            .map_err(error::to_com)
     }
 
     unsafe fn GetEnable(&self, p_enable: *mut BOOL) -> windows::core::Result<()> {
@@ -693,7 +624,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
             .ctx
             .runtime
             .with_engine(|e, _| e.get_enable(self.handle))
-            .map_err(mem::to_com)?;
+            .map_err(error::to_com)?;
         write_out(p_enable, BOOL::from(enabled))
     }
 }
@@ -701,7 +632,9 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
 // ---- IOPCAsyncIO3 -----------------------------------------------------------------------
 
 impl Group_Impl {
-    fn async_read_max_age_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn async_read_max_age_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
@@ -710,7 +643,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
@@ -722,7 +655,9 @@ impl Group_Impl {
         self.async_out(started, p_cancel, pp_errors)
     }
 
-    fn async_write_vqt_impl(
+    /// # Safety
+    /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
+    unsafe fn async_write_vqt_impl(
         &self,
         count: u32,
         ph_server: *const OPCHANDLE,
@@ -731,7 +666,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
-        null_out(pp_errors)?;
+        let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
         let vqts = in_array(p_vqt, count)?;
@@ -762,7 +697,7 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.async_read_max_age_impl(
+        abi::hresult(self.async_read_max_age_impl(
             count,
             ph_server,
             p_max_age,
@@ -781,7 +716,14 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hr(self.async_write_vqt_impl(count, ph_server, p_vqt, transaction, p_cancel, pp_errors))
+        abi::hresult(self.async_write_vqt_impl(
+            count,
+            ph_server,
+            p_vqt,
+            transaction,
+            p_cancel,
+            pp_errors,
+        ))
     }
 
     unsafe fn RefreshMaxAge(

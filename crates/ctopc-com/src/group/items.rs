@@ -5,11 +5,12 @@
 //! string buffer, the output arrays are allocated once before the core call (so nothing
 //! can fail after items were added), and the core adds every item under one lock.
 
-use super::{in_array, in_array_n, Group_Impl, OutArray};
+use super::Group_Impl;
+use crate::abi::{self, in_array, OutArray, OwnedArray};
 use crate::enums::{check_next, Cursor};
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
-use crate::{mem, variant};
+use crate::{error, variant};
 use ctopc_core::model::{ItemAttributes, ItemDefinition, ItemResult};
 use ctopc_core::namespace::EuInfo;
 use ctopc_core::value::ArrayValue;
@@ -125,14 +126,14 @@ fn item_result(r: Result<ItemResult, OpcError>) -> (OPCITEMRESULT, HRESULT) {
             },
             S_OK,
         ),
-        Err(e) => (OPCITEMRESULT::default(), mem::hresult(e)),
+        Err(e) => (OPCITEMRESULT::default(), error::hresult(e)),
     }
 }
 
 fn plain<V: Default>(r: Result<V, OpcError>) -> (V, HRESULT) {
     match r {
         Ok(v) => (v, S_OK),
-        Err(e) => (V::default(), mem::hresult(e)),
+        Err(e) => (V::default(), error::hresult(e)),
     }
 }
 
@@ -141,7 +142,7 @@ macro_rules! check {
     ($e:expr) => {
         match $e {
             Ok(v) => v,
-            Err(hr) => return hr,
+            Err(e) => return e.code(),
         }
     };
 }
@@ -160,7 +161,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let results = check!(OutArray::new(ppaddresults));
         let errors = check!(OutArray::new(pperrors));
-        let defs = check!(in_array(dwcount, pitemarray));
+        let defs = check!(in_array(pitemarray, dwcount));
         let decoded = Defs::decode(defs);
         let core_defs = decoded.core_defs(defs);
         self.per_item_values(
@@ -190,7 +191,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let results = check!(OutArray::new(ppvalidationresults));
         let errors = check!(OutArray::new(pperrors));
-        let defs = check!(in_array(dwcount, pitemarray));
+        let defs = check!(in_array(pitemarray, dwcount));
         let decoded = Defs::decode(defs);
         let core_defs = decoded.core_defs(defs);
         self.per_item_values(
@@ -216,7 +217,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item(handles.len(), errors, |e, now, g| {
             e.remove_items(now, g, handles)
         })
@@ -230,7 +231,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         let active = bactive.as_bool();
         self.per_item(handles.len(), errors, |e, now, g| {
             e.set_active_state(now, g, handles, active)
@@ -245,8 +246,8 @@ impl IOPCItemMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
-        let clients = check!(in_array_n(handles.len(), phclient));
+        let handles = check!(in_array(phserver, dwcount));
+        let clients = check!(in_array(phclient, dwcount));
         let pairs: Vec<(u32, u32)> = handles
             .iter()
             .copied()
@@ -265,8 +266,8 @@ impl IOPCItemMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
-        let types = check!(in_array_n(handles.len(), prequesteddatatypes));
+        let handles = check!(in_array(phserver, dwcount));
+        let types = check!(in_array(prequesteddatatypes, dwcount));
         let pairs: Vec<(u32, VarType)> = handles
             .iter()
             .copied()
@@ -290,7 +291,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         }
         let items = match self.engine(|e, _, g| e.item_attributes(g)) {
             Ok(items) => items,
-            Err(e) => return mem::hresult(e),
+            Err(e) => return error::hresult(e),
         };
         let empty = items.is_empty();
         let enumerator: IEnumOPCItemAttributes = ItemAttributesEnum::create(items);
@@ -347,31 +348,9 @@ fn eu_info(eu: &EuInfo) -> windows::core::Result<(OPCEUTYPE, VARIANT)> {
     })
 }
 
-/// An OPCITEMATTRIBUTES array being built: on drop, its strings and VARIANTs are freed
-/// with it unless [`Building::finish`] handed it out (all-or-nothing).
-struct Building(Option<mem::TaskMem<OPCITEMATTRIBUTES>>);
-
-impl Building {
-    fn finish(mut self) -> Option<mem::TaskMem<OPCITEMATTRIBUTES>> {
-        self.0.take()
-    }
-}
-
-impl Drop for Building {
-    fn drop(&mut self) {
-        if let Some(block) = &mut self.0 {
-            for a in block.as_mut_slice() {
-                mem::free_wstr(a.szAccessPath);
-                mem::free_wstr(a.szItemID);
-                variant::clear(&mut a.vEUInfo);
-            }
-        }
-    }
-}
-
 fn attributes(a: &ItemAttributes, out: &mut OPCITEMATTRIBUTES) -> windows::core::Result<()> {
-    out.szAccessPath = mem::alloc_wstr(&a.access_path)?;
-    out.szItemID = mem::alloc_wstr(&a.item_id)?;
+    out.szAccessPath = abi::alloc_wstr(&a.access_path)?;
+    out.szItemID = abi::alloc_wstr(&a.item_id)?;
     out.bActive = BOOL::from(a.active);
     out.hClient = a.client_handle;
     out.hServer = a.server_handle;
@@ -401,24 +380,20 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
         let (pos, end) = self.cursor.peek(celt);
         let got = end - pos;
         if got > 0 {
-            let Ok(block) = mem::TaskMem::<OPCITEMATTRIBUTES>::zeroed(got) else {
+            // All-or-nothing: until handed out, the array frees its strings and VARIANTs.
+            let Ok(mut block) = OwnedArray::<OPCITEMATTRIBUTES>::zeroed(got) else {
                 return E_OUTOFMEMORY;
             };
-            let mut building = Building(Some(block));
-            if let Some(block) = &mut building.0 {
-                for (src, dst) in self.cursor.items()[pos..end]
-                    .iter()
-                    .zip(block.as_mut_slice().iter_mut())
-                {
-                    if let Err(e) = attributes(src, dst) {
-                        return e.code();
-                    }
+            for (src, dst) in self.cursor.items()[pos..end]
+                .iter()
+                .zip(block.as_mut_slice().iter_mut())
+            {
+                if let Err(e) = attributes(src, dst) {
+                    return e.code();
                 }
             }
-            if let Some(block) = building.finish() {
-                // SAFETY: checked non-null by check_next; every allocation has succeeded.
-                unsafe { ppitemarray.write(block.into_raw()) };
-            }
+            // SAFETY: checked non-null by check_next; every allocation has succeeded.
+            unsafe { ppitemarray.write(block.into_raw()) };
         }
         self.cursor.commit(end);
         if !pceltfetched.is_null() {
@@ -472,8 +447,8 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
-        let deadbands = check!(in_array_n(handles.len(), ppercentdeadband));
+        let handles = check!(in_array(phserver, dwcount));
+        let deadbands = check!(in_array(ppercentdeadband, dwcount));
         let pairs: Vec<(u32, f32)> = handles
             .iter()
             .copied()
@@ -493,7 +468,7 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let values = check!(OutArray::new(pppercentdeadband));
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item_values(
             handles.len(),
             values,
@@ -510,7 +485,7 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item(handles.len(), errors, |e, _, g| {
             e.clear_item_deadband(g, handles)
         })
@@ -534,8 +509,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let values = check!(OutArray::new(ppdwrevisedsamplingrate));
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
-        let rates = check!(in_array_n(handles.len(), pdwrequestedsamplingrate));
+        let handles = check!(in_array(phserver, dwcount));
+        let rates = check!(in_array(pdwrequestedsamplingrate, dwcount));
         let pairs: Vec<(u32, u32)> = handles.iter().copied().zip(rates.iter().copied()).collect();
         self.per_item_values(
             handles.len(),
@@ -543,8 +518,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
             errors,
             |e, _, g| e.set_item_sampling_rate(g, &pairs),
             |r| match r {
-                Ok(rev) => (rev.value, rev.code().map_or(S_OK, mem::hresult)),
-                Err(e) => (0, mem::hresult(e)),
+                Ok(rev) => (rev.value, rev.code().map_or(S_OK, error::hresult)),
+                Err(e) => (0, error::hresult(e)),
             },
         )
     }
@@ -558,7 +533,7 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let values = check!(OutArray::new(ppdwsamplingrate));
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item_values(
             handles.len(),
             values,
@@ -575,7 +550,7 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item(handles.len(), errors, |e, _, g| {
             e.clear_item_sampling_rate(g, handles)
         })
@@ -591,8 +566,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
-        let enable = check!(in_array_n(handles.len(), pbenable));
+        let handles = check!(in_array(phserver, dwcount));
+        let enable = check!(in_array(pbenable, dwcount));
         let pairs: Vec<(u32, bool)> = handles
             .iter()
             .copied()
@@ -612,7 +587,7 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
     ) -> HRESULT {
         let values = check!(OutArray::new(ppbenable));
         let errors = check!(OutArray::new(pperrors));
-        let handles = check!(in_array(dwcount, phserver));
+        let handles = check!(in_array(phserver, dwcount));
         self.per_item_values(
             handles.len(),
             values,
@@ -620,7 +595,7 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
             |e, _, g| e.get_item_buffer_enable(g, handles),
             |r| match r {
                 Ok(b) => (BOOL::from(b), S_OK),
-                Err(e) => (BOOL(0), mem::hresult(e)),
+                Err(e) => (BOOL(0), error::hresult(e)),
             },
         )
     }

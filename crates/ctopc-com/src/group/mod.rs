@@ -17,11 +17,12 @@
 mod io;
 mod items;
 
+use crate::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
 use crate::connpoint::{self, SinkSlot, Slot};
 use crate::context::Context;
+use crate::error;
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
-use crate::mem::{self, TaskMem};
 use ctopc_core::model::{Engine, GroupHandle, SessionHandle, SetGroupState};
 use ctopc_core::{OpcError, Timestamp};
 use std::collections::BTreeMap;
@@ -29,7 +30,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{
     implement, IUnknown, IUnknownImpl, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR,
 };
-use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, S_FALSE, S_OK};
+use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, S_OK};
 use windows::Win32::System::Com::{
     IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl,
     IEnumConnectionPoints,
@@ -113,7 +114,7 @@ fn create_locked(
 ) -> windows::core::Result<IUnknown> {
     ctx.runtime
         .with_engine(|e, _| e.group_add_ref(group))
-        .map_err(mem::to_com)?;
+        .map_err(error::to_com)?;
     let sink = Arc::new(SinkSlot::<IOPCDataCallback>::default());
     let point: Arc<dyn Slot> = Arc::new(DataCallbackPoint {
         ctx,
@@ -190,75 +191,8 @@ impl Drop for Group {
 }
 
 // ---------------------------------------------------------------------------------------
-// Shared helpers of the group's COM methods
+// The per-item shape of the group's COM methods (argument helpers: `crate::abi`)
 // ---------------------------------------------------------------------------------------
-
-/// An `[in, size_is(count)]` array: E_INVALIDARG for a count of 0 or a NULL pointer.
-pub(crate) fn in_array<'a, T>(count: u32, p: *const T) -> Result<&'a [T], HRESULT> {
-    if count == 0 || p.is_null() {
-        return Err(E_INVALIDARG);
-    }
-    // SAFETY: a non-null `[in, size_is(count)]` array holds `count` elements that stay
-    // valid for the duration of the call (the stub or the in-process caller owns them).
-    Ok(unsafe { std::slice::from_raw_parts(p, count as usize) })
-}
-
-/// A second `[in, size_is(count)]` array of the same call (count already checked).
-pub(crate) fn in_array_n<'a, T>(n: usize, p: *const T) -> Result<&'a [T], HRESULT> {
-    if p.is_null() {
-        return Err(E_INVALIDARG);
-    }
-    // SAFETY: as in `in_array`: the array holds the call's `count` elements.
-    Ok(unsafe { std::slice::from_raw_parts(p, n) })
-}
-
-/// An `[out]` pointer to a callee-allocated CoTaskMem array: null-checked (E_INVALIDARG)
-/// and set to NULL before anything else, so that every failure leaves NULL behind.
-pub(crate) struct OutArray<T>(*mut *mut T);
-
-impl<T> OutArray<T> {
-    pub(crate) fn new(pp: *mut *mut T) -> Result<Self, HRESULT> {
-        if pp.is_null() {
-            return Err(E_INVALIDARG);
-        }
-        // SAFETY: checked non-null; an [out] pointer to caller storage for one pointer.
-        unsafe { pp.write(std::ptr::null_mut()) };
-        Ok(OutArray(pp))
-    }
-
-    /// Hands the array to the caller.
-    pub(crate) fn set(self, array: TaskMem<T>) {
-        // SAFETY: `self.0` was checked non-null in `new`.
-        unsafe { self.0.write(array.into_raw()) };
-    }
-}
-
-/// Writes one plain `[out]` value (E_INVALIDARG for NULL).
-pub(crate) fn write_out<T>(p: *mut T, value: T) -> Result<(), HRESULT> {
-    if p.is_null() {
-        return Err(E_INVALIDARG);
-    }
-    // SAFETY: checked non-null; an [out] pointer to caller storage.
-    unsafe { p.write(value) };
-    Ok(())
-}
-
-/// The per-item HRESULT of a core result.
-pub(crate) fn item_hr<R>(r: &Result<R, OpcError>) -> HRESULT {
-    match r {
-        Ok(_) => S_OK,
-        Err(e) => mem::hresult(*e),
-    }
-}
-
-/// S_FALSE when any per-item code is a failure, else S_OK.
-pub(crate) fn overall(errors: &[HRESULT]) -> HRESULT {
-    if errors.iter().any(|e| e.is_err()) {
-        S_FALSE
-    } else {
-        S_OK
-    }
-}
 
 impl Group_Impl {
     /// Runs one core call on the engine.
@@ -289,7 +223,7 @@ impl Group_Impl {
         };
         let results = match self.engine(call) {
             Ok(r) => r,
-            Err(e) => return mem::hresult(e),
+            Err(e) => return error::hresult(e),
         };
         if results.len() != n {
             return E_FAIL;
@@ -303,7 +237,7 @@ impl Group_Impl {
             *v = value;
             *e = hr;
         }
-        let hr = overall(errs.as_mut_slice());
+        let hr = s_false_if_any(errs.as_mut_slice());
         values.set(vals);
         errors.set(errs);
         hr
@@ -325,7 +259,7 @@ impl Group_Impl {
         };
         let results = match self.engine(call) {
             Ok(r) => r,
-            Err(e) => return mem::hresult(e),
+            Err(e) => return error::hresult(e),
         };
         if results.len() != n {
             return E_FAIL;
@@ -333,28 +267,9 @@ impl Group_Impl {
         for (r, e) in results.iter().zip(errs.as_mut_slice().iter_mut()) {
             *e = item_hr(r);
         }
-        let hr = overall(errs.as_mut_slice());
+        let hr = s_false_if_any(errs.as_mut_slice());
         errors.set(errs);
         hr
-    }
-}
-
-/// Reads a `[in, string]` name (E_INVALIDARG for NULL or invalid UTF-16).
-fn read_name(p: PCWSTR) -> Result<String, HRESULT> {
-    if p.is_null() {
-        return Err(E_INVALIDARG);
-    }
-    // SAFETY: a non-null [in, string] parameter is a NUL-terminated UTF-16 string.
-    unsafe { p.to_string() }.map_err(|_| E_INVALIDARG)
-}
-
-/// An `[in, unique]` value: None for NULL.
-fn read_opt<T: Copy>(p: *const T) -> Option<T> {
-    if p.is_null() {
-        None
-    } else {
-        // SAFETY: a non-null [in, unique] pointer points to one value for the call.
-        Some(unsafe { *p })
     }
 }
 
@@ -391,8 +306,8 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         unsafe { ppname.write(PWSTR::null()) };
         let s = self
             .engine(|e, _, g| e.group_state(g))
-            .map_err(mem::to_com)?;
-        let name = mem::alloc_wstr(&s.name)?;
+            .map_err(error::to_com)?;
+        let name = abi::alloc_wstr(&s.name)?;
         // SAFETY: every pointer was checked non-null above; all allocation has succeeded.
         unsafe {
             pupdaterate.write(s.update_rate);
@@ -421,27 +336,27 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
             return E_INVALIDARG;
         }
         let state = SetGroupState {
-            update_rate: read_opt(prequestedupdaterate),
-            active: read_opt(pactive).map(|b| b.as_bool()),
-            time_bias: read_opt(ptimebias),
-            percent_deadband: read_opt(ppercentdeadband),
-            lcid: read_opt(plcid),
-            client_handle: read_opt(phclientgroup),
+            update_rate: abi::in_opt(prequestedupdaterate),
+            active: abi::in_opt(pactive).map(|b| b.as_bool()),
+            time_bias: abi::in_opt(ptimebias),
+            percent_deadband: abi::in_opt(ppercentdeadband),
+            lcid: abi::in_opt(plcid),
+            client_handle: abi::in_opt(phclientgroup),
         };
         match self.engine(|e, now, g| e.set_group_state(now, g, &state)) {
             Ok(rate) => {
                 // SAFETY: checked non-null above.
                 unsafe { previsedupdaterate.write(rate.value) };
-                rate.code().map_or(S_OK, mem::hresult)
+                rate.code().map_or(S_OK, error::hresult)
             }
-            Err(e) => mem::hresult(e),
+            Err(e) => error::hresult(e),
         }
     }
 
     unsafe fn SetName(&self, szname: PCWSTR) -> windows::core::Result<()> {
-        let name = read_name(szname)?;
+        let name = abi::in_string(szname, OpcError::InvalidArg)?;
         self.engine(|e, _, g| e.set_group_name(g, &name))
-            .map_err(mem::to_com)
+            .map_err(error::to_com)
     }
 
     unsafe fn CloneGroup(
@@ -455,12 +370,12 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         }
         // SAFETY: checked non-null; an [out] interface pointer.
         unsafe { ppunk.write(None) };
-        let name = read_name(szname)?;
+        let name = abi::in_string(szname, OpcError::InvalidArg)?;
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
         let new = self
             .engine(|e, now, g| e.clone_group(now, g, &name))
-            .map_err(mem::to_com)?;
+            .map_err(error::to_com)?;
         let session = self.session;
         let undo = || {
             let _ = self
@@ -505,9 +420,9 @@ impl IOPCGroupStateMgt2_Impl for Group_Impl {
             Ok(r) => {
                 // SAFETY: checked non-null above.
                 unsafe { pdwrevisedkeepalivetime.write(r.value) };
-                r.code().map_or(S_OK, mem::hresult)
+                r.code().map_or(S_OK, error::hresult)
             }
-            Err(e) => mem::hresult(e),
+            Err(e) => error::hresult(e),
         }
     }
 
@@ -517,8 +432,8 @@ impl IOPCGroupStateMgt2_Impl for Group_Impl {
         }
         let t = self
             .engine(|e, _, g| e.keep_alive(g))
-            .map_err(mem::to_com)?;
-        write_out(pdwkeepalivetime, t).map_err(Into::into)
+            .map_err(error::to_com)?;
+        abi::write_out(pdwkeepalivetime, t)
     }
 }
 
@@ -545,7 +460,7 @@ impl Slot for DataCallbackPoint {
         {
             // The group was removed: no connection (the sink is released, no lock held).
             let _ = Slot::unadvise(&*self.slot, cookie);
-            return Err(mem::to_com(e));
+            return Err(error::to_com(e));
         }
         Ok(cookie)
     }
@@ -579,11 +494,18 @@ impl IConnectionPointContainer_Impl for Group_Impl {
         ))
     }
 
+    // windows-rs declares IConnectionPointContainer's methods safe although they take raw
+    // pointers: the COM runtime passes them under the interface's contract; `find` checks
+    // and reads the REFIID.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn FindConnectionPoint(&self, riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
-        connpoint::find(
-            self.to_interface::<IConnectionPointContainer>(),
-            &self.points(),
-            riid,
-        )
+        // SAFETY: `riid` is this method's [in] REFIID.
+        unsafe {
+            connpoint::find(
+                self.to_interface::<IConnectionPointContainer>(),
+                &self.points(),
+                riid,
+            )
+        }
     }
 }

@@ -12,12 +12,11 @@
 //!   empty string (the sample does the same, and clients that `wcslen` it do not crash).
 //!   Browse returns S_FALSE when some element's properties failed (sample).
 
-use super::out::{self, clear, in_slice, in_string, nonnull, put, OwnedArray, OwnedWstr};
 use super::props::{self, Prop};
 use super::OpcServer_Impl;
+use crate::abi::{self, clear, in_slice, in_string, nonnull, put, OwnedArray, OwnedWstr};
 use crate::enums::StringEnum;
 use crate::interfaces::*;
-use crate::mem;
 use ctopc_core::browse::{
     BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
     PropertySelection,
@@ -30,8 +29,8 @@ use windows::Win32::System::Com::IEnumString;
 /// An enumeration argument: values outside the IDL's are E_INVALIDARG.
 fn enum_arg<T: TryFrom<u32, Error = OpcError>>(v: i32) -> windows::core::Result<T> {
     u32::try_from(v)
-        .map_err(|_| out::invalid_arg())
-        .and_then(|v| T::try_from(v).map_err(out::com_err))
+        .map_err(|_| abi::invalid_arg())
+        .and_then(|v| T::try_from(v).map_err(crate::error::to_com))
 }
 
 impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
@@ -52,7 +51,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         let name = in_string(pname, OpcError::InvalidArg)?;
         self.cursor()
             .change_browse_position(direction, &name)
-            .map_err(out::com_err)
+            .map_err(crate::error::to_com)
     }
 
     unsafe fn BrowseOPCItemIDs(
@@ -64,11 +63,11 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         ppenum: *mut Option<IEnumString>,
     ) -> HRESULT {
         clear(ppenum, None);
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppenum)?;
             let browse_type: BrowseType = enum_arg(browse_type.0)?;
             if access_rights_filter & !(OPC_READABLE | OPC_WRITEABLE) != 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let filter = in_string(pfilter, OpcError::InvalidFilter)?;
             let names = self
@@ -79,7 +78,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                     data_type_filter.0,
                     access_rights_filter,
                 )
-                .map_err(out::com_err)?;
+                .map_err(crate::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
             // SAFETY: checked non-null.
             unsafe { put(ppenum, Some(StringEnum::create(names))) };
@@ -95,7 +94,10 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         clear(pitem_id, PWSTR::null());
         nonnull(pitem_id)?;
         let data_id = in_string(pdata_id, OpcError::InvalidArg)?;
-        let id = self.cursor().get_item_id(&data_id).map_err(out::com_err)?;
+        let id = self
+            .cursor()
+            .get_item_id(&data_id)
+            .map_err(crate::error::to_com)?;
         let id = OwnedWstr::new(&id)?;
         // SAFETY: checked non-null; the only allocation has succeeded.
         unsafe { put(pitem_id, id.into_raw()) };
@@ -108,12 +110,12 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         ppenum: *mut Option<IEnumString>,
     ) -> HRESULT {
         clear(ppenum, None);
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppenum)?;
             let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
             self.cursor()
                 .browse_access_paths(&item_id)
-                .map_err(out::com_err)?;
+                .map_err(crate::error::to_com)?;
             Err(E_NOTIMPL.into())
         })())
     }
@@ -133,14 +135,14 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         ppitem_properties: *mut *mut OPCITEMPROPERTIES,
     ) -> HRESULT {
         clear(ppitem_properties, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppitem_properties)?;
             if count == 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let item_ids: Vec<OpcResult<String>> = in_slice(pitem_ids, count)?
                 .iter()
-                .map(|p| out::item_id_at(*p))
+                .map(|p| abi::item_id_at(*p))
                 .collect();
             let ids = in_slice(pproperty_ids, property_count)?;
             let ids = (!ids.is_empty()).then_some(ids);
@@ -192,7 +194,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         clear(pmore, BOOL(0));
         clear(pcount, 0);
         clear(ppelements, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(pcontinuation_point)?;
             nonnull(pmore)?;
             nonnull(pcount)?;
@@ -209,7 +211,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
             } else {
                 // SAFETY: a non-null [in, out, string] is a NUL-terminated UTF-16 string.
                 unsafe { incoming.to_string() }
-                    .map_err(|_| out::com_err(OpcError::InvalidContinuationPoint))?
+                    .map_err(|_| crate::error::to_com(OpcError::InvalidContinuationPoint))?
             };
             let ids = in_slice(pproperty_ids, property_count)?;
             let selection = PropertySelection::from_args(return_all_properties.as_bool(), ids);
@@ -250,7 +252,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                     })
                 }
             }
-            .map_err(out::com_err)?;
+            .map_err(crate::error::to_com)?;
             if with_values {
                 let mut wanted: Vec<(&str, &mut Vec<Prop>)> = result
                     .elements
@@ -278,7 +280,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
             // SAFETY: all checked non-null; every allocation has succeeded. The incoming
             // continuation point is freed exactly once and replaced.
             unsafe {
-                mem::free_wstr(incoming);
+                abi::free_wstr(incoming);
                 put(pcontinuation_point, next.into_raw());
                 put(pmore, BOOL::from(result.more_elements));
                 put(pcount, n as u32);

@@ -27,12 +27,11 @@
 //!   group objects; any other riid is E_NOINTERFACE (sample); a scope outside the IDL's is
 //!   E_INVALIDARG.
 
-use super::out::{self, clear, in_string, nonnull, put, query_out};
 use super::OpcServer;
+use crate::abi::{self, clear, in_string, nonnull, put, query_out};
 use crate::context::Context;
 use crate::enums::{StringEnum, UnknownEnum};
 use crate::interfaces::*;
-use crate::mem;
 use ctopc_core::model::{GroupHandle, GroupParams, RemoveGroupOutcome, SessionHandle};
 use ctopc_core::OpcError;
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR};
@@ -89,16 +88,6 @@ fn lcid_accepted(lcid: u32) -> bool {
     super::lang_for(lcid).is_some() || unsafe { IsValidLocale(lcid, LCID_SUPPORTED) }.as_bool()
 }
 
-/// Reads an optional `[in, unique]` value.
-fn opt_in<T: Copy>(p: *const T) -> Option<T> {
-    if p.is_null() {
-        None
-    } else {
-        // SAFETY: a non-null `[in, unique]` pointer points to one readable value.
-        Some(unsafe { *p })
-    }
-}
-
 impl OpcServer {
     fn remove_forced(&self, group: GroupHandle) {
         let _ = self
@@ -107,7 +96,10 @@ impl OpcServer {
             .with_engine(|e, now| e.remove_group(now, self.handle, group, true));
     }
 
-    pub(super) fn add_group(
+    /// # Safety
+    /// The pointers are the parameters of the COM method (IOPCServer::AddGroup), valid as its IDL
+    /// says (each may be NULL: checked here).
+    pub(super) unsafe fn add_group(
         &self,
         a: &AddGroupArgs,
         pserver: *mut u32,
@@ -124,22 +116,22 @@ impl OpcServer {
         nonnull(ppunk)?;
         let name = in_string(a.name, OpcError::InvalidArg)?;
         if !lcid_accepted(a.lcid) {
-            return Err(out::invalid_arg());
+            return Err(abi::invalid_arg());
         }
         let params = GroupParams {
             name: &name,
             active: a.active.as_bool(),
             update_rate: a.rate,
             client_handle: a.client,
-            time_bias: opt_in(a.bias).unwrap_or_else(local_time_bias),
-            percent_deadband: opt_in(a.deadband).unwrap_or(0.0),
+            time_bias: abi::in_opt(a.bias).unwrap_or_else(local_time_bias),
+            percent_deadband: abi::in_opt(a.deadband).unwrap_or(0.0),
             lcid: a.lcid,
         };
         let added = self
             .ctx
             .runtime
             .with_engine(|e, now| e.add_group(now, self.handle, &params))
-            .map_err(out::com_err)?;
+            .map_err(crate::error::to_com)?;
         let object = match new_group_object(self.ctx, self.handle, added.group) {
             Ok(o) => o,
             Err(e) => {
@@ -157,10 +149,13 @@ impl OpcServer {
             put(pserver, added.group.0);
             put(prevised, added.update_rate.value);
         }
-        Ok(added.update_rate.code().map_or(S_OK, mem::hresult))
+        Ok(added.update_rate.code().map_or(S_OK, crate::error::hresult))
     }
 
-    pub(super) fn group_by_name(
+    /// # Safety
+    /// The pointers are the parameters of the COM method (IOPCServer::GetGroupByName), valid as its IDL
+    /// says (each may be NULL: checked here).
+    pub(super) unsafe fn group_by_name(
         &self,
         pname: PCWSTR,
         riid: *const GUID,
@@ -176,7 +171,7 @@ impl OpcServer {
             .lock()
             .engine
             .group_by_name(self.handle, &name)
-            .map_err(out::com_err)?;
+            .map_err(crate::error::to_com)?;
         let object = group_object(self.ctx, self.handle, group)?;
         query_out(&object, riid, ppunk)
     }
@@ -192,14 +187,17 @@ impl OpcServer {
             .with_engine(|e, now| {
                 e.remove_group(now, self.handle, GroupHandle(server_group), force.as_bool())
             })
-            .map_err(out::com_err)?;
+            .map_err(crate::error::to_com)?;
         Ok(match outcome {
             RemoveGroupOutcome::Removed => S_OK,
-            RemoveGroupOutcome::InUse => mem::hresult(OpcError::InUse),
+            RemoveGroupOutcome::InUse => crate::error::hresult(OpcError::InUse),
         })
     }
 
-    pub(super) fn group_enumerator(
+    /// # Safety
+    /// The pointers are the parameters of the COM method (IOPCServer::CreateGroupEnumerator), valid as its IDL
+    /// says (each may be NULL: checked here).
+    pub(super) unsafe fn group_enumerator(
         &self,
         scope: OPCENUMSCOPE,
         riid: *const GUID,
@@ -214,7 +212,7 @@ impl OpcServer {
             | OPC_ENUM_PRIVATE
             | OPC_ENUM_ALL => true,
             OPC_ENUM_PUBLIC_CONNECTIONS | OPC_ENUM_PUBLIC => false,
-            _ => return Err(out::invalid_arg()),
+            _ => return Err(abi::invalid_arg()),
         };
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
@@ -224,7 +222,7 @@ impl OpcServer {
                 .lock()
                 .engine
                 .groups(self.handle)
-                .map_err(out::com_err)?
+                .map_err(crate::error::to_com)?
         } else {
             Vec::new()
         };

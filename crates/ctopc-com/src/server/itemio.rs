@@ -9,12 +9,12 @@
 //! is stuck), the call abandons the request and answers ASKOM_E_NetAnswerTimeout for the
 //! items itself.
 
-use super::out::{
+use super::{OpcServer, OpcServer_Impl};
+use crate::abi::TaskMem;
+use crate::abi::{
     self, clear, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any, OwnedArray,
 };
-use super::{OpcServer, OpcServer_Impl};
 use crate::interfaces::*;
-use crate::mem::{self, TaskMem};
 use crate::runtime;
 use crate::variant;
 use ctopc_core::model::{
@@ -114,7 +114,13 @@ fn merge<I, T>(
 }
 
 /// The item IDs of an `[in, size_is(count)] LPWSTR*` array, each checked.
-fn item_ids(p: *const PCWSTR, count: u32) -> windows::core::Result<Vec<Result<String, OpcError>>> {
+///
+/// # Safety
+/// As [`crate::abi::in_slice`], each non-null element as [`crate::abi::item_id_at`].
+unsafe fn item_ids(
+    p: *const PCWSTR,
+    count: u32,
+) -> windows::core::Result<Vec<Result<String, OpcError>>> {
     Ok(in_slice(p, count)?.iter().map(|s| item_id_at(*s)).collect())
 }
 
@@ -133,13 +139,13 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         clear(ppqualities, std::ptr::null_mut());
         clear(pptimes, std::ptr::null_mut());
         clear(pperrors, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppvalues)?;
             nonnull(ppqualities)?;
             nonnull(pptimes)?;
             nonnull(pperrors)?;
             if count == 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let ids = item_ids(pitem_ids, count)?;
             let ages = in_slice(pmax_age, count)?;
@@ -165,7 +171,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
                         Ok(v) => {
                             values.as_mut_slice()[i] = v;
                             qualities.as_mut_slice()[i] = s.quality.0;
-                            times.as_mut_slice()[i] = mem::filetime(s.timestamp);
+                            times.as_mut_slice()[i] = crate::clock::filetime(s.timestamp);
                         }
                         Err(e) => errors.as_mut_slice()[i] = e.code(),
                     }
@@ -191,10 +197,10 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
         clear(pperrors, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(pperrors)?;
             if count == 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let ids = item_ids(pitem_ids, count)?;
             let vqts = in_slice(pvqt, count)?;

@@ -25,12 +25,12 @@
 //! 2 function requires an error code in this case"): a property "is defined for the item"
 //! in LookupItemIDs' sense only when it has an item ID.
 
-use super::out::{
+use super::{OpcServer, OpcServer_Impl};
+use crate::abi::TaskMem;
+use crate::abi::{
     self, clear, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray, OwnedWstr,
 };
-use super::{OpcServer, OpcServer_Impl};
 use crate::interfaces::*;
-use crate::mem::{self, TaskMem};
 use crate::variant;
 use ctopc_core::asix::namespace::ItemAttributes;
 use ctopc_core::lang::Lang;
@@ -342,7 +342,7 @@ pub fn static_properties(
 /// property failed, else S_OK.
 pub fn item_code(r: &OpcResult<Vec<Prop>>) -> HRESULT {
     match r {
-        Err(e) => mem::hresult(*e),
+        Err(e) => crate::error::hresult(*e),
         Ok(props) if props.iter().any(|p| p.error.is_some()) => S_FALSE,
         Ok(_) => S_OK,
     }
@@ -359,7 +359,7 @@ pub fn item_properties(r: &OpcResult<Vec<Prop>>) -> windows::core::Result<OPCITE
     let mut arr = OwnedArray::<OPCITEMPROPERTY>::zeroed(props.len())?;
     for (slot, prop) in arr.as_mut_slice().iter_mut().zip(props) {
         slot.dwPropertyID = prop.id;
-        slot.hrErrorID = prop.error.map_or(S_OK, mem::hresult);
+        slot.hrErrorID = prop.error.map_or(S_OK, crate::error::hresult);
         if prop.error.is_none() {
             slot.vtDataType = VARENUM(prop.var_type.0);
             slot.szDescription = opt_wstr(Some(prop.description))?;
@@ -417,7 +417,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         nonnull(pptypes)?;
         let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
         let cx = self.props_ctx();
-        let props = static_properties(&cx, &item_id, None, false).map_err(out::com_err)?;
+        let props = static_properties(&cx, &item_id, None, false).map_err(crate::error::to_com)?;
         let n = props.len();
         let mut ids = TaskMem::<u32>::zeroed(n)?;
         let mut types = TaskMem::<VARTYPE>::zeroed(n)?;
@@ -447,22 +447,22 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
     ) -> HRESULT {
         clear(ppdata, std::ptr::null_mut());
         clear(pperrors, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppdata)?;
             nonnull(pperrors)?;
             if count == 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let ids = in_slice(pids, count)?;
             let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
             let cx = self.props_ctx();
             let mut props =
-                static_properties(&cx, &item_id, Some(ids), true).map_err(out::com_err)?;
+                static_properties(&cx, &item_id, Some(ids), true).map_err(crate::error::to_com)?;
             self.fill_live_values(&mut [(item_id.as_str(), &mut props)]);
             let mut data = OwnedArray::<VARIANT>::zeroed(props.len())?;
             let mut errors = TaskMem::<HRESULT>::zeroed(props.len())?;
             for (i, prop) in props.iter().enumerate() {
-                errors.as_mut_slice()[i] = prop.error.map_or(S_OK, mem::hresult);
+                errors.as_mut_slice()[i] = prop.error.map_or(S_OK, crate::error::hresult);
                 if prop.error.is_none() {
                     data.as_mut_slice()[i] = variant::to_variant(&prop.value)?;
                 }
@@ -487,16 +487,16 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
     ) -> HRESULT {
         clear(ppnew_ids, std::ptr::null_mut());
         clear(pperrors, std::ptr::null_mut());
-        out::hresult((|| {
+        abi::hresult((|| {
             nonnull(ppnew_ids)?;
             nonnull(pperrors)?;
             if count == 0 {
-                return Err(out::invalid_arg());
+                return Err(abi::invalid_arg());
             }
             let ids = in_slice(pids, count)?;
             let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
             let cx = self.props_ctx();
-            let info = resolve(&cx, &item_id).map_err(out::com_err)?;
+            let info = resolve(&cx, &item_id).map_err(crate::error::to_com)?;
             let mut new_ids = OwnedArray::<PWSTR>::zeroed(ids.len())?;
             let mut errors = TaskMem::<HRESULT>::zeroed(ids.len())?;
             for (i, &id) in ids.iter().enumerate() {
@@ -506,8 +506,10 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
                         new_ids.as_mut_slice()[i] = OwnedWstr::new(&new_id)?.into_raw();
                         errors.as_mut_slice()[i] = S_OK;
                     }
-                    (Some(e), _) => errors.as_mut_slice()[i] = mem::hresult(e),
-                    (None, None) => errors.as_mut_slice()[i] = mem::hresult(OpcError::InvalidPid),
+                    (Some(e), _) => errors.as_mut_slice()[i] = crate::error::hresult(e),
+                    (None, None) => {
+                        errors.as_mut_slice()[i] = crate::error::hresult(OpcError::InvalidPid)
+                    }
                 }
             }
             let hr = s_false_if_any(errors.as_mut_slice());

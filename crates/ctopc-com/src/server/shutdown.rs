@@ -28,8 +28,13 @@ impl IConnectionPointContainer_Impl for OpcServer_Impl {
         Ok(connpoint::enumerate(container, &self.points()))
     }
 
+    // windows-rs declares IConnectionPointContainer's methods safe although they take raw
+    // pointers: the COM runtime passes them under the interface's contract; `find` checks
+    // and reads the REFIID.
+    #[allow(clippy::not_unsafe_ptr_arg_deref)]
     fn FindConnectionPoint(&self, riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
         let container: IConnectionPointContainer = self.to_interface();
-        connpoint::find(container, &self.points(), riid)
+        // SAFETY: `riid` is this method's [in] REFIID.
+        unsafe { connpoint::find(container, &self.points(), riid) }
     }
 }

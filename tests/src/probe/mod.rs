@@ -1,4 +1,4 @@
-//! The marshal probe (cargo feature `marshal-probe`): a COM server whose objects return a
+//! The marshal probe: a test COM server whose objects return a
 //! distinct, non-ASCII text in every string out-parameter of every OPC interface, so that
 //! an out-of-process client can check that each one crosses the project's proxy/stub DLL
 //! (`opc_ps.dll`, built from `idl/` by `cargo xtask proxy`) non-NULL and intact.
@@ -19,23 +19,23 @@
 //! [`client`] holds safe readers of the same outputs for the test (every raw call and
 //! every CoTaskMem free of the test is here, so that the test itself has no `unsafe`).
 
-use crate::factory::ClassFactory;
-use crate::interfaces::*;
-use crate::lifetime::{self, ObjectGuard};
-use crate::mem::{self, TaskMem};
-use crate::registry::{self, ServerRegistration};
-use std::ffi::c_void;
+use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
+use ctopc_com::client::ComThread;
+use ctopc_com::factory::ClassFactory;
+use ctopc_com::interfaces::*;
+use ctopc_com::lifetime::{self, ObjectGuard};
+use ctopc_com::registry::{self, ServerRegistration};
+use ctopc_com::{clock, error};
 use std::sync::Mutex;
 use std::time::Duration;
 use windows::core::{implement, IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
-    CoTaskMemFree, CoUninitialize, IEnumString, IEnumString_Impl, CLSCTX_LOCAL_SERVER,
-    COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
+    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, IEnumString,
+    IEnumString_Impl, CLSCTX_LOCAL_SERVER, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
     RPC_C_IMP_LEVEL_IDENTIFY,
 };
-use windows::Win32::System::Variant::{VariantClear, VARIANT, VT_BSTR, VT_I4, VT_R8};
+use windows::Win32::System::Variant::{VARIANT, VT_BSTR, VT_I4, VT_R8};
 
 /// CLSID of `ServerCTOPC.MarshalProbe` (also its AppID).
 pub const CLSID_MARSHAL_PROBE: GUID = GUID::from_u128(0x4a55eb1b_c24e_4023_85fe_9c8ff38a0a3c);
@@ -149,185 +149,13 @@ fn page_start(cp: Option<&str>) -> Option<usize> {
     }
 }
 
-// ---------------------------------------------------------------------------------------
-// CoTaskMem ownership of nested out-structures
-// ---------------------------------------------------------------------------------------
-
-/// An element of a CoTaskMem array whose members may own further CoTaskMem blocks.
-trait OwnsTaskMem {
-    /// Frees every block the element's members own (not the element itself) and nulls them.
-    ///
-    /// # Safety
-    /// Every non-null pointer member was allocated with CoTaskMemAlloc (arrays with the
-    /// element count stored next to them) and is owned by this element alone.
-    unsafe fn free_owned(&mut self);
-}
-
-impl OwnsTaskMem for PWSTR {
-    unsafe fn free_owned(&mut self) {
-        mem::free_wstr(*self);
-        *self = PWSTR::null();
-    }
-}
-
-fn clear_variant(v: &mut VARIANT) {
-    // SAFETY: `v` is an initialised VARIANT (all-zero is VT_EMPTY); VariantClear frees what
-    // it owns and leaves VT_EMPTY. A failure (unknown type) leaves nothing to free here.
-    let _ = unsafe { VariantClear(v) };
-}
-
-impl OwnsTaskMem for OPCITEMPROPERTY {
-    unsafe fn free_owned(&mut self) {
-        // SAFETY: forwarded contract of this function.
-        unsafe {
-            self.szItemID.free_owned();
-            self.szDescription.free_owned();
-        }
-        clear_variant(&mut self.vValue);
-    }
-}
-
-impl OwnsTaskMem for OPCITEMPROPERTIES {
-    unsafe fn free_owned(&mut self) {
-        // SAFETY: forwarded contract: `pItemProperties` holds `dwNumProperties` elements.
-        unsafe { free_array(self.pItemProperties, self.dwNumProperties as usize) };
-        self.pItemProperties = std::ptr::null_mut();
-        self.dwNumProperties = 0;
-    }
-}
-
-impl OwnsTaskMem for OPCBROWSEELEMENT {
-    unsafe fn free_owned(&mut self) {
-        // SAFETY: forwarded contract of this function.
-        unsafe {
-            self.szName.free_owned();
-            self.szItemID.free_owned();
-            self.ItemProperties.free_owned();
-        }
-    }
-}
-
-impl OwnsTaskMem for OPCITEMATTRIBUTES {
-    unsafe fn free_owned(&mut self) {
-        // SAFETY: forwarded contract of this function.
-        unsafe {
-            self.szAccessPath.free_owned();
-            self.szItemID.free_owned();
-        }
-        if !self.pBlob.is_null() {
-            // SAFETY: forwarded contract: a CoTaskMem block owned by this element.
-            unsafe { CoTaskMemFree(Some(self.pBlob.cast::<c_void>())) };
-            self.pBlob = std::ptr::null_mut();
-        }
-        clear_variant(&mut self.vEUInfo);
-    }
-}
-
-/// Frees a CoTaskMem array of `n` elements and everything they own.
+/// Hands `object` out through an `[out, iid_is(riid)] IUnknown**` as a raw HRESULT.
 ///
 /// # Safety
-/// `p` is null or a CoTaskMem array of at least `n` initialised elements satisfying the
-/// contract of [`OwnsTaskMem::free_owned`], owned by the caller and not used afterwards.
-unsafe fn free_array<T: OwnsTaskMem>(p: *mut T, n: usize) {
-    if p.is_null() {
-        return;
-    }
-    for i in 0..n {
-        // SAFETY: `i < n` elements of the array (contract of this function).
-        unsafe { (*p.add(i)).free_owned() };
-    }
-    // SAFETY: the block came from CoTaskMemAlloc and is owned by the caller.
-    unsafe { CoTaskMemFree(Some(p.cast::<c_void>())) };
-}
-
-/// A zeroed CoTaskMem array that frees its elements' blocks and itself on drop unless it
-/// is handed out with `into_raw`.
-struct OwnedArray<T: OwnsTaskMem> {
-    mem: Option<TaskMem<T>>,
-}
-
-impl<T: OwnsTaskMem> OwnedArray<T> {
-    fn zeroed(n: usize) -> windows::core::Result<Self> {
-        Ok(OwnedArray {
-            mem: Some(TaskMem::zeroed(n)?),
-        })
-    }
-
-    fn as_mut_slice(&mut self) -> &mut [T] {
-        match self.mem.as_mut() {
-            Some(m) => m.as_mut_slice(),
-            None => &mut [],
-        }
-    }
-
-    fn into_raw(mut self) -> *mut T {
-        self.mem
-            .take()
-            .map_or(std::ptr::null_mut(), TaskMem::into_raw)
-    }
-}
-
-impl<T: OwnsTaskMem> Drop for OwnedArray<T> {
-    fn drop(&mut self) {
-        for e in self.as_mut_slice() {
-            // SAFETY: every pointer member was set by this module from CoTaskMem allocations
-            // (or is still null) and has not been handed out.
-            unsafe { e.free_owned() };
-        }
-    }
-}
-
-/// One CoTaskMem string, freed on drop unless handed out.
-struct OwnedWstr(PWSTR);
-
-impl OwnedWstr {
-    fn new(s: &str) -> windows::core::Result<Self> {
-        Ok(OwnedWstr(mem::alloc_wstr(s)?))
-    }
-
-    fn into_raw(self) -> PWSTR {
-        let p = self.0;
-        std::mem::forget(self);
-        p
-    }
-}
-
-impl Drop for OwnedWstr {
-    fn drop(&mut self) {
-        mem::free_wstr(self.0);
-    }
-}
-
-/// Writes `value` to an out-parameter checked non-null by the caller.
-///
-/// # Safety
-/// `p` is non-null and points to writable caller-owned storage for a `T` whose old value
-/// needs no drop.
-unsafe fn put<T>(p: *mut T, value: T) {
+/// As [`abi::query_out`].
+unsafe fn query_out(object: &IUnknown, riid: *const GUID, out: *mut Option<IUnknown>) -> HRESULT {
     // SAFETY: contract of this function.
-    unsafe { p.write(value) };
-}
-
-fn nonnull<T>(p: *mut T) -> windows::core::Result<()> {
-    if p.is_null() {
-        Err(E_INVALIDARG.into())
-    } else {
-        Ok(())
-    }
-}
-
-/// Hands `object` out as interface `riid` through an `[out, iid_is(riid)] IUnknown**`.
-fn query_out(object: &IUnknown, riid: *const GUID, out: *mut Option<IUnknown>) -> HRESULT {
-    if riid.is_null() || out.is_null() {
-        return E_INVALIDARG;
-    }
-    // SAFETY: both pointers checked non-null; QueryInterface writes a pointer of interface
-    // `riid` (or null on failure) to `out`, which has the layout of a `*mut c_void`.
-    unsafe { object.query(riid, out.cast::<*mut c_void>()) }
-}
-
-fn hresult(r: windows::core::Result<HRESULT>) -> HRESULT {
-    r.unwrap_or_else(|e| e.code())
+    abi::hresult(unsafe { abi::query_out(object, riid, out) }.map(|()| S_OK))
 }
 
 fn properties(
@@ -353,15 +181,12 @@ fn properties(
 }
 
 /// The property IDs a client asked for (`dwPropertyCount` of `pdwPropertyIDs`).
-fn requested_ids(count: u32, ids: *const u32) -> windows::core::Result<Vec<u32>> {
-    if count == 0 {
-        return Ok(Vec::new());
-    }
-    if ids.is_null() {
-        return Err(E_INVALIDARG.into());
-    }
-    // SAFETY: `[in, size_is(dwPropertyCount)]`: `count` readable elements.
-    Ok(unsafe { std::slice::from_raw_parts(ids, count as usize) }.to_vec())
+///
+/// # Safety
+/// As [`abi::in_slice`].
+unsafe fn requested_ids(count: u32, ids: *const u32) -> windows::core::Result<Vec<u32>> {
+    // SAFETY: contract of this function.
+    Ok(unsafe { abi::in_slice(ids, count) }?.to_vec())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -389,7 +214,9 @@ pub fn create_instance() -> windows::core::Result<IUnknown> {
     .into())
 }
 
-fn error_string(name: &str, out: *mut PWSTR) -> windows::core::Result<()> {
+/// # Safety
+/// `out` is NULL or the method's `[out] LPWSTR*`.
+unsafe fn error_string(name: &str, out: *mut PWSTR) -> windows::core::Result<()> {
     nonnull(out)?;
     let s = OwnedWstr::new(&text(name))?;
     // SAFETY: checked non-null; the only allocation has succeeded.
@@ -398,7 +225,10 @@ fn error_string(name: &str, out: *mut PWSTR) -> windows::core::Result<()> {
 }
 
 /// `GetClassDetails` of both server-list interfaces: every requested output or none.
-fn class_details(outs: &[(*mut PWSTR, &str)]) -> windows::core::Result<()> {
+///
+/// # Safety
+/// Each pointer is NULL or the method's `[out] LPWSTR*`.
+unsafe fn class_details(outs: &[(*mut PWSTR, &str)]) -> windows::core::Result<()> {
     for (p, _) in outs {
         nonnull(*p)?;
     }
@@ -413,7 +243,9 @@ fn class_details(outs: &[(*mut PWSTR, &str)]) -> windows::core::Result<()> {
     Ok(())
 }
 
-fn string_enum(name: &str, riid: *const GUID, out: *mut Option<IUnknown>) -> HRESULT {
+/// # Safety
+/// As [`abi::query_out`].
+unsafe fn string_enum(name: &str, riid: *const GUID, out: *mut Option<IUnknown>) -> HRESULT {
     let items = (0..ENUM_STRING_LEN).map(|i| text_at(name, i)).collect();
     let e: IUnknown = StringEnum {
         items,
@@ -421,7 +253,8 @@ fn string_enum(name: &str, riid: *const GUID, out: *mut Option<IUnknown>) -> HRE
         _guard: ObjectGuard::new(),
     }
     .into();
-    query_out(&e, riid, out)
+    // SAFETY: contract of this function.
+    unsafe { query_out(&e, riid, out) }
 }
 
 impl IOPCCommon_Impl for ProbeServer_Impl {
@@ -509,7 +342,7 @@ impl IOPCServer_Impl for ProbeServer_Impl {
         nonnull(pstatus)?;
         let mut block = TaskMem::<OPCSERVERSTATUS>::zeroed(1)?;
         let vendor = OwnedWstr::new(&text(param::SERVER_STATUS_VENDOR_INFO))?;
-        let now = mem::filetime(mem::now());
+        let now = clock::filetime(clock::now());
         block.as_mut_slice()[0] = OPCSERVERSTATUS {
             ftStartTime: now,
             ftCurrentTime: now,
@@ -698,7 +531,7 @@ impl IOPCItemProperties_Impl for ProbeServer_Impl {
         pnew_ids: *mut *mut PWSTR,
         perrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        hresult((|| {
+        abi::hresult((|| {
             nonnull(pnew_ids)?;
             nonnull(perrors)?;
             if count == 0 {
@@ -743,7 +576,7 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
         property_ids: *const u32,
         pitem_properties: *mut *mut OPCITEMPROPERTIES,
     ) -> HRESULT {
-        hresult((|| {
+        abi::hresult((|| {
             nonnull(pitem_properties)?;
             if count == 0 || item_ids.is_null() {
                 return Err(E_INVALIDARG.into());
@@ -783,7 +616,7 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
         pcount: *mut u32,
         pelements: *mut *mut OPCBROWSEELEMENT,
     ) -> HRESULT {
-        hresult((|| {
+        abi::hresult((|| {
             nonnull(pcontinuation_point)?;
             nonnull(pmore)?;
             nonnull(pcount)?;
@@ -833,7 +666,7 @@ impl IOPCBrowse_Impl for ProbeServer_Impl {
             // SAFETY: all checked non-null; every allocation has succeeded. The incoming
             // continuation point is freed exactly once and replaced.
             unsafe {
-                mem::free_wstr(incoming);
+                abi::free_wstr(incoming);
                 put(
                     pcontinuation_point,
                     next.map_or(PWSTR::null(), OwnedWstr::into_raw),
@@ -1036,7 +869,7 @@ impl IEnumOPCItemAttributes_Impl for ItemEnum_Impl {
         pitems: *mut *mut OPCITEMATTRIBUTES,
         pfetched: *mut u32,
     ) -> HRESULT {
-        hresult((|| {
+        abi::hresult((|| {
             nonnull(pitems)?;
             nonnull(pfetched)?;
             let mut pos = self.pos();
@@ -1162,27 +995,9 @@ impl IEnumString_Impl for StringEnum_Impl {
 // marshal-probe.exe: /RegServer, /UnregServer, -Embedding
 // ---------------------------------------------------------------------------------------
 
-/// COM initialised for the lifetime of the value (multithreaded apartment).
-struct ComInit;
-
-impl ComInit {
-    fn mta() -> windows::core::Result<ComInit> {
-        // SAFETY: paired with CoUninitialize in Drop on this thread.
-        unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
-        Ok(ComInit)
-    }
-}
-
-impl Drop for ComInit {
-    fn drop(&mut self) {
-        // SAFETY: this thread initialised COM in `mta`.
-        unsafe { CoUninitialize() };
-    }
-}
-
 fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::core::Result<R> {
     let exe = std::env::current_exe()
-        .map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
+        .map_err(|e| error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     let exe = exe.to_string_lossy();
     let reg = ServerRegistration {
         clsid: CLSID_MARSHAL_PROBE,
@@ -1201,7 +1016,7 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
 
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = ComThread::mta()?;
     with_registration(registry::register)??;
     println!(
         "marshal-probe: registered {PROGID} ({})",
@@ -1212,7 +1027,7 @@ pub fn register() -> windows::core::Result<()> {
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = ComThread::mta()?;
     with_registration(registry::unregister)??;
     println!("marshal-probe: unregistered {PROGID}");
     Ok(())
@@ -1220,7 +1035,7 @@ pub fn unregister() -> windows::core::Result<()> {
 
 /// `-Embedding`: serve until the last client has gone (as ServerCTOPC.exe does).
 pub fn serve() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = ComThread::mta()?;
     // SAFETY: called once, before any marshalling in this process (as in host::serve).
     let _ = unsafe {
         CoInitializeSecurity(
@@ -1261,9 +1076,9 @@ pub fn serve() -> windows::core::Result<()> {
 /// lives in another process), copies what arrived and frees it. A string that arrived
 /// NULL is `None`; one that is not valid UTF-16 is reported as `<invalid UTF-16 ...>`.
 pub mod client {
-    use super::{free_array, OwnsTaskMem};
-    use crate::client::take_array;
-    use crate::interfaces::*;
+    use ctopc_com::abi::{free_array, OwnsTaskMem};
+    use ctopc_com::client::take_array;
+    use ctopc_com::interfaces::*;
     use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
     use windows::Win32::Foundation::{E_POINTER, S_FALSE};
     use windows::Win32::System::Com::{CoTaskMemAlloc, IEnumString};
@@ -1422,8 +1237,10 @@ pub mod client {
             .collect();
         // SAFETY: a CoTaskMem array of `n` CoTaskMem strings, ours.
         unsafe { free_array(descriptions, n) };
-        let ids = take_array(ids, n);
-        let types = take_array(types, n);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let ids = unsafe { take_array(ids, n) };
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let types = unsafe { take_array(types, n) };
         Ok(ids
             .into_iter()
             .zip(texts)
@@ -1469,7 +1286,8 @@ pub mod client {
             .collect();
         // SAFETY: a CoTaskMem array of `n` CoTaskMem strings (or nulls), ours.
         unsafe { free_array(new_ids, n) };
-        let errors = take_array(errors, n);
+        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
+        let errors = unsafe { take_array(errors, n) };
         Ok((hr, texts.into_iter().zip(errors).collect()))
     }
 
