@@ -528,7 +528,7 @@ fn table_lists_every_string_output_declared_in_idl() {
 #[cfg(windows)]
 mod through_the_proxy {
     use super::*;
-    use ctopc_com::client::{ComThread, Server};
+    use ctopc_com::client::{BrowseArgs, BrowseElement, BrowsePage, ComThread, Server};
     use e2e_tests::probe::{self, client as read};
     use e2e_tests::{artifact, code, interfaces::*};
     use std::process::Command;
@@ -594,13 +594,27 @@ mod through_the_proxy {
         read::add_group(&server.server, "grupa", riid).expect("AddGroup")
     }
 
+    /// `IOPCBrowse::Browse` of the root with `continuation_point` as the [in, out]
+    /// parameter's input (a CoTaskMem copy the server frees), all properties when
+    /// `all_properties`. A failed call is `Err`.
+    fn browse_root(
+        server: &Server,
+        continuation_point: Option<&str>,
+        all_properties: bool,
+    ) -> windows::core::Result<BrowsePage> {
+        server.browse(&BrowseArgs {
+            continuation_point: continuation_point.map(String::from),
+            all_properties,
+            ..BrowseArgs::all("")
+        })
+    }
+
     /// Every element of the root, page by page, following the continuation points.
-    fn browse_all(server: &Server, all_properties: bool) -> Vec<read::BrowseElement> {
-        let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
+    fn browse_all(server: &Server, all_properties: bool) -> Vec<BrowseElement> {
         let mut elements = Vec::new();
         let mut cp: Option<String> = None;
         for _ in 0..10 {
-            let page = read::browse(&browse, cp.as_deref(), all_properties).expect("Browse");
+            let page = browse_root(server, cp.as_deref(), all_properties).expect("Browse");
             elements.extend(page.elements);
             if !page.more_elements {
                 return elements;
@@ -757,22 +771,15 @@ mod through_the_proxy {
     #[test]
     fn iopcbrowseserveraddressspace_getitemid_item_id_arrives_intact() {
         let (_com, server) = connect();
-        let bsas = server
-            .unknown
-            .cast::<IOPCBrowseServerAddressSpace>()
-            .expect("IOPCBrowseServerAddressSpace");
-        let id = read::item_id(&bsas, "Wydział/Pompa").expect("GetItemID");
+        let id = server.get_item_id("Wydział/Pompa").expect("GetItemID");
         assert_intact(BSAS_ITEM_ID, id.as_deref(), &expected(BSAS_ITEM_ID));
     }
 
     #[test]
     fn iopcitemproperties_queryavailableproperties_descriptions_arrive_intact() {
         let (_com, server) = connect();
-        let props = server
-            .unknown
-            .cast::<IOPCItemProperties>()
-            .expect("IOPCItemProperties");
-        let got = read::available_properties(&props, "Pompa.Ciśnienie")
+        let got = server
+            .query_available_properties("Pompa.Ciśnienie")
             .expect("QueryAvailableProperties");
         assert_eq!(got.len(), probe::AVAILABLE_PROPERTIES.len());
         for (i, (id, description, _vt)) in got.iter().enumerate() {
@@ -788,13 +795,10 @@ mod through_the_proxy {
     #[test]
     fn iopcitemproperties_lookupitemids_new_item_ids_arrive_intact() {
         let (_com, server) = connect();
-        let props = server
-            .unknown
-            .cast::<IOPCItemProperties>()
-            .expect("IOPCItemProperties");
         let ids = [OPC_PROPERTY_EU_UNITS, OPC_PROPERTY_DESCRIPTION];
-        let (hr, got) =
-            read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
+        let (hr, got) = server
+            .lookup_item_ids("Pompa.Ciśnienie", &ids)
+            .expect("LookupItemIDs");
         assert_eq!(hr, S_OK);
         for (i, (id, err)) in got.iter().enumerate() {
             assert_eq!(*err, S_OK);
@@ -811,8 +815,9 @@ mod through_the_proxy {
             OPC_PROPERTY_VALUE,
             OPC_PROPERTY_DESCRIPTION,
         ];
-        let (hr, got) =
-            read::lookup_item_ids(&props, "Pompa.Ciśnienie", &ids).expect("LookupItemIDs");
+        let (hr, got) = server
+            .lookup_item_ids("Pompa.Ciśnienie", &ids)
+            .expect("LookupItemIDs");
         assert_eq!(hr, S_FALSE);
         assert_eq!(got[1], (None, HRESULT(OPC_E_INVALID_PID.0)));
         for i in [0, 2] {
@@ -828,10 +833,9 @@ mod through_the_proxy {
     #[test]
     fn iopcbrowse_getproperties_property_item_id_arrives_intact() {
         let (_com, server) = connect();
-        let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
-        let (hr, items) =
-            read::get_properties(&browse, &["Pompa.Ciśnienie", "Pompa.Prędkość"], &[])
-                .expect("GetProperties");
+        let (hr, items) = server
+            .get_properties(&["Pompa.Ciśnienie", "Pompa.Prędkość"], false, &[])
+            .expect("GetProperties");
         assert_eq!(hr, S_OK);
         assert_eq!(items.len(), 2);
         for (i, item) in items.iter().enumerate() {
@@ -850,14 +854,14 @@ mod through_the_proxy {
     #[test]
     fn iopcbrowse_getproperties_property_description_arrives_intact() {
         let (_com, server) = connect();
-        let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
         let ids = [
             OPC_PROPERTY_EU_UNITS,
             OPC_PROPERTY_DESCRIPTION,
             OPC_PROPERTY_HIGH_EU,
         ];
-        let (_, items) =
-            read::get_properties(&browse, &["Pompa.Ciśnienie"], &ids).expect("GetProperties");
+        let (_, items) = server
+            .get_properties(&["Pompa.Ciśnienie"], false, &ids)
+            .expect("GetProperties");
         assert_eq!(items.len(), 1);
         let props = &items[0].properties;
         assert_eq!(props.iter().map(|p| p.id).collect::<Vec<_>>(), ids);
@@ -874,8 +878,7 @@ mod through_the_proxy {
     #[test]
     fn iopcbrowse_browse_continuation_point_arrives_intact() {
         let (_com, server) = connect();
-        let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
-        let page = read::browse(&browse, None, false).expect("Browse");
+        let page = browse_root(&server, None, false).expect("Browse");
         assert!(page.more_elements);
         assert_intact(
             BROWSE_CONTINUATION_POINT,
@@ -887,10 +890,9 @@ mod through_the_proxy {
     #[test]
     fn iopcbrowse_browse_continuation_point_returns_to_the_server_intact() {
         let (_com, server) = connect();
-        let browse = server.unknown.cast::<IOPCBrowse>().expect("IOPCBrowse");
         // [in] direction of the [in, out] parameter: the probe accepts only its own
         // continuation point, character for character...
-        let page = read::browse(&browse, Some(&expected(BROWSE_CONTINUATION_POINT)), false)
+        let page = browse_root(&server, Some(&expected(BROWSE_CONTINUATION_POINT)), false)
             .expect("Browse with the continuation point: the server did not receive it intact");
         assert_eq!(
             page.elements.len(),
@@ -902,8 +904,8 @@ mod through_the_proxy {
             "no continuation point after the last page"
         );
         // ...and rejects any other.
-        let bad = read::browse(
-            &browse,
+        let bad = browse_root(
+            &server,
             Some("IOPCBrowse::Browse(pszContinuationPoint) – Wytwórnia Kwasu zolc"),
             false,
         );

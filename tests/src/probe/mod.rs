@@ -16,8 +16,9 @@
 //! * Methods without string outputs return `E_NOTIMPL`. Out-parameters are all-or-nothing
 //!   and CoTaskMem-allocated, as in the real server.
 //!
-//! [`client`] holds safe readers of the same outputs for the test (every raw call and
-//! every CoTaskMem free of the test is here, so that the test itself has no `unsafe`).
+//! [`client`] and the client library `ctopc_com::client` hold safe readers of the same
+//! outputs for the test (every raw call and every CoTaskMem free of the test is there, so
+//! that the test itself has no `unsafe`).
 
 use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
 use ctopc_com::client::ComThread;
@@ -1071,17 +1072,18 @@ pub fn serve() -> windows::core::Result<()> {
 // Safe readers for the test
 // ---------------------------------------------------------------------------------------
 
-/// Safe readers of every string output the probe produces, for the out-of-process test:
-/// each calls one method through the given interface pointer (a proxy when the object
-/// lives in another process), copies what arrived and frees it. A string that arrived
-/// NULL is `None`; one that is not valid UTF-16 is reported as `<invalid UTF-16 ...>`.
+/// Safe readers of the string outputs the probe produces that the client library
+/// (`ctopc_com::client::Server`, which reads GetItemID, QueryAvailableProperties,
+/// LookupItemIDs, GetProperties and Browse for the test) has no reader for: each calls one
+/// method through the given interface pointer (a proxy when the object lives in another
+/// process), copies what arrived and frees it. A string that arrived NULL is `None` (also
+/// in an enumeration); one that is not valid UTF-16 is reported as `<invalid UTF-16 ...>`.
 pub mod client {
     use ctopc_com::abi::{free_array, OwnsTaskMem};
-    use ctopc_com::client::take_array;
     use ctopc_com::interfaces::*;
-    use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
+    use windows::core::{IUnknown, Interface, BOOL, GUID, PCWSTR, PWSTR};
     use windows::Win32::Foundation::{E_POINTER, S_FALSE};
-    use windows::Win32::System::Com::{CoTaskMemAlloc, IEnumString};
+    use windows::Win32::System::Com::IEnumString;
 
     /// Copies a string out-parameter without freeing it.
     fn copy_wstr(p: PWSTR) -> Option<String> {
@@ -1125,18 +1127,6 @@ pub mod client {
         // SAFETY: valid pointers for the call; the strings are ours afterwards.
         unsafe { list.GetClassDetails(clsid, &mut a, &mut b, &mut c)? };
         Ok((take_wstr(a), take_wstr(b), take_wstr(c)))
-    }
-
-    /// `IOPCBrowseServerAddressSpace::GetItemID`.
-    pub fn item_id(
-        bsas: &IOPCBrowseServerAddressSpace,
-        item_data_id: &str,
-    ) -> windows::core::Result<Option<String>> {
-        let name = wide(item_data_id);
-        let mut out = PWSTR::null();
-        // SAFETY: NUL-terminated input alive for the call; valid out-pointer.
-        unsafe { bsas.GetItemID(PCWSTR(name.as_ptr()), &mut out)? };
-        Ok(take_wstr(out))
     }
 
     /// Every string of an IEnumString, fetched `chunk` at a time.
@@ -1202,259 +1192,6 @@ pub mod client {
         // SAFETY: NUL-terminated input alive for the call; valid out-pointer.
         unsafe { bsas.BrowseAccessPaths(PCWSTR(item.as_ptr()), &mut e).ok()? };
         drain(&e.ok_or_else(|| windows::core::Error::from(E_POINTER))?, 2)
-    }
-
-    /// `IOPCItemProperties::QueryAvailableProperties`: (property ID, description, VARTYPE).
-    pub fn available_properties(
-        props: &IOPCItemProperties,
-        item_id: &str,
-    ) -> windows::core::Result<Vec<(u32, Option<String>, u16)>> {
-        let item = wide(item_id);
-        let mut n = 0u32;
-        let mut ids: *mut u32 = std::ptr::null_mut();
-        let mut descriptions: *mut PWSTR = std::ptr::null_mut();
-        let mut types: *mut VARTYPE = std::ptr::null_mut();
-        // SAFETY: NUL-terminated input alive for the call; valid out-pointers.
-        unsafe {
-            props.QueryAvailableProperties(
-                PCWSTR(item.as_ptr()),
-                &mut n,
-                &mut ids,
-                &mut descriptions,
-                &mut types,
-            )?
-        };
-        let n = n as usize;
-        let texts: Vec<Option<String>> = (0..n)
-            .map(|i| {
-                if descriptions.is_null() {
-                    None
-                } else {
-                    // SAFETY: `n` elements were returned.
-                    copy_wstr(unsafe { *descriptions.add(i) })
-                }
-            })
-            .collect();
-        // SAFETY: a CoTaskMem array of `n` CoTaskMem strings, ours.
-        unsafe { free_array(descriptions, n) };
-        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-        let ids = unsafe { take_array(ids, n) };
-        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-        let types = unsafe { take_array(types, n) };
-        Ok(ids
-            .into_iter()
-            .zip(texts)
-            .zip(types)
-            .map(|((id, d), t)| (id, d, t.0))
-            .collect())
-    }
-
-    /// One element of `LookupItemIDs`: the new item ID and its error.
-    pub type NewItemId = (Option<String>, HRESULT);
-
-    /// `IOPCItemProperties::LookupItemIDs`: the call's HRESULT and per property (new item
-    /// ID, error).
-    pub fn lookup_item_ids(
-        props: &IOPCItemProperties,
-        item_id: &str,
-        ids: &[u32],
-    ) -> windows::core::Result<(HRESULT, Vec<NewItemId>)> {
-        let item = wide(item_id);
-        let mut new_ids: *mut PWSTR = std::ptr::null_mut();
-        let mut errors: *mut HRESULT = std::ptr::null_mut();
-        // SAFETY: input valid for the call (`ids.len()` elements); valid out-pointers.
-        let hr = unsafe {
-            props.LookupItemIDs(
-                PCWSTR(item.as_ptr()),
-                ids.len() as u32,
-                ids.as_ptr(),
-                &mut new_ids,
-                &mut errors,
-            )
-        };
-        hr.ok()?;
-        let n = ids.len();
-        let texts: Vec<Option<String>> = (0..n)
-            .map(|i| {
-                if new_ids.is_null() {
-                    None
-                } else {
-                    // SAFETY: `n` elements were returned.
-                    copy_wstr(unsafe { *new_ids.add(i) })
-                }
-            })
-            .collect();
-        // SAFETY: a CoTaskMem array of `n` CoTaskMem strings (or nulls), ours.
-        unsafe { free_array(new_ids, n) };
-        // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-        let errors = unsafe { take_array(errors, n) };
-        Ok((hr, texts.into_iter().zip(errors).collect()))
-    }
-
-    /// One `OPCITEMPROPERTY`, owned.
-    #[derive(Debug, Clone, PartialEq)]
-    pub struct Property {
-        pub id: u32,
-        pub item_id: Option<String>,
-        pub description: Option<String>,
-        pub error: HRESULT,
-    }
-
-    /// One `OPCITEMPROPERTIES`, owned.
-    #[derive(Debug, Clone, PartialEq)]
-    pub struct Properties {
-        pub error: HRESULT,
-        pub properties: Vec<Property>,
-    }
-
-    fn copy_properties(p: &OPCITEMPROPERTIES) -> Properties {
-        let properties = if p.pItemProperties.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: `dwNumProperties` elements came with the structure.
-            unsafe { std::slice::from_raw_parts(p.pItemProperties, p.dwNumProperties as usize) }
-                .iter()
-                .map(|q| Property {
-                    id: q.dwPropertyID,
-                    item_id: copy_wstr(q.szItemID),
-                    description: copy_wstr(q.szDescription),
-                    error: q.hrErrorID,
-                })
-                .collect()
-        };
-        Properties {
-            error: p.hrErrorID,
-            properties,
-        }
-    }
-
-    /// `IOPCBrowse::GetProperties` of `items` (`ids` empty: all properties).
-    pub fn get_properties(
-        browse: &IOPCBrowse,
-        items: &[&str],
-        ids: &[u32],
-    ) -> windows::core::Result<(HRESULT, Vec<Properties>)> {
-        let wides: Vec<Vec<u16>> = items.iter().map(|s| wide(s)).collect();
-        let ptrs: Vec<PCWSTR> = wides.iter().map(|w| PCWSTR(w.as_ptr())).collect();
-        let mut out: *mut OPCITEMPROPERTIES = std::ptr::null_mut();
-        // SAFETY: inputs valid for the call; valid out-pointer.
-        let hr = unsafe {
-            browse.GetProperties(
-                ptrs.len() as u32,
-                ptrs.as_ptr(),
-                BOOL::from(false),
-                ids.len() as u32,
-                ids.as_ptr(),
-                &mut out,
-            )
-        };
-        hr.ok()?;
-        let n = items.len();
-        let result = if out.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: `n` elements were returned.
-            unsafe { std::slice::from_raw_parts(out, n) }
-                .iter()
-                .map(copy_properties)
-                .collect()
-        };
-        // SAFETY: the CoTaskMem array and everything in it is ours.
-        unsafe { free_array(out, n) };
-        Ok((hr, result))
-    }
-
-    /// One `OPCBROWSEELEMENT`, owned.
-    #[derive(Debug, Clone, PartialEq)]
-    pub struct BrowseElement {
-        pub name: Option<String>,
-        pub item_id: Option<String>,
-        pub flags: u32,
-        pub properties: Properties,
-    }
-
-    /// The result of one `IOPCBrowse::Browse` call.
-    #[derive(Debug, Clone, PartialEq)]
-    pub struct BrowsePage {
-        pub hr: HRESULT,
-        pub continuation_point: Option<String>,
-        pub more_elements: bool,
-        pub elements: Vec<BrowseElement>,
-    }
-
-    /// `IOPCBrowse::Browse` of the root with `continuation_point` as the [in, out]
-    /// parameter's input (a CoTaskMem copy the server frees), all properties when
-    /// `all_properties`. A failed call is `Err`.
-    pub fn browse(
-        browse: &IOPCBrowse,
-        continuation_point: Option<&str>,
-        all_properties: bool,
-    ) -> windows::core::Result<BrowsePage> {
-        let empty = wide("");
-        // `[in, size_is(dwPropertyCount)] DWORD*` is a top-level (reference) pointer: the
-        // proxy rejects NULL with RPC_X_NULL_REF_POINTER even when the count is 0.
-        let no_ids = [0u32; 1];
-        let mut cp = match continuation_point {
-            None => PWSTR::null(),
-            Some(s) => {
-                let w = wide(s);
-                // SAFETY: plain allocation, checked below.
-                let p = unsafe { CoTaskMemAlloc(w.len() * 2) }.cast::<u16>();
-                if p.is_null() {
-                    return Err(windows::Win32::Foundation::E_OUTOFMEMORY.into());
-                }
-                // SAFETY: `p` has room for `w.len()` units.
-                unsafe { std::ptr::copy_nonoverlapping(w.as_ptr(), p, w.len()) };
-                PWSTR(p)
-            }
-        };
-        let mut more = BOOL::from(false);
-        let mut n = 0u32;
-        let mut out: *mut OPCBROWSEELEMENT = std::ptr::null_mut();
-        // SAFETY: inputs valid for the call; valid out-pointers; `cp` is CoTaskMem (the
-        // [in, out] string is replaced by the call, and is ours again afterwards).
-        let hr = unsafe {
-            browse.Browse(
-                PCWSTR(empty.as_ptr()),
-                &mut cp,
-                0,
-                OPC_BROWSE_FILTER_ALL,
-                PCWSTR(empty.as_ptr()),
-                PCWSTR(empty.as_ptr()),
-                BOOL::from(all_properties),
-                BOOL::from(false),
-                0,
-                no_ids.as_ptr(),
-                &mut more,
-                &mut n,
-                &mut out,
-            )
-        };
-        let continuation_point = take_wstr(cp);
-        let n = n as usize;
-        let elements = if out.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: `n` elements were returned.
-            unsafe { std::slice::from_raw_parts(out, n) }
-                .iter()
-                .map(|e| BrowseElement {
-                    name: copy_wstr(e.szName),
-                    item_id: copy_wstr(e.szItemID),
-                    flags: e.dwFlagValue,
-                    properties: copy_properties(&e.ItemProperties),
-                })
-                .collect()
-        };
-        // SAFETY: the CoTaskMem array and everything in it is ours.
-        unsafe { free_array(out, n) };
-        hr.ok()?;
-        Ok(BrowsePage {
-            hr,
-            continuation_point,
-            more_elements: more.as_bool(),
-            elements,
-        })
     }
 
     /// `IOPCServer::AddGroup` asking for `riid`; returns the group.
