@@ -194,7 +194,7 @@ fn the_server_object_answers_queryinterface_for_its_interfaces() {
 fn the_server_logs_its_start_to_the_days_log_file_in_the_install_folder() {
     let (_com, server) = connect();
     assert_alive(&server);
-    let (y, m, d) = ctopc_com::mem::local_date();
+    let (y, m, d) = ctopc_com::clock::local_date();
     let log = e2e_tests::artifact(&format!("Log/ServerCTOPC.{y:04}{m:02}{d:02}.log"));
     // The writer thread flushes asynchronously: give it a moment.
     let deadline = std::time::Instant::now() + Duration::from_secs(10);

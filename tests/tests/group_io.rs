@@ -96,7 +96,7 @@ fn device_read(p: &Plant, handles: &[u32]) -> Vec<ReadItem> {
 }
 
 fn now() -> Timestamp {
-    ctopc_com::mem::now()
+    ctopc_com::clock::now()
 }
 
 fn r4(v: &Value) -> f32 {

@@ -541,7 +541,7 @@ impl Server {
         let name_filter = HSTRING::from(a.name_filter.as_str());
         let vendor_filter = HSTRING::from(a.vendor_filter.as_str());
         let mut cp = match &a.continuation_point {
-            Some(s) => crate::mem::alloc_wstr(s)?,
+            Some(s) => crate::abi::alloc_wstr(s)?,
             None => PWSTR::null(),
         };
         let mut more = BOOL(0);
@@ -674,7 +674,7 @@ impl Server {
                     dwReserved: 0,
                     ftTimeStamp: v
                         .timestamp
-                        .map_or_else(FILETIME::default, crate::mem::filetime),
+                        .map_or_else(FILETIME::default, crate::clock::filetime),
                 }),
                 Err(e) => {
                     result = Err(e);
