@@ -334,3 +334,9 @@ pub unsafe fn raw_query(unk: &IUnknown, riid: *const GUID, ppv: *mut *mut c_void
     // SAFETY: a valid interface pointer; the arguments per this function's contract.
     unsafe { (Interface::vtable(unk).QueryInterface)(unk.as_raw(), riid, ppv) }
 }
+
+/// A new server object wrapped in the client library's `Server` (for success paths: its
+/// readers copy and free what the server hands out).
+pub fn client() -> ctopc_com::client::Server {
+    ctopc_com::client::Server::from_unknown(new_server()).expect("IOPCServer and IOPCCommon")
+}
