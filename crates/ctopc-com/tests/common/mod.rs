@@ -340,3 +340,33 @@ pub unsafe fn raw_query(unk: &IUnknown, riid: *const GUID, ppv: *mut *mut c_void
 pub fn client() -> ctopc_com::client::Server {
     ctopc_com::client::Server::from_unknown(new_server()).expect("IOPCServer and IOPCCommon")
 }
+
+/// The environment variable that tells a child test process which helper test to run.
+const CHILD_ENV: &str = "CTOPC_INPROC_CHILD";
+
+/// Runs the test `name` of this test binary in a child process (for a call that may crash
+/// the process, e.g. one writing through a NULL out-parameter): `name` must be an
+/// `#[ignore]`d test that starts with `if !in_child("name") { return; }`. True when the
+/// child ran it and passed; false when it failed or crashed.
+pub fn passes_in_child(name: &str) -> bool {
+    let exe = std::env::current_exe().expect("current_exe");
+    let out = std::process::Command::new(exe)
+        .args([name, "--exact", "--ignored", "--test-threads=1"])
+        .env(CHILD_ENV, name)
+        .output()
+        .expect("run the test binary as a child");
+    if !out.status.success() {
+        eprintln!(
+            "child test {name}: {:?}\n{}{}",
+            out.status,
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    out.status.success()
+}
+
+/// Whether this process is the child [`passes_in_child`] started for test `name`.
+pub fn in_child(name: &str) -> bool {
+    std::env::var(CHILD_ENV).is_ok_and(|v| v == name)
+}
