@@ -646,3 +646,100 @@ fn browse_success_and_paging() {
         assert_eq!(errors, [S_OK, OPC_E_INVALID_PID]);
     }
 }
+
+#[test]
+fn strings_that_are_not_utf16_answer_each_methods_code() {
+    let a = space();
+    // ChangeBrowsePosition, GetItemID: E_INVALIDARG.
+    // SAFETY: a NUL-terminated (invalid) UTF-16 string.
+    assert_eq!(
+        hr(unsafe { a.ChangeBrowsePosition(OPC_BROWSE_DOWN, bad_utf16()) }),
+        E_INVALIDARG
+    );
+    let mut p = PWSTR(poison());
+    // SAFETY: as above; a valid out-pointer.
+    assert_eq!(
+        hr(unsafe { a.GetItemID(bad_utf16(), &mut p) }),
+        E_INVALIDARG
+    );
+    assert!(p.is_null());
+    // BrowseOPCItemIDs: a filter is OPC_E_INVALIDFILTER.
+    let (r, out) = browse_ids(&a, OPC_FLAT, bad_utf16(), 0);
+    assert_eq!(r, OPC_E_INVALIDFILTER);
+    assert!(out.is_null());
+    // BrowseAccessPaths: OPC_E_INVALIDITEMID.
+    let mut out = OutUnk::poisoned();
+    // SAFETY: as above; a valid out-pointer.
+    assert_eq!(
+        unsafe { a.BrowseAccessPaths(bad_utf16(), out.as_out()) },
+        OPC_E_INVALIDITEMID
+    );
+    assert!(out.is_null());
+}
+
+#[test]
+fn browse_strings_that_are_not_utf16() {
+    let b = server::<IOPCBrowse>();
+    let bad = || HSTRING::from_wide(&UNPAIRED_SURROGATE[..3]);
+    for (what, a, expected) in [
+        (
+            "szItemID",
+            BrowseRaw {
+                item_id: bad(),
+                ..BrowseRaw::new()
+            },
+            OPC_E_UNKNOWNITEMID,
+        ),
+        (
+            "szElementNameFilter",
+            BrowseRaw {
+                name_filter: bad(),
+                ..BrowseRaw::new()
+            },
+            OPC_E_INVALIDFILTER,
+        ),
+        (
+            "szVendorFilter",
+            BrowseRaw {
+                vendor_filter: bad(),
+                ..BrowseRaw::new()
+            },
+            OPC_E_INVALIDFILTER,
+        ),
+    ] {
+        let (r, o) = browse_raw(&b, &a, NullOut::None);
+        assert_failed_cleanly(r, o, expected, NullOut::None, what);
+    }
+    // A continuation point that is not UTF-16: OPC_E_INVALIDCONTINUATIONPOINT, and the
+    // client's string is left alone.
+    let a = BrowseRaw::new();
+    let mut cp = PWSTR(UNPAIRED_SURROGATE.as_ptr() as *mut u16);
+    let (mut more, mut count) = (BOOL(7), U32_POISON);
+    let mut elements: *mut OPCBROWSEELEMENT = poison();
+    // SAFETY: valid pointers; the continuation point is a static the call must not free
+    // on failure (a failed call leaves it to the client).
+    let r = unsafe {
+        b.Browse(
+            pcwstr(&a.item_id),
+            &mut cp,
+            0,
+            a.filter,
+            pcwstr(&a.name_filter),
+            pcwstr(&a.vendor_filter),
+            false.into(),
+            false.into(),
+            0,
+            null(),
+            &mut more,
+            &mut count,
+            &mut elements,
+        )
+    };
+    assert_eq!(r, OPC_E_INVALIDCONTINUATIONPOINT);
+    assert_eq!(
+        cp.0 as *const u16,
+        UNPAIRED_SURROGATE.as_ptr(),
+        "left alone"
+    );
+    assert_eq!((more, count, elements.is_null()), (BOOL(0), 0, true));
+}

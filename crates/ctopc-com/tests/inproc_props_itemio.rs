@@ -501,3 +501,62 @@ fn item_io_write_vqt_success_and_per_item_errors() {
         .unwrap();
     assert_eq!((r, errors), (S_OK, vec![S_OK]));
 }
+
+#[test]
+fn item_ids_that_are_not_utf16() {
+    let p = server::<IOPCItemProperties>();
+    let (r, o) = qap(&p, bad_utf16(), None);
+    assert_eq!(r, OPC_E_INVALIDITEMID, "QueryAvailableProperties");
+    assert_qap_cleared(&o, None, "invalid UTF-16");
+    let ids = [1u32];
+    let mut data: *mut VARIANT = poison();
+    let mut errors: *mut HRESULT = poison();
+    // SAFETY: valid pointers; a NUL-terminated (invalid) UTF-16 item ID.
+    let r = unsafe { p.GetItemProperties(bad_utf16(), 1, ids.as_ptr(), &mut data, &mut errors) };
+    assert_eq!(r, OPC_E_INVALIDITEMID, "GetItemProperties");
+    assert!(data.is_null() && errors.is_null());
+    let mut new_ids: *mut PWSTR = poison();
+    let mut errors: *mut HRESULT = poison();
+    // SAFETY: as above.
+    let r = unsafe { p.LookupItemIDs(bad_utf16(), 1, ids.as_ptr(), &mut new_ids, &mut errors) };
+    assert_eq!(r, OPC_E_INVALIDITEMID, "LookupItemIDs");
+    assert!(new_ids.is_null() && errors.is_null());
+    // IOPCItemIO: a per-item OPC_E_INVALIDITEMID.
+    let io: IOPCItemIO = p.cast().unwrap();
+    let ids = [bad_utf16()];
+    let ages = [0u32];
+    let (r, o) = read_raw(&io, 1, ids.as_ptr(), ages.as_ptr(), None);
+    assert_eq!(r, S_FALSE, "Read");
+    // SAFETY: four CoTaskMem arrays of 1 handed out by the call, ours.
+    let errors = unsafe {
+        take_variants(o.values, 1);
+        take_array(o.qualities, 1);
+        take_array(o.times, 1);
+        take_array(o.errors, 1)
+    };
+    assert_eq!(errors, [OPC_E_INVALIDITEMID]);
+    let vqt = [OPCITEMVQT::default()];
+    let mut errors: *mut HRESULT = poison();
+    // SAFETY: valid arrays of 1.
+    let r = unsafe { io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), &mut errors) };
+    assert_eq!(r, S_FALSE, "WriteVQT");
+    // SAFETY: a CoTaskMem array of 1 handed out by the call, ours.
+    assert_eq!(unsafe { take_array(errors, 1) }, [OPC_E_INVALIDITEMID]);
+}
+
+#[test]
+fn write_vqt_of_a_variant_type_the_server_cannot_take_is_opc_e_badtype() {
+    let io = server::<IOPCItemIO>();
+    let id = wide("KW_A110");
+    let ids = [pcwstr(&id)];
+    // VT_UNKNOWN (13) with a NULL pointer: no value the server converts.
+    let mut vqt = [OPCITEMVQT::default()];
+    // SAFETY: writes the VARTYPE of a zeroed VARIANT (its first 16 bits).
+    unsafe { *(&mut vqt[0].vDataValue as *mut VARIANT).cast::<u16>() = 13 };
+    let mut errors: *mut HRESULT = poison();
+    // SAFETY: valid arrays of 1.
+    let r = unsafe { io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), &mut errors) };
+    assert_eq!(r, S_FALSE);
+    // SAFETY: a CoTaskMem array of 1 handed out by the call, ours.
+    assert_eq!(unsafe { take_array(errors, 1) }, [OPC_E_BADTYPE]);
+}

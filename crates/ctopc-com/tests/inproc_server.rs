@@ -859,3 +859,32 @@ fn set_client_name_branches() {
     // SAFETY: a valid string.
     assert_eq!(hr(unsafe { c.SetClientName(pcwstr(&empty)) }), S_OK);
 }
+
+#[test]
+fn add_group_name_that_is_not_utf16_is_invalidarg() {
+    let s = opc_server();
+    let mut o = AddOut::poisoned();
+    // SAFETY: valid pointers; the name is a NUL-terminated (invalid) UTF-16 string.
+    let r = unsafe {
+        add_group_raw(
+            &s,
+            bad_utf16(),
+            1000,
+            null(),
+            EN,
+            &mut o.handle,
+            &mut o.revised,
+            &IUnknown::IID,
+            o.unk.as_out(),
+        )
+    };
+    assert_eq!(r, E_INVALIDARG);
+    o.assert_cleared("invalid UTF-16 name");
+    let mut out = OutUnk::poisoned();
+    // SAFETY: valid pointers.
+    assert_eq!(
+        hr(unsafe { s.GetGroupByName(bad_utf16(), &IUnknown::IID, out.as_out()) }),
+        E_INVALIDARG
+    );
+    assert!(out.is_null());
+}

@@ -370,3 +370,12 @@ pub fn passes_in_child(name: &str) -> bool {
 pub fn in_child(name: &str) -> bool {
     std::env::var(CHILD_ENV).is_ok_and(|v| v == name)
 }
+
+/// A NUL-terminated UTF-16 string that is not valid UTF-16 (an unpaired surrogate): the
+/// proxy would carry it, and the server must reject it with the method's code.
+pub const UNPAIRED_SURROGATE: [u16; 4] = [0x004B, 0xD800, 0x0041, 0];
+
+/// [`UNPAIRED_SURROGATE`] as an `[in, string]` pointer (a static: valid for any call).
+pub fn bad_utf16() -> PCWSTR {
+    PCWSTR(UNPAIRED_SURROGATE.as_ptr())
+}
