@@ -112,8 +112,8 @@ fn the_data_callback_point_and_its_container() {
     let (_s, g) = server_with_group("cp-point");
     let cpc = container(&g);
     let cp = data_point(&g);
-    // SAFETY: a valid interface pointer.
     assert_eq!(
+        // SAFETY: a valid interface pointer.
         unsafe { cp.GetConnectionInterface() }.expect("GetConnectionInterface"),
         IOPCDataCallback::IID
     );
@@ -136,8 +136,8 @@ fn the_data_callback_point_and_its_container() {
     let [first, second] = points;
     assert!(second.is_none());
     let first = first.expect("the point");
-    // SAFETY: a valid interface pointer.
     assert_eq!(
+        // SAFETY: a valid interface pointer.
         unsafe { first.GetConnectionInterface() }.expect("GetConnectionInterface"),
         IOPCDataCallback::IID
     );
@@ -241,8 +241,8 @@ fn unadvise_of_unknown_cookies_and_advise_again() {
     assert_eq!(connections(&cp).len(), 1, "still connected");
     // SAFETY: a plain value.
     assert_eq!(hr(unsafe { cp.Unadvise(cookie) }), S_OK);
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: a plain value.
         hr(unsafe { cp.Unadvise(cookie) }),
         CONNECT_E_NOCONNECTION,
         "twice"
@@ -313,8 +313,8 @@ fn releasing_the_group_releases_a_sink_that_was_not_unadvised() {
     drop(sink_unk);
     drop(sink);
     assert!(weak.upgrade().is_some(), "the group holds the sink");
-    // SAFETY: a valid handle of this client's group.
     assert_eq!(
+        // SAFETY: a valid handle of this client's group.
         unsafe { s.RemoveGroup(g.server_handle, false.into()) },
         OPC_S_INUSE
     );

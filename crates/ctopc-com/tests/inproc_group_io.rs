@@ -117,9 +117,7 @@ fn write(p: &Plant, items: &[(u32, Value)]) -> (HRESULT, Vec<HRESULT>) {
 
 /// A valid OPCITEMVQT of `v` (VariantClear its value afterwards).
 fn vqt(v: &Value, quality: Option<u16>, stamp: Option<Timestamp>) -> OPCITEMVQT {
-    let ft = stamp
-        .map(|t| ctopc_com::mem::filetime(t))
-        .unwrap_or_default();
+    let ft = stamp.map(ctopc_com::mem::filetime).unwrap_or_default();
     OPCITEMVQT {
         vDataValue: var(v),
         bQualitySpecified: quality.is_some().into(),
@@ -704,35 +702,35 @@ fn refresh_argument_branches() {
     let p = plant("io-refresh-args", true);
     let (a2, a3) = (p.async2(), p.async3());
     // NULL pdwCancelID.
-    // SAFETY: a deliberately NULL out-pointer.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 1, std::ptr::null_mut()) }),
         E_INVALIDARG
     );
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         hr(unsafe { a3.RefreshMaxAge(0, 1, std::ptr::null_mut()) }),
         E_INVALIDARG
     );
     // Sources outside OPCDATASOURCE.
     for src in BAD_SOURCES {
         let mut cancel = 0u32;
-        // SAFETY: a valid out-pointer.
         assert_eq!(
+            // SAFETY: a valid out-pointer.
             hr(unsafe { a2.Refresh2(src, 1, &mut cancel) }),
             E_INVALIDARG,
             "{src:?}"
         );
-        // SAFETY: a deliberately NULL out-pointer.
         assert_eq!(
+            // SAFETY: a deliberately NULL out-pointer.
             hr(unsafe { a2.Refresh2(src, 1, std::ptr::null_mut()) }),
             E_INVALIDARG,
             "{src:?}"
         );
     }
     // GetEnable(NULL).
-    // SAFETY: a deliberately NULL out-pointer.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         hr(unsafe { a2.GetEnable(std::ptr::null_mut()) }),
         E_INVALIDARG
     );
@@ -797,8 +795,8 @@ fn refresh_sends_every_active_item_and_fails_for_an_inactive_group() {
     };
     assert_eq!(r, S_OK);
     let mut cancel = POISON_U32;
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 305, &mut cancel) }),
         E_FAIL
     );
@@ -849,21 +847,24 @@ fn async_calls_without_a_sink_are_connect_e_noconnection_with_outputs_cleared() 
     let mut vqts = [vqt(&Value::R4(1.0), None, None)];
     type Call<'a> = Box<dyn Fn(*mut u32, *mut *mut HRESULT) -> HRESULT + 'a>;
     let calls: Vec<(&str, Call)> = vec![
-        // SAFETY (each call): valid pointers.
         (
             "Read",
+            // SAFETY: valid pointers.
             Box::new(|c, e| unsafe { a2.Read(1, h.as_ptr(), 1, c, e) }),
         ),
         (
             "Write",
+            // SAFETY: valid pointers.
             Box::new(|c, e| unsafe { a2.Write(1, h.as_ptr(), vars.as_ptr(), 2, c, e) }),
         ),
         (
             "ReadMaxAge",
+            // SAFETY: valid pointers.
             Box::new(|c, e| unsafe { a3.ReadMaxAge(1, h.as_ptr(), ages.as_ptr(), 3, c, e) }),
         ),
         (
             "WriteVQT",
+            // SAFETY: valid pointers.
             Box::new(|c, e| unsafe { a3.WriteVQT(1, h.as_ptr(), vqts.as_ptr(), 4, c, e) }),
         ),
     ];
@@ -891,8 +892,8 @@ fn async_calls_without_a_sink_are_connect_e_noconnection_with_outputs_cleared() 
     let mut b = BOOL(7);
     // SAFETY: a valid out-pointer.
     assert_eq!(hr(unsafe { a2.GetEnable(&mut b) }), CONNECT_E_NOCONNECTION);
-    // SAFETY: a plain value.
     assert_eq!(
+        // SAFETY: a plain value.
         hr(unsafe { a2.SetEnable(false.into()) }),
         CONNECT_E_NOCONNECTION
     );

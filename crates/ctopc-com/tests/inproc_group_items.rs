@@ -596,8 +596,8 @@ fn enumerator_next_and_clone_argument_branches() {
     // Nothing was consumed by the failed calls.
     assert_eq!(next(&e, 5).1.len(), 2);
     // Clone(NULL): E_INVALIDARG.
-    // SAFETY: a deliberately NULL out-pointer.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         code(&unsafe { e.Clone(std::ptr::null_mut()) }),
         E_INVALIDARG
     );

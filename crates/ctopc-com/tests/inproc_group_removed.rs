@@ -62,8 +62,8 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     };
     assert_eq!(r, E_FAIL, "SetState");
     let new_name = wide("removed-renamed");
-    // SAFETY: a valid string.
     assert_eq!(
+        // SAFETY: a valid string.
         hr(unsafe { sm.SetName(pcwstr(&new_name)) }),
         E_FAIL,
         "SetName"
@@ -73,14 +73,14 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     let r = unsafe { sm.CloneGroup(pcwstr(&new_name), &IUnknown::IID, out.as_out()) };
     assert_eq!(hr(r), E_FAIL, "CloneGroup");
     assert!(out.is_null(), "CloneGroup: ppUnk cleared");
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         unsafe { sm.SetKeepAlive(1000, &mut revised) },
         E_FAIL,
         "SetKeepAlive"
     );
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { sm.GetKeepAlive(&mut revised) }),
         E_FAIL,
         "GetKeepAlive"
@@ -116,38 +116,45 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     let dm: IOPCItemDeadbandMgt = iface(g);
     let sam: IOPCItemSamplingMgt = iface(g);
     type Call<'a> = Box<dyn Fn(*mut *mut HRESULT) -> HRESULT + 'a>;
-    // SAFETY (each call): valid arrays of `n` elements and a valid error out-pointer.
     let error_only: Vec<(&str, Call)> = vec![
         (
             "RemoveItems",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { g.item_mgt.RemoveItems(n, hp, e) }),
         ),
         (
             "SetActiveState",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { g.item_mgt.SetActiveState(n, hp, true.into(), e) }),
         ),
         (
             "SetClientHandles",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { g.item_mgt.SetClientHandles(n, hp, clients.as_ptr(), e) }),
         ),
         (
             "SetDatatypes",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { g.item_mgt.SetDatatypes(n, hp, types.as_ptr(), e) }),
         ),
         (
             "SetItemDeadband",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { dm.SetItemDeadband(n, hp, deadbands.as_ptr(), e) }),
         ),
         (
             "ClearItemDeadband",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { dm.ClearItemDeadband(n, hp, e) }),
         ),
         (
             "ClearItemSamplingRate",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { sam.ClearItemSamplingRate(n, hp, e) }),
         ),
         (
             "SetItemBufferEnable",
+            // SAFETY: valid arrays of `n` elements and a valid error out-pointer.
             Box::new(|e| unsafe { sam.SetItemBufferEnable(n, hp, enable.as_ptr(), e) }),
         ),
     ];
@@ -162,18 +169,22 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     let with_values: Vec<(&str, ValCall)> = vec![
         (
             "GetItemDeadband",
+            // SAFETY: valid arrays and out-pointers (f32, u32 and BOOL arrays alike
             Box::new(|v, e| unsafe { dm.GetItemDeadband(n, hp, v.cast(), e) }),
         ),
         (
             "SetItemSamplingRate",
+            // SAFETY: valid arrays and out-pointers (f32, u32 and BOOL arrays alike
             Box::new(|v, e| unsafe { sam.SetItemSamplingRate(n, hp, rates.as_ptr(), v, e) }),
         ),
         (
             "GetItemSamplingRate",
+            // SAFETY: valid arrays and out-pointers (f32, u32 and BOOL arrays alike
             Box::new(|v, e| unsafe { sam.GetItemSamplingRate(n, hp, v, e) }),
         ),
         (
             "GetItemBufferEnable",
+            // SAFETY: valid arrays and out-pointers (f32, u32 and BOOL arrays alike
             Box::new(|v, e| unsafe { sam.GetItemBufferEnable(n, hp, v.cast(), e) }),
         ),
     ];
@@ -219,8 +230,8 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
         var(&ctopc_core::Value::R4(1.0)),
     ];
     let mut errors = poison::<HRESULT>();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         unsafe { sync.Write(n, hp, vars.as_ptr(), &mut errors) },
         E_FAIL,
         "Write"
@@ -228,8 +239,8 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     assert!(errors.is_null());
     let vqts = [OPCITEMVQT::default(), OPCITEMVQT::default()];
     let mut errors = poison::<HRESULT>();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         unsafe { sync.WriteVQT(n, hp, vqts.as_ptr(), &mut errors) },
         E_FAIL,
         "WriteVQT"
@@ -239,19 +250,22 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     // Async I/O (before any connection check: there is no group).
     let a3: IOPCAsyncIO3 = iface(g);
     type AsyncCall<'a> = Box<dyn Fn(*mut u32, *mut *mut HRESULT) -> HRESULT + 'a>;
-    // SAFETY (each call): valid arrays and out-pointers.
     let asyncs: Vec<(&str, AsyncCall)> = vec![
+        // SAFETY: valid arrays and out-pointers.
         ("Read", Box::new(|c, e| unsafe { a3.Read(n, hp, 1, c, e) })),
         (
             "Write",
+            // SAFETY: valid arrays and out-pointers.
             Box::new(|c, e| unsafe { a3.Write(n, hp, vars.as_ptr(), 1, c, e) }),
         ),
         (
             "ReadMaxAge",
+            // SAFETY: valid arrays and out-pointers.
             Box::new(|c, e| unsafe { a3.ReadMaxAge(n, hp, ages.as_ptr(), 1, c, e) }),
         ),
         (
             "WriteVQT",
+            // SAFETY: valid arrays and out-pointers.
             Box::new(|c, e| unsafe { a3.WriteVQT(n, hp, vqts.as_ptr(), 1, c, e) }),
         ),
     ];
@@ -264,8 +278,8 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     drop(asyncs);
     clear_all(&mut vars);
     let mut cancel = POISON_U32;
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { a3.Refresh2(OPC_DS_CACHE, 1, &mut cancel) }),
         E_FAIL
     );
@@ -276,8 +290,8 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     assert_eq!(cancel, 0, "RefreshMaxAge: cancel ID cleared");
     // SAFETY: a plain value.
     assert_eq!(hr(unsafe { a3.Cancel2(1) }), E_FAIL, "Cancel2");
-    // SAFETY: a plain value.
     assert_eq!(
+        // SAFETY: a plain value.
         hr(unsafe { a3.SetEnable(true.into()) }),
         E_FAIL,
         "SetEnable"

@@ -299,14 +299,14 @@ fn set_name_argument_branches_and_success() {
     // SAFETY: a valid string.
     assert_eq!(hr(unsafe { sm.SetName(pcwstr(&empty)) }), E_INVALIDARG);
     let bad: [u16; 2] = [0xD800, 0];
-    // SAFETY: a NUL-terminated (invalid UTF-16) string.
     assert_eq!(
+        // SAFETY: a NUL-terminated (invalid UTF-16) string.
         hr(unsafe { sm.SetName(PCWSTR(bad.as_ptr())) }),
         E_INVALIDARG
     );
     let taken = wide("name-b");
-    // SAFETY: a valid string.
     assert_eq!(
+        // SAFETY: a valid string.
         hr(unsafe { sm.SetName(pcwstr(&taken)) }),
         OPC_E_DUPLICATENAME
     );
@@ -440,13 +440,13 @@ fn clone_group_makes_an_inactive_copy_with_new_handles() {
 fn keep_alive_argument_branches_and_revision() {
     let (_s, g) = server_with_group("keepalive");
     let sm = state_mgt(&g);
-    // SAFETY: a deliberately NULL out-pointer.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         unsafe { sm.SetKeepAlive(5000, std::ptr::null_mut()) },
         E_INVALIDARG
     );
-    // SAFETY: a deliberately NULL out-pointer.
     assert_eq!(
+        // SAFETY: a deliberately NULL out-pointer.
         hr(unsafe { sm.GetKeepAlive(std::ptr::null_mut()) }),
         E_INVALIDARG
     );
@@ -791,15 +791,19 @@ fn a_null_value_out_array_clears_the_error_array() {
         }
     };
     // SAFETY (each call): a deliberately NULL value out-array, other pointers valid.
+    // SAFETY: a deliberately NULL value out-array, other pointers valid.
     check("GetItemDeadband", &|e| unsafe {
         d.GetItemDeadband(1, h.as_ptr(), std::ptr::null_mut(), e)
     });
+    // SAFETY: a deliberately NULL value out-array, other pointers valid.
     check("SetItemSamplingRate", &|e| unsafe {
         sm.SetItemSamplingRate(1, h.as_ptr(), rates.as_ptr(), std::ptr::null_mut(), e)
     });
+    // SAFETY: a deliberately NULL value out-array, other pointers valid.
     check("GetItemSamplingRate", &|e| unsafe {
         sm.GetItemSamplingRate(1, h.as_ptr(), std::ptr::null_mut(), e)
     });
+    // SAFETY: a deliberately NULL value out-array, other pointers valid.
     check("GetItemBufferEnable", &|e| unsafe {
         sm.GetItemBufferEnable(1, h.as_ptr(), std::ptr::null_mut(), e)
     });
