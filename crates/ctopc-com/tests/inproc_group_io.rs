@@ -898,3 +898,56 @@ fn async_calls_without_a_sink_are_connect_e_noconnection_with_outputs_cleared() 
         CONNECT_E_NOCONNECTION
     );
 }
+
+/// A VARIANT no Value can come from (VT_NULL: OPC_E_BADTYPE when decoded).
+fn null_variant() -> VARIANT {
+    let mut v = VARIANT::default();
+    // SAFETY: setting the VARTYPE of an empty VARIANT (VT_NULL owns nothing).
+    unsafe { (*v.Anonymous.Anonymous).vt = windows::Win32::System::Variant::VT_NULL };
+    v
+}
+
+#[test]
+fn writes_of_variants_that_hold_no_value_fail_per_item_after_the_basic_checks() {
+    let p = plant("io-write-null-variant", true);
+    // SETPOINT: OPC_E_BADTYPE; LEVEL (read-only): OPC_E_BADRIGHTS wins; an unknown handle:
+    // OPC_E_INVALIDHANDLE wins. Nothing is written.
+    let h = [p.h[1], p.h[0], BAD_HANDLE];
+    let expected = vec![OPC_E_BADTYPE, OPC_E_BADRIGHTS, OPC_E_INVALIDHANDLE];
+    let vars = [null_variant(), null_variant(), null_variant()];
+    let r = errors_of(3, |e| {
+        // SAFETY: valid arrays of the same length.
+        unsafe { p.sync().Write(3, h.as_ptr(), vars.as_ptr(), e) }
+    });
+    assert_eq!(r, (S_FALSE, expected.clone()), "Write");
+    let vqts: Vec<OPCITEMVQT> = (0..3)
+        .map(|_| OPCITEMVQT {
+            vDataValue: null_variant(),
+            ..Default::default()
+        })
+        .collect();
+    let r = errors_of(3, |e| {
+        // SAFETY: valid arrays of the same length.
+        unsafe { p.sync().WriteVQT(3, h.as_ptr(), vqts.as_ptr(), e) }
+    });
+    assert_eq!(r, (S_FALSE, expected.clone()), "WriteVQT");
+    let (hr_, cancel, errs) = async_call(3, |c, e| {
+        // SAFETY: valid arrays of the same length.
+        unsafe { p.async2().Write(3, h.as_ptr(), vars.as_ptr(), 901, c, e) }
+    });
+    assert_eq!((hr_, errs), (S_FALSE, expected.clone()), "async Write");
+    assert_eq!(cancel, 0, "no item accepted: no transaction to cancel");
+    let (hr_, _, errs) = async_call(3, |c, e| {
+        // SAFETY: valid arrays of the same length.
+        unsafe { p.async3().WriteVQT(3, h.as_ptr(), vqts.as_ptr(), 902, c, e) }
+    });
+    assert_eq!((hr_, errs), (S_FALSE, expected), "async WriteVQT");
+    // No item was accepted: no completion.
+    let rec = p.rec.as_ref().expect("sink");
+    assert!(rec
+        .wait_for(Duration::from_millis(500), |c| matches!(
+            c.transaction(),
+            901 | 902
+        ))
+        .is_none());
+}

@@ -292,12 +292,19 @@ fn validate_items_checks_without_adding() {
     let (hr, e) = enumerator(&g);
     assert_eq!(hr, S_FALSE, "nothing was added");
     assert!(next(&e, 10).1.is_empty());
-    // All valid: S_OK.
+    // All valid: S_OK. bBlobUpdate TRUE changes nothing: this server has no blobs.
     let d = defs(&[LEVEL]);
-    let (mut results, mut errors) = (poison::<OPCITEMRESULT>(), poison::<HRESULT>());
-    let hr = raw_validate(&g, 1, d.defs.as_ptr(), &mut results, &mut errors);
-    let (hr, out) = take_results(hr, results, errors, 1);
-    assert_eq!((hr, out[0].1), (S_OK, S_OK));
+    for blob in [false, true] {
+        let (mut results, mut errors) = (poison::<OPCITEMRESULT>(), poison::<HRESULT>());
+        // SAFETY: valid pointers.
+        let hr = unsafe {
+            g.item_mgt
+                .ValidateItems(1, d.defs.as_ptr(), blob.into(), &mut results, &mut errors)
+        };
+        let (hr, out) = take_results(hr, results, errors, 1);
+        assert_eq!((hr, out[0].1), (S_OK, S_OK), "bBlobUpdate {blob}");
+        assert_eq!(out[0].0.vtCanonicalDataType.0, VT_R4);
+    }
 }
 
 // ---- RemoveItems / SetActiveState / SetClientHandles / SetDatatypes ---------------------
@@ -595,6 +602,12 @@ fn enumerator_next_and_clone_argument_branches() {
     assert!(items.is_null());
     // Nothing was consumed by the failed calls.
     assert_eq!(next(&e, 5).1.len(), 2);
+    // Next(0) without pceltFetched: E_INVALIDARG (only one element may go without it).
+    let mut items: *mut OPCITEMATTRIBUTES = std::ptr::null_mut();
+    // SAFETY: a valid array out-pointer; pceltFetched deliberately NULL.
+    let hr = unsafe { e.Next(0, &mut items, std::ptr::null_mut()) };
+    assert_eq!(hr, E_INVALIDARG);
+    assert!(items.is_null());
     // Clone(NULL): E_INVALIDARG.
     assert_eq!(
         // SAFETY: a deliberately NULL out-pointer.
