@@ -951,3 +951,45 @@ fn writes_of_variants_that_hold_no_value_fail_per_item_after_the_basic_checks() 
         ))
         .is_none());
 }
+
+#[test]
+fn cancel2_ends_a_transaction_with_on_cancel_complete_or_fails_once_it_completed() {
+    let p = plant("io-cancel", true);
+    let a2 = p.async2();
+    let rec = p.rec.as_ref().expect("sink");
+    let mut cancelled = 0;
+    for tid in 801..821u32 {
+        let (hr_, cancel, _) = async_call(3, |c, e| {
+            // SAFETY: valid pointers.
+            unsafe { a2.Read(3, p.h.as_ptr(), tid, c, e) }
+        });
+        assert_eq!(hr_, S_OK);
+        // SAFETY: a plain value.
+        match hr(unsafe { a2.Cancel2(cancel) }) {
+            S_OK => {
+                cancelled += 1;
+                let c = p.wait_tx(tid);
+                assert_eq!(
+                    c,
+                    Callback::CancelComplete {
+                        transaction: tid,
+                        group: 1
+                    }
+                );
+                // SAFETY: a plain value.
+                assert_eq!(hr(unsafe { a2.Cancel2(cancel) }), E_FAIL, "cancelled twice");
+            }
+            E_FAIL => {
+                assert!(matches!(p.wait_tx(tid), Callback::ReadComplete { .. }));
+            }
+            other => panic!("Cancel2: {other:?}"),
+        }
+    }
+    // Exactly one completion per transaction (a cancelled one has no OnReadComplete).
+    std::thread::sleep(Duration::from_millis(300));
+    for tid in 801..821u32 {
+        let n = rec.all().iter().filter(|c| c.transaction() == tid).count();
+        assert_eq!(n, 1, "transaction {tid}: {:?}", rec.all());
+    }
+    eprintln!("Cancel2: {cancelled} of 20 cancelled before completion");
+}
