@@ -809,3 +809,60 @@ fn a_null_value_out_array_clears_the_error_array() {
     });
     assert!(failures.is_empty(), "*ppErrors not cleared by {failures:?}");
 }
+
+#[test]
+fn set_state_client_handle_and_active_reach_the_callbacks() {
+    let (_s, g, _h) = group_with("state-callbacks", &[LEVEL, SETPOINT]);
+    let (_cookie, rec) = advise(&g);
+    let sm: IOPCGroupStateMgt = iface(&g);
+    assert_eq!(
+        set_state(
+            &sm,
+            SetArgs {
+                client: Some(55),
+                ..Default::default()
+            }
+        ),
+        (S_OK, 1000)
+    );
+    let a2: IOPCAsyncIO2 = iface(&g);
+    let mut cancel = 0u32;
+    // SAFETY: a valid out-pointer.
+    assert_eq!(
+        hr(unsafe { a2.Refresh2(OPC_DS_DEVICE, 71, &mut cancel) }),
+        S_OK
+    );
+    let wait = std::time::Duration::from_secs(10);
+    let c = rec
+        .wait_for(wait, |c| c.transaction() == 71)
+        .expect("the refresh");
+    let Callback::DataChange { group, items, .. } = c else {
+        panic!("{c:?}")
+    };
+    assert_eq!(group, 55, "the new client group handle");
+    assert_eq!(items.len(), 2);
+    // Inactive: a refresh is E_FAIL; active again: it works.
+    let set_active = |a: bool| {
+        set_state(
+            &sm,
+            SetArgs {
+                active: Some(a),
+                ..Default::default()
+            },
+        )
+        .0
+    };
+    assert_eq!(set_active(false), S_OK);
+    // SAFETY: a valid out-pointer.
+    assert_eq!(
+        hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 72, &mut cancel) }),
+        E_FAIL
+    );
+    assert_eq!(set_active(true), S_OK);
+    // SAFETY: a valid out-pointer.
+    assert_eq!(
+        hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 73, &mut cancel) }),
+        S_OK
+    );
+    assert!(rec.wait_for(wait, |c| c.transaction() == 73).is_some());
+}
