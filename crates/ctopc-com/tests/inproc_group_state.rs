@@ -828,10 +828,8 @@ fn set_state_client_handle_and_active_reach_the_callbacks() {
     let a2: IOPCAsyncIO2 = iface(&g);
     let mut cancel = 0u32;
     // SAFETY: a valid out-pointer.
-    assert_eq!(
-        hr(unsafe { a2.Refresh2(OPC_DS_DEVICE, 71, &mut cancel) }),
-        S_OK
-    );
+    let r = unsafe { a2.Refresh2(OPC_DS_DEVICE, 71, &mut cancel) };
+    assert_eq!(hr(r), S_OK);
     let wait = std::time::Duration::from_secs(10);
     let c = rec
         .wait_for(wait, |c| c.transaction() == 71)
@@ -854,15 +852,11 @@ fn set_state_client_handle_and_active_reach_the_callbacks() {
     };
     assert_eq!(set_active(false), S_OK);
     // SAFETY: a valid out-pointer.
-    assert_eq!(
-        hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 72, &mut cancel) }),
-        E_FAIL
-    );
+    let r = unsafe { a2.Refresh2(OPC_DS_CACHE, 72, &mut cancel) };
+    assert_eq!(hr(r), E_FAIL);
     assert_eq!(set_active(true), S_OK);
     // SAFETY: a valid out-pointer.
-    assert_eq!(
-        hr(unsafe { a2.Refresh2(OPC_DS_CACHE, 73, &mut cancel) }),
-        S_OK
-    );
+    let r = unsafe { a2.Refresh2(OPC_DS_CACHE, 73, &mut cancel) };
+    assert_eq!(hr(r), S_OK);
     assert!(rec.wait_for(wait, |c| c.transaction() == 73).is_some());
 }
