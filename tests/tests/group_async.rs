@@ -487,14 +487,16 @@ fn count_zero_invalid_source_and_null_pointers_are_rejected() {
             io.Read(1, h, 1, &mut cancel, std::ptr::null_mut()),
             io.Write(1, h, std::ptr::null(), 1, &mut cancel, &mut errors),
             io.Write(1, h, &v, 1, std::ptr::null_mut(), &mut errors),
+            io3.ReadMaxAge(1, std::ptr::null(), &age, 1, &mut cancel, &mut errors),
             io3.ReadMaxAge(1, h, std::ptr::null(), 1, &mut cancel, &mut errors),
+            io3.ReadMaxAge(1, h, &age, 1, std::ptr::null_mut(), &mut errors),
+            io3.ReadMaxAge(1, h, &age, 1, &mut cancel, std::ptr::null_mut()),
             io3.WriteVQT(1, h, std::ptr::null(), 1, &mut cancel, &mut errors),
             io3.WriteVQT(1, h, &vqt, 1, &mut cancel, std::ptr::null_mut()),
         ];
         for (i, hr) in hrs.iter().enumerate() {
             assert!(rejected(*hr), "call {i}: {hr:?}");
         }
-        let _ = age;
         assert!(rejected(code(&io.Refresh2(
             OPC_DS_CACHE,
             1,
