@@ -15,9 +15,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use asix_model::vardb::{parse_attribute_table, parse_var_set};
+use asix_model::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase, BASIC_CHANNEL};
 use asix_net::inproc::InProcessSim;
-use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
-use ctopc_core::asix::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase, BASIC_CHANNEL};
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, SyncOutcome,
 };

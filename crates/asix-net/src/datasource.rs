@@ -16,8 +16,8 @@ use std::collections::{btree_map, BTreeMap, HashMap};
 use std::sync::mpsc;
 use std::sync::Arc;
 
-use ctopc_core::asix::namespace::{AsixNamespace, Derivation};
-use ctopc_core::asix::{
+use asix_model::namespace::{AsixNamespace, Derivation};
+use asix_model::{
     apply_quality_rules_with, check_write_value, Limit, RuleOptions, ServerOptions,
     ServerSelection, Variable,
 };

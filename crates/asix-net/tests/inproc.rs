@@ -3,8 +3,8 @@
 //! derived items refuse writes; a slow device (`SimulationDeviceDelay`) answers late,
 //! the engine times it out at `SourceTimeout`, and Cancel2 beats it.
 
+use asix_model::{parse_config, AsixNamespace};
 use asix_net::inproc::InProcessSim;
-use ctopc_core::asix::{parse_config, AsixNamespace};
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition,
     SourceRequest, SyncOutcome, SyncResult,

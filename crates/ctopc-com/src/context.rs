@@ -12,9 +12,9 @@
 
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
 use crate::runtime::Runtime;
-use ctopc_core::asix::address_space::build_address_space;
-use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
-use ctopc_core::asix::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase};
+use asix_model::address_space::build_address_space;
+use asix_model::vardb::{parse_attribute_table, parse_var_set};
+use asix_model::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase};
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::Lang;
 use std::path::{Path, PathBuf};
@@ -75,7 +75,7 @@ pub fn load(dir: &Path) -> Result<Loaded, String> {
 }
 
 fn load_file(path: &Path, source: ConfigSource) -> Result<Loaded, String> {
-    let (cfg, w) = ctopc_core::asix::load_config_file(path).map_err(|e| e.to_string())?;
+    let (cfg, w) = asix_model::load_config_file(path).map_err(|e| e.to_string())?;
     let (ns, dbw) = AsixNamespace::load(cfg);
     let warnings = w
         .iter()
@@ -100,7 +100,7 @@ pub fn embedded_demo() -> Result<Loaded, String> {
     warnings.extend(w2);
     let mut ns = AsixNamespace::new(cfg);
     ns.set_database(
-        ctopc_core::asix::BASIC_CHANNEL,
+        asix_model::BASIC_CHANNEL,
         ChannelDatabase::Loaded(Arc::new(db)),
     );
     Ok(Loaded {

@@ -5,7 +5,7 @@ use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
 use crate::runtime::{self, Runtime};
 use crate::{factory::ClassFactory, lifetime, server};
-use ctopc_core::asix::AsixNamespace;
+use asix_model::AsixNamespace;
 use ctopc_core::model::Engine;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::source::{Backend, Wake};

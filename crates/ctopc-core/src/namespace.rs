@@ -1,5 +1,5 @@
 //! The contract between the group/item model and whatever defines which items exist
-//! (the asix variable database and item-ID grammar in `asix`, or a test fake).
+//! (the asix variable database and item-ID grammar of crate `asix-model`, or a test fake).
 
 use crate::{OpcResult, Value, VarType};
 

@@ -32,7 +32,7 @@ use super::{OpcServer, OpcServer_Impl};
 use crate::interfaces::*;
 use crate::mem::{self, TaskMem};
 use crate::variant;
-use ctopc_core::asix::namespace::ItemAttributes;
+use asix_model::namespace::ItemAttributes;
 use ctopc_core::lang::Lang;
 use ctopc_core::model::ItemState;
 use ctopc_core::namespace::{EuInfo, ItemDef, Namespace};
@@ -79,9 +79,9 @@ pub trait AttributeSource {
     fn resolves(&self, item_id: &str) -> OpcResult<ItemDef>;
 }
 
-impl AttributeSource for ctopc_core::asix::AsixNamespace {
+impl AttributeSource for asix_model::AsixNamespace {
     fn resolve_with_attributes(&self, item_id: &str) -> OpcResult<(ItemDef, ItemAttributes)> {
-        ctopc_core::asix::AsixNamespace::resolve_with_attributes(self, item_id, "")
+        asix_model::AsixNamespace::resolve_with_attributes(self, item_id, "")
     }
     fn resolves(&self, item_id: &str) -> OpcResult<ItemDef> {
         Namespace::resolve(self, item_id, "")
@@ -549,7 +549,7 @@ mod tests {
                     low: 0.0,
                     high: 8.0,
                 },
-                limits: ctopc_core::asix::LimitProps {
+                limits: asix_model::LimitProps {
                     hihi: Some(7.5),
                     hi: Some(7.0),
                     lo: Some(1.0),

@@ -42,9 +42,9 @@ use super::format::{bar_values, format_value, percentage, value_as_f64, FormatSp
 use super::itemid::{parse_item_id, ItemId, Suffix, VarItem};
 use super::text::{parse_number, Warning};
 use super::vardb::{load_database_file, DbError, GroupNode, VarDatabase, Variable};
-use crate::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
-use crate::value::ArrayValue;
-use crate::{OpcError, OpcResult, Value, VarType};
+use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
+use ctopc_core::value::ArrayValue;
+use ctopc_core::{OpcError, OpcResult, Value, VarType};
 
 /// The database state of one channel.
 #[derive(Debug, Clone)]
@@ -85,7 +85,7 @@ pub struct LimitProps {
 
 impl LimitProps {
     fn of(var: &Variable) -> LimitProps {
-        let n = |l: &Option<crate::asix::vardb::Limit>| l.as_ref().and_then(|l| l.value());
+        let n = |l: &Option<crate::vardb::Limit>| l.as_ref().and_then(|l| l.value());
         LimitProps {
             hihi: n(&var.alarm_high),
             hi: n(&var.warn_high),

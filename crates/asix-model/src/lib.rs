@@ -1,6 +1,7 @@
 //! asix semantics: `ASIXConnect.ini` channels and options, the variable database
 //! (attribute table + variable-set tree), item identifiers, derived values, quality
-//! rules and the [`Namespace`](crate::namespace::Namespace) implementation.
+//! rules and the [`Namespace`](ctopc_core::namespace::Namespace) implementation, over the
+//! OPC DA model of `ctopc-core`.
 //!
 //! Everything here is pure; the only file access is in the thin `load_*` wrappers
 //! ([`load_config_file`], [`load_database_file`], [`AsixNamespace::load`]) around the
@@ -8,6 +9,7 @@
 //!
 //! User documentation: `asixconnect.ini.example` (configuration) and
 //! `docs/variable-database.md` (database format) at the repository root.
+#![forbid(unsafe_code)]
 
 pub mod address_space;
 pub mod config;
@@ -18,9 +20,6 @@ pub mod namespace;
 pub mod quality_rules;
 pub mod text;
 pub mod vardb;
-
-#[cfg(test)]
-mod demo_tests;
 
 pub use config::{
     load_config_file, parse_config, AsixConfig, ChannelOptions, ConfigError, ConfigErrorKind,
