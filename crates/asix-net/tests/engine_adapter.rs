@@ -368,6 +368,8 @@ fn the_network_backend_runs_from_a_plain_thread() {
     let ns = Arc::new(ns);
     let wake = Arc::new(CountingWake(AtomicU64::new(0)));
     let mut backend = asix_net::datasource::network_backend(ns.clone(), wake.clone()).unwrap();
+    // Real data: the server reports OPC_STATUS_RUNNING over the network backend.
+    assert!(!backend.is_simulation());
     let mut e = Engine::new(EngineConfig::default(), ns as Arc<dyn Namespace>);
     let session = e.open_session();
     let group = e
