@@ -369,7 +369,7 @@ mod tests {
             .unwrap();
         }
         std::fs::write(dir.join("ASIXConnect.ini"), ini_text()).unwrap();
-        let loaded = ctopc_core::asix::load_config_file(&dir.join("ASIXConnect.ini"));
+        let loaded = asix_model::load_config_file(&dir.join("ASIXConnect.ini"));
         let (cfg, warnings) = loaded.unwrap();
         assert!(warnings.is_empty(), "{warnings:?}");
         assert!(!cfg.server.simulate_current_data);
@@ -378,7 +378,7 @@ mod tests {
             (cfg.server.discovery_port, cfg.server.data_port),
             (Some(DISCOVERY_PORT), Some(DATA_PORT))
         );
-        let (ns, _) = ctopc_core::asix::AsixNamespace::load(cfg);
+        let (ns, _) = asix_model::AsixNamespace::load(cfg);
         assert_eq!(ns.no_config_reason(), None, "the demo database loads");
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -15,9 +15,8 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use asix_model::{AsixNamespace, BASIC_CHANNEL};
 use asix_net::inproc::InProcessSim;
-use ctopc_core::asix::vardb::{parse_attribute_table, parse_var_set};
-use ctopc_core::asix::{parse_config, AsixNamespace, ChannelDatabase, VarDatabase, BASIC_CHANNEL};
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, SyncOutcome,
 };
@@ -32,22 +31,17 @@ fn live() -> isize {
     s.bytes_allocated as isize - s.bytes_deallocated as isize
 }
 
-const TABLE: &[u8] = include_bytes!("../../../demo/wytwornia_kwasu/atrybuty.csv");
-const SET: &[u8] = include_bytes!("../../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
-const INI: &str = "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nCheckLimits = tak\nCheckControlVariables = tak\n";
 const MEMORY_ITEMS: usize = 80_000;
 const N: usize = 10_000;
 const RUNS: usize = 15;
 
-/// The embedded demo configuration of the server (crates/ctopc-com/src/context.rs).
+/// The embedded demo configuration of the server (`asix_model::embedded_demo`).
 fn demo_namespace() -> Arc<AsixNamespace> {
-    let (cfg, _) = parse_config(INI.as_bytes(), "<bench>").expect("ini");
-    let table = parse_attribute_table(TABLE, "atrybuty.csv").expect("table");
-    let (set, _) = parse_var_set(SET, "wytwornia_kwasu.zez").expect("set");
-    let (db, _) = VarDatabase::build(&table, Some(&set), None).expect("db");
-    let mut ns = AsixNamespace::new(cfg);
-    ns.set_database(BASIC_CHANNEL, ChannelDatabase::Loaded(Arc::new(db)));
-    Arc::new(ns)
+    Arc::new(
+        asix_model::embedded_demo()
+            .expect("the embedded demo")
+            .namespace,
+    )
 }
 
 /// The server's driver thread, in miniature (crates/ctopc-com/src/runtime.rs).

@@ -5,8 +5,8 @@ use std::collections::HashMap;
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
-use ctopc_core::asix::ini::split_list;
-use ctopc_core::asix::AsixConfig;
+use asix_model::ini::split_list;
+use asix_model::AsixConfig;
 
 use crate::proto::discovery::{Announce, Resource, ResourceKind};
 use crate::proto::DEFAULT_DISCOVERY_PORT;
@@ -194,7 +194,7 @@ mod tests {
     #[test]
     fn external_list_applies_only_when_no_server_is_named() {
         let mut cfg = ClientConfig::new("CLI.", "CLI");
-        let (config, _) = ctopc_core::asix::parse_config(
+        let (config, _) = asix_model::parse_config(
             b"[AsixCTServers]\nKANAL1 = S1, S2\n[AsixHTServers]\nARCH = S3\n[AsixALServers]\nAlarmy = S4\n",
             "ASIXConnect.ini",
         )

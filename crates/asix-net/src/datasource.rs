@@ -16,8 +16,8 @@ use std::collections::{btree_map, BTreeMap, HashMap};
 use std::sync::mpsc;
 use std::sync::Arc;
 
-use ctopc_core::asix::namespace::{AsixNamespace, Derivation};
-use ctopc_core::asix::{
+use asix_model::namespace::{AsixNamespace, Derivation};
+use asix_model::{
     apply_quality_rules_with, check_write_value, Limit, RuleOptions, ServerOptions,
     ServerSelection, Variable,
 };
@@ -231,7 +231,8 @@ type Touched = BTreeMap<Fan, Option<u32>>;
 
 struct Mapped {
     channel: Arc<str>,
-    r: Resolved,
+    /// Resolved once, when subscribed; reads and writes of the item reuse it.
+    r: Arc<Resolved>,
     rate: u32,
 }
 
@@ -250,7 +251,7 @@ enum Kind {
 struct Pending {
     kind: Kind,
     results: Vec<Option<Result<Vqt, OpcError>>>,
-    resolved: Vec<Option<Resolved>>,
+    resolved: Vec<Option<Arc<Resolved>>>,
     remaining: usize,
 }
 
@@ -420,7 +421,7 @@ impl<R: Resolver> AsixSource<R> {
     fn subscribe(&mut self, subs: Vec<(SourceItem, u32)>) {
         let mut touched = Touched::new();
         for (item, rate) in subs {
-            let Some(r) = self.resolver.resolve(&item) else {
+            let Some(r) = self.resolver.resolve(&item).map(Arc::new) else {
                 warn!(item = %item.item_id, "not an asix item");
                 continue;
             };
@@ -650,11 +651,21 @@ impl<R: Resolver> AsixSource<R> {
         }
     }
 
+    /// A source item's resolution: the one made when it was subscribed (the same key, so
+    /// the same item of the same generation), else resolved now (an item read or written
+    /// while nothing subscribes it).
+    fn resolved(&self, item: &SourceItem) -> Option<Arc<Resolved>> {
+        match self.items.get(&item.key) {
+            Some(m) if m.channel == item.channel => Some(Arc::clone(&m.r)),
+            _ => self.resolver.resolve(item).map(Arc::new),
+        }
+    }
+
     fn read(&mut self, req_id: SourceReqId, items: Vec<SourceItem>) {
         self.start_request(req_id, Kind::Read, items.len());
         let mut by_channel: BTreeMap<Arc<str>, (Vec<usize>, Vec<ItemKey>)> = BTreeMap::new();
         for (i, item) in items.iter().enumerate() {
-            match self.resolver.resolve(item) {
+            match self.resolved(item) {
                 Some(r) => {
                     let e = by_channel.entry(item.channel.clone()).or_default();
                     e.0.push(i);
@@ -704,7 +715,7 @@ impl<R: Resolver> AsixSource<R> {
         );
         let mut by_channel: BTreeMap<Arc<str>, Parts> = BTreeMap::new();
         for (i, (item, v)) in items.into_iter().enumerate() {
-            let Some(r) = self.resolver.resolve(&item) else {
+            let Some(r) = self.resolved(&item) else {
                 self.fill(req_id, i, Err(OpcError::ItemUnknown));
                 continue;
             };
@@ -721,7 +732,7 @@ impl<R: Resolver> AsixSource<R> {
             let e = by_channel.entry(item.channel.clone()).or_default();
             if v.quality.is_none() && v.timestamp.is_none() {
                 e.0.push(i);
-                e.1.push((r.key, v.value));
+                e.1.push((r.key.clone(), v.value));
             } else {
                 // Extended write: what the client left out is good quality, now.
                 e.2.push(i);
@@ -730,7 +741,7 @@ impl<R: Resolver> AsixSource<R> {
                     v.quality.unwrap_or(Quality::GOOD),
                     v.timestamp.unwrap_or(now),
                 );
-                e.3.push((r.key, vqt));
+                e.3.push((r.key.clone(), vqt));
             }
         }
         for (channel, (pos_simple, simple, pos_ext, ext)) in by_channel {

@@ -14,7 +14,7 @@
 //! delayed.
 
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
-use ctopc_core::asix::{
+use asix_model::{
     apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable,
 };
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
@@ -40,7 +40,7 @@ struct Resolved {
     live: Option<Live>,
 }
 
-/// The parts of a [`ctopc_core::asix::LiveItem`] the simulation uses.
+/// The parts of a [`asix_model::LiveItem`] the simulation uses.
 struct Live {
     derivation: Derivation,
     definition: Option<Variable>,

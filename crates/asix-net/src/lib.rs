@@ -9,7 +9,7 @@
 //!   (also the model of [`inproc`], the in-process simulation backend).
 //! - [`discovery`]: choosing a server from the announcements (ranking, variants).
 //! - [`naming`], [`config`]: the client's asix name, channel options and external server
-//!   lists (INI files are read by the core's reader, [`ctopc_core::asix::ini`]).
+//!   lists (INI files are read by the core's reader, [`asix_model::ini`]).
 #![forbid(unsafe_code)]
 
 pub mod client;

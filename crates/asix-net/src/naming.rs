@@ -1,6 +1,6 @@
 //! The client's name in the asix network.
 
-use ctopc_core::asix::ini::parse_ini_tolerant;
+use asix_model::ini::parse_ini_tolerant;
 use tracing::warn;
 
 /// The client's asix name (manual §3.6.1.1 and §6.3.1): `[ASLINK] Nazwa` from `aslink.ini`

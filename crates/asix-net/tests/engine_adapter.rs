@@ -9,12 +9,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use asix_model::namespace::AsixNamespace;
+use asix_model::{load_config_file, load_database_file, ServerOptions};
 use asix_net::client::wall_now;
 use asix_net::datasource::{client_config_from_server_options, AsixSource, NamespaceResolver};
 use asix_net::sim::plant::{channels_from_database, ACID_PLANT_CHANNEL};
 use common::*;
-use ctopc_core::asix::namespace::AsixNamespace;
-use ctopc_core::asix::{load_config_file, load_database_file, ServerOptions};
 use ctopc_core::model::{
     DataSource as ReadFrom, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition,
     SyncOutcome, SyncResult,
@@ -325,7 +325,7 @@ fn the_resolver_takes_the_external_server_lists_from_the_configuration() {
     use asix_net::{ClientConfig, ServerChoice};
     let ini = "[Channel:*]\n[Channel:Named]\nAsixServerName = S9\n\
         [AsixCTServers]\nKanal1 = S1, S2\n[AsixHTServers]\nARCH = S3\n";
-    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    let (config, warnings) = asix_model::parse_config(ini.as_bytes(), "test.ini").unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
     let (ns, _) = AsixNamespace::load(config);
     let r = NamespaceResolver::new(Arc::new(ns), ClientConfig::new("CLI.", "CLI"));
@@ -362,12 +362,14 @@ fn the_network_backend_runs_from_a_plain_thread() {
         sim.discovery_addr().port(),
         db.display()
     );
-    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    let (config, warnings) = asix_model::parse_config(ini.as_bytes(), "test.ini").unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
     let (ns, _) = AsixNamespace::load(config);
     let ns = Arc::new(ns);
     let wake = Arc::new(CountingWake(AtomicU64::new(0)));
     let mut backend = asix_net::datasource::network_backend(ns.clone(), wake.clone()).unwrap();
+    // Real data: the server reports OPC_STATUS_RUNNING over the network backend.
+    assert!(!backend.is_simulation());
     let mut e = Engine::new(EngineConfig::default(), ns as Arc<dyn Namespace>);
     let session = e.open_session();
     let group = e
@@ -452,7 +454,7 @@ async fn limits_setup(diagnostics: bool) -> (asix_net::sim::SimHandle, Driver) {
         "[Channel:*]\nItemsDatabase = {}\nCheckLimits = tak\nCheckControlVariables = tak\n",
         db_path.display()
     );
-    let (config, warnings) = ctopc_core::asix::parse_config(ini.as_bytes(), "test.ini").unwrap();
+    let (config, warnings) = asix_model::parse_config(ini.as_bytes(), "test.ini").unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
     let (ns, _) = AsixNamespace::load(config);
     let ns = Arc::new(ns);

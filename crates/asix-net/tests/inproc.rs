@@ -3,8 +3,8 @@
 //! derived items refuse writes; a slow device (`SimulationDeviceDelay`) answers late,
 //! the engine times it out at `SourceTimeout`, and Cancel2 beats it.
 
+use asix_model::{parse_config, AsixNamespace};
 use asix_net::inproc::InProcessSim;
-use ctopc_core::asix::{parse_config, AsixNamespace};
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition,
     SourceRequest, SyncOutcome, SyncResult,
@@ -194,6 +194,14 @@ fn device_write_reaches_the_plant_and_read_only_items_refuse() {
         }
     };
     assert_eq!(r[0].as_ref().unwrap().value.as_f64(), Some(12.5));
+}
+
+/// The server state comes from the backend (`Backend::is_simulation`): the in-process
+/// simulation is simulated data, OPC_STATUS_TEST.
+#[test]
+fn the_simulation_says_it_simulates() {
+    let s = InProcessSim::new(demo(), 1, Timestamp::from_unix_millis(1_700_000_000_000));
+    assert!(s.is_simulation());
 }
 
 // ---- a slow device: SimulationDeviceDelay and SourceTimeout ---------------------------

@@ -170,8 +170,7 @@ async fn external_server_list_applies_when_the_channel_names_no_server() {
         let b = sim("B").await;
         let mut cfg = client_cfg(&[a.discovery_addr(), b.discovery_addr()]);
         let ini = format!("[AsixCTServers]\n{CH} = B\n");
-        let (config, _) =
-            ctopc_core::asix::parse_config(ini.as_bytes(), "ASIXConnect.ini").unwrap();
+        let (config, _) = asix_model::parse_config(ini.as_bytes(), "ASIXConnect.ini").unwrap();
         cfg.external = ExternalServerLists::from_config(&config);
         let (c, mut ev) = client(cfg.clone());
         c.subscribe(vec![key("PIEC_TEMP")], 50);

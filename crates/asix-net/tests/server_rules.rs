@@ -270,7 +270,7 @@ async fn the_demo_database_is_served_by_channel() {
     bounded!(async {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
-        let (db, _) = ctopc_core::asix::load_database_file(&path, None).expect("demo database");
+        let (db, _) = asix_model::load_database_file(&path, None).expect("demo database");
         let a = sim_with("A", |c| {
             c.channels = channels_from_database(&db, ACID_PLANT_CHANNEL)
         })

@@ -1,13 +1,11 @@
 //! What ServerCTOPC.exe does for each switch: register, unregister, serve.
 
-use crate::context::{self, ConfigSource, Context};
+use crate::context::{self, Context, Setup};
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
 use crate::runtime::{self, Runtime};
 use crate::{factory::ClassFactory, lifetime, server};
-use ctopc_core::asix::AsixNamespace;
 use ctopc_core::model::Engine;
-use ctopc_core::namespace::Namespace;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
 use std::path::PathBuf;
@@ -124,14 +122,13 @@ pub fn unregister() -> windows::core::Result<()> {
     Ok(())
 }
 
-/// Makes the data source for a namespace (the server binary decides: the in-process
-/// simulation or the asix network client). Gets the waker to call when data arrives.
-pub type MakeBackend<'a> =
-    dyn FnOnce(&Arc<AsixNamespace>, Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
+/// Makes the data source (the server binary decides: the in-process simulation or the
+/// asix network client). Gets the waker to call when data arrives.
+pub type MakeBackend<'a> = dyn FnOnce(Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
 
 /// The default language: the configured one, else Polish on Polish Windows, else English.
-fn default_lang(ns: &AsixNamespace) -> Lang {
-    if let Some(l) = ns.config().server.default_language.fixed() {
+fn default_lang(configured: Option<Lang>) -> Lang {
+    if let Some(l) = configured {
         return l;
     }
     // SAFETY: no arguments; returns the user's UI language.
@@ -145,44 +142,41 @@ pub fn install_dir() -> Result<PathBuf, String> {
     Ok(exe.parent().map(PathBuf::from).unwrap_or_default())
 }
 
-/// Starts the runtime over a loaded configuration and installs the process context.
-pub fn start(
-    loaded: context::Loaded,
-    make_backend: Box<MakeBackend<'_>>,
-) -> Result<&'static Context, String> {
-    match &loaded.source {
-        ConfigSource::File(p) => tracing::info!("configuration: {}", p.display()),
-        ConfigSource::FromEnv(p) => tracing::info!("configuration: {} (from {})", p.display(), context::CONFIG_ENV),
-        ConfigSource::EmbeddedDemo => tracing::info!("configuration: none found next to the executable; running the embedded demo plant (simulated)"),
-    }
-    for w in &loaded.warnings {
-        tracing::warn!("{w}");
-    }
-    let ns = Arc::new(loaded.namespace);
-    let simulation = ns.config().server.simulate_current_data;
-    let (state, reason) = Context::state_for(&ns, simulation);
-    if let Some(r) = &reason {
+/// Starts the runtime over a configuration and installs the process context. The server
+/// state comes from the data source: a backend that simulates current data is
+/// OPC_STATUS_TEST.
+pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
+    let Setup {
+        namespace,
+        address_space,
+        engine_config,
+        default_language,
+        no_config_reason,
+    } = setup;
+    if let Some(r) = &no_config_reason {
         tracing::error!("OPC_STATUS_NOCONFIG: {r}");
     }
-    let engine_config = ns.config().server.engine_config();
     if engine_config.source_timeout_ms != ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS {
         tracing::info!(
             "data source timeout: {} ms (SourceTimeout)",
             engine_config.source_timeout_ms
         );
     }
-    let engine = Engine::new(engine_config, Arc::clone(&ns) as Arc<dyn Namespace>);
-    let ns_for_backend = Arc::clone(&ns);
-    let rt = Runtime::start(engine, move |wake| make_backend(&ns_for_backend, wake))?;
+    let engine = Engine::new(engine_config, Arc::clone(&namespace));
+    let mut simulation = false;
+    let rt = Runtime::start(engine, |wake| {
+        let backend = make_backend(wake)?;
+        simulation = backend.is_simulation();
+        Ok(backend)
+    })?;
     let rt = runtime::install(rt);
     let ctx = Context {
         runtime: rt,
-        address_space: Context::address_space_for(&ns),
-        default_lang: default_lang(&ns),
-        namespace: ns,
-        state,
-        no_config_reason: reason,
-        source: loaded.source,
+        address_space,
+        default_lang: default_lang(default_language),
+        namespace,
+        state: Context::state_for(no_config_reason.as_deref(), simulation),
+        no_config_reason,
     };
     context::install(ctx)
 }
@@ -201,11 +195,8 @@ unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
 /// `-Embedding`: start, register the class object for multiple use, serve until the last
 /// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
 /// stop every connected client first gets IOPCShutdown::ShutdownRequest.
-pub fn serve(
-    loaded: context::Loaded,
-    make_backend: Box<MakeBackend<'_>>,
-) -> windows::core::Result<()> {
-    serve_as(loaded, make_backend, ServeMode::UntilUnused)
+pub fn serve(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
+    serve_as(setup, make_backend, ServeMode::UntilUnused)
 }
 
 /// How long the server process serves.
@@ -219,7 +210,7 @@ pub enum ServeMode {
 
 /// Serves in the given mode (see [`serve`]).
 pub fn serve_as(
-    loaded: context::Loaded,
+    setup: Setup,
     make_backend: Box<MakeBackend<'_>>,
     mode: ServeMode,
 ) -> windows::core::Result<()> {
@@ -241,7 +232,7 @@ pub fn serve_as(
             None,
         )
     };
-    let ctx = start(loaded, make_backend).map_err(|e| {
+    let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
         crate::mem::error(E_FAIL, &e)
     })?;

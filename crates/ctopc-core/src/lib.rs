@@ -4,7 +4,6 @@
 //! The COM layer (`ctopc-com`) only translates between COM and this crate.
 #![forbid(unsafe_code)]
 
-pub mod asix;
 pub mod browse;
 pub mod convert;
 pub mod error;

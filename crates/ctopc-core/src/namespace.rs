@@ -1,5 +1,5 @@
 //! The contract between the group/item model and whatever defines which items exist
-//! (the asix variable database and item-ID grammar in `asix`, or a test fake).
+//! (the asix variable database and item-ID grammar of crate `asix-model`, or a test fake).
 
 use crate::{OpcResult, Value, VarType};
 
@@ -36,6 +36,34 @@ pub struct ItemDef {
     pub constant: Option<Value>,
 }
 
+/// Attribute values of an item for its OPC item properties (asix: from the variable
+/// database's attribute table).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ItemAttributes {
+    /// `Description` of the variable behind the item (Polish, the asix original).
+    pub description: Option<String>,
+    /// `DescriptionEn`, when given.
+    pub description_en: Option<String>,
+    /// EU units (value items: `Unit`; `PercentageCV`: `%`).
+    pub eu_units: Option<String>,
+    /// EU type with high/low EU (value items with a range; `PercentageCV`: 0..100).
+    pub eu: EuInfo,
+    /// The variable's numeric warning and alarm limits (value items only), the item
+    /// properties 307-310. A limit held in a variable (`KW_Lnnn`) is not a property: it is
+    /// read as the item `<var>.<Attr>.CV`.
+    pub limits: LimitProps,
+}
+
+/// The OPC limit properties: HiHi (307, `AlarmHigh`), Hi (308, `WarnHigh`), Lo (309,
+/// `WarnLow`) and LoLo (310, `AlarmLow`).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LimitProps {
+    pub hihi: Option<f64>,
+    pub hi: Option<f64>,
+    pub lo: Option<f64>,
+    pub lolo: Option<f64>,
+}
+
 /// Resolves (item ID, access path) to an item, or to OPC_E_INVALIDITEMID (bad syntax),
 /// OPC_E_UNKNOWNITEMID (no such item) or OPC_E_UNKNOWNPATH (no such access path).
 pub trait Namespace: Send + Sync {
@@ -47,5 +75,18 @@ pub trait Namespace: Send + Sync {
     /// (OPC_E_BADTYPE otherwise).
     fn check_write_value(&self, _value: &Value) -> OpcResult<()> {
         Ok(())
+    }
+
+    /// Resolves an item with the attribute values behind its OPC item properties
+    /// (descriptions, EU units, limits). The default has none.
+    fn resolve_with_attributes(
+        &self,
+        item_id: &str,
+        access_path: &str,
+    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+        Ok((
+            self.resolve(item_id, access_path)?,
+            ItemAttributes::default(),
+        ))
     }
 }

@@ -21,7 +21,7 @@ impl Namespace for NumericOnly {
         FakeNs.resolve(item_id, access_path)
     }
     fn check_write_value(&self, value: &Value) -> OpcResult<()> {
-        ctopc_core::asix::check_write_value(value)
+        asix_model::check_write_value(value)
     }
 }
 

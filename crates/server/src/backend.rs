@@ -2,8 +2,8 @@
 //! `SimulateCurrentData` is on (the embedded default; `SimulationDeviceDelay` makes its
 //! device answers late), else the asix network client.
 
+use asix_model::AsixNamespace;
 use asix_net::inproc::InProcessSim;
-use ctopc_core::asix::AsixNamespace;
 use ctopc_core::source::{Backend, Wake};
 use std::sync::Arc;
 

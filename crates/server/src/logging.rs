@@ -249,9 +249,9 @@ pub fn log_dir(install_dir: &Path, configured: Option<&str>) -> PathBuf {
 #[cfg(windows)]
 pub fn init(
     install_dir: &Path,
-    opts: &ctopc_core::asix::ServerOptions,
+    opts: &asix_model::ServerOptions,
 ) -> Option<tracing_appender::non_blocking::WorkerGuard> {
-    use ctopc_core::asix::LogLevel;
+    use asix_model::LogLevel;
     let dir = log_dir(install_dir, opts.log_directory.as_deref());
     let max = u64::from(opts.log_max_file_size_mb) * 1024 * 1024;
     let files = match LogFiles::new(

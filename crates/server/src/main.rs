@@ -1,7 +1,10 @@
-//! ServerCTOPC.exe: thin shell. Parse the switch, set up logging, then hand over to the
-//! COM layer (`ctopc_com::host`).
+//! ServerCTOPC.exe: thin shell. Parse the switch, load the configuration (`config`), set
+//! up logging, choose the data source (`backend`), then hand over to the COM layer
+//! (`ctopc_com::host`) with the namespace and plain values.
 
 mod cli;
+#[cfg_attr(not(windows), allow(dead_code))]
+mod config;
 mod logging;
 
 use std::process::ExitCode;
@@ -60,9 +63,10 @@ fn run(cmd: cli::Command) -> ExitCode {
 /// `-Embedding` (and the service): configuration, then logging as configured, then serve.
 #[cfg(windows)]
 fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
-    use ctopc_com::{context, host};
-    let loaded = host::install_dir().and_then(|dir| context::load(&dir).map(|l| (dir, l)));
-    let (dir, loaded) = match loaded {
+    use ctopc_com::host;
+    use std::sync::Arc;
+    let loaded = host::install_dir().and_then(|dir| config::load(&dir).map(|l| (dir, l)));
+    let (dir, (source, loaded)) = match loaded {
         Ok(x) => x,
         Err(e) => {
             // No log directory is known yet: stderr, and the log folder of the install dir.
@@ -83,7 +87,15 @@ fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
         .map(|d| config.resolve_path(d).to_string_lossy().into_owned());
     let _guard = logging::init(&dir, &log_options);
     tracing::info!(version = env!("CARGO_PKG_VERSION"), "ServerCTOPC starting");
-    match host::serve_as(loaded, Box::new(backend::make), mode) {
+    tracing::info!("{}", source.log_line());
+    for w in &loaded.warnings {
+        tracing::warn!("{w}");
+    }
+    let ns = Arc::new(loaded.namespace);
+    let setup = setup(&ns);
+    let make_backend =
+        Box::new(move |wake: Arc<dyn ctopc_core::source::Wake>| backend::make(&ns, wake));
+    match host::serve_as(setup, make_backend, mode) {
         Ok(()) => {
             tracing::info!("ServerCTOPC stopped");
             ExitCode::SUCCESS
@@ -92,6 +104,29 @@ fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
             tracing::error!("ServerCTOPC failed: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// What the COM host needs of the asix namespace, as plain values and the core's
+/// `Namespace` trait.
+#[cfg(windows)]
+fn setup(ns: &std::sync::Arc<asix_model::AsixNamespace>) -> ctopc_com::context::Setup {
+    use ctopc_core::browse::AddressSpace;
+    use std::sync::Arc;
+    let address_space = match asix_model::address_space::build_address_space(ns) {
+        Ok(a) => a,
+        Err(e) => {
+            tracing::error!("cannot build the browse tree: {e:?}; browsing shows an empty tree");
+            AddressSpace::empty()
+        }
+    };
+    let server = &ns.config().server;
+    ctopc_com::context::Setup {
+        namespace: Arc::clone(ns) as Arc<dyn ctopc_core::namespace::Namespace>,
+        address_space: Arc::new(address_space),
+        engine_config: server.engine_config(),
+        default_language: server.default_language.fixed(),
+        no_config_reason: ns.no_config_reason(),
     }
 }
 

@@ -126,9 +126,8 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
             }
             "--demo-db" => {
                 let f = val()?;
-                let (db, warnings) =
-                    ctopc_core::asix::load_database_file(std::path::Path::new(&f), None)
-                        .map_err(|e| e.to_string())?;
+                let (db, warnings) = asix_model::load_database_file(std::path::Path::new(&f), None)
+                    .map_err(|e| e.to_string())?;
                 for w in warnings {
                     eprintln!("asix-sim: {w}");
                 }

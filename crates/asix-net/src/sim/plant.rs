@@ -162,7 +162,7 @@ impl Behaviour {
 /// the database says (0..100 without a range), behaviours guessed from the `Alias` tag;
 /// control variables hold 0 (healthy) until written or forced.
 pub fn channels_from_database(
-    db: &ctopc_core::asix::VarDatabase,
+    db: &asix_model::VarDatabase,
     default_channel: &str,
 ) -> Vec<ChannelDef> {
     let controls: std::collections::HashSet<&str> = db
@@ -1036,7 +1036,7 @@ mod tests {
     fn the_demo_database_becomes_a_plant_by_channel() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
-        let Ok((db, _)) = ctopc_core::asix::load_database_file(&path, None) else {
+        let Ok((db, _)) = asix_model::load_database_file(&path, None) else {
             panic!("demo database at {}", path.display());
         };
         let chs = channels_from_database(&db, ACID_PLANT_CHANNEL);

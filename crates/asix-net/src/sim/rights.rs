@@ -14,9 +14,9 @@
 
 use std::collections::{HashMap, HashSet};
 
-use ctopc_core::asix::ini::{parse_ini_tolerant, split_list};
-use ctopc_core::asix::text::parse_bool;
-use ctopc_core::asix::Warning;
+use asix_model::ini::{parse_ini_tolerant, split_list};
+use asix_model::text::parse_bool;
+use asix_model::Warning;
 
 /// Why a write is refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -32,10 +32,9 @@ use crate::abi::{
 };
 use crate::interfaces::*;
 use crate::variant;
-use ctopc_core::asix::namespace::ItemAttributes;
 use ctopc_core::lang::Lang;
 use ctopc_core::model::ItemState;
-use ctopc_core::namespace::{EuInfo, ItemDef, Namespace};
+use ctopc_core::namespace::{EuInfo, ItemAttributes, ItemDef, Namespace};
 use ctopc_core::properties::{self as p, require_property};
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{OpcError, OpcResult, Value, VarType};
@@ -79,12 +78,12 @@ pub trait AttributeSource {
     fn resolves(&self, item_id: &str) -> OpcResult<ItemDef>;
 }
 
-impl AttributeSource for ctopc_core::asix::AsixNamespace {
+impl AttributeSource for std::sync::Arc<dyn Namespace> {
     fn resolve_with_attributes(&self, item_id: &str) -> OpcResult<(ItemDef, ItemAttributes)> {
-        ctopc_core::asix::AsixNamespace::resolve_with_attributes(self, item_id, "")
+        Namespace::resolve_with_attributes(&**self, item_id, "")
     }
     fn resolves(&self, item_id: &str) -> OpcResult<ItemDef> {
-        Namespace::resolve(self, item_id, "")
+        Namespace::resolve(&**self, item_id, "")
     }
 }
 
@@ -379,7 +378,7 @@ impl OpcServer {
     /// The context for property lookups in this session.
     pub(super) fn props_ctx(&self) -> Ctx<'_> {
         Ctx {
-            ns: &*self.ctx.namespace,
+            ns: &self.ctx.namespace,
             lang: self.lang(),
             scan_rate_ms: self.scan_rate_ms(),
         }
@@ -551,7 +550,7 @@ mod tests {
                     low: 0.0,
                     high: 8.0,
                 },
-                limits: ctopc_core::asix::LimitProps {
+                limits: ctopc_core::namespace::LimitProps {
                     hihi: Some(7.5),
                     hi: Some(7.0),
                     lo: Some(1.0),

@@ -25,7 +25,7 @@
 use super::config::ChannelOptions;
 use super::format::value_as_f64;
 use super::vardb::Variable;
-use crate::{OpcError, OpcResult, Quality, Value};
+use ctopc_core::{OpcError, OpcResult, Quality, Value};
 
 /// The switches of the rules (from the item's channel).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -154,9 +154,9 @@ pub fn check_write_value(value: &Value) -> OpcResult<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::asix::vardb::Limit;
-    use crate::value::ArrayValue;
-    use crate::VarType;
+    use crate::vardb::Limit;
+    use ctopc_core::value::ArrayValue;
+    use ctopc_core::VarType;
 
     fn var(
         wl: Option<Limit>,
@@ -483,8 +483,8 @@ mod tests {
 #[cfg(test)]
 mod variable_limit_tests {
     use super::*;
-    use crate::asix::vardb::{Limit, Variable};
-    use crate::VarType;
+    use crate::vardb::{Limit, Variable};
+    use ctopc_core::VarType;
 
     fn var_with_alarm_high_variable() -> Variable {
         Variable {

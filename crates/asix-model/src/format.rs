@@ -25,7 +25,7 @@
 //! shortest form that reads back to the same number (`21.5`, `0.1`).
 //! Non-finite reals print as `nan`/`inf`/`-inf` (`NAN`/`INF` for F, E, G).
 
-use crate::Value;
+use ctopc_core::Value;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Conv {

@@ -34,7 +34,7 @@
 
 use std::fmt;
 
-use crate::{OpcError, OpcResult, VarType};
+use ctopc_core::{OpcError, OpcResult, VarType};
 
 /// The type code of a descriptive ID.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -4,14 +4,16 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use super::config::{load_config_file, parse_config, AsixConfig, CHANNEL_OPTIONS, SERVER_OPTIONS};
-use super::namespace::{AsixNamespace, BrowseNode, ChannelDatabase, Derivation, LimitProps};
-use super::quality_rules::{apply_quality_rules, RuleOptions};
-use super::text::decode_windows_1250;
-use super::vardb::{load_database_file, parse_attribute_table, Limit, VarDatabase};
-use crate::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
-use crate::value::ArrayValue;
-use crate::{OpcError, Quality, Value, VarType};
+use asix_model::config::{
+    load_config_file, parse_config, AsixConfig, CHANNEL_OPTIONS, SERVER_OPTIONS,
+};
+use asix_model::namespace::{AsixNamespace, BrowseNode, ChannelDatabase, Derivation, LimitProps};
+use asix_model::quality_rules::{apply_quality_rules, RuleOptions};
+use asix_model::text::decode_windows_1250;
+use asix_model::vardb::{load_database_file, parse_attribute_table, Limit, VarDatabase};
+use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
+use ctopc_core::value::ArrayValue;
+use ctopc_core::{OpcError, Quality, Value, VarType};
 
 fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -90,7 +92,7 @@ fn demo_database_loads_cleanly() {
             "Diagnostyka"
         ]
     );
-    fn count(g: &super::vardb::GroupNode) -> usize {
+    fn count(g: &asix_model::vardb::GroupNode) -> usize {
         g.variables.len() + g.groups.iter().map(count).sum::<usize>()
     }
     assert_eq!(count(&db.root), db.variables.len());

@@ -34,7 +34,7 @@ use std::path::{Path, PathBuf};
 
 use super::ini::{parse_ini, split_list, IniEntry, IniSection};
 use super::text::{parse_bool, Warning};
-use crate::{OpcError, OpcResult};
+use ctopc_core::{OpcError, OpcResult};
 
 /// The name of the basic channel.
 pub const BASIC_CHANNEL: &str = "*";
@@ -89,11 +89,11 @@ pub enum DefaultLanguage {
 
 impl DefaultLanguage {
     /// The configured language, or `None` for [`DefaultLanguage::System`] (the caller
-    /// then asks Windows, see [`Lang::default_for_system`](crate::Lang::default_for_system)).
-    pub const fn fixed(self) -> Option<crate::Lang> {
+    /// then asks Windows, see [`Lang::default_for_system`](ctopc_core::Lang::default_for_system)).
+    pub const fn fixed(self) -> Option<ctopc_core::Lang> {
         match self {
-            DefaultLanguage::Polish => Some(crate::Lang::Polish),
-            DefaultLanguage::English => Some(crate::Lang::English),
+            DefaultLanguage::Polish => Some(ctopc_core::Lang::Polish),
+            DefaultLanguage::English => Some(ctopc_core::Lang::English),
             DefaultLanguage::System => None,
         }
     }
@@ -130,8 +130,8 @@ pub struct ServerOptions {
     pub log_max_file_size_mb: u32,
     /// `LogKeepFiles` (default 30): older log files beyond this count are deleted.
     pub log_keep_files: u32,
-    /// `SourceTimeout`, ms (default [`crate::model::DEFAULT_SOURCE_TIMEOUT_MS`],
-    /// 100..=600000; the engine's [`crate::model::EngineConfig::source_timeout_ms`]): how
+    /// `SourceTimeout`, ms (default [`ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS`],
+    /// 100..=600000; the engine's [`ctopc_core::model::EngineConfig::source_timeout_ms`]): how
     /// long the server waits for the data source to answer a device read or write before
     /// failing its items with ASKOM_E_NetAnswerTimeout.
     pub source_timeout_ms: u32,
@@ -149,12 +149,12 @@ const MAX_SIMULATION_DEVICE_DELAY_MS: u32 = 600_000;
 impl ServerOptions {
     /// The engine's configuration these options imply (`MinUpdateRate`, `SourceTimeout`;
     /// subscription callbacks paced by their delivery; the rest at the engine's defaults).
-    pub fn engine_config(&self) -> crate::model::EngineConfig {
-        crate::model::EngineConfig {
+    pub fn engine_config(&self) -> ctopc_core::model::EngineConfig {
+        ctopc_core::model::EngineConfig {
             min_update_rate_ms: self.min_update_rate_ms,
             source_timeout_ms: self.source_timeout_ms,
-            max_pending_data_changes: crate::model::SERVER_PENDING_DATA_CHANGES,
-            ..crate::model::EngineConfig::default()
+            max_pending_data_changes: ctopc_core::model::SERVER_PENDING_DATA_CHANGES,
+            ..ctopc_core::model::EngineConfig::default()
         }
     }
 }
@@ -185,7 +185,7 @@ impl Default for ServerOptions {
             log_level: LogLevel::Info,
             log_max_file_size_mb: 10,
             log_keep_files: 30,
-            source_timeout_ms: crate::model::DEFAULT_SOURCE_TIMEOUT_MS,
+            source_timeout_ms: ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS,
             simulation_device_delay_ms: 0,
         }
     }
@@ -731,7 +731,7 @@ mod tests {
         assert!(!c.server.attributes_as_items);
         assert_eq!(
             c.server.source_timeout_ms,
-            crate::model::DEFAULT_SOURCE_TIMEOUT_MS
+            ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS
         );
         assert_eq!(c.server.simulation_device_delay_ms, 0);
         assert_eq!(c.channels.len(), 1);
@@ -884,7 +884,7 @@ mod tests {
                 o.source_timeout_ms == 600_000
             }),
             ("SourceTimeout", "", |o| {
-                o.source_timeout_ms == crate::model::DEFAULT_SOURCE_TIMEOUT_MS
+                o.source_timeout_ms == ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS
             }),
             ("SimulationDeviceDelay", "1500", |o| {
                 o.simulation_device_delay_ms == 1500
@@ -904,8 +904,14 @@ mod tests {
             assert!(w.is_empty(), "{w:?}");
             assert!(check(&c.server), "{key} = {value}");
         }
-        assert_eq!(DefaultLanguage::Polish.fixed(), Some(crate::Lang::Polish));
-        assert_eq!(DefaultLanguage::English.fixed(), Some(crate::Lang::English));
+        assert_eq!(
+            DefaultLanguage::Polish.fixed(),
+            Some(ctopc_core::Lang::Polish)
+        );
+        assert_eq!(
+            DefaultLanguage::English.fixed(),
+            Some(ctopc_core::Lang::English)
+        );
         assert_eq!(DefaultLanguage::System.fixed(), None);
         for (key, value) in [
             ("AttributesAsItems", "ja"),
@@ -928,7 +934,7 @@ mod tests {
 
     #[test]
     fn server_options_reach_the_engine_config() {
-        use crate::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
+        use ctopc_core::model::{EngineConfig, DEFAULT_SOURCE_TIMEOUT_MS};
         let (c, _) = parse("").unwrap();
         assert_eq!(
             c.server.engine_config(),
@@ -949,8 +955,8 @@ mod tests {
             EngineConfig::default().max_transactions_per_group
         );
         // The engine keeps it.
-        let ns = std::sync::Arc::new(crate::asix::AsixNamespace::new(c));
-        let engine = crate::model::Engine::new(e, ns);
+        let ns = std::sync::Arc::new(crate::AsixNamespace::new(c));
+        let engine = ctopc_core::model::Engine::new(e, ns);
         assert_eq!(engine.config().source_timeout_ms, 1000);
     }
 

@@ -1,13 +1,16 @@
 //! asix semantics: `ASIXConnect.ini` channels and options, the variable database
 //! (attribute table + variable-set tree), item identifiers, derived values, quality
-//! rules and the [`Namespace`](crate::namespace::Namespace) implementation.
+//! rules and the [`Namespace`](ctopc_core::namespace::Namespace) implementation, over the
+//! OPC DA model of `ctopc-core`.
 //!
 //! Everything here is pure; the only file access is in the thin `load_*` wrappers
-//! ([`load_config_file`], [`load_database_file`], [`AsixNamespace::load`]) around the
-//! `parse_*` functions that hold the logic.
+//! ([`load_config_file`], [`load_database_file`], [`AsixNamespace::load`],
+//! [`startup::load_file`]) around the `parse_*` functions that hold the logic.
+//! [`startup`] assembles what a server starts with, the embedded demo included.
 //!
 //! User documentation: `asixconnect.ini.example` (configuration) and
 //! `docs/variable-database.md` (database format) at the repository root.
+#![forbid(unsafe_code)]
 
 pub mod address_space;
 pub mod config;
@@ -16,11 +19,9 @@ pub mod ini;
 pub mod itemid;
 pub mod namespace;
 pub mod quality_rules;
+pub mod startup;
 pub mod text;
 pub mod vardb;
-
-#[cfg(test)]
-mod demo_tests;
 
 pub use config::{
     load_config_file, parse_config, AsixConfig, ChannelOptions, ConfigError, ConfigErrorKind,
@@ -34,5 +35,6 @@ pub use namespace::{
 pub use quality_rules::{
     apply_quality_rules, apply_quality_rules_with, check_write_value, RuleOptions,
 };
+pub use startup::{embedded_demo, Loaded};
 pub use text::Warning;
 pub use vardb::{load_database_file, DbError, Limit, VarDatabase, Variable};

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use super::format::FormatSpec;
 use super::text::{decode_text, parse_bool, parse_number, Warning};
-use crate::{OpcError, VarType};
+use ctopc_core::{OpcError, VarType};
 
 /// A database that cannot be used: `code` is `ASKOM_E_VarBaseNotFound` (a file is missing)
 /// or `ASKOM_E_ErrorDuringOpeningVarBase` (unreadable or invalid).

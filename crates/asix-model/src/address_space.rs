@@ -3,7 +3,7 @@
 //! as branches that are also items, with attribute leaves).
 
 use super::namespace::AsixNamespace;
-use crate::browse::{AddressSpace, BuildError, NodeId};
+use ctopc_core::browse::{AddressSpace, BuildError, NodeId};
 use std::collections::HashMap;
 
 /// Separator of the item IDs given to group branches (groups are not items; the ID only
@@ -41,8 +41,8 @@ pub fn build_address_space(ns: &AsixNamespace) -> Result<AddressSpace, BuildErro
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::asix::{parse_config, ChannelDatabase};
-    use crate::browse::{BrowseCursor, BrowseDirection, BrowseType};
+    use crate::{parse_config, ChannelDatabase};
+    use ctopc_core::browse::{BrowseCursor, BrowseDirection, BrowseType};
     use std::sync::Arc;
 
     fn demo(attributes_as_items: bool) -> AsixNamespace {

@@ -42,9 +42,10 @@ use super::format::{bar_values, format_value, percentage, value_as_f64, FormatSp
 use super::itemid::{parse_item_id, ItemId, Suffix, VarItem};
 use super::text::{parse_number, Warning};
 use super::vardb::{load_database_file, DbError, GroupNode, VarDatabase, Variable};
-use crate::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
-use crate::value::ArrayValue;
-use crate::{OpcError, OpcResult, Value, VarType};
+use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
+pub use ctopc_core::namespace::{ItemAttributes, LimitProps};
+use ctopc_core::value::ArrayValue;
+use ctopc_core::{OpcError, OpcResult, Value, VarType};
 
 /// The database state of one channel.
 #[derive(Debug, Clone)]
@@ -56,42 +57,14 @@ pub enum ChannelDatabase {
     Failed(DbError),
 }
 
-/// Attribute values of an item for its OPC item properties.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct ItemAttributes {
-    /// `Description` of the variable behind the item (Polish, the asix original).
-    pub description: Option<String>,
-    /// `DescriptionEn`, when given.
-    pub description_en: Option<String>,
-    /// EU units (value items: `Unit`; `PercentageCV`: `%`).
-    pub eu_units: Option<String>,
-    /// EU type with high/low EU (value items with a range; `PercentageCV`: 0..100).
-    pub eu: EuInfo,
-    /// The variable's numeric warning and alarm limits (value items only), the item
-    /// properties 307-310. A limit held in a variable (`KW_Lnnn`) is not a property: it is
-    /// read as the item `<var>.<Attr>.CV`.
-    pub limits: LimitProps,
-}
-
-/// The OPC limit properties: HiHi (307, `AlarmHigh`), Hi (308, `WarnHigh`), Lo (309,
-/// `WarnLow`) and LoLo (310, `AlarmLow`).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct LimitProps {
-    pub hihi: Option<f64>,
-    pub hi: Option<f64>,
-    pub lo: Option<f64>,
-    pub lolo: Option<f64>,
-}
-
-impl LimitProps {
-    fn of(var: &Variable) -> LimitProps {
-        let n = |l: &Option<crate::asix::vardb::Limit>| l.as_ref().and_then(|l| l.value());
-        LimitProps {
-            hihi: n(&var.alarm_high),
-            hi: n(&var.warn_high),
-            lo: n(&var.warn_low),
-            lolo: n(&var.alarm_low),
-        }
+/// The variable's limits as the OPC limit properties 307-310.
+fn limit_props(var: &Variable) -> LimitProps {
+    let n = |l: &Option<crate::vardb::Limit>| l.as_ref().and_then(|l| l.value());
+    LimitProps {
+        hihi: n(&var.alarm_high),
+        hi: n(&var.warn_high),
+        lo: n(&var.warn_low),
+        lolo: n(&var.alarm_low),
     }
 }
 
@@ -480,7 +453,7 @@ impl Ctx<'_> {
                 let eu = range.map_or(EuInfo::None, |(low, high)| EuInfo::Analog { low, high });
                 attrs.eu_units = (!var.unit.is_empty()).then(|| var.unit.clone());
                 attrs.eu = eu.clone();
-                attrs.limits = LimitProps::of(var);
+                attrs.limits = limit_props(var);
                 let rights = if var.writable {
                     OPC_READABLE | OPC_WRITEABLE
                 } else {
@@ -575,6 +548,14 @@ impl Namespace for AsixNamespace {
     fn resolve(&self, item_id: &str, access_path: &str) -> OpcResult<ItemDef> {
         self.resolve_with_attributes(item_id, access_path)
             .map(|(def, _)| def)
+    }
+
+    fn resolve_with_attributes(
+        &self,
+        item_id: &str,
+        access_path: &str,
+    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+        AsixNamespace::resolve_with_attributes(self, item_id, access_path)
     }
 
     /// AsixConnect §5: values written must be integer or real.
