@@ -8,7 +8,7 @@
 //!
 //! All process setup is here, in [`start`]: the thread joins the multithreaded apartment,
 //! and the server's runtime and context are started once per test process over the
-//! embedded demo plant (`context::embedded_demo()`) with the in-process simulation the
+//! embedded demo plant (`asix_model::embedded_demo()`) with the in-process simulation the
 //! binary uses (`asix_net::inproc::InProcessSim`, as `crates/server/src/backend.rs`), the
 //! way `host::start` does it for `ServerCTOPC.exe`. Each test then makes its own server
 //! object **through the class factory** ([`new_server`], [`server`]) and QueryInterfaces
@@ -85,11 +85,24 @@ static STARTED: OnceLock<Result<(), String>> = OnceLock::new();
 pub fn start() {
     join_mta();
     let started = STARTED.get_or_init(|| {
-        let loaded = context::embedded_demo()?;
+        let loaded = asix_model::embedded_demo()?;
+        let ns = Arc::new(loaded.namespace);
+        // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
+        let server = &ns.config().server;
+        let setup = context::Setup {
+            namespace: Arc::clone(&ns) as Arc<dyn ctopc_core::namespace::Namespace>,
+            address_space: Arc::new(
+                asix_model::address_space::build_address_space(&ns)
+                    .map_err(|e| format!("{e:?}"))?,
+            ),
+            engine_config: server.engine_config(),
+            default_language: server.default_language.fixed(),
+            no_config_reason: ns.no_config_reason(),
+        };
         host::start(
-            loaded,
-            Box::new(|ns, _wake| {
-                let sim = InProcessSim::new(Arc::clone(ns), SIM_SEED, mem::now());
+            setup,
+            Box::new(move |_wake| {
+                let sim = InProcessSim::new(Arc::clone(&ns), SIM_SEED, mem::now());
                 Ok(Box::new(sim) as Box<dyn Backend>)
             }),
         )
