@@ -7,6 +7,7 @@
 pub mod asix;
 pub mod browse;
 pub mod convert;
+pub mod driver;
 pub mod error;
 pub mod lang;
 pub mod model;
