@@ -3,7 +3,7 @@
 use crate::context::{self, ConfigSource, Context};
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
-use crate::runtime::{self, Runtime};
+use crate::runtime::Runtime;
 use crate::{factory::ClassFactory, lifetime, server};
 use ctopc_core::asix::AsixNamespace;
 use ctopc_core::model::Engine;
@@ -174,7 +174,6 @@ pub fn start(
     let engine = Engine::new(engine_config, Arc::clone(&ns) as Arc<dyn Namespace>);
     let ns_for_backend = Arc::clone(&ns);
     let rt = Runtime::start(engine, move |wake| make_backend(&ns_for_backend, wake))?;
-    let rt = runtime::install(rt);
     let ctx = Context {
         runtime: rt,
         address_space: Context::address_space_for(&ns),
