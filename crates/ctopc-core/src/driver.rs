@@ -77,10 +77,12 @@ pub fn dispatch(events: Vec<Event>, out: &mut impl Deliver) -> Vec<Report> {
     not_queued
 }
 
-/// The engine and its data source, driven together.
+/// The engine and its data source, driven together. The engine is open to the COM
+/// objects (one call per COM method, under the runtime's lock); the source is reached only
+/// through [`Driver::step`].
 pub struct Driver {
     pub engine: Engine,
-    pub source: Box<dyn Backend>,
+    source: Box<dyn Backend>,
 }
 
 impl Driver {
