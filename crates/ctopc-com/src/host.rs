@@ -3,7 +3,7 @@
 use crate::context::{self, Context, Setup};
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::registry::{self, Category, ServerRegistration};
-use crate::runtime::{self, Runtime};
+use crate::runtime::Runtime;
 use crate::{factory::ClassFactory, lifetime, server};
 use ctopc_core::model::Engine;
 use ctopc_core::source::{Backend, Wake};
@@ -169,7 +169,6 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<&'stati
         simulation = backend.is_simulation();
         Ok(backend)
     })?;
-    let rt = runtime::install(rt);
     let ctx = Context {
         runtime: rt,
         address_space,

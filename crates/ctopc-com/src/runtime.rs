@@ -2,18 +2,27 @@
 //! source, one driver thread that runs the scheduler and moves data between them, and one
 //! callback worker per client so that a slow or dead client never stalls another.
 //!
-//! Locks: `state` (engine + source) is held only for short, non-blocking sections; no
-//! client is ever called while it is held. Callbacks are queued to the client's worker,
+//! The step itself and the pacing bookkeeping are pure and tested natively
+//! (`ctopc_core::driver`); this module owns the threads, condvars, worker queues and the
+//! VARIANT marshalling of the callbacks.
+//!
+//! Locks: `driver` (engine + source) is held only for short, non-blocking sections; no
+//! client is ever called while it is held, and no callback worker ever waits for it
+//! (workers report back through `reports`). Callbacks are queued to the client's worker,
 //! which re-checks the sink before calling it. Subscription callbacks are paced by their
 //! delivery (at most two per group under way; see `EngineConfig::max_pending_data_changes`),
 //! so a slow or hung client costs the server two pending updates per group, not a backlog.
+//! Lock order: `driver` before `sinks` (the driver checks a lost sink under the engine
+//! lock); `sinks` and `workers` are never held while waiting for `driver`.
 
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
 use crate::{connpoint::SinkSlot, mem, variant};
+use ctopc_core::driver::{self, Deliver, Driver, Report};
 use ctopc_core::model::{Engine, Event, GroupHandle, SessionHandle};
-use ctopc_core::source::{Backend, SourceOutput, Wake};
+use ctopc_core::source::{Backend, Wake};
 use ctopc_core::{OpcError, Timestamp};
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
 use std::time::Duration;
@@ -29,57 +38,6 @@ pub struct Mta<T>(pub T);
 unsafe impl<T> Send for Mta<T> {}
 // SAFETY: as above.
 unsafe impl<T> Sync for Mta<T> {}
-
-pub struct State {
-    pub engine: Engine,
-    pub source: Box<dyn Backend>,
-    stop: bool,
-}
-
-impl State {
-    /// Moves everything the source has ready into the engine.
-    fn pull_source(&mut self, now: Timestamp) {
-        let mut out = SourceOutput::default();
-        self.source.poll(now, &mut out);
-        if !out.updates.is_empty() {
-            self.engine.handle_source_updates(now, out.updates);
-        }
-        for (id, results) in out.read_results {
-            self.engine.handle_source_read_result(now, id, results);
-        }
-        for (id, results) in out.write_results {
-            self.engine.handle_source_write_result(now, id, results);
-        }
-    }
-
-    /// One step of the driver: source in, timers, requests out, source in again (an
-    /// in-process source answers at once). Returns the events to deliver and when to run next.
-    fn step(&mut self, now: Timestamp) -> (Vec<Event>, Option<Timestamp>) {
-        self.pull_source(now);
-        if self.engine.poll_timeout().is_some_and(|t| t <= now) {
-            self.engine.handle_timeout(now);
-        }
-        let mut asked = false;
-        while let Some(req) = self.engine.poll_source_request() {
-            self.source.request(now, req);
-            asked = true;
-        }
-        if asked {
-            self.pull_source(now);
-        }
-        // Synchronous callers wait on `Runtime::stepped` and take their own results.
-        while self.engine.poll_sync_completion().is_some() {}
-        let mut events = Vec::new();
-        while let Some(e) = self.engine.poll_event() {
-            events.push(e);
-        }
-        let next = match (self.engine.poll_timeout(), self.source.poll_timeout()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        };
-        (events, next)
-    }
-}
 
 #[derive(Default)]
 struct Signal {
@@ -139,18 +97,24 @@ impl Worker {
     }
 }
 
-/// Process-wide runtime (one per server process).
+/// The server's runtime (one per server process).
 pub struct Runtime {
-    state: Mutex<State>,
-    /// Notified after every driver step, for synchronous calls waiting on the source.
+    /// Itself, for the jobs queued to the workers (which must not keep it alive).
+    me: Weak<Runtime>,
+    driver: Mutex<Driver>,
+    /// Set by `shutdown`: the driver thread exits at its next wake-up.
+    stop: AtomicBool,
+    /// Notified after a driver step in which a synchronous operation completed, for the
+    /// synchronous calls waiting on the source (each then takes its own result).
     stepped: Condvar,
     signal: Arc<Signal>,
     sinks: Mutex<HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>>,
     shutdown_sinks: Mutex<HashMap<SessionHandle, Arc<SinkSlot<IOPCShutdown>>>>,
     workers: Mutex<HashMap<SessionHandle, Worker>>,
-    /// Groups whose scheduled OnDataChange finished delivering, for the driver to tell the
-    /// engine (a worker never waits for the engine's lock: it goes on with its next call).
-    delivered: Mutex<Vec<GroupHandle>>,
+    /// What the workers report (a scheduled OnDataChange ended, a sink was lost), for the
+    /// driver to tell the engine at its next step: a worker never waits for the engine's
+    /// lock, it goes on with its next call.
+    reports: Mutex<Vec<Report>>,
     pub start_time: Timestamp,
 }
 
@@ -168,31 +132,29 @@ impl Runtime {
         let signal = Arc::new(Signal::default());
         let waker: Arc<dyn Wake> = Arc::new(SourceWaker(Arc::downgrade(&signal)));
         let source = make_source(waker)?;
-        let rt = Arc::new(Runtime {
-            state: Mutex::new(State {
-                engine,
-                source,
-                stop: false,
-            }),
+        let rt = Arc::new_cyclic(|me| Runtime {
+            me: me.clone(),
+            driver: Mutex::new(Driver::new(engine, source)),
+            stop: AtomicBool::new(false),
             stepped: Condvar::new(),
             signal,
             sinks: Mutex::new(HashMap::new()),
             shutdown_sinks: Mutex::new(HashMap::new()),
             workers: Mutex::new(HashMap::new()),
-            delivered: Mutex::new(Vec::new()),
+            reports: Mutex::new(Vec::new()),
             start_time: mem::now(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
             .name("driver".into())
-            .spawn(move || driver(weak));
+            .spawn(move || drive(weak));
         spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
         Ok(rt)
     }
 
     /// The engine and source, locked (keep the section short; never call a client inside).
-    pub fn lock(&self) -> MutexGuard<'_, State> {
-        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    pub fn lock(&self) -> MutexGuard<'_, Driver> {
+        self.driver.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Runs `f` on the engine with the current time, then wakes the driver so that what
@@ -206,7 +168,8 @@ impl Runtime {
         r
     }
 
-    /// Waits until `poll` returns Some (checked after every driver step), at most `limit`.
+    /// Waits until `poll` returns Some (checked now and after every driver step that
+    /// completed a synchronous operation), at most `limit`.
     pub fn wait_for<R>(
         &self,
         limit: Duration,
@@ -315,7 +278,7 @@ impl Runtime {
         for rx in done {
             let _ = rx.recv_timeout(Duration::from_secs(5));
         }
-        self.lock().stop = true;
+        self.stop.store(true, Ordering::SeqCst);
         self.signal.wake();
     }
 
@@ -324,90 +287,100 @@ impl Runtime {
     /// delivery ended, or at once when it cannot be queued, so that a slow client gets
     /// coalesced updates instead of an unbounded queue.
     fn deliver(&self, events: Vec<Event>) {
-        let mut not_queued = Vec::new();
-        {
+        let not_queued = {
             let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
             let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
-            for event in events {
-                let group = event.group();
-                let paced = matches!(&event, Event::DataChange(d) if d.kind.is_scheduled());
-                let (Some(slot), Some(worker)) =
-                    (sinks.get(&group).cloned(), workers.get(&event.session()))
-                else {
-                    if paced {
-                        not_queued.push(group);
-                    }
-                    continue;
-                };
-                let weak_rt = self.self_weak();
-                let job: Job = Box::new(move || {
-                    deliver_one(weak_rt.clone(), group, &slot, event);
-                    if paced {
-                        if let Some(rt) = weak_rt.upgrade() {
-                            rt.deliveries_ended([group]);
-                        }
-                    }
-                });
-                if worker.tx.send(job).is_err() && paced {
-                    not_queued.push(group);
-                }
-            }
-        }
-        if !not_queued.is_empty() {
-            self.deliveries_ended(not_queued);
-        }
+            let mut queues = Queues {
+                sinks: &sinks,
+                workers: &workers,
+                rt: &self.me,
+            };
+            driver::dispatch(events, &mut queues)
+        };
+        self.report(not_queued);
     }
 
-    /// Hands the groups whose scheduled OnDataChange is done with (delivered, failed or
-    /// never queued) to the driver, which tells the engine at its next step.
-    fn deliveries_ended(&self, groups: impl IntoIterator<Item = GroupHandle>) {
-        self.delivered
+    /// Hands the workers' reports (a scheduled OnDataChange done with: delivered, failed or
+    /// never queued; a sink lost) to the driver, which tells the engine at its next step.
+    fn report(&self, reports: impl IntoIterator<Item = Report>) {
+        let mut reports = reports.into_iter().peekable();
+        if reports.peek().is_none() {
+            return;
+        }
+        self.reports
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .extend(groups);
+            .extend(reports);
         self.signal.wake();
     }
+}
 
-    fn self_weak(&self) -> Weak<Runtime> {
-        RUNTIME.get().map(Arc::downgrade).unwrap_or_default()
+/// The clients' callback queues, as the driver's [`Deliver`]: each event becomes a job on
+/// its session's worker, which calls the group's sink (if still connected) and reports.
+struct Queues<'a> {
+    sinks: &'a HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>,
+    workers: &'a HashMap<SessionHandle, Worker>,
+    rt: &'a Weak<Runtime>,
+}
+
+impl Deliver for Queues<'_> {
+    fn deliver(&mut self, event: Event, paced: bool) -> bool {
+        let group = event.group();
+        let (Some(slot), Some(worker)) = (
+            self.sinks.get(&group).cloned(),
+            self.workers.get(&event.session()),
+        ) else {
+            return false;
+        };
+        let rt = self.rt.clone();
+        let job: Job = Box::new(move || {
+            let lost = deliver_one(group, &slot, event);
+            let reports = [
+                lost.then_some(Report::Disconnected(group)),
+                paced.then_some(Report::Ended(group)),
+            ];
+            if reports.iter().any(Option::is_some) {
+                if let Some(rt) = rt.upgrade() {
+                    rt.report(reports.into_iter().flatten());
+                }
+            }
+        });
+        worker.tx.send(job).is_ok()
     }
 }
 
-static RUNTIME: std::sync::OnceLock<Arc<Runtime>> = std::sync::OnceLock::new();
-
-/// Installs the process runtime (once, at start-up).
-pub fn install(rt: Arc<Runtime>) -> Arc<Runtime> {
-    let _ = RUNTIME.set(Arc::clone(&rt));
-    RUNTIME.get().cloned().unwrap_or(rt)
-}
-
-/// The process runtime, if started.
-pub fn get() -> Option<Arc<Runtime>> {
-    RUNTIME.get().cloned()
-}
-
-fn driver(rt: Weak<Runtime>) {
+/// The driver thread: a step whenever woken or due, then the events to the workers.
+fn drive(rt: Weak<Runtime>) {
     let _com = crate::client::ComThread::mta();
     loop {
         let Some(rt) = rt.upgrade() else { return };
-        let delivered =
-            std::mem::take(&mut *rt.delivered.lock().unwrap_or_else(|p| p.into_inner()));
-        let (events, next) = {
-            let mut g = rt.lock();
-            if g.stop {
-                return;
-            }
-            let now = mem::now();
-            for group in delivered {
-                g.engine.data_change_delivered(now, group);
-            }
-            g.step(now)
-        };
-        rt.stepped.notify_all();
-        if !events.is_empty() {
-            rt.deliver(events);
+        if rt.stop.load(Ordering::SeqCst) {
+            return;
         }
-        let wait = match next {
+        let mut reports =
+            std::mem::take(&mut *rt.reports.lock().unwrap_or_else(|p| p.into_inner()));
+        let step = {
+            let mut d = rt.lock();
+            // A lost sink whose group has a sink again was re-advised meanwhile: that
+            // Advise told the engine (or will, after this section), so the loss is stale.
+            // Checked under the engine lock, which the Advise takes after filling the slot.
+            if reports.iter().any(|r| matches!(r, Report::Disconnected(_))) {
+                let sinks = rt.sinks.lock().unwrap_or_else(|p| p.into_inner());
+                reports.retain(|r| match r {
+                    Report::Disconnected(g) => !sinks.get(g).is_some_and(|s| s.is_connected()),
+                    Report::Ended(_) => true,
+                });
+            }
+            d.step(mem::now(), reports)
+        };
+        if !step.sync_completed.is_empty() {
+            // The waiters take their own results (`Engine::take_sync_result`).
+            rt.stepped.notify_all();
+        }
+        if !step.events.is_empty() {
+            rt.deliver(step.events);
+        }
+        let wait = match step.next {
             Some(t) => Duration::from_millis(t.millis_since(mem::now()).clamp(1, 1000)),
             None => Duration::from_millis(1000),
         };
@@ -434,15 +407,11 @@ fn hr_of(e: Option<OpcError>) -> HRESULT {
     e.map_or(HRESULT(0), mem::hresult)
 }
 
-/// Delivers one event to a group's sink on the client's worker thread.
-fn deliver_one(
-    rt: Weak<Runtime>,
-    group: GroupHandle,
-    slot: &SinkSlot<IOPCDataCallback>,
-    event: Event,
-) {
+/// Delivers one event to a group's sink on the client's worker thread. True when the
+/// client is gone and its sink was dropped (the engine must hear of it).
+fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) -> bool {
     let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else {
-        return;
+        return false;
     };
     let result = match &event {
         Event::DataChange(d) => call_values(
@@ -489,16 +458,11 @@ fn deliver_one(
                 "group {}: the client's IOPCDataCallback is gone ({e}); dropping it",
                 group.0
             );
-            if slot.drop_if(cookie) {
-                if let Some(rt) = rt.upgrade() {
-                    let _ =
-                        rt.with_engine(|eng, now| eng.set_callback_connected(now, group, false));
-                }
-            }
-        } else {
-            tracing::debug!("group {}: callback returned {e}", group.0);
+            return slot.drop_if(cookie);
         }
+        tracing::debug!("group {}: callback returned {e}", group.0);
     }
+    false
 }
 
 fn call_values(

@@ -313,3 +313,233 @@ fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError>
 pub fn var_type(v: &VARIANT) -> VarType {
     VarType(vt_of(v))
 }
+
+#[cfg(test)]
+mod tests {
+    //! `from_variant(&to_variant(v)) == v` for every value kind, SAFEARRAYs included (run
+    //! under Wine: `cargo xtask e2e -p ctopc-com`). Floats compare by their bits, so NaNs
+    //! (any payload) and -0.0 must come back exactly as they went in.
+
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Equal, with floats compared bit for bit.
+    fn same(a: &Value, b: &Value) -> bool {
+        match (a, b) {
+            (Value::R4(x), Value::R4(y)) => x.to_bits() == y.to_bits(),
+            (Value::R8(x), Value::R8(y)) | (Value::Date(x), Value::Date(y)) => {
+                x.to_bits() == y.to_bits()
+            }
+            (Value::Array(x), Value::Array(y)) => {
+                x.element_type == y.element_type
+                    && x.elements.len() == y.elements.len()
+                    && x.elements.iter().zip(&y.elements).all(|(a, b)| same(a, b))
+            }
+            _ => a == b,
+        }
+    }
+
+    fn any_f32() -> impl Strategy<Value = f32> {
+        prop_oneof![
+            any::<f32>(),
+            any::<u32>().prop_map(f32::from_bits),
+            Just(f32::NAN),
+            Just(-0.0f32),
+            Just(f32::INFINITY),
+            Just(f32::MIN_POSITIVE / 2.0),
+        ]
+    }
+
+    fn any_f64() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            any::<f64>(),
+            any::<u64>().prop_map(f64::from_bits),
+            Just(f64::NAN),
+            Just(-0.0f64),
+            Just(f64::NEG_INFINITY),
+            Just(f64::MIN_POSITIVE / 2.0),
+        ]
+    }
+
+    /// Text as clients send it: ASCII, Polish letters, other planes (surrogate pairs),
+    /// interior NULs, and the empty string (a NULL BSTR).
+    fn any_text() -> impl Strategy<Value = String> {
+        prop_oneof![
+            Just(String::new()),
+            "[a-zA-Z0-9 ._]{0,12}",
+            "[ąćęłńóśźżĄĆĘŁŃÓŚŹŻ\\x00\u{FFFD}\u{1F600}\u{10FFFF}a-z]{0,8}",
+            any::<String>(),
+        ]
+    }
+
+    /// A scalar of the given VARTYPE (one that a SAFEARRAY can hold, VT_VARIANT aside).
+    fn scalar_of(vt: VarType) -> BoxedStrategy<Value> {
+        match vt {
+            VarType::I1 => any::<i8>().prop_map(Value::I1).boxed(),
+            VarType::UI1 => any::<u8>().prop_map(Value::UI1).boxed(),
+            VarType::I2 => any::<i16>().prop_map(Value::I2).boxed(),
+            VarType::UI2 => any::<u16>().prop_map(Value::UI2).boxed(),
+            VarType::I4 => any::<i32>().prop_map(Value::I4).boxed(),
+            VarType::UI4 => any::<u32>().prop_map(Value::UI4).boxed(),
+            VarType::I8 => any::<i64>().prop_map(Value::I8).boxed(),
+            VarType::UI8 => any::<u64>().prop_map(Value::UI8).boxed(),
+            VarType::R4 => any_f32().prop_map(Value::R4).boxed(),
+            VarType::R8 => any_f64().prop_map(Value::R8).boxed(),
+            VarType::CY => any::<i64>().prop_map(Value::Cy).boxed(),
+            VarType::DATE => any_f64().prop_map(Value::Date).boxed(),
+            VarType::BSTR => any_text().prop_map(Value::Bstr).boxed(),
+            VarType::BOOL => any::<bool>().prop_map(Value::Bool).boxed(),
+            VarType::ERROR => any::<i32>().prop_map(Value::Error).boxed(),
+            _ => Just(Value::Empty).boxed(),
+        }
+    }
+
+    /// Every element type a typed SAFEARRAY can have.
+    const ELEMENT_TYPES: [VarType; 15] = [
+        VarType::I1,
+        VarType::UI1,
+        VarType::I2,
+        VarType::UI2,
+        VarType::I4,
+        VarType::UI4,
+        VarType::I8,
+        VarType::UI8,
+        VarType::R4,
+        VarType::R8,
+        VarType::CY,
+        VarType::DATE,
+        VarType::BSTR,
+        VarType::BOOL,
+        VarType::ERROR,
+    ];
+
+    fn any_scalar() -> impl Strategy<Value = Value> {
+        prop_oneof![
+            Just(Value::Empty),
+            proptest::sample::select(&ELEMENT_TYPES[..]).prop_flat_map(scalar_of),
+        ]
+    }
+
+    /// A typed array: every element of the array's element type (empty arrays included).
+    fn typed_array() -> impl Strategy<Value = Value> {
+        proptest::sample::select(&ELEMENT_TYPES[..]).prop_flat_map(|vt| {
+            proptest::collection::vec(scalar_of(vt), 0..12).prop_map(move |elements| {
+                Value::Array(ArrayValue {
+                    element_type: vt,
+                    elements,
+                })
+            })
+        })
+    }
+
+    /// Any value: scalars, typed arrays, and VT_VARIANT arrays of any of these, nested up
+    /// to three levels (a VARIANT array holding arrays holding arrays).
+    fn any_value() -> impl Strategy<Value = Value> {
+        let leaf = prop_oneof![3 => any_scalar(), 1 => typed_array()];
+        leaf.prop_recursive(3, 48, 8, |inner| {
+            proptest::collection::vec(inner, 0..8).prop_map(|elements| {
+                Value::Array(ArrayValue {
+                    element_type: VarType::VARIANT,
+                    elements,
+                })
+            })
+        })
+    }
+
+    /// The round trip through a VARIANT that is cleared afterwards (no leak: the VARIANT
+    /// owns every BSTR and SAFEARRAY it holds, and VariantClear frees them all).
+    fn round_trip(v: &Value) -> (VarType, Result<Value, OpcError>) {
+        let mut var = match to_variant(v) {
+            Ok(var) => var,
+            Err(e) => panic!("to_variant({v:?}) failed: {e:?}"),
+        };
+        let vt = var_type(&var);
+        let back = from_variant(&var);
+        clear(&mut var);
+        assert_eq!(var_type(&var), VarType::EMPTY, "cleared");
+        (vt, back)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig {
+            cases: 1000,
+            failure_persistence: None,
+            ..ProptestConfig::default()
+        })]
+
+        #[test]
+        fn every_value_round_trips_through_a_variant(v in any_value()) {
+            let (vt, back) = round_trip(&v);
+            prop_assert_eq!(vt, v.var_type(), "the VARIANT's VARTYPE");
+            let back = back.map_err(|e| TestCaseError::fail(format!("from_variant: {e:?}")))?;
+            prop_assert!(same(&back, &v), "{:?} came back as {:?}", v, back);
+        }
+
+        #[test]
+        fn write_variant_fills_caller_storage_with_the_same_value(v in any_value()) {
+            let mut slot = VARIANT::default();
+            // SAFETY: `slot` is a local VARIANT owning nothing; it is cleared below.
+            let written = unsafe { write_variant(&mut slot, &v) };
+            prop_assert!(written.is_ok());
+            let back = from_variant(&slot);
+            clear(&mut slot);
+            prop_assert!(back.is_ok_and(|b| same(&b, &v)));
+        }
+    }
+
+    #[test]
+    fn every_kind_round_trips_at_its_edges() {
+        let mut values = vec![
+            Value::Empty,
+            Value::I1(i8::MIN),
+            Value::UI1(u8::MAX),
+            Value::I2(i16::MIN),
+            Value::UI2(u16::MAX),
+            Value::I4(i32::MIN),
+            Value::UI4(u32::MAX),
+            Value::I8(i64::MIN),
+            Value::UI8(u64::MAX),
+            Value::R4(f32::NAN),
+            Value::R4(-0.0),
+            Value::R8(f64::from_bits(0x7FF0_0000_0000_0001)),
+            Value::R8(f64::MAX),
+            Value::Cy(i64::MAX),
+            Value::Date(-657_434.0),
+            Value::Date(2_958_465.999_99),
+            Value::Bstr(String::new()),
+            Value::Bstr("Wytwórnia \u{0} kwasu \u{1F600}".into()),
+            Value::Bool(true),
+            Value::Bool(false),
+            Value::Error(0x8004_0007_u32 as i32),
+        ];
+        for vt in ELEMENT_TYPES {
+            values.push(Value::Array(ArrayValue {
+                element_type: vt,
+                elements: Vec::new(),
+            }));
+        }
+        // The original's extended write: [value, quality, timestamp] in a VARIANT array.
+        values.push(Value::Array(ArrayValue {
+            element_type: VarType::VARIANT,
+            elements: vec![Value::R8(1.5), Value::I4(0xC0), Value::Date(45_000.25)],
+        }));
+        values.push(Value::Array(ArrayValue {
+            element_type: VarType::VARIANT,
+            elements: vec![
+                Value::Empty,
+                Value::Array(ArrayValue {
+                    element_type: VarType::BSTR,
+                    elements: vec![Value::Bstr("a".into()), Value::Bstr(String::new())],
+                }),
+            ],
+        }));
+        for v in values {
+            let (vt, back) = round_trip(&v);
+            assert_eq!(vt, v.var_type(), "{v:?}");
+            match back {
+                Ok(b) => assert!(same(&b, &v), "{v:?} came back as {b:?}"),
+                Err(e) => panic!("{v:?}: from_variant failed with {e:?}"),
+            }
+        }
+    }
+}

@@ -6,6 +6,7 @@
 
 pub mod browse;
 pub mod convert;
+pub mod driver;
 pub mod error;
 pub mod lang;
 pub mod model;

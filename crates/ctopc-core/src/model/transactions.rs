@@ -6,9 +6,9 @@
 //! [`SyncId`] and the COM layer waits (with the engine unlocked) until
 //! [`Engine::take_sync_result`] has the answer: the backend answered, or the engine timed
 //! the request out ([`super::EngineConfig::source_timeout_ms`]). The thread driving the
-//! engine learns which waiter to wake from [`Engine::poll_sync_completion`] after each
-//! `handle_source_*` / `handle_timeout` call; a waiter that gives up (its own NetTimeout)
-//! calls [`Engine::abandon_sync`].
+//! engine learns from [`Engine::poll_sync_completion`] which operations completed in a
+//! step ([`crate::driver::Step::sync_completed`]) and wakes the waiters only then; a waiter
+//! that gives up (its own NetTimeout) calls [`Engine::abandon_sync`].
 //!
 //! Asynchronous calls return a server-generated cancel ID and complete through
 //! [`Engine::poll_event`] (OnReadComplete, OnDataChange for refreshes, OnWriteComplete).
@@ -781,8 +781,10 @@ impl Engine {
         self.txns.sync_done.remove(&id.0)
     }
 
-    /// The next synchronous operation whose result became available (so the COM layer can
-    /// wake exactly the thread waiting for it); its result is then in `take_sync_result`.
+    /// The next synchronous operation whose result became available; its result is then in
+    /// `take_sync_result`. The driver collects these after each step
+    /// ([`crate::driver::Step::sync_completed`]) so that waiters are woken only when one of
+    /// them has its answer.
     pub fn poll_sync_completion(&mut self) -> Option<SyncId> {
         self.txns.sync_completed.pop_front()
     }
