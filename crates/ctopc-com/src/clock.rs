@@ -17,18 +17,7 @@ pub fn now() -> Timestamp {
     let since = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap_or_default();
-    Timestamp::from_unix_millis(0).add_micros_saturating(since.as_micros())
-}
-
-trait AddMicros {
-    fn add_micros_saturating(self, us: u128) -> Timestamp;
-}
-
-impl AddMicros for Timestamp {
-    fn add_micros_saturating(self, us: u128) -> Timestamp {
-        let ticks = i64::try_from(us.saturating_mul(10)).unwrap_or(i64::MAX);
-        Timestamp(self.0.saturating_add(ticks))
-    }
+    Timestamp::from_unix_micros(since.as_micros())
 }
 
 /// Today's local date (year, month, day), for the names of the log files.

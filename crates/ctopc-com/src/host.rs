@@ -53,7 +53,7 @@ impl Drop for ComInit {
 
 fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
-        .map_err(|e| crate::mem::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
+        .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())
 }
 
@@ -104,7 +104,7 @@ pub fn register_service() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     let exe = exe_path()?;
     crate::service::install(std::path::Path::new(&exe))
-        .map_err(|e| crate::mem::error(E_FAIL, &e))?;
+        .map_err(|e| crate::error::error(E_FAIL, &e))?;
     with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
@@ -117,7 +117,7 @@ pub fn register_service() -> windows::core::Result<()> {
 pub fn unregister() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     with_registration(None, registry::unregister)??;
-    crate::service::uninstall().map_err(|e| crate::mem::error(E_FAIL, &e))?;
+    crate::service::uninstall().map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
 }
@@ -233,7 +233,7 @@ pub fn serve_as(
     };
     let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
-        crate::mem::error(E_FAIL, &e)
+        crate::error::error(E_FAIL, &e)
     })?;
     // SAFETY: a plain function pointer with the handler signature, valid for the process.
     let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };

@@ -15,7 +15,6 @@ pub mod group;
 pub mod host;
 pub mod interfaces;
 pub mod lifetime;
-pub mod mem;
 pub mod registry;
 pub mod runtime;
 pub mod server;

@@ -51,7 +51,7 @@ fn check(err: WIN32_ERROR, what: &str) -> windows::core::Result<()> {
     if err == ERROR_SUCCESS {
         Ok(())
     } else {
-        Err(crate::mem::error(
+        Err(crate::error::error(
             err.to_hresult(),
             &format!("registry: {what}: error {}", err.0),
         ))

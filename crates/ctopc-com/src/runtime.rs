@@ -16,7 +16,7 @@
 //! lock); `sinks` and `workers` are never held while waiting for `driver`.
 
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
-use crate::{connpoint::SinkSlot, mem, variant};
+use crate::{clock, connpoint::SinkSlot, error, variant};
 use ctopc_core::driver::{self, Deliver, Driver, Report};
 use ctopc_core::model::{Engine, Event, GroupHandle, SessionHandle};
 use ctopc_core::source::{Backend, Wake};
@@ -142,7 +142,7 @@ impl Runtime {
             shutdown_sinks: Mutex::new(HashMap::new()),
             workers: Mutex::new(HashMap::new()),
             reports: Mutex::new(Vec::new()),
-            start_time: mem::now(),
+            start_time: clock::now(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
@@ -162,7 +162,7 @@ impl Runtime {
     pub fn with_engine<R>(&self, f: impl FnOnce(&mut Engine, Timestamp) -> R) -> R {
         let r = {
             let mut g = self.lock();
-            f(&mut g.engine, mem::now())
+            f(&mut g.engine, clock::now())
         };
         self.signal.wake();
         r
@@ -371,7 +371,7 @@ fn drive(rt: Weak<Runtime>) {
                     Report::Ended(_) => true,
                 });
             }
-            d.step(mem::now(), reports)
+            d.step(clock::now(), reports)
         };
         if !step.sync_completed.is_empty() {
             // The waiters take their own results (`Engine::take_sync_result`).
@@ -381,7 +381,7 @@ fn drive(rt: Weak<Runtime>) {
             rt.deliver(step.events);
         }
         let wait = match step.next {
-            Some(t) => Duration::from_millis(t.millis_since(mem::now()).clamp(1, 1000)),
+            Some(t) => Duration::from_millis(t.millis_since(clock::now()).clamp(1, 1000)),
             None => Duration::from_millis(1000),
         };
         let signal = Arc::clone(&rt.signal);
@@ -404,7 +404,7 @@ pub fn is_disconnected(hr: HRESULT) -> bool {
 }
 
 fn hr_of(e: Option<OpcError>) -> HRESULT {
-    e.map_or(HRESULT(0), mem::hresult)
+    e.map_or(HRESULT(0), error::hresult)
 }
 
 /// Delivers one event to a group's sink on the client's worker thread. True when the
@@ -476,7 +476,7 @@ fn call_values(
 ) -> windows::core::Result<()> {
     let handles: Vec<u32> = items.iter().map(|i| i.client_handle).collect();
     let qualities: Vec<u16> = items.iter().map(|i| i.quality.0).collect();
-    let times: Vec<FILETIME> = items.iter().map(|i| mem::filetime(i.timestamp)).collect();
+    let times: Vec<FILETIME> = items.iter().map(|i| clock::filetime(i.timestamp)).collect();
     let errors: Vec<HRESULT> = items.iter().map(|i| hr_of(i.error)).collect();
     let mut values: Vec<VARIANT> = Vec::with_capacity(items.len());
     for i in items {

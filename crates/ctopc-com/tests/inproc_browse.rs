@@ -453,7 +453,7 @@ fn browse_raw(b: &IOPCBrowse, a: &BrowseRaw, null_out: NullOut) -> (HRESULT, Bro
 
 /// A CoTaskMem copy of `s` (a continuation point the client owns).
 fn mem_wstr(s: &str) -> PWSTR {
-    ctopc_com::mem::alloc_wstr(s).expect("CoTaskMemAlloc")
+    ctopc_com::abi::alloc_wstr(s).expect("CoTaskMemAlloc")
 }
 
 fn assert_failed_cleanly(

@@ -117,7 +117,7 @@ fn write(p: &Plant, items: &[(u32, Value)]) -> (HRESULT, Vec<HRESULT>) {
 
 /// A valid OPCITEMVQT of `v` (VariantClear its value afterwards).
 fn vqt(v: &Value, quality: Option<u16>, stamp: Option<Timestamp>) -> OPCITEMVQT {
-    let ft = stamp.map(ctopc_com::mem::filetime).unwrap_or_default();
+    let ft = stamp.map(ctopc_com::clock::filetime).unwrap_or_default();
     OPCITEMVQT {
         vDataValue: var(v),
         bQualitySpecified: quality.is_some().into(),

@@ -41,6 +41,7 @@
 //!   convert arrays). An element's error is the array's error.
 
 use crate::lang::Lang;
+use crate::time::{civil_from_days, days_from_civil};
 use crate::value::ArrayValue;
 use crate::{OpcError, Value, VarType};
 
@@ -801,29 +802,6 @@ fn parse_bool(s: &str, locale: Locale) -> Result<bool, OpcError> {
 
 // ---------------------------------------------------------------------------------------
 // Dates
-
-/// Days from 1970-01-01 to y-m-d (proleptic Gregorian).
-fn days_from_civil(y: i64, m: u32, d: u32) -> i64 {
-    let y = if m <= 2 { y - 1 } else { y };
-    let era = y.div_euclid(400);
-    let yoe = y - era * 400;
-    let m = i64::from(m);
-    let doy = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + i64::from(d) - 1;
-    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
-    era * 146_097 + doe - 719_468
-}
-
-fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (yoe + era * 400 + i64::from(m <= 2), m, d)
-}
 
 /// Days from 1970-01-01 to the OLE epoch 1899-12-30.
 const OLE_EPOCH_DAYS: i64 = -25_569;

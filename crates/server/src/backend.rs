@@ -18,7 +18,7 @@ pub fn make(ns: &Arc<AsixNamespace>, wake: Arc<dyn Wake>) -> Result<Box<dyn Back
         if delay > 0 {
             tracing::info!("simulation: device reads and writes answer after {delay} ms (SimulationDeviceDelay)");
         }
-        let sim = InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::mem::now())
+        let sim = InProcessSim::new(Arc::clone(ns), SIM_SEED, ctopc_com::clock::now())
             .with_device_delay(delay);
         return Ok(Box::new(sim));
     }

@@ -258,7 +258,7 @@ pub fn init(
         &dir,
         max,
         opts.log_keep_files as usize,
-        Box::new(ctopc_com::mem::local_date),
+        Box::new(ctopc_com::clock::local_date),
     ) {
         Ok(f) => f,
         Err(e) => {
@@ -295,36 +295,15 @@ pub fn emergency(install_dir: &Path, message: &str) {
 
 /// The UTC date (used only when the local date is not available).
 pub fn today_utc() -> Date {
-    let days = std::time::SystemTime::now()
+    let since = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs() / 86_400)
-        .unwrap_or(0) as i64;
-    civil_from_days(days)
-}
-
-/// Days since 1970-01-01 to a proleptic Gregorian date (Howard Hinnant's algorithm).
-pub fn civil_from_days(z: i64) -> Date {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let y = (yoe + era * 400 + i64::from(m <= 2)) as i32;
-    (y, m, d)
+        .unwrap_or_default();
+    let c = ctopc_core::Timestamp::from_unix_micros(since.as_micros()).civil();
+    (c.year as i32, c.month, c.day)
 }
 
 #[cfg(test)]
 mod date_tests {
-    #[test]
-    fn civil_dates_from_unix_days() {
-        assert_eq!(super::civil_from_days(0), (1970, 1, 1));
-        assert_eq!(super::civil_from_days(20_414), (2025, 11, 22));
-        assert_eq!(super::civil_from_days(11_016), (2000, 2, 29));
-    }
-
     #[test]
     fn the_log_directory_defaults_to_log_under_the_install_folder() {
         let base = std::path::Path::new("/opt/ctopc");

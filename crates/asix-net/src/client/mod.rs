@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use ctopc_core::{OpcError, Timestamp, Value};
-use tokio::io::{AsyncReadExt, AsyncWriteExt, BufReader, BufWriter};
+use tokio::io::{AsyncWriteExt, BufWriter};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::{TcpStream, UdpSocket};
 use tokio::runtime::Handle;
@@ -24,9 +24,10 @@ use tracing::{debug, warn};
 pub use self::core::{Action, ClientCore, ClientEvent, ItemKey, LinkId, Now, RequestId};
 use crate::config::ClientConfig;
 use crate::discovery::{Candidate, Search};
+use crate::proto::codec::{frames, next_frame, ReadError};
 use crate::proto::discovery::{decode_datagram, encode_datagram, Datagram, FindServer, Resource};
-use crate::proto::frame::{body_len, decode_body, Frame, ReadSource};
-use crate::proto::MAX_DATAGRAM;
+use crate::proto::frame::{Frame, ReadSource};
+use crate::proto::{DecodeError, MAX_DATAGRAM};
 use crate::Vqt;
 
 /// Receives the client's events. Called from the client's task, never while it holds a
@@ -354,26 +355,10 @@ fn open_link(
 }
 
 async fn read_loop(link: LinkId, rd: OwnedReadHalf, internal: mpsc::Sender<Internal>) {
-    let mut rd = BufReader::with_capacity(64 * 1024, rd);
-    let mut body = Vec::new();
+    let mut rd = frames(rd);
     let error = loop {
-        let mut len = [0u8; 4];
-        if rd.read_exact(&mut len).await.is_err() {
-            break OpcError::NetCloseLink;
-        }
-        let n = match body_len(len) {
-            Ok(n) => n,
-            Err(e) => {
-                warn!(link, error = %e, "bad frame");
-                break OpcError::NetCloseLink;
-            }
-        };
-        body.resize(n, 0);
-        if rd.read_exact(&mut body).await.is_err() {
-            break OpcError::NetCloseLink;
-        }
-        match decode_body(&body) {
-            Ok(frame) => {
+        match next_frame(&mut rd).await {
+            Some(Ok(frame)) => {
                 if internal
                     .send(Internal::Frame { link, frame })
                     .await
@@ -382,7 +367,12 @@ async fn read_loop(link: LinkId, rd: OwnedReadHalf, internal: mpsc::Sender<Inter
                     return;
                 }
             }
-            Err(e) => {
+            None | Some(Err(ReadError::Io(_))) => break OpcError::NetCloseLink,
+            Some(Err(ReadError::Decode(e @ DecodeError::BadLength(_)))) => {
+                warn!(link, error = %e, "bad frame");
+                break OpcError::NetCloseLink;
+            }
+            Some(Err(ReadError::Decode(e))) => {
                 warn!(link, error = %e, "undecodable frame");
                 break OpcError::NetCloseLink;
             }

@@ -4,6 +4,7 @@
 //! Everything is little-endian. Decoding is total: any byte sequence yields a value or a
 //! [`DecodeError`], never a panic, and never an allocation larger than the input justifies.
 
+pub mod codec;
 pub mod discovery;
 pub mod frame;
 

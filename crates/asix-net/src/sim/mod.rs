@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use ctopc_core::{OpcError, Quality, Timestamp, Value, VarType};
-use tokio::io::{AsyncReadExt, AsyncWriteExt, BufReader, BufWriter};
+use tokio::io::{AsyncWriteExt, BufWriter};
 use tokio::net::tcp::OwnedReadHalf;
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
 use tokio::sync::{mpsc, watch};
@@ -23,12 +23,12 @@ use tracing::{debug, info, warn};
 use self::plant::{numeric, Behaviour, ChannelDef, Plant};
 use self::rights::{Denied, WriteRights};
 use crate::client::wall_now;
+use crate::proto::codec::{frames, next_frame, ReadError};
 use crate::proto::discovery::{
     decode_datagram, encode_datagram, Announce, Datagram, FindServer, Resource, ResourceKind,
 };
 use crate::proto::frame::{
-    body_len, decode_body, encode_frame, Frame, HelloAck, Message, ReadSource, ServerFlags,
-    UpdateEncoder, VarRef,
+    encode_frame, Frame, HelloAck, Message, ReadSource, ServerFlags, UpdateEncoder, VarRef,
 };
 use crate::proto::{DecodeError, MAX_DATAGRAM};
 use crate::Vqt;
@@ -445,22 +445,12 @@ enum Step {
 }
 
 async fn read_frames(rd: OwnedReadHalf, tx: mpsc::Sender<Result<Frame, DecodeError>>) {
-    let mut rd = BufReader::with_capacity(64 * 1024, rd);
-    let mut body = Vec::new();
+    let mut rd = frames(rd);
     loop {
-        let mut len = [0u8; 4];
-        if rd.read_exact(&mut len).await.is_err() {
-            return;
-        }
-        let r = match body_len(len) {
-            Ok(n) => {
-                body.resize(n, 0);
-                if rd.read_exact(&mut body).await.is_err() {
-                    return;
-                }
-                decode_body(&body)
-            }
-            Err(e) => Err(e),
+        let r = match next_frame(&mut rd).await {
+            Some(Ok(frame)) => Ok(frame),
+            Some(Err(ReadError::Decode(e))) => Err(e),
+            None | Some(Err(ReadError::Io(_))) => return,
         };
         let stop = r.is_err();
         if tx.send(r).await.is_err() || stop {

@@ -22,7 +22,7 @@
 use asix_net::inproc::InProcessSim;
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::interfaces::*;
-use ctopc_com::{context, host, mem, server};
+use ctopc_com::{context, host, server};
 use ctopc_core::source::Backend;
 use std::cell::Cell;
 use std::ffi::c_void;
@@ -102,7 +102,7 @@ pub fn start() {
         host::start(
             setup,
             Box::new(move |_wake| {
-                let sim = InProcessSim::new(Arc::clone(&ns), SIM_SEED, mem::now());
+                let sim = InProcessSim::new(Arc::clone(&ns), SIM_SEED, ctopc_com::clock::now());
                 Ok(Box::new(sim) as Box<dyn Backend>)
             }),
         )

@@ -2,6 +2,7 @@
 //! refers to it, with the subscription bookkeeping (reference counts, requested sampling
 //! rates, what the backend was last told).
 
+use hashbrown::HashTable;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
@@ -154,6 +155,8 @@ pub(crate) struct SourceEntry {
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
+    /// [`key_hash`] of (channel, key), for the index (it takes what was padding).
+    pub key_hash: u32,
     /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
     eu_range: u32,
     pub quality: Quality,
@@ -251,7 +254,7 @@ impl SourceTable {
         let entries = &self.entries;
         if let Some(idx) = self.index.find(hash, |i| {
             let e = &entries[i as usize];
-            e.channel == channel && *e.key == *def.source_key
+            e.key_hash == hash && e.channel == channel && *e.key == *def.source_key
         }) {
             return idx;
         }
@@ -292,6 +295,7 @@ impl SourceTable {
             generation: 0,
             refs: 0,
             channel,
+            key_hash: hash,
             eu_range,
             quality,
             canonical: def.canonical_type,
@@ -321,7 +325,9 @@ impl SourceTable {
         if let EuInfo::Enumerated(texts) = &def.eu {
             self.enum_texts.insert(idx, texts.clone());
         }
-        self.index.insert(hash, idx);
+        let entries = &self.entries;
+        self.index
+            .insert(hash, idx, |i| entries[i as usize].key_hash);
         self.live += 1;
         idx
     }
@@ -563,7 +569,7 @@ impl SourceTable {
             self.enum_texts.remove(&idx);
         }
         let e = &mut self.entries[idx as usize];
-        self.index.remove(key_hash(e.channel, &e.key), idx);
+        self.index.remove(e.key_hash, idx);
         e.key = Arc::from("");
         e.value = CachedValue::EMPTY;
         e.set_rates(RateSet::Empty);
@@ -592,96 +598,37 @@ fn key_hash(channel: u32, key: &str) -> u32 {
     (h >> 32) as u32 ^ h as u32
 }
 
-/// An open-addressing (linear probing) index from a 32-bit hash to entry indices, 8 bytes
-/// per slot: `hash << 32 | (index + 1)`, 0 = empty. Keys are compared through the entries
-/// themselves, so no string is stored twice. Deletion shifts back (no tombstones).
+/// The index from a source item's 32-bit hash to its entry index: a
+/// `hashbrown::HashTable<u32>` (the SwissTable under std's HashMap), 4 bytes and one
+/// control byte per bucket. Keys are compared through the entries themselves, so no string
+/// is stored twice; the table keeps no hashes, so growing it asks `rehash` of
+/// [`SourceIndex::insert`] (the entries keep theirs: [`SourceEntry::key_hash`]).
 #[derive(Default)]
 pub(crate) struct SourceIndex {
-    slots: Vec<u64>,
-    len: usize,
+    table: HashTable<u32>,
+}
+
+/// The table's 64-bit hash of a 32-bit one: hashbrown takes the bucket from the low bits
+/// and its 7-bit tag from the top ones, so both halves carry the hash.
+fn wide(hash: u32) -> u64 {
+    (u64::from(hash) << 32) | u64::from(hash)
 }
 
 impl SourceIndex {
-    fn mask(&self) -> usize {
-        self.slots.len().wrapping_sub(1)
-    }
-
     pub fn find(&self, hash: u32, mut eq: impl FnMut(u32) -> bool) -> Option<u32> {
-        if self.slots.is_empty() {
-            return None;
-        }
-        let mask = self.mask();
-        let mut i = hash as usize & mask;
-        loop {
-            let s = self.slots[i];
-            if s == 0 {
-                return None;
-            }
-            if (s >> 32) as u32 == hash && eq((s as u32) - 1) {
-                return Some((s as u32) - 1);
-            }
-            i = (i + 1) & mask;
-        }
+        self.table.find(wide(hash), |&i| eq(i)).copied()
     }
 
-    pub fn insert(&mut self, hash: u32, idx: u32) {
-        if (self.len + 1) * 8 > self.slots.len() * 7 {
-            self.grow();
-        }
-        let mask = self.mask();
-        let mut i = hash as usize & mask;
-        while self.slots[i] != 0 {
-            i = (i + 1) & mask;
-        }
-        self.slots[i] = (u64::from(hash) << 32) | u64::from(idx + 1);
-        self.len += 1;
+    /// Adds `idx` (not in the index yet) under `hash`; `rehash` gives the hash of an
+    /// index already in the table, for when it grows.
+    pub fn insert(&mut self, hash: u32, idx: u32, rehash: impl Fn(u32) -> u32) {
+        self.table
+            .insert_unique(wide(hash), idx, |&i| wide(rehash(i)));
     }
 
     pub fn remove(&mut self, hash: u32, idx: u32) {
-        if self.slots.is_empty() {
-            return;
-        }
-        let mask = self.mask();
-        let want = (u64::from(hash) << 32) | u64::from(idx + 1);
-        let mut hole = hash as usize & mask;
-        loop {
-            let s = self.slots[hole];
-            if s == 0 {
-                return;
-            }
-            if s == want {
-                break;
-            }
-            hole = (hole + 1) & mask;
-        }
-        let mut j = hole;
-        loop {
-            j = (j + 1) & mask;
-            let s = self.slots[j];
-            if s == 0 {
-                break;
-            }
-            let ideal = (s >> 32) as usize & mask;
-            // `s` may move into the hole when the hole lies between its ideal slot and j.
-            if (j.wrapping_sub(ideal) & mask) >= (j.wrapping_sub(hole) & mask) {
-                self.slots[hole] = s;
-                hole = j;
-            }
-        }
-        self.slots[hole] = 0;
-        self.len -= 1;
-    }
-
-    fn grow(&mut self) {
-        let new_len = (self.slots.len() * 2).max(16);
-        let old = std::mem::replace(&mut self.slots, vec![0; new_len]);
-        let mask = new_len - 1;
-        for s in old.into_iter().filter(|&s| s != 0) {
-            let mut i = (s >> 32) as usize & mask;
-            while self.slots[i] != 0 {
-                i = (i + 1) & mask;
-            }
-            self.slots[i] = s;
+        if let Ok(entry) = self.table.find_entry(wide(hash), |&i| i == idx) {
+            entry.remove();
         }
     }
 }
@@ -703,7 +650,8 @@ mod tests {
             let hash = |k: u32| k % 7; // many collisions
             for (k, insert) in ops {
                 if insert && !model.contains_key(&k) {
-                    index.insert(hash(k), next);
+                    let keys: HashMap<u32, u32> = model.iter().map(|(k, i)| (*i, *k)).collect();
+                    index.insert(hash(k), next, |i| hash(keys[&i]));
                     model.insert(k, next);
                     next += 1;
                 } else if !insert {

@@ -1,7 +1,15 @@
 //! The command line of opcdiag: parsing and help texts (pure, tested natively).
+//!
+//! Parsed by clap (derive): global options (`--server`, `--lang`) anywhere, then a
+//! subcommand with its own options and arguments, `-h`/`--help`/`/?` anywhere for the
+//! command's help. The help texts are the hand-written ones below (clap shows them as its
+//! help of each command); clap's errors are turned into opcdiag's own messages, each
+//! with the help of the command it is about, and exit code 2.
 // Natively only the tests use what the Windows commands show.
 #![cfg_attr(not(windows), allow(dead_code))]
 
+use clap::error::{ContextKind, ContextValue, ErrorKind};
+use clap::{CommandFactory, Parser, Subcommand};
 use ctopc_core::VarType;
 
 pub const DEFAULT_SERVER: &str = "ServerCTOPC.App";
@@ -194,6 +202,19 @@ const COMMANDS: &[&str] = &[
     "demo",
 ];
 
+/// What a command's arguments must be, for the message when they are not.
+fn needs(command: &str) -> &'static str {
+    match command {
+        "status" => "no arguments",
+        "browse" => "no arguments besides its options",
+        "props" => "one ITEMID",
+        "read" | "subscribe" => "at least one ITEMID",
+        "write" => "ITEMID and VALUE",
+        "demo" => "no arguments besides --for",
+        _ => "other arguments",
+    }
+}
+
 /// The LCID for `--lang`: en, pl, or a number (decimal or 0x hex).
 pub fn parse_lcid(s: &str) -> Option<u32> {
     match s.to_ascii_lowercase().as_str() {
@@ -234,208 +255,318 @@ fn parse_secs(s: &str) -> Option<f64> {
     s.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
 }
 
+// clap's value parsers: each error is the whole message opcdiag shows.
+
+fn server_arg(v: &str) -> Result<String, String> {
+    if v.trim().is_empty() {
+        return Err("--server needs a ProgID".into());
+    }
+    Ok(v.to_string())
+}
+
+fn lang_arg(v: &str) -> Result<u32, String> {
+    parse_lcid(v).ok_or_else(|| format!("--lang: unknown language {v:?} (en, pl or an LCID)"))
+}
+
+fn remote(option: &str) -> String {
+    format!("{option}: remote servers are not supported; run opcdiag on the server's computer")
+}
+
+fn host_arg(_: &str) -> Result<String, String> {
+    Err(remote("--host"))
+}
+
+fn node_arg(_: &str) -> Result<String, String> {
+    Err(remote("--node"))
+}
+
+fn depth_arg(v: &str) -> Result<usize, String> {
+    v.parse::<usize>()
+        .ok()
+        .filter(|d| *d > 0)
+        .ok_or_else(|| format!("--depth: expected a number > 0, got {v:?}"))
+}
+
+fn type_arg(v: &str) -> Result<VarType, String> {
+    parse_vartype(v).ok_or_else(|| format!("--type: unknown data type {v:?}"))
+}
+
+fn rate_arg(v: &str) -> Result<u32, String> {
+    v.parse::<u32>()
+        .map_err(|_| format!("--rate: expected milliseconds, got {v:?}"))
+}
+
+fn for_arg(v: &str) -> Result<f64, String> {
+    parse_secs(v).ok_or_else(|| format!("--for: expected seconds > 0, got {v:?}"))
+}
+
+/// The command line as clap sees it.
+#[derive(Parser, Debug)]
+#[command(
+    name = "opcdiag",
+    override_help = USAGE,
+    disable_version_flag = true,
+    disable_help_subcommand = true,
+    args_override_self = true
+)]
+struct Cli {
+    /// The server's ProgID.
+    #[arg(long, global = true, value_name = "PROGID", value_parser = server_arg)]
+    server: Option<String>,
+    /// The session's language: en, pl or an LCID.
+    #[arg(long, global = true, value_name = "LCID", value_parser = lang_arg)]
+    lang: Option<u32>,
+    /// Not supported (remote servers): rejected with a message.
+    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
+          value_parser = host_arg)]
+    host: Option<String>,
+    /// Not supported (remote servers): rejected with a message.
+    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
+          value_parser = node_arg)]
+    node: Option<String>,
+    #[command(subcommand)]
+    command: Option<Sub>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Sub {
+    #[command(override_help = STATUS_HELP)]
+    Status,
+    #[command(override_help = BROWSE_HELP)]
+    Browse {
+        #[arg(long)]
+        flat: bool,
+        #[arg(long, value_name = "PATH")]
+        branch: Option<String>,
+        #[arg(long, value_name = "N", value_parser = depth_arg, allow_negative_numbers = true)]
+        depth: Option<usize>,
+    },
+    #[command(override_help = PROPS_HELP)]
+    Props {
+        #[arg(value_name = "ITEMID")]
+        item: String,
+    },
+    #[command(override_help = READ_HELP)]
+    Read {
+        #[arg(value_name = "ITEMID", required = true)]
+        items: Vec<String>,
+        #[arg(long)]
+        device: bool,
+        #[arg(long, value_name = "ACCESSPATH")]
+        path: Option<String>,
+    },
+    #[command(override_help = WRITE_HELP, allow_negative_numbers = true)]
+    Write {
+        #[arg(value_name = "ITEMID")]
+        item: String,
+        #[arg(value_name = "VALUE")]
+        value: String,
+        #[arg(long = "type", value_name = "VT", value_parser = type_arg)]
+        vt: Option<VarType>,
+        #[arg(long, value_name = "ACCESSPATH")]
+        path: Option<String>,
+    },
+    #[command(override_help = SUBSCRIBE_HELP)]
+    Subscribe {
+        #[arg(value_name = "ITEMID", required = true)]
+        items: Vec<String>,
+        #[arg(long = "rate", value_name = "MS", value_parser = rate_arg, allow_negative_numbers = true)]
+        rate_ms: Option<u32>,
+        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
+        for_secs: Option<f64>,
+        #[arg(long, value_name = "ACCESSPATH")]
+        path: Option<String>,
+    },
+    #[command(override_help = DEMO_HELP)]
+    Demo {
+        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
+        for_secs: Option<f64>,
+    },
+    /// `help [COMMAND]`: the general usage, or a command's help.
+    #[command(override_help = USAGE)]
+    Help {
+        #[arg(value_name = "COMMAND")]
+        command: Vec<String>,
+    },
+}
+
 /// Parses the arguments after the program name.
 pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
-    let mut global = Global {
-        server: DEFAULT_SERVER.to_string(),
-        lcid: None,
+    // `/?` is the Windows spelling of --help.
+    let args: Vec<&str> = args
+        .iter()
+        .map(|a| if a == "/?" { "--help" } else { a.as_str() })
+        .collect();
+    let cli = match Cli::try_parse_from(std::iter::once("opcdiag").chain(args.iter().copied())) {
+        Ok(cli) => cli,
+        // -h or --help anywhere: the help of the command given, wherever it stands.
+        Err(e) if e.kind() == ErrorKind::DisplayHelp => {
+            return Ok(Parsed::Help(help(command_in(&args))))
+        }
+        Err(e) => return Err(usage_error(&e, command_in(&args))),
     };
-    let mut command: Option<&str> = None;
-    let mut positional: Vec<String> = Vec::new();
-    let mut flat = false;
-    let mut device = false;
-    let mut branch = None;
-    let mut depth = None;
-    let mut path = String::new();
-    let mut vt = None;
-    let mut rate_ms = 1000u32;
-    let mut for_secs = None;
-    let mut want_help = false;
-    // Options given, to reject those the command does not take.
-    let mut seen: Vec<&'static str> = Vec::new();
+    let global = Global {
+        server: cli.server.unwrap_or_else(|| DEFAULT_SERVER.to_string()),
+        lcid: cli.lang,
+    };
+    let command = match cli.command {
+        None => {
+            return Err(UsageError {
+                message: "no command given".into(),
+                help: USAGE,
+            })
+        }
+        Some(Sub::Help { command }) => {
+            return Ok(Parsed::Help(help(command.first().map(String::as_str))))
+        }
+        Some(Sub::Status) => Command::Status,
+        Some(Sub::Browse {
+            flat,
+            branch,
+            depth,
+        }) => Command::Browse {
+            flat,
+            branch,
+            depth,
+        },
+        Some(Sub::Props { item }) => Command::Props { item },
+        Some(Sub::Read {
+            items,
+            device,
+            path,
+        }) => Command::Read {
+            items,
+            device,
+            path: path.unwrap_or_default(),
+        },
+        Some(Sub::Write {
+            item,
+            value,
+            vt,
+            path,
+        }) => Command::Write {
+            item,
+            value,
+            vt,
+            path: path.unwrap_or_default(),
+        },
+        Some(Sub::Subscribe {
+            items,
+            rate_ms,
+            for_secs,
+            path,
+        }) => Command::Subscribe {
+            items,
+            rate_ms: rate_ms.unwrap_or(1000),
+            for_secs,
+            path: path.unwrap_or_default(),
+        },
+        Some(Sub::Demo { for_secs }) => Command::Demo { for_secs },
+    };
+    Ok(Parsed::Run(global, command))
+}
 
-    let err = |command: Option<&str>, message: String| UsageError {
-        message,
-        help: help(command),
+/// The command the arguments name (the first word that is not an option or an option's
+/// value), to pick the help text shown with `--help` or with an error.
+fn command_in<'a>(args: &[&'a str]) -> Option<&'a str> {
+    let cli = Cli::command();
+    let takes_value = |long: &str| {
+        std::iter::once(&cli)
+            .chain(cli.get_subcommands())
+            .flat_map(|c| c.get_arguments())
+            .any(|a| a.get_long() == Some(long) && a.get_action().takes_values())
     };
     let mut it = args.iter();
     while let Some(a) = it.next() {
-        let mut value = |name: &str| {
-            it.next()
-                .cloned()
-                .ok_or_else(|| err(command, format!("{name} needs a value")))
-        };
-        match a.as_str() {
-            "-h" | "--help" | "/?" => want_help = true,
-            "--server" => {
-                global.server = value("--server")?;
-                if global.server.trim().is_empty() {
-                    return Err(err(command, "--server needs a ProgID".into()));
-                }
+        if let Some(long) = a.strip_prefix("--") {
+            if !long.contains('=') && takes_value(long) {
+                it.next();
             }
-            "--host" | "--node" => {
-                return Err(err(
-                    command,
-                    format!(
-                    "{a}: remote servers are not supported; run opcdiag on the server's computer"
-                ),
-                ))
-            }
-            "--lang" => {
-                let v = value("--lang")?;
-                global.lcid = Some(parse_lcid(&v).ok_or_else(|| {
-                    err(
-                        command,
-                        format!("--lang: unknown language {v:?} (en, pl or an LCID)"),
-                    )
-                })?);
-            }
-            "--flat" => {
-                flat = true;
-                seen.push("--flat");
-            }
-            "--device" => {
-                device = true;
-                seen.push("--device");
-            }
-            "--branch" => {
-                branch = Some(value("--branch")?);
-                seen.push("--branch");
-            }
-            "--depth" => {
-                let v = value("--depth")?;
-                depth = Some(v.parse::<usize>().ok().filter(|d| *d > 0).ok_or_else(|| {
-                    err(
-                        command,
-                        format!("--depth: expected a number > 0, got {v:?}"),
-                    )
-                })?);
-                seen.push("--depth");
-            }
-            "--path" => {
-                path = value("--path")?;
-                seen.push("--path");
-            }
-            "--type" => {
-                let v = value("--type")?;
-                vt = Some(
-                    parse_vartype(&v)
-                        .ok_or_else(|| err(command, format!("--type: unknown data type {v:?}")))?,
-                );
-                seen.push("--type");
-            }
-            "--rate" => {
-                let v = value("--rate")?;
-                rate_ms = v.parse::<u32>().map_err(|_| {
-                    err(command, format!("--rate: expected milliseconds, got {v:?}"))
-                })?;
-                seen.push("--rate");
-            }
-            "--for" => {
-                let v = value("--for")?;
-                for_secs = Some(parse_secs(&v).ok_or_else(|| {
-                    err(command, format!("--for: expected seconds > 0, got {v:?}"))
-                })?);
-                seen.push("--for");
-            }
-            s if s.starts_with("--") => return Err(err(command, format!("unknown option {s}"))),
-            s if command.is_none() => {
-                if s == "help" {
-                    command = Some("help");
-                } else if let Some(c) = COMMANDS.iter().find(|c| **c == s) {
-                    command = Some(c);
-                } else {
-                    return Err(err(None, format!("unknown command {s:?}")));
-                }
-            }
-            s => positional.push(s.to_string()),
+        } else if !a.starts_with('-') {
+            return Some(a);
         }
     }
+    None
+}
 
-    let Some(cmd) = command else {
-        if want_help {
-            return Ok(Parsed::Help(USAGE));
-        }
-        return Err(err(None, "no command given".into()));
+/// The long options of `command` (`None`: the global ones).
+fn options_of(command: Option<&str>) -> Vec<String> {
+    let cli = Cli::command();
+    let c = match command {
+        Some(name) => match cli.find_subcommand(name) {
+            Some(c) => c.clone(),
+            None => return Vec::new(),
+        },
+        None => cli,
     };
-    if cmd == "help" {
-        return Ok(Parsed::Help(help(positional.first().map(String::as_str))));
+    c.get_arguments()
+        .filter_map(|a| a.get_long().map(|l| format!("--{l}")))
+        .collect()
+}
+
+/// opcdiag's message for a clap error, with the help of the command it is about.
+fn usage_error(e: &clap::Error, command: Option<&str>) -> UsageError {
+    // A word that is no command is reported as an unknown command, with the usage.
+    let command = command.filter(|c| COMMANDS.contains(c) || *c == "help");
+    let context = |kind| match e.get(kind) {
+        Some(ContextValue::String(s)) => Some(s.as_str()),
+        _ => None,
+    };
+    let arg = context(ContextKind::InvalidArg).unwrap_or("");
+    let message = match e.kind() {
+        ErrorKind::InvalidSubcommand => {
+            let name = context(ContextKind::InvalidSubcommand).unwrap_or(arg);
+            return UsageError {
+                message: format!("unknown command {name:?}"),
+                help: USAGE,
+            };
+        }
+        ErrorKind::UnknownArgument if !arg.starts_with('-') => match command {
+            Some(c) => format!("{c} needs {}", needs(c)),
+            None => {
+                return UsageError {
+                    message: format!("unknown command {arg:?}"),
+                    help: USAGE,
+                }
+            }
+        },
+        ErrorKind::UnknownArgument => {
+            let known = |c: Option<&str>| options_of(c).iter().any(|o| o == arg);
+            match command {
+                Some(c) if known(Some(c)) => {
+                    format!("{arg} is an option of {c}: give it after {c}")
+                }
+                Some(c) if COMMANDS.iter().any(|o| known(Some(o))) => {
+                    format!("{c} does not take {arg}")
+                }
+                _ => format!("unknown option {arg}"),
+            }
+        }
+        ErrorKind::MissingRequiredArgument | ErrorKind::TooFewValues => match command {
+            Some(c) => format!("{c} needs {}", needs(c)),
+            None => first_line(e),
+        },
+        ErrorKind::ValueValidation => match std::error::Error::source(e) {
+            Some(source) => source.to_string(),
+            None => first_line(e),
+        },
+        ErrorKind::InvalidValue | ErrorKind::NoEquals => {
+            let name = arg.split_whitespace().next().unwrap_or(arg);
+            format!("{name} needs a value")
+        }
+        _ => first_line(e),
+    };
+    UsageError {
+        message,
+        help: help(command),
     }
-    if want_help {
-        return Ok(Parsed::Help(help(Some(cmd))));
-    }
-    let allowed: &[&str] = match cmd {
-        "browse" => &["--flat", "--branch", "--depth"],
-        "read" => &["--device", "--path"],
-        "write" => &["--type", "--path"],
-        "subscribe" => &["--rate", "--for", "--path"],
-        "demo" => &["--for"],
-        _ => &[],
-    };
-    if let Some(bad) = seen.iter().find(|o| !allowed.contains(o)) {
-        return Err(err(Some(cmd), format!("{cmd} does not take {bad}")));
-    }
-    let arity = |min: usize, max: Option<usize>, what: &str| -> Result<(), UsageError> {
-        let n = positional.len();
-        if n < min || max.is_some_and(|m| n > m) {
-            Err(err(Some(cmd), format!("{cmd} needs {what}")))
-        } else {
-            Ok(())
-        }
-    };
-    let command = match cmd {
-        "status" => {
-            arity(0, Some(0), "no arguments")?;
-            Command::Status
-        }
-        "browse" => {
-            arity(0, Some(0), "no arguments besides its options")?;
-            Command::Browse {
-                flat,
-                branch,
-                depth,
-            }
-        }
-        "props" => {
-            arity(1, Some(1), "one ITEMID")?;
-            Command::Props {
-                item: positional.remove(0),
-            }
-        }
-        "read" => {
-            arity(1, None, "at least one ITEMID")?;
-            Command::Read {
-                items: positional,
-                device,
-                path,
-            }
-        }
-        "write" => {
-            arity(2, Some(2), "ITEMID and VALUE")?;
-            let value = positional.remove(1);
-            Command::Write {
-                item: positional.remove(0),
-                value,
-                vt,
-                path,
-            }
-        }
-        "subscribe" => {
-            arity(1, None, "at least one ITEMID")?;
-            Command::Subscribe {
-                items: positional,
-                rate_ms,
-                for_secs,
-                path,
-            }
-        }
-        "demo" => {
-            arity(0, Some(0), "no arguments besides --for")?;
-            Command::Demo { for_secs }
-        }
-        _ => return Err(err(None, format!("unknown command {cmd:?}"))),
-    };
-    Ok(Parsed::Run(global, command))
+}
+
+/// clap's own message, without its "error: " and its usage lines.
+fn first_line(e: &clap::Error) -> String {
+    let text = e.to_string();
+    let line = text.lines().next().unwrap_or_default();
+    line.strip_prefix("error: ").unwrap_or(line).to_string()
 }
 
 #[cfg(test)]
@@ -634,5 +765,62 @@ mod tests {
             assert_eq!(parse_vartype(s), Some(vt), "{s}");
         }
         assert_eq!(parse_vartype("VT_VARIANT"), None);
+    }
+
+    #[test]
+    fn the_clap_definition_is_consistent_and_shows_the_help_texts() {
+        let cli = Cli::command();
+        cli.clone().debug_assert();
+        assert_eq!(cli.clone().render_help().to_string(), USAGE);
+        for c in COMMANDS {
+            let mut sub = cli.find_subcommand(c).unwrap().clone();
+            assert_eq!(sub.render_help().to_string(), help(Some(c)), "{c}");
+        }
+    }
+
+    #[test]
+    fn windows_help_negative_values_and_options_before_their_command() {
+        assert_eq!(parse(&args("/?")), Ok(Parsed::Help(USAGE)));
+        assert_eq!(parse(&args("write /?")), Ok(Parsed::Help(WRITE_HELP)));
+        assert_eq!(parse(&args("help frobnicate")), Ok(Parsed::Help(USAGE)));
+        assert_eq!(
+            parse(&args("--server X.Y --help browse")),
+            Ok(Parsed::Help(BROWSE_HELP))
+        );
+        assert_eq!(
+            run("--lang=pl write X -3.5").1,
+            Command::Write {
+                item: "X".into(),
+                value: "-3.5".into(),
+                vt: None,
+                path: String::new()
+            }
+        );
+        assert_eq!(
+            run("subscribe A --rate 10 --rate 20").1,
+            Command::Subscribe {
+                items: vec!["A".into()],
+                rate_ms: 20,
+                for_secs: None,
+                path: String::new()
+            },
+            "the last of a repeated option counts"
+        );
+        let e = parse(&args("--flat browse")).unwrap_err();
+        assert_eq!(
+            (e.message.as_str(), e.help),
+            (
+                "--flat is an option of browse: give it after browse",
+                BROWSE_HELP
+            )
+        );
+        assert!(usage_error("status --node").contains("--node: remote servers"));
+        let blank = ["status", "--server", " "].map(String::from);
+        assert_eq!(
+            parse(&blank).unwrap_err().message,
+            "--server needs a ProgID"
+        );
+        assert!(usage_error("props --device A").contains("props does not take --device"));
+        assert!(usage_error("subscribe A --for -1").contains("seconds > 0"));
     }
 }

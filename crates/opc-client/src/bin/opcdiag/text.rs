@@ -149,34 +149,16 @@ pub fn state_meaning(state: u32) -> &'static str {
     }
 }
 
-/// Days since 1970-01-01 as (year, month, day) (proleptic Gregorian).
-fn civil_from_days(z: i64) -> (i64, u32, u32) {
-    let z = z + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    (yoe + era * 400 + i64::from(m <= 2), m, d)
-}
-
 /// ("yyyy-mm-dd", "hh:mm:ss.mmm") of `t` shifted by `offset_min` minutes.
 fn civil(t: Timestamp, offset_min: i32) -> (String, String) {
-    let ms = t.unix_millis() + i64::from(offset_min) * 60_000;
-    let days = ms.div_euclid(86_400_000);
-    let in_day = ms.rem_euclid(86_400_000);
-    let (y, m, d) = civil_from_days(days);
-    let (h, min, s, milli) = (
-        in_day / 3_600_000,
-        in_day / 60_000 % 60,
-        in_day / 1000 % 60,
-        in_day % 1000,
-    );
+    let shifted = Timestamp(t.0.saturating_add(i64::from(offset_min) * 60 * 10_000_000));
+    let c = shifted.civil();
     (
-        format!("{y:04}-{m:02}-{d:02}"),
-        format!("{h:02}:{min:02}:{s:02}.{milli:03}"),
+        format!("{:04}-{:02}-{:02}", c.year, c.month, c.day),
+        format!(
+            "{:02}:{:02}:{:02}.{:03}",
+            c.hour, c.minute, c.second, c.millis
+        ),
     )
 }
 
