@@ -35,6 +35,7 @@ mod shutdown;
 
 use crate::abi::{self, write_out, OutArray, TaskMem};
 use crate::clock;
+use crate::comdef::RawConnectionPointContainer;
 use crate::connpoint::SinkSlot;
 use crate::context::{self, Context};
 use crate::interfaces::*;
@@ -46,7 +47,6 @@ use ctopc_core::OpcError;
 use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG};
-use windows::Win32::System::Com::IConnectionPointContainer;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
 pub const VENDOR_INFO: &str =
@@ -64,7 +64,7 @@ struct Session {
     IOPCItemProperties,
     IOPCBrowse,
     IOPCItemIO,
-    IConnectionPointContainer
+    RawConnectionPointContainer
 )]
 pub struct OpcServer {
     ctx: &'static Context,
@@ -156,6 +156,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         pcount: *mut u32,
         plcids: *mut *mut u32,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((pcount, plcids)) };
         if pcount.is_null() || plcids.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -175,6 +177,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         code: HRESULT,
         pstring: *mut PWSTR,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((pstring,)) };
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -225,6 +229,8 @@ impl IOPCServer_Impl for OpcServer_Impl {
         lcid: u32,
         pstring: *mut PWSTR,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((pstring,)) };
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
