@@ -152,6 +152,56 @@ fn get_connection_interface_with_null_is_e_pointer() {
 }
 
 #[test]
+fn the_other_null_out_parameters_are_e_pointer_and_clones_work() {
+    let (_s, g) = server_with_group("cp-null-outs");
+    let cpc = container(&g);
+    let cp = data_point(&g);
+    let null = std::ptr::null_mut();
+    // SAFETY: deliberately NULL out-pointers (the server must check them).
+    unsafe {
+        assert_eq!(
+            (Interface::vtable(&cp).GetConnectionPointContainer)(cp.as_raw(), null),
+            E_POINTER
+        );
+        assert_eq!(
+            (Interface::vtable(&cp).EnumConnections)(cp.as_raw(), null),
+            E_POINTER
+        );
+        assert_eq!(
+            (Interface::vtable(&cpc).EnumConnectionPoints)(cpc.as_raw(), null),
+            E_POINTER
+        );
+    }
+    // The enumerators' Clone: E_POINTER for NULL, else a copy at the same position.
+    // SAFETY: a valid interface pointer.
+    let points: IEnumConnectionPoints =
+        unsafe { cpc.EnumConnectionPoints() }.expect("EnumConnectionPoints");
+    // SAFETY: a deliberately NULL out-pointer.
+    let r = unsafe { (Interface::vtable(&points).Clone)(points.as_raw(), null) };
+    assert_eq!(r, E_POINTER);
+    // SAFETY: a plain count.
+    assert!(unsafe { points.Skip(1) }.is_ok());
+    // SAFETY: a valid interface pointer.
+    let copy = unsafe { points.Clone() }.expect("Clone");
+    let mut one = [None];
+    let mut fetched = POISON_U32;
+    // SAFETY: room for one element and a valid fetched count.
+    let hr = unsafe { copy.Next(&mut one, &mut fetched) };
+    assert_eq!(
+        (hr, fetched),
+        (S_FALSE, 0),
+        "the copy is past the one point too"
+    );
+    // SAFETY: a valid interface pointer.
+    let conns: IEnumConnections = unsafe { cp.EnumConnections() }.expect("EnumConnections");
+    // SAFETY: a deliberately NULL out-pointer.
+    let r = unsafe { (Interface::vtable(&conns).Clone)(conns.as_raw(), null) };
+    assert_eq!(r, E_POINTER);
+    // SAFETY: a valid interface pointer.
+    assert!(unsafe { conns.Clone() }.is_ok());
+}
+
+#[test]
 fn advise_argument_branches_and_the_advise_limit() {
     let (_s, g) = server_with_group("cp-advise");
     let cp = data_point(&g);
