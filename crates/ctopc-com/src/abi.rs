@@ -11,6 +11,10 @@
 //!   errors from the core go through [`crate::error::to_com`] (the one mapping), per-item
 //!   codes through [`item_hr`]; [`hresult`] turns a method's result into its raw HRESULT
 //!   for methods that may return S_FALSE.
+//! - **Out-parameters are cleared first**: a method's first statement is
+//!   [`clear_outs`]`((p1, p2, ..))`, which sets every non-NULL out-parameter to 0 / NULL /
+//!   `None` before any check can return (a NULL sibling included), so that every failure
+//!   leaves them all cleared.
 //! - **Out-parameters are all-or-nothing**: everything a method hands out is first built
 //!   in owners ([`TaskMem`], [`OwnedArray`], [`OwnedWstr`]) that free it all on drop; only
 //!   after every allocation of the call has succeeded are the pointers written to the
