@@ -11,6 +11,10 @@
 //!   errors from the core go through [`crate::error::to_com`] (the one mapping), per-item
 //!   codes through [`item_hr`]; [`hresult`] turns a method's result into its raw HRESULT
 //!   for methods that may return S_FALSE.
+//! - **Out-parameters are cleared first**: a method's first statement is
+//!   [`clear_outs`]`((p1, p2, ..))`, which sets every non-NULL out-parameter to 0 / NULL /
+//!   `None` before any check can return (a NULL sibling included), so that every failure
+//!   leaves them all cleared.
 //! - **Out-parameters are all-or-nothing**: everything a method hands out is first built
 //!   in owners ([`TaskMem`], [`OwnedArray`], [`OwnedWstr`]) that free it all on drop; only
 //!   after every allocation of the call has succeeded are the pointers written to the
@@ -19,7 +23,7 @@
 use crate::error;
 use ctopc_core::OpcError;
 use std::ffi::c_void;
-use windows::core::{IUnknown, Interface, GUID, HRESULT, PCWSTR, PWSTR};
+use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_OUTOFMEMORY, S_FALSE, S_OK};
 use windows::Win32::System::Com::{CoTaskMemAlloc, CoTaskMemFree};
 use windows::Win32::System::Variant::VARIANT;
@@ -72,6 +76,84 @@ pub unsafe fn clear<T>(p: *mut T, value: T) {
         // `None`) own nothing.
         unsafe { p.write(value) };
     }
+}
+
+/// The value an out-parameter holds after a failed call: 0, NULL, `None`, GUID_NULL.
+pub trait Cleared {
+    /// The cleared value (owns nothing).
+    fn cleared() -> Self;
+}
+
+macro_rules! cleared_as {
+    ($($t:ty => $v:expr),+ $(,)?) => {
+        $(impl Cleared for $t {
+            fn cleared() -> Self {
+                $v
+            }
+        })+
+    };
+}
+
+cleared_as! {
+    u32 => 0,
+    i32 => 0,
+    f32 => 0.0,
+    HRESULT => HRESULT(0),
+    PWSTR => PWSTR::null(),
+    GUID => GUID::zeroed(),
+    BOOL => BOOL(0),
+}
+
+impl<T> Cleared for *mut T {
+    fn cleared() -> Self {
+        std::ptr::null_mut()
+    }
+}
+
+impl<I: Interface> Cleared for Option<I> {
+    fn cleared() -> Self {
+        None
+    }
+}
+
+/// The out-parameters of one call, as a tuple of raw pointers: see [`clear_outs`].
+pub trait OutParams {
+    /// # Safety
+    /// As [`clear_outs`].
+    unsafe fn clear_all(self);
+}
+
+macro_rules! out_params_tuple {
+    ($($p:ident: $t:ident),+) => {
+        impl<$($t: Cleared),+> OutParams for ($(*mut $t,)+) {
+            unsafe fn clear_all(self) {
+                let ($($p,)+) = self;
+                // SAFETY: forwarded contract of `clear_outs`: each pointer is NULL or
+                // writable caller storage whose old value needs no drop.
+                unsafe { $(clear($p, $t::cleared());)+ }
+            }
+        }
+    };
+}
+
+out_params_tuple!(a: A);
+out_params_tuple!(a: A, b: B);
+out_params_tuple!(a: A, b: B, c: C);
+out_params_tuple!(a: A, b: B, c: C, d: D);
+out_params_tuple!(a: A, b: B, c: C, d: D, e: E);
+out_params_tuple!(a: A, b: B, c: C, d: D, e: E, f: F);
+
+/// Clears every non-NULL out-parameter of a call (0, NULL, `None`) **before any check can
+/// return**, so that a call failing for any reason, a NULL sibling out-parameter included,
+/// leaves all of them cleared: the first statement of a method with out-parameters.
+/// `outs` is a tuple of the method's `[out]` pointers, e.g. `(pcount, ppids)`.
+///
+/// # Safety
+/// Each pointer is NULL or writable caller-owned storage for its type whose old value
+/// needs no drop (an `[out]` parameter of the call: the callee never reads it).
+pub unsafe fn clear_outs(outs: impl OutParams) {
+    // SAFETY: contract of this function.
+    unsafe { outs.clear_all() }
 }
 
 /// Writes one plain required `[out]` value; E_INVALIDARG (nothing written) for NULL.

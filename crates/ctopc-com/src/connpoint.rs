@@ -3,14 +3,21 @@
 //! unknown cookies rejected. The container holds only the sink slots, never the
 //! IConnectionPoint objects, so there is no reference cycle: each FindConnectionPoint
 //! makes a small connection point that holds the container.
+//!
+//! The objects implement our own definitions of the interfaces (`crate::comdef`): NULL
+//! out-parameters are E_POINTER (the contracts name it), out-parameters are cleared first
+//! and filled on success only.
 
+use crate::abi;
+use crate::comdef::{RawConnectionPoint, RawConnectionPoint_Impl};
 use crate::enums::ConnectionPointEnum;
+use std::ffi::c_void;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
-use windows::core::{implement, IUnknown, Interface, Ref, GUID};
-use windows::Win32::Foundation::E_POINTER;
+use windows::core::{implement, IUnknown, Interface, GUID, HRESULT};
+use windows::Win32::Foundation::{E_POINTER, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IConnectionPoint_Impl, IEnumConnections,
+    IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints, IEnumConnections,
 };
 use windows::Win32::System::Ole::{
     CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION,
@@ -114,7 +121,7 @@ impl<I: Interface + Clone> Slot for SinkSlot<I> {
     }
 }
 
-#[implement(IConnectionPoint)]
+#[implement(RawConnectionPoint)]
 pub struct ConnectionPoint {
     iid: GUID,
     container: IConnectionPointContainer,
@@ -127,67 +134,131 @@ impl ConnectionPoint {
         container: IConnectionPointContainer,
         slot: Arc<dyn Slot>,
     ) -> IConnectionPoint {
-        ConnectionPoint {
+        let point: RawConnectionPoint = ConnectionPoint {
             iid,
             container,
             slot,
         }
-        .into()
+        .into();
+        point.into()
     }
 }
 
-impl IConnectionPoint_Impl for ConnectionPoint_Impl {
-    fn GetConnectionInterface(&self) -> windows::core::Result<GUID> {
-        Ok(self.iid)
+impl RawConnectionPoint_Impl for ConnectionPoint_Impl {
+    unsafe fn GetConnectionInterface(&self, piid: *mut GUID) -> HRESULT {
+        // SAFETY: `piid` is this method's [out] parameter.
+        unsafe { out_or_e_pointer(piid, self.iid) }
     }
-    fn GetConnectionPointContainer(&self) -> windows::core::Result<IConnectionPointContainer> {
-        Ok(self.container.clone())
+
+    unsafe fn GetConnectionPointContainer(
+        &self,
+        ppcpc: *mut Option<IConnectionPointContainer>,
+    ) -> HRESULT {
+        // SAFETY: `ppcpc` is this method's [out] interface pointer.
+        unsafe { out_or_e_pointer(ppcpc, Some(self.container.clone())) }
     }
-    fn Advise(&self, sink: Ref<IUnknown>) -> windows::core::Result<u32> {
-        let sink = sink
-            .ok()
-            .map_err(|_| windows::core::Error::from(E_POINTER))?;
-        self.slot.advise(sink)
+
+    unsafe fn Advise(&self, sink: *mut c_void, pdwcookie: *mut u32) -> HRESULT {
+        // SAFETY: `pdwcookie` is this method's [out] parameter.
+        unsafe { abi::clear_outs((pdwcookie,)) };
+        if pdwcookie.is_null() {
+            // Checked before connecting: a failed Advise makes no connection.
+            return E_POINTER;
+        }
+        // SAFETY: `sink` is this method's [in] IUnknown*: NULL or an interface pointer
+        // valid for the call.
+        let Some(sink) = (unsafe { IUnknown::from_raw_borrowed(&sink) }) else {
+            return E_POINTER;
+        };
+        match self.slot.advise(sink) {
+            Ok(cookie) => {
+                // SAFETY: checked non-null above.
+                unsafe { abi::put(pdwcookie, cookie) };
+                S_OK
+            }
+            Err(e) => e.into(),
+        }
     }
-    fn Unadvise(&self, cookie: u32) -> windows::core::Result<()> {
-        self.slot.unadvise(cookie)
+
+    unsafe fn Unadvise(&self, cookie: u32) -> HRESULT {
+        self.slot.unadvise(cookie).into()
     }
-    fn EnumConnections(&self) -> windows::core::Result<IEnumConnections> {
-        Ok(crate::enums::ConnectionEnum::create(
-            self.slot.connections(),
-        ))
+
+    unsafe fn EnumConnections(&self, ppenum: *mut Option<IEnumConnections>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { abi::clear_outs((ppenum,)) };
+        if ppenum.is_null() {
+            return E_POINTER;
+        }
+        let e = crate::enums::ConnectionEnum::create(self.slot.connections());
+        // SAFETY: checked non-null above.
+        unsafe { abi::put(ppenum, Some(e)) };
+        S_OK
     }
 }
 
-/// FindConnectionPoint for a container with the given (iid, slot) points.
+/// Writes one `[out]` value of a COM-defined method: E_POINTER (nothing written) for NULL.
 ///
 /// # Safety
-/// `riid` is NULL or points to a GUID (the method's `[in] REFIID`).
+/// As [`abi::clear`]: `p` is NULL or writable caller storage for one `T`.
+pub unsafe fn out_or_e_pointer<T>(p: *mut T, value: T) -> HRESULT {
+    if p.is_null() {
+        return E_POINTER;
+    }
+    // SAFETY: checked non-null; contract of this function.
+    unsafe { abi::put(p, value) };
+    S_OK
+}
+
+/// IConnectionPointContainer::FindConnectionPoint for a container with the given (iid,
+/// slot) points: `*ppCP` cleared first; E_POINTER for a NULL `riid` or `ppCP`,
+/// CONNECT_E_NOCONNECTION for an IID without a point.
+///
+/// # Safety
+/// `riid` is NULL or points to a GUID (the method's `[in] REFIID`); `ppcp` is NULL or
+/// writable caller storage for one interface pointer (its `[out]`).
 pub unsafe fn find(
     container: IConnectionPointContainer,
     points: &[(GUID, Arc<dyn Slot>)],
     riid: *const GUID,
-) -> windows::core::Result<IConnectionPoint> {
-    if riid.is_null() {
-        return Err(E_POINTER.into());
+    ppcp: *mut Option<IConnectionPoint>,
+) -> HRESULT {
+    // SAFETY: contract of this function.
+    unsafe { abi::clear_outs((ppcp,)) };
+    if riid.is_null() || ppcp.is_null() {
+        return E_POINTER;
     }
     // SAFETY: checked non-null; an [in] REFIID.
     let riid = unsafe { *riid };
-    points
-        .iter()
-        .find(|(iid, _)| *iid == riid)
-        .map(|(iid, slot)| ConnectionPoint::create(*iid, container.clone(), Arc::clone(slot)))
-        .ok_or_else(|| CONNECT_E_NOCONNECTION.into())
+    let Some((iid, slot)) = points.iter().find(|(iid, _)| *iid == riid) else {
+        return CONNECT_E_NOCONNECTION;
+    };
+    let point = ConnectionPoint::create(*iid, container, Arc::clone(slot));
+    // SAFETY: checked non-null above.
+    unsafe { abi::put(ppcp, Some(point)) };
+    S_OK
 }
 
-/// EnumConnectionPoints for a container with the given points.
-pub fn enumerate(
+/// IConnectionPointContainer::EnumConnectionPoints for a container with the given points:
+/// E_POINTER for a NULL `ppEnum`.
+///
+/// # Safety
+/// `ppenum` is NULL or writable caller storage for one interface pointer (the `[out]`).
+pub unsafe fn enumerate(
     container: IConnectionPointContainer,
     points: &[(GUID, Arc<dyn Slot>)],
-) -> windows::Win32::System::Com::IEnumConnectionPoints {
+    ppenum: *mut Option<IEnumConnectionPoints>,
+) -> HRESULT {
+    // SAFETY: contract of this function.
+    unsafe { abi::clear_outs((ppenum,)) };
+    if ppenum.is_null() {
+        return E_POINTER;
+    }
     let cps = points
         .iter()
         .map(|(iid, slot)| ConnectionPoint::create(*iid, container.clone(), Arc::clone(slot)))
         .collect();
-    ConnectionPointEnum::create(cps)
+    // SAFETY: checked non-null above.
+    unsafe { abi::put(ppenum, Some(ConnectionPointEnum::create(cps))) };
+    S_OK
 }

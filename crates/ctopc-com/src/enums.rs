@@ -1,13 +1,23 @@
 //! Snapshot enumerators (IEnumString, IEnumUnknown, IEnumConnectionPoints,
 //! IEnumConnections): the list is taken when the enumerator is created; clones share it
 //! and copy the position.
+//!
+//! They implement our own definitions of the interfaces (`crate::comdef`): `Clone` with a
+//! NULL out-parameter is E_POINTER (windows-rs' shim wrote through it), and every
+//! out-parameter is cleared first and filled on success only.
 
+use crate::abi;
+use crate::comdef::{
+    RawEnumConnectionPoints, RawEnumConnectionPoints_Impl, RawEnumConnections,
+    RawEnumConnections_Impl, RawEnumString, RawEnumString_Impl, RawEnumUnknown,
+    RawEnumUnknown_Impl,
+};
+use crate::connpoint::out_or_e_pointer;
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IEnumConnectionPoints, IEnumConnectionPoints_Impl, IEnumConnections,
-    IEnumConnections_Impl, IEnumString, IEnumString_Impl, IEnumUnknown, IEnumUnknown_Impl,
+    IConnectionPoint, IEnumConnectionPoints, IEnumConnections, IEnumString, IEnumUnknown,
     CONNECTDATA,
 };
 
@@ -60,15 +70,6 @@ impl<T> Cursor<T> {
             S_OK
         } else {
             S_FALSE
-        }
-    }
-
-    /// Skip for the `Result`-returning IEnum*::Skip methods: S_FALSE travels as the error
-    /// (an `Ok` would become S_OK).
-    pub fn skip_result(&self, n: u32) -> windows::core::Result<()> {
-        match self.skip(n) {
-            S_OK => Ok(()),
-            hr => Err(hr.into()),
         }
     }
 
@@ -132,31 +133,45 @@ unsafe fn next_into<T, U>(
     unsafe { finish(fetched, end - pos, celt) }
 }
 
-#[implement(IEnumString)]
+/// IEnum*::Clone: `*ppenum` is a new enumerator sharing the snapshot at the same position;
+/// E_POINTER (nothing made) for a NULL `ppenum`.
+///
+/// # Safety
+/// `ppenum` is NULL or writable caller storage for one interface pointer (the `[out]`).
+unsafe fn clone_out<I>(ppenum: *mut Option<I>, make: impl FnOnce() -> I) -> HRESULT {
+    if ppenum.is_null() {
+        return E_POINTER;
+    }
+    // SAFETY: contract of this function (non-null checked above).
+    unsafe { out_or_e_pointer(ppenum, Some(make())) }
+}
+
+#[implement(RawEnumString)]
 pub struct StringEnum(Cursor<String>);
 
 impl StringEnum {
     pub fn create(items: Vec<String>) -> IEnumString {
-        StringEnum(Cursor::new(items)).into()
+        StringEnum::from_cursor(Cursor::new(items))
+    }
+
+    fn from_cursor(cursor: Cursor<String>) -> IEnumString {
+        let e: RawEnumString = StringEnum(cursor).into();
+        e.into()
     }
 }
 
-impl IEnumString_Impl for StringEnum_Impl {
-    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
-    // runtime passes them under the interface's contract; they are dereferenced only in
-    // the `unsafe fn`s of this module, each with its SAFETY argument.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn Next(&self, celt: u32, rgelt: *mut PWSTR, fetched: *mut u32) -> HRESULT {
+impl RawEnumString_Impl for StringEnum_Impl {
+    unsafe fn Next(&self, celt: u32, rgelt: *mut PWSTR, fetched: *mut u32) -> HRESULT {
         if let Err(hr) = check_next(celt, rgelt, fetched) {
             return hr;
         }
         let (pos, end) = self.0.peek(celt);
         let mut out: Vec<PWSTR> = Vec::with_capacity(end - pos);
         for s in &self.0.items()[pos..end] {
-            match crate::abi::alloc_wstr(s) {
+            match abi::alloc_wstr(s) {
                 Ok(p) => out.push(p),
                 Err(e) => {
-                    out.into_iter().for_each(crate::abi::free_wstr);
+                    out.into_iter().for_each(abi::free_wstr);
                     return e.code();
                 }
             }
@@ -169,94 +184,105 @@ impl IEnumString_Impl for StringEnum_Impl {
         // SAFETY: `fetched` is this method's pceltFetched.
         unsafe { finish(fetched, end - pos, celt) }
     }
-    fn Skip(&self, celt: u32) -> HRESULT {
+    unsafe fn Skip(&self, celt: u32) -> HRESULT {
         self.0.skip(celt)
     }
-    fn Reset(&self) -> windows::core::Result<()> {
+    unsafe fn Reset(&self) -> HRESULT {
         self.0.reset();
-        Ok(())
+        S_OK
     }
-    fn Clone(&self) -> windows::core::Result<IEnumString> {
-        Ok(StringEnum(self.0.fork()).into())
+    unsafe fn Clone(&self, ppenum: *mut Option<IEnumString>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { clone_out(ppenum, || StringEnum::from_cursor(self.0.fork())) }
     }
 }
 
-#[implement(IEnumUnknown)]
+#[implement(RawEnumUnknown)]
 pub struct UnknownEnum(Cursor<IUnknown>);
 
 impl UnknownEnum {
     pub fn create(items: Vec<IUnknown>) -> IEnumUnknown {
-        UnknownEnum(Cursor::new(items)).into()
+        UnknownEnum::from_cursor(Cursor::new(items))
+    }
+
+    fn from_cursor(cursor: Cursor<IUnknown>) -> IEnumUnknown {
+        let e: RawEnumUnknown = UnknownEnum(cursor).into();
+        e.into()
     }
 }
 
-impl IEnumUnknown_Impl for UnknownEnum_Impl {
-    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
-    // runtime passes them under the interface's contract; they are dereferenced only in
-    // the `unsafe fn`s of this module, each with its SAFETY argument.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn Next(&self, celt: u32, rgelt: *mut Option<IUnknown>, fetched: *mut u32) -> HRESULT {
+impl RawEnumUnknown_Impl for UnknownEnum_Impl {
+    unsafe fn Next(&self, celt: u32, rgelt: *mut Option<IUnknown>, fetched: *mut u32) -> HRESULT {
         // SAFETY: this method's parameters, under the IEnum*::Next contract.
         unsafe { next_into(&self.0, celt, rgelt, fetched, |u| Some(u.clone())) }
     }
-    fn Skip(&self, celt: u32) -> windows::core::Result<()> {
-        self.0.skip_result(celt)
+    unsafe fn Skip(&self, celt: u32) -> HRESULT {
+        self.0.skip(celt)
     }
-    fn Reset(&self) -> windows::core::Result<()> {
+    unsafe fn Reset(&self) -> HRESULT {
         self.0.reset();
-        Ok(())
+        S_OK
     }
-    fn Clone(&self) -> windows::core::Result<IEnumUnknown> {
-        Ok(UnknownEnum(self.0.fork()).into())
+    unsafe fn Clone(&self, ppenum: *mut Option<IEnumUnknown>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { clone_out(ppenum, || UnknownEnum::from_cursor(self.0.fork())) }
     }
 }
 
-#[implement(IEnumConnectionPoints)]
+#[implement(RawEnumConnectionPoints)]
 pub struct ConnectionPointEnum(Cursor<IConnectionPoint>);
 
 impl ConnectionPointEnum {
     pub fn create(items: Vec<IConnectionPoint>) -> IEnumConnectionPoints {
-        ConnectionPointEnum(Cursor::new(items)).into()
+        ConnectionPointEnum::from_cursor(Cursor::new(items))
+    }
+
+    fn from_cursor(cursor: Cursor<IConnectionPoint>) -> IEnumConnectionPoints {
+        let e: RawEnumConnectionPoints = ConnectionPointEnum(cursor).into();
+        e.into()
     }
 }
 
-impl IEnumConnectionPoints_Impl for ConnectionPointEnum_Impl {
-    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
-    // runtime passes them under the interface's contract; they are dereferenced only in
-    // the `unsafe fn`s of this module, each with its SAFETY argument.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn Next(&self, celt: u32, rgelt: *mut Option<IConnectionPoint>, fetched: *mut u32) -> HRESULT {
+impl RawEnumConnectionPoints_Impl for ConnectionPointEnum_Impl {
+    unsafe fn Next(
+        &self,
+        celt: u32,
+        rgelt: *mut Option<IConnectionPoint>,
+        fetched: *mut u32,
+    ) -> HRESULT {
         // SAFETY: this method's parameters, under the IEnum*::Next contract.
         unsafe { next_into(&self.0, celt, rgelt, fetched, |cp| Some(cp.clone())) }
     }
-    fn Skip(&self, celt: u32) -> windows::core::Result<()> {
-        self.0.skip_result(celt)
+    unsafe fn Skip(&self, celt: u32) -> HRESULT {
+        self.0.skip(celt)
     }
-    fn Reset(&self) -> windows::core::Result<()> {
+    unsafe fn Reset(&self) -> HRESULT {
         self.0.reset();
-        Ok(())
+        S_OK
     }
-    fn Clone(&self) -> windows::core::Result<IEnumConnectionPoints> {
-        Ok(ConnectionPointEnum(self.0.fork()).into())
+    unsafe fn Clone(&self, ppenum: *mut Option<IEnumConnectionPoints>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { clone_out(ppenum, || ConnectionPointEnum::from_cursor(self.0.fork())) }
     }
 }
 
 /// IConnectionPoint::EnumConnections: (cookie, sink) pairs.
-#[implement(IEnumConnections)]
+#[implement(RawEnumConnections)]
 pub struct ConnectionEnum(Cursor<(u32, IUnknown)>);
 
 impl ConnectionEnum {
     pub fn create(items: Vec<(u32, IUnknown)>) -> IEnumConnections {
-        ConnectionEnum(Cursor::new(items)).into()
+        ConnectionEnum::from_cursor(Cursor::new(items))
+    }
+
+    fn from_cursor(cursor: Cursor<(u32, IUnknown)>) -> IEnumConnections {
+        let e: RawEnumConnections = ConnectionEnum(cursor).into();
+        e.into()
     }
 }
 
-impl IEnumConnections_Impl for ConnectionEnum_Impl {
-    // windows-rs declares the IEnum* methods safe although they take raw pointers: the COM
-    // runtime passes them under the interface's contract; they are dereferenced only in
-    // the `unsafe fn`s of this module, each with its SAFETY argument.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn Next(&self, celt: u32, rgcd: *mut CONNECTDATA, fetched: *mut u32) -> HRESULT {
+impl RawEnumConnections_Impl for ConnectionEnum_Impl {
+    unsafe fn Next(&self, celt: u32, rgcd: *mut CONNECTDATA, fetched: *mut u32) -> HRESULT {
         // SAFETY: this method's parameters, under the IEnum*::Next contract.
         unsafe {
             next_into(&self.0, celt, rgcd, fetched, |(cookie, unk)| CONNECTDATA {
@@ -265,14 +291,15 @@ impl IEnumConnections_Impl for ConnectionEnum_Impl {
             })
         }
     }
-    fn Skip(&self, celt: u32) -> windows::core::Result<()> {
-        self.0.skip_result(celt)
+    unsafe fn Skip(&self, celt: u32) -> HRESULT {
+        self.0.skip(celt)
     }
-    fn Reset(&self) -> windows::core::Result<()> {
+    unsafe fn Reset(&self) -> HRESULT {
         self.0.reset();
-        Ok(())
+        S_OK
     }
-    fn Clone(&self) -> windows::core::Result<IEnumConnections> {
-        Ok(ConnectionEnum(self.0.fork()).into())
+    unsafe fn Clone(&self, ppenum: *mut Option<IEnumConnections>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { clone_out(ppenum, || ConnectionEnum::from_cursor(self.0.fork())) }
     }
 }

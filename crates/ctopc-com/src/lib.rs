@@ -6,6 +6,7 @@
 pub mod abi;
 pub mod client;
 pub mod clock;
+pub mod comdef;
 pub mod connpoint;
 pub mod context;
 pub mod enums;

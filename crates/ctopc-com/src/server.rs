@@ -11,14 +11,16 @@
 //!   arrays with a non-zero count, REFIIDs) alike. The OPC specifications list E_INVALIDARG
 //!   for bad arguments of every method and the OPC Foundation sample server answers NULLs
 //!   with it; E_POINTER is kept for the COM-defined methods whose contracts name it
-//!   (QueryInterface, IEnum*::Next, IConnectionPoint*). Through the proxy a NULL `[ref]`
+//!   (QueryInterface, IEnum*::Next and Clone, IConnectionPointContainer and
+//!   IConnectionPoint, which the objects implement through our own definitions in
+//!   `crate::comdef`, so that the NULL checks are ours and not windows-rs' shims'). Through the proxy a NULL `[ref]`
 //!   pointer mostly never reaches the server: the proxy answers RPC_X_NULL_REF_POINTER
 //!   (Wine's proxy lets some NULL `[out]` pointers through; the stub then hands the server
 //!   storage of its own and the proxy fails on the way back). `[in, unique]` pointers
 //!   (AddGroup's pTimeBias and pPercentDeadband) may be NULL and mean "the default".
 //! - A count of 0 is E_INVALIDARG; enumeration values outside the IDL's are E_INVALIDARG.
-//! - Out-parameters are cleared first (NULL / 0), then filled only after everything of the
-//!   call has succeeded (`crate::abi`): all or nothing.
+//! - Out-parameters are cleared first (NULL / 0, `abi::clear_outs` before any check), then
+//!   filled only after everything of the call has succeeded (`crate::abi`): all or nothing.
 //! - Per-item operations return S_FALSE when any item failed, with per-item codes.
 //! - Core errors become COM errors only through `crate::error::to_com` (the crate's one
 //!   mapping, shared with the group objects; its message object is made with
@@ -35,6 +37,7 @@ mod shutdown;
 
 use crate::abi::{self, write_out, OutArray, TaskMem};
 use crate::clock;
+use crate::comdef::RawConnectionPointContainer;
 use crate::connpoint::SinkSlot;
 use crate::context::{self, Context};
 use crate::interfaces::*;
@@ -46,7 +49,6 @@ use ctopc_core::OpcError;
 use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG};
-use windows::Win32::System::Com::IConnectionPointContainer;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
 pub const VENDOR_INFO: &str =
@@ -64,7 +66,7 @@ struct Session {
     IOPCItemProperties,
     IOPCBrowse,
     IOPCItemIO,
-    IConnectionPointContainer
+    RawConnectionPointContainer
 )]
 pub struct OpcServer {
     ctx: &'static Context,
@@ -156,6 +158,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         pcount: *mut u32,
         plcids: *mut *mut u32,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((pcount, plcids)) };
         if pcount.is_null() || plcids.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -175,6 +179,8 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         code: HRESULT,
         pstring: *mut PWSTR,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((pstring,)) };
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -225,6 +231,8 @@ impl IOPCServer_Impl for OpcServer_Impl {
         lcid: u32,
         pstring: *mut PWSTR,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((pstring,)) };
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }

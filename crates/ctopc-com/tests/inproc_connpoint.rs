@@ -110,7 +110,6 @@ fn find_connection_point_unknown_iid_is_connect_e_noconnection() {
 }
 
 #[test]
-#[ignore = "bug: FindConnectionPoint leaves *ppCP unset (not NULL) on failure (windows-rs' shim writes the out-parameter only on success; COM wants NULL)"]
 fn find_connection_point_failures_set_the_out_to_null() {
     let c = container();
     for (what, riid) in [
@@ -138,7 +137,6 @@ fn child_find_connection_point_null_out() {
 }
 
 #[test]
-#[ignore = "bug: FindConnectionPoint with a NULL ppCP writes through it (access violation): windows-rs' generated shim has no NULL check"]
 fn find_connection_point_null_out_is_e_pointer() {
     assert!(passes_in_child("child_find_connection_point_null_out"));
 }
@@ -156,7 +154,6 @@ fn child_enum_connection_points_null_out() {
 }
 
 #[test]
-#[ignore = "bug: EnumConnectionPoints with a NULL ppEnum writes through it (access violation): windows-rs' generated shim has no NULL check"]
 fn enum_connection_points_null_out_is_e_pointer() {
     assert!(passes_in_child("child_enum_connection_points_null_out"));
 }
@@ -224,7 +221,6 @@ fn child_advise_null_cookie() {
 }
 
 #[test]
-#[ignore = "bug: Advise with a NULL pdwCookie writes through it (access violation) and keeps the connection: windows-rs' generated shim has no NULL check"]
 fn advise_null_cookie_is_e_pointer() {
     assert!(passes_in_child("child_advise_null_cookie"));
 }
@@ -325,7 +321,6 @@ fn child_connection_point_null_outs() {
 }
 
 #[test]
-#[ignore = "bug: GetConnectionInterface, GetConnectionPointContainer and EnumConnections with a NULL out-parameter write through it (access violation): windows-rs' generated shims have no NULL check"]
 fn connection_point_null_outs_are_e_pointer() {
     assert!(passes_in_child("child_connection_point_null_outs"));
 }

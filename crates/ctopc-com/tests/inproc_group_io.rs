@@ -346,9 +346,6 @@ fn sync_read_max_age_argument_branches() {
     }
 }
 
-#[ignore = "bug: with a NULL out-parameter, IOPCSyncIO::Read and IOPCSyncIO2::ReadMaxAge \
-            answer E_INVALIDARG without clearing the out-parameters after it (io.rs: \
-            out-pointers are set to NULL first)"]
 #[test]
 fn sync_reads_with_a_null_out_parameter_clear_all_the_others() {
     let p = plant("io-read-clear", false);
@@ -547,9 +544,6 @@ fn async_read_write_argument_branches() {
     );
 }
 
-#[ignore = "bug: the asynchronous Read/Write/ReadMaxAge/WriteVQT with a NULL ppErrors \
-            answer E_INVALIDARG without clearing *pdwCancelID (io.rs: out-pointers are set \
-            to NULL first)"]
 #[test]
 fn async_calls_with_null_errors_clear_the_cancel_id() {
     let p = plant("io-async-clear", true);
@@ -741,8 +735,6 @@ fn refresh_argument_branches() {
     }
 }
 
-#[ignore = "bug: Refresh2 with a source outside OPCDATASOURCE answers E_INVALIDARG before \
-            clearing *pdwCancelID (io.rs: out-pointers are set to NULL first)"]
 #[test]
 fn refresh2_with_a_bad_source_clears_the_cancel_id() {
     let p = plant("io-refresh-clear", true);

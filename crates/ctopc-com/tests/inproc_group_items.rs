@@ -488,8 +488,6 @@ fn create_enumerator_argument_branches() {
     }
 }
 
-#[ignore = "bug: CreateEnumerator(NULL riid) answers E_INVALIDARG without clearing *ppUnk \
-            (server.rs: out-parameters are cleared first, NULL / 0)"]
 #[test]
 fn create_enumerator_with_null_riid_clears_the_out_parameter() {
     let (_s, g) = server_with_group("items-enum-args-clear");
@@ -616,9 +614,6 @@ fn enumerator_next_and_clone_argument_branches() {
     );
 }
 
-#[ignore = "bug: IEnumOPCItemAttributes::Next with pceltFetched NULL and celt > 1 answers \
-            E_INVALIDARG without clearing *ppItemArray (server.rs: out-parameters are cleared \
-            first)"]
 #[test]
 fn enumerator_next_failure_clears_the_array_out_parameter() {
     let (_s, g, _h) = group_with("items-enum-next-clear", &[LEVEL, SETPOINT]);
@@ -630,8 +625,6 @@ fn enumerator_next_failure_clears_the_array_out_parameter() {
     assert!(items.is_null());
 }
 
-#[ignore = "bug: AddItems/ValidateItems with a NULL ppAddResults answer E_INVALIDARG before \
-            clearing *ppErrors (server.rs: out-parameters are cleared first, NULL / 0)"]
 #[test]
 fn add_items_null_results_clears_the_error_array() {
     let (_s, g) = server_with_group("items-add-clear");

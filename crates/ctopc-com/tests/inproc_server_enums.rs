@@ -176,7 +176,6 @@ fn child_enum_clone_null_out() {
 }
 
 #[test]
-#[ignore = "bug: IEnumString::Clone with a NULL ppenum writes through it (access violation): windows-rs' generated shim has no NULL check (the same for every enumerator's Clone)"]
 fn enum_clone_null_out_is_e_pointer() {
     assert!(passes_in_child("child_enum_clone_null_out"));
 }

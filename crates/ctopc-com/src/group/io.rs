@@ -296,6 +296,8 @@ impl Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((pp_values, pp_errors)) };
         let pp_values = OutArray::new(pp_values)?;
         let pp_errors = OutArray::new(pp_errors)?;
         let handles = in_array(ph_server, count)?;
@@ -394,6 +396,8 @@ impl Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((pp_values, pp_qualities, pp_times, pp_errors)) };
         let pp_values = OutArray::new(pp_values)?;
         let pp_qualities = OutArray::new(pp_qualities)?;
         let pp_times = OutArray::new(pp_times)?;
@@ -505,6 +509,8 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((p_cancel, pp_errors)) };
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
@@ -526,6 +532,8 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((p_cancel, pp_errors)) };
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
@@ -596,6 +604,8 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         transaction: u32,
         p_cancel: *mut u32,
     ) -> windows::core::Result<()> {
+        // SAFETY: the method's [out] parameter.
+        unsafe { abi::clear_outs((p_cancel,)) };
         let source = data_source(source)?;
         self.refresh_impl(p_cancel, |e, now| {
             e.refresh2(now, self.handle, source, transaction)
@@ -617,6 +627,8 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
     }
 
     unsafe fn GetEnable(&self, p_enable: *mut BOOL) -> windows::core::Result<()> {
+        // SAFETY: the method's [out] parameter.
+        unsafe { abi::clear_outs((p_enable,)) };
         if p_enable.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -643,6 +655,8 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((p_cancel, pp_errors)) };
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
@@ -666,6 +680,8 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> ComResult<HRESULT> {
+        // SAFETY: the method's [out] parameters.
+        unsafe { abi::clear_outs((p_cancel, pp_errors)) };
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;

@@ -159,6 +159,8 @@ impl IOPCItemMgt_Impl for Group_Impl {
         ppaddresults: *mut *mut OPCITEMRESULT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((ppaddresults, pperrors)) };
         let results = check!(OutArray::new(ppaddresults));
         let errors = check!(OutArray::new(pperrors));
         let defs = check!(in_array(pitemarray, dwcount));
@@ -189,6 +191,8 @@ impl IOPCItemMgt_Impl for Group_Impl {
         ppvalidationresults: *mut *mut OPCITEMRESULT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((ppvalidationresults, pperrors)) };
         let results = check!(OutArray::new(ppvalidationresults));
         let errors = check!(OutArray::new(pperrors));
         let defs = check!(in_array(pitemarray, dwcount));
@@ -279,11 +283,11 @@ impl IOPCItemMgt_Impl for Group_Impl {
     /// Only IID_IEnumOPCItemAttributes (E_NOINTERFACE otherwise); S_FALSE with an empty
     /// enumerator when the group has no items.
     unsafe fn CreateEnumerator(&self, riid: *const GUID, ppunk: *mut Option<IUnknown>) -> HRESULT {
+        // SAFETY: this method's [out] interface pointer.
+        unsafe { abi::clear_outs((ppunk,)) };
         if riid.is_null() || ppunk.is_null() {
             return E_INVALIDARG;
         }
-        // SAFETY: checked non-null; an [out] interface pointer.
-        unsafe { ppunk.write(None) };
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
         if iid != IEnumOPCItemAttributes::IID {
@@ -372,11 +376,12 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
         ppitemarray: *mut *mut OPCITEMATTRIBUTES,
         pceltfetched: *mut u32,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters. (*pceltFetched is written below when
+        // asked for; a failed Next leaves it as it was, as the enumerators of `enums` do.)
+        unsafe { abi::clear_outs((ppitemarray,)) };
         if let Err(hr) = check_next(celt, ppitemarray, pceltfetched) {
             return hr;
         }
-        // SAFETY: checked non-null by check_next.
-        unsafe { ppitemarray.write(std::ptr::null_mut()) };
         let (pos, end) = self.cursor.peek(celt);
         let got = end - pos;
         if got > 0 {
@@ -420,6 +425,8 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
         &self,
         ppenumitemattributes: *mut Option<IEnumOPCItemAttributes>,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] interface pointer.
+        unsafe { abi::clear_outs((ppenumitemattributes,)) };
         if ppenumitemattributes.is_null() {
             return Err(E_INVALIDARG.into());
         }
@@ -466,6 +473,8 @@ impl IOPCItemDeadbandMgt_Impl for Group_Impl {
         pppercentdeadband: *mut *mut f32,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((pppercentdeadband, pperrors)) };
         let values = check!(OutArray::new(pppercentdeadband));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));
@@ -507,6 +516,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         ppdwrevisedsamplingrate: *mut *mut u32,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((ppdwrevisedsamplingrate, pperrors)) };
         let values = check!(OutArray::new(ppdwrevisedsamplingrate));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));
@@ -531,6 +542,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         ppdwsamplingrate: *mut *mut u32,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((ppdwsamplingrate, pperrors)) };
         let values = check!(OutArray::new(ppdwsamplingrate));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));
@@ -585,6 +598,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         ppbenable: *mut *mut BOOL,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameters.
+        unsafe { abi::clear_outs((ppbenable, pperrors)) };
         let values = check!(OutArray::new(ppbenable));
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));

@@ -18,6 +18,7 @@ mod io;
 mod items;
 
 use crate::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
+use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl};
 use crate::connpoint::{self, SinkSlot, Slot};
 use crate::context::Context;
 use crate::error;
@@ -31,10 +32,7 @@ use windows::core::{
     implement, IUnknown, IUnknownImpl, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR,
 };
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, S_OK};
-use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl,
-    IEnumConnectionPoints,
-};
+use windows::Win32::System::Com::{IConnectionPoint, IEnumConnectionPoints};
 use windows_core::Weak;
 
 pub use items::ItemAttributesEnum;
@@ -49,7 +47,7 @@ pub use items::ItemAttributesEnum;
     IOPCAsyncIO3,
     IOPCItemDeadbandMgt,
     IOPCItemSamplingMgt,
-    IConnectionPointContainer
+    RawConnectionPointContainer
 )]
 pub struct Group {
     pub(crate) ctx: &'static Context,
@@ -332,6 +330,8 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         plcid: *const LCID,
         phclientgroup: *const OPCHANDLE,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((previsedupdaterate,)) };
         if previsedupdaterate.is_null() {
             return E_INVALIDARG;
         }
@@ -365,11 +365,11 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         riid: *const GUID,
         ppunk: *mut Option<IUnknown>,
     ) -> windows::core::Result<()> {
+        // SAFETY: this method's [out] interface pointer.
+        unsafe { abi::clear_outs((ppunk,)) };
         if riid.is_null() || ppunk.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        // SAFETY: checked non-null; an [out] interface pointer.
-        unsafe { ppunk.write(None) };
         let name = abi::in_string(szname, OpcError::InvalidArg)?;
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
@@ -413,6 +413,8 @@ impl IOPCGroupStateMgt2_Impl for Group_Impl {
         dwkeepalivetime: u32,
         pdwrevisedkeepalivetime: *mut u32,
     ) -> HRESULT {
+        // SAFETY: this method's [out] parameter.
+        unsafe { abi::clear_outs((pdwrevisedkeepalivetime,)) };
         if pdwrevisedkeepalivetime.is_null() {
             return E_INVALIDARG;
         }
@@ -486,26 +488,20 @@ impl Group_Impl {
     }
 }
 
-impl IConnectionPointContainer_Impl for Group_Impl {
-    fn EnumConnectionPoints(&self) -> windows::core::Result<IEnumConnectionPoints> {
-        Ok(connpoint::enumerate(
-            self.to_interface::<IConnectionPointContainer>(),
-            &self.points(),
-        ))
+impl RawConnectionPointContainer_Impl for Group_Impl {
+    unsafe fn EnumConnectionPoints(&self, ppenum: *mut Option<IEnumConnectionPoints>) -> HRESULT {
+        let container = self.to_interface::<RawConnectionPointContainer>().into();
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { connpoint::enumerate(container, &self.points(), ppenum) }
     }
 
-    // windows-rs declares IConnectionPointContainer's methods safe although they take raw
-    // pointers: the COM runtime passes them under the interface's contract; `find` checks
-    // and reads the REFIID.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn FindConnectionPoint(&self, riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
-        // SAFETY: `riid` is this method's [in] REFIID.
-        unsafe {
-            connpoint::find(
-                self.to_interface::<IConnectionPointContainer>(),
-                &self.points(),
-                riid,
-            )
-        }
+    unsafe fn FindConnectionPoint(
+        &self,
+        riid: *const GUID,
+        ppcp: *mut Option<IConnectionPoint>,
+    ) -> HRESULT {
+        let container = self.to_interface::<RawConnectionPointContainer>().into();
+        // SAFETY: `riid` is this method's [in] REFIID, `ppcp` its [out] interface pointer.
+        unsafe { connpoint::find(container, &self.points(), riid, ppcp) }
     }
 }

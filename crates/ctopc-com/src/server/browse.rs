@@ -14,7 +14,9 @@
 
 use super::props::{self, Prop};
 use super::OpcServer_Impl;
-use crate::abi::{self, clear, in_slice, in_string, nonnull, put, OwnedArray, OwnedWstr};
+use crate::abi::{
+    self, clear, clear_outs, in_slice, in_string, nonnull, put, OwnedArray, OwnedWstr,
+};
 use crate::enums::StringEnum;
 use crate::interfaces::*;
 use ctopc_core::browse::{
@@ -191,9 +193,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         pcount: *mut u32,
         ppelements: *mut *mut OPCBROWSEELEMENT,
     ) -> HRESULT {
-        clear(pmore, BOOL(0));
-        clear(pcount, 0);
-        clear(ppelements, std::ptr::null_mut());
+        clear_outs((pmore, pcount, ppelements));
         abi::hresult((|| {
             nonnull(pcontinuation_point)?;
             nonnull(pmore)?;

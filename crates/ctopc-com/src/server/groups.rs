@@ -28,7 +28,7 @@
 //!   E_INVALIDARG.
 
 use super::OpcServer;
-use crate::abi::{self, clear, in_string, nonnull, put, query_out};
+use crate::abi::{self, clear, clear_outs, in_string, nonnull, put, query_out};
 use crate::context::Context;
 use crate::enums::{StringEnum, UnknownEnum};
 use crate::interfaces::*;
@@ -107,9 +107,7 @@ impl OpcServer {
         riid: *const GUID,
         ppunk: *mut Option<IUnknown>,
     ) -> windows::core::Result<HRESULT> {
-        clear(pserver, 0);
-        clear(prevised, 0);
-        clear(ppunk, None);
+        clear_outs((pserver, prevised, ppunk));
         nonnull(pserver)?;
         nonnull(prevised)?;
         nonnull(riid)?;

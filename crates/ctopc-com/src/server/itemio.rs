@@ -12,7 +12,8 @@
 use super::{OpcServer, OpcServer_Impl};
 use crate::abi::TaskMem;
 use crate::abi::{
-    self, clear, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any, OwnedArray,
+    self, clear, clear_outs, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any,
+    OwnedArray,
 };
 use crate::interfaces::*;
 use crate::runtime;
@@ -135,10 +136,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pptimes: *mut *mut FILETIME,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        clear(ppvalues, std::ptr::null_mut());
-        clear(ppqualities, std::ptr::null_mut());
-        clear(pptimes, std::ptr::null_mut());
-        clear(pperrors, std::ptr::null_mut());
+        clear_outs((ppvalues, ppqualities, pptimes, pperrors));
         abi::hresult((|| {
             nonnull(ppvalues)?;
             nonnull(ppqualities)?;

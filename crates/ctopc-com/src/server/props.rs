@@ -28,7 +28,8 @@
 use super::{OpcServer, OpcServer_Impl};
 use crate::abi::TaskMem;
 use crate::abi::{
-    self, clear, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray, OwnedWstr,
+    self, clear_outs, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray,
+    OwnedWstr,
 };
 use crate::interfaces::*;
 use crate::variant;
@@ -406,10 +407,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         ppdescriptions: *mut *mut PWSTR,
         pptypes: *mut *mut VARTYPE,
     ) -> windows::core::Result<()> {
-        clear(pcount, 0);
-        clear(ppids, std::ptr::null_mut());
-        clear(ppdescriptions, std::ptr::null_mut());
-        clear(pptypes, std::ptr::null_mut());
+        clear_outs((pcount, ppids, ppdescriptions, pptypes));
         nonnull(pcount)?;
         nonnull(ppids)?;
         nonnull(ppdescriptions)?;
@@ -444,8 +442,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         ppdata: *mut *mut VARIANT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        clear(ppdata, std::ptr::null_mut());
-        clear(pperrors, std::ptr::null_mut());
+        clear_outs((ppdata, pperrors));
         abi::hresult((|| {
             nonnull(ppdata)?;
             nonnull(pperrors)?;
@@ -484,8 +481,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         ppnew_ids: *mut *mut PWSTR,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        clear(ppnew_ids, std::ptr::null_mut());
-        clear(pperrors, std::ptr::null_mut());
+        clear_outs((ppnew_ids, pperrors));
         abi::hresult((|| {
             nonnull(ppnew_ids)?;
             nonnull(pperrors)?;

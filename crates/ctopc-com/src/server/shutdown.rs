@@ -4,14 +4,12 @@
 //! stop) calls `ShutdownRequest(reason)` on every connected client before the server exits.
 
 use super::OpcServer_Impl;
+use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl};
 use crate::connpoint::{self, Slot};
 use crate::interfaces::IOPCShutdown;
 use std::sync::Arc;
-use windows::core::{IUnknownImpl, Interface, GUID};
-use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IConnectionPointContainer_Impl,
-    IEnumConnectionPoints,
-};
+use windows::core::{IUnknownImpl, Interface, GUID, HRESULT};
+use windows::Win32::System::Com::{IConnectionPoint, IEnumConnectionPoints};
 
 impl OpcServer_Impl {
     fn points(&self) -> [(GUID, Arc<dyn Slot>); 1] {
@@ -22,19 +20,20 @@ impl OpcServer_Impl {
     }
 }
 
-impl IConnectionPointContainer_Impl for OpcServer_Impl {
-    fn EnumConnectionPoints(&self) -> windows::core::Result<IEnumConnectionPoints> {
-        let container: IConnectionPointContainer = self.to_interface();
-        Ok(connpoint::enumerate(container, &self.points()))
+impl RawConnectionPointContainer_Impl for OpcServer_Impl {
+    unsafe fn EnumConnectionPoints(&self, ppenum: *mut Option<IEnumConnectionPoints>) -> HRESULT {
+        let container = self.to_interface::<RawConnectionPointContainer>().into();
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { connpoint::enumerate(container, &self.points(), ppenum) }
     }
 
-    // windows-rs declares IConnectionPointContainer's methods safe although they take raw
-    // pointers: the COM runtime passes them under the interface's contract; `find` checks
-    // and reads the REFIID.
-    #[allow(clippy::not_unsafe_ptr_arg_deref)]
-    fn FindConnectionPoint(&self, riid: *const GUID) -> windows::core::Result<IConnectionPoint> {
-        let container: IConnectionPointContainer = self.to_interface();
-        // SAFETY: `riid` is this method's [in] REFIID.
-        unsafe { connpoint::find(container, &self.points(), riid) }
+    unsafe fn FindConnectionPoint(
+        &self,
+        riid: *const GUID,
+        ppcp: *mut Option<IConnectionPoint>,
+    ) -> HRESULT {
+        let container = self.to_interface::<RawConnectionPointContainer>().into();
+        // SAFETY: `riid` is this method's [in] REFIID, `ppcp` its [out] interface pointer.
+        unsafe { connpoint::find(container, &self.points(), riid, ppcp) }
     }
 }

@@ -1,0 +1,121 @@
+//! Our own definitions of the COM-defined interfaces that the server implements
+//! (IConnectionPointContainer, IConnectionPoint, IEnumString, IEnumUnknown,
+//! IEnumConnectionPoints, IEnumConnections), for the implementing side only.
+//!
+//! Why: windows-rs' generated vtable shims of these interfaces (`IConnectionPoint_Impl`
+//! and the others) turn methods with one out-parameter into `fn(..) -> Result<T>` and
+//! write the result through the caller's pointer **without a NULL check** (a NULL
+//! out-parameter crashed the server), and leave it as it was on failure (COM wants NULL).
+//! Here every out-parameter is a raw pointer and every method returns its raw HRESULT, so
+//! the checks are ours: out-parameters are cleared first (`abi::clear_outs`), a NULL one
+//! is E_POINTER (these methods' contracts name it), and they are filled on success only.
+//!
+//! Each interface has the IID and the vtable order of the SDK's (`ocidl.idl`,
+//! `objidl.idl`); parameter types have the layout of the SDK's (`*mut Option<I>` is an
+//! interface pointer out-parameter). A client (the proxy, the in-process tests, our own
+//! client code) keeps using windows-rs' types: COM matches by IID and vtable layout, and
+//! [`From`] turns one of ours into windows-rs' type of the same interface.
+
+#![allow(non_snake_case)]
+
+use std::ffi::c_void;
+use windows::Win32::System::Com::{
+    IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints, IEnumConnections,
+    IEnumString, IEnumUnknown, CONNECTDATA,
+};
+use windows_core::{interface, IUnknown, IUnknown_Vtbl, Interface, GUID, HRESULT, PWSTR};
+
+/// `IConnectionPointContainer` (`ocidl.idl`).
+#[interface("b196b284-bab4-101a-b69c-00aa00341d07")]
+pub unsafe trait RawConnectionPointContainer: IUnknown {
+    pub fn EnumConnectionPoints(&self, ppenum: *mut Option<IEnumConnectionPoints>) -> HRESULT;
+    pub fn FindConnectionPoint(
+        &self,
+        riid: *const GUID,
+        ppcp: *mut Option<IConnectionPoint>,
+    ) -> HRESULT;
+}
+
+/// `IConnectionPoint` (`ocidl.idl`).
+#[interface("b196b286-bab4-101a-b69c-00aa00341d07")]
+pub unsafe trait RawConnectionPoint: IUnknown {
+    pub fn GetConnectionInterface(&self, piid: *mut GUID) -> HRESULT;
+    pub fn GetConnectionPointContainer(
+        &self,
+        ppcpc: *mut Option<IConnectionPointContainer>,
+    ) -> HRESULT;
+    pub fn Advise(&self, punksink: *mut c_void, pdwcookie: *mut u32) -> HRESULT;
+    pub fn Unadvise(&self, dwcookie: u32) -> HRESULT;
+    pub fn EnumConnections(&self, ppenum: *mut Option<IEnumConnections>) -> HRESULT;
+}
+
+/// `IEnumString` (`objidl.idl`).
+#[interface("00000101-0000-0000-c000-000000000046")]
+pub unsafe trait RawEnumString: IUnknown {
+    pub fn Next(&self, celt: u32, rgelt: *mut PWSTR, pceltfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, celt: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumString>) -> HRESULT;
+}
+
+/// `IEnumUnknown` (`objidl.idl`).
+#[interface("00000100-0000-0000-c000-000000000046")]
+pub unsafe trait RawEnumUnknown: IUnknown {
+    pub fn Next(&self, celt: u32, rgelt: *mut Option<IUnknown>, pceltfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, celt: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumUnknown>) -> HRESULT;
+}
+
+/// `IEnumConnectionPoints` (`ocidl.idl`).
+#[interface("b196b285-bab4-101a-b69c-00aa00341d07")]
+pub unsafe trait RawEnumConnectionPoints: IUnknown {
+    pub fn Next(
+        &self,
+        cconnections: u32,
+        ppcp: *mut Option<IConnectionPoint>,
+        pcfetched: *mut u32,
+    ) -> HRESULT;
+    pub fn Skip(&self, cconnections: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumConnectionPoints>) -> HRESULT;
+}
+
+/// `IEnumConnections` (`ocidl.idl`).
+#[interface("b196b287-bab4-101a-b69c-00aa00341d07")]
+pub unsafe trait RawEnumConnections: IUnknown {
+    pub fn Next(&self, cconnections: u32, rgcd: *mut CONNECTDATA, pcfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, cconnections: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumConnections>) -> HRESULT;
+}
+
+/// Our definition and windows-rs' of the same interface: the IIDs are checked equal at
+/// compile time, and `From` hands one of ours out as windows-rs' type.
+macro_rules! same_interface {
+    ($($ours:ident => $theirs:ident),+ $(,)?) => {
+        $(
+            const _: () = assert!(
+                <$ours as Interface>::IID.to_u128() == <$theirs as Interface>::IID.to_u128()
+            );
+
+            impl From<$ours> for $theirs {
+                fn from(ours: $ours) -> $theirs {
+                    // SAFETY: the same COM interface (the IIDs are equal, asserted above,
+                    // and the vtables have the SDK's method order and parameter layout):
+                    // the owned reference is handed over as it is.
+                    unsafe { $theirs::from_raw(ours.into_raw()) }
+                }
+            }
+        )+
+    };
+}
+
+same_interface! {
+    RawConnectionPointContainer => IConnectionPointContainer,
+    RawConnectionPoint => IConnectionPoint,
+    RawEnumString => IEnumString,
+    RawEnumUnknown => IEnumUnknown,
+    RawEnumConnectionPoints => IEnumConnectionPoints,
+    RawEnumConnections => IEnumConnections,
+}
