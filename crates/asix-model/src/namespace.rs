@@ -44,6 +44,7 @@ use super::text::{parse_number, Warning};
 use super::vardb::{load_database_file, DbError, GroupNode, VarDatabase, Variable};
 use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
 pub use ctopc_core::namespace::{ItemAttributes, LimitProps};
+use ctopc_core::properties as p;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{OpcError, OpcResult, Value, VarType};
 
@@ -561,5 +562,199 @@ impl Namespace for AsixNamespace {
     /// AsixConnect §5: values written must be integer or real.
     fn check_write_value(&self, value: &Value) -> OpcResult<()> {
         super::quality_rules::check_write_value(value)
+    }
+
+    /// The asix attribute items of properties 100-103 and 307-310: see
+    /// [`property_item_id_via`].
+    fn property_item_id(&self, item_id: &str, def: &ItemDef, property_id: u32) -> Option<String> {
+        property_item_id_via(
+            |id| Namespace::resolve(self, id, ""),
+            item_id,
+            def,
+            property_id,
+        )
+    }
+}
+
+/// The asix item-ID suffixes of the properties that are attribute items of a variable
+/// (`<V>.<suffix>`): EU units, description, high and low EU, and the numeric warning and
+/// alarm limits as items (`<V>.<Attr>.CV`, a constant).
+pub const PROPERTY_ITEM_SUFFIXES: [(u32, &str); 8] = [
+    (p::OPC_PROPERTY_EU_UNITS, "EU_UNIT"),
+    (p::OPC_PROPERTY_DESCRIPTION, "DESC"),
+    (p::OPC_PROPERTY_HIGH_EU, "HI_EU"),
+    (p::OPC_PROPERTY_LOW_EU, "LO_EU"),
+    (p::OPC_PROPERTY_HIHI_LIMIT, "AlarmHigh.CV"),
+    (p::OPC_PROPERTY_HI_LIMIT, "WarnHigh.CV"),
+    (p::OPC_PROPERTY_LO_LIMIT, "WarnLow.CV"),
+    (p::OPC_PROPERTY_LOLO_LIMIT, "AlarmLow.CV"),
+];
+
+/// The item ID of property `property_id` of the item `item_id` (resolved to `def`), with
+/// `resolve` resolving on the basic channel: `<V>.<suffix>` ([`PROPERTY_ITEM_SUFFIXES`])
+/// for the value items of database variables (`<V>` and `<V>.CV`, aliases included: live,
+/// keyed by the bare asix name) when that ID resolves; `None` for every other property
+/// and item.
+pub fn property_item_id_via(
+    resolve: impl Fn(&str) -> OpcResult<ItemDef>,
+    item_id: &str,
+    def: &ItemDef,
+    property_id: u32,
+) -> Option<String> {
+    let (_, suffix) = PROPERTY_ITEM_SUFFIXES
+        .iter()
+        .find(|(id, _)| *id == property_id)?;
+    // Only the value items of database variables: live, keyed by the bare asix name.
+    if def.constant.is_some() || def.source_key.contains('.') {
+        return None;
+    }
+    let base = item_id.strip_suffix(".CV").unwrap_or(item_id);
+    let same = resolve(base).is_ok_and(|d| d.source_key == def.source_key && d.constant.is_none());
+    if !same {
+        return None;
+    }
+    let candidate = format!("{base}.{suffix}");
+    resolve(&candidate).is_ok().then_some(candidate)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ctopc_core::properties::{lookup_item_ids, static_properties, PropertyContext};
+    use ctopc_core::Lang;
+
+    /// The namespace of the property tests that were in the COM crate: `V` (alias `A`)
+    /// and some of its attribute items.
+    fn fake(item_id: &str) -> OpcResult<ItemDef> {
+        let var = |key: &str| ItemDef {
+            source_key: key.into(),
+            channel: "*".into(),
+            canonical_type: VarType::R4,
+            access_rights: 1,
+            eu: EuInfo::Analog {
+                low: 0.0,
+                high: 8.0,
+            },
+            constant: None,
+        };
+        match item_id {
+            "V" | "V.CV" | "A" => Ok(var("V")),
+            "V.DESC" | "V.EU_UNIT" | "V.HI_EU" | "V.LO_EU" | "A.DESC" | "V.AlarmHigh.CV"
+            | "V.WarnLow.CV" => {
+                let mut d = var(item_id);
+                d.constant = Some(Value::Bstr("x".into()));
+                Ok(d)
+            }
+            "V.PercentageCV" => Ok(var("V.PercentageCV")),
+            "" | "V." => Err(OpcError::InvalidItemId),
+            _ => Err(OpcError::UnknownItemId),
+        }
+    }
+
+    fn id_of(item_id: &str, property_id: u32) -> Option<String> {
+        let def = fake(item_id).unwrap();
+        property_item_id_via(fake, item_id, &def, property_id)
+    }
+
+    #[test]
+    fn item_ids_of_attribute_properties() {
+        assert_eq!(id_of("V.CV", 101).as_deref(), Some("V.DESC"));
+        assert_eq!(id_of("V.CV", 100).as_deref(), Some("V.EU_UNIT"));
+        assert_eq!(id_of("V.CV", 2), None);
+        assert_eq!(id_of("V.CV", 307).as_deref(), Some("V.AlarmHigh.CV"));
+        assert_eq!(id_of("V.CV", 309).as_deref(), Some("V.WarnLow.CV"));
+        assert_eq!(
+            id_of("V.CV", 308),
+            None,
+            "V.WarnHigh.CV does not resolve here"
+        );
+        assert_eq!(id_of("A", 101).as_deref(), Some("A.DESC"));
+        assert_eq!(id_of("A", 100), None, "A.EU_UNIT does not resolve");
+        assert_eq!(id_of("V.PercentageCV", 100), None);
+    }
+
+    #[test]
+    fn attribute_items_and_unknown_properties_have_no_item_ids() {
+        // A constant (an attribute item) has none, even where `<id>.<suffix>` resolves.
+        assert_eq!(id_of("V.DESC", 101), None);
+        for id in [1, 3, 4, 5, 6, 7, 8, 104, 311, 9999] {
+            assert_eq!(id_of("V", id), None, "{id}");
+        }
+        let ids: Vec<u32> = PROPERTY_ITEM_SUFFIXES.iter().map(|(id, _)| *id).collect();
+        assert_eq!(ids, [100, 101, 102, 103, 307, 308, 309, 310]);
+    }
+
+    fn demo() -> AsixNamespace {
+        crate::embedded_demo().expect("the embedded demo").namespace
+    }
+
+    #[test]
+    fn demo_property_item_ids_and_lookup() {
+        let ns = demo();
+        let cx = PropertyContext {
+            ns: &ns,
+            lang: Lang::English,
+            scan_rate_ms: 1000,
+        };
+        let got =
+            lookup_item_ids(&cx, "KW_A000", &[1, 100, 101, 102, 103, 9999, 2, 307, 310]).unwrap();
+        assert_eq!(
+            got,
+            [
+                Err(OpcError::InvalidPid),
+                Ok("KW_A000.EU_UNIT".to_owned()),
+                Ok("KW_A000.DESC".to_owned()),
+                Ok("KW_A000.HI_EU".to_owned()),
+                Ok("KW_A000.LO_EU".to_owned()),
+                Err(OpcError::InvalidPid),
+                Err(OpcError::InvalidPid),
+                Ok("KW_A000.AlarmHigh.CV".to_owned()),
+                Ok("KW_A000.AlarmLow.CV".to_owned()),
+            ]
+        );
+        assert_eq!(
+            lookup_item_ids(&cx, "KW_A000.CV", &[101]).unwrap(),
+            [Ok("KW_A000.DESC".to_owned())]
+        );
+        // The attribute item itself has no property item IDs.
+        assert_eq!(
+            lookup_item_ids(&cx, "KW_A000.DESC", &[101]).unwrap(),
+            [Err(OpcError::InvalidPid)]
+        );
+        assert_eq!(
+            lookup_item_ids(&cx, "NO_SUCH_VARIABLE", &[101]),
+            Err(OpcError::UnknownItemId)
+        );
+    }
+
+    #[test]
+    fn demo_limits_are_properties_of_value_items_only() {
+        let ns = demo();
+        let cx = PropertyContext {
+            ns: &ns,
+            lang: Lang::English,
+            scan_rate_ms: 1000,
+        };
+        let values = |item_id: &str, ids: &[u32]| -> Vec<Option<Value>> {
+            static_properties(&cx, item_id, Some(ids), true)
+                .unwrap()
+                .into_iter()
+                .map(|p| p.error.is_none().then_some(p.value))
+                .collect()
+        };
+        let limits = [307, 308, 309, 310];
+        assert_eq!(
+            values("KW_A000", &limits),
+            [7.5, 7.0, 1.0, 0.5].map(|x| Some(Value::R8(x)))
+        );
+        // A limit held in a variable is no property.
+        assert_eq!(
+            values("KW_A100", &[308, 309]),
+            [None, Some(Value::R8(900.0))]
+        );
+        // Attribute items (constants) and derived items have none.
+        for id in ["KW_A000.DESC", "KW_A000.HI_EU", "KW_A000.PercentageCV"] {
+            assert_eq!(values(id, &limits), [None, None, None, None], "{id}");
+        }
     }
 }

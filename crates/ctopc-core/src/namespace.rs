@@ -89,4 +89,20 @@ pub trait Namespace: Send + Sync {
             ItemAttributes::default(),
         ))
     }
+
+    /// The item ID under which property `property_id` of an item can be read as an item
+    /// of its own (IOPCItemProperties::LookupItemIDs, `OPCITEMPROPERTY.szItemID`), if it
+    /// has one. `item_id` is the ID as the client wrote it and `def` what it resolved to
+    /// on the basic channel (property calls have no access path). Called only for
+    /// properties the item has (`crate::properties::available_ids`). The default: no
+    /// property has an item ID (LookupItemIDs then answers OPC_E_INVALID_PID); asix names
+    /// its attribute items (`<V>.DESC`, `<V>.AlarmHigh.CV`, ...).
+    fn property_item_id(
+        &self,
+        _item_id: &str,
+        _def: &ItemDef,
+        _property_id: u32,
+    ) -> Option<String> {
+        None
+    }
 }

@@ -7,9 +7,18 @@
 //! 300-313 alarms and conditions, 600-609 complex data and DA 3.0 write behaviour.
 //! IDs 5000 and above are vendor-specific; ServerCTOPC defines none: the asix warning and
 //! alarm limits map onto 307-310 (HiHi/Hi/Lo/LoLo Limit).
+//!
+//! Which of them an item has, and their values: [`item`] (re-exported here).
 
 use crate::lang::Lang;
 use crate::{OpcError, OpcResult, VarType};
+
+pub mod item;
+
+pub use item::{
+    available_ids, fill_live, is_live, lookup_item_ids, needs_read, property, property_item_id,
+    resolve_item, static_properties, ItemInfo, Prop, PropertyContext, VALUE_MAX_AGE_FACTOR,
+};
 
 pub const OPC_PROPERTY_DATATYPE: u32 = 1;
 pub const OPC_PROPERTY_VALUE: u32 = 2;
