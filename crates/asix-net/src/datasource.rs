@@ -16,11 +16,8 @@ use std::collections::{btree_map, BTreeMap, HashMap};
 use std::sync::mpsc;
 use std::sync::Arc;
 
-use asix_model::namespace::{AsixNamespace, Derivation};
-use asix_model::{
-    apply_quality_rules_with, check_write_value, Limit, RuleOptions, ServerOptions,
-    ServerSelection, Variable,
-};
+use asix_model::namespace::AsixNamespace;
+use asix_model::{ServerOptions, ServerSelection};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput, Wake};
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
@@ -30,61 +27,16 @@ use tracing::{info, warn};
 use crate::client::{AsixClient, ClientEvent, ItemKey, RequestId};
 use crate::config::{ClientConfig, ConnectOptions, ExternalServerLists};
 use crate::naming::asix_client_name;
+use crate::pipeline::Resolution;
 use crate::proto::frame::ReadSource;
 use crate::proto::DEFAULT_DISCOVERY_PORT;
 use crate::Vqt;
 
-/// What a source item is on the asix network.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Resolved {
-    /// The asix variable.
-    pub key: ItemKey,
-    /// How the item's value derives from the variable's.
-    pub derivation: Derivation,
-    /// The variable's database definition (limits, control variable); `None` for
-    /// descriptive IDs.
-    pub definition: Option<Variable>,
-    /// CheckLimits / CheckControlVariables of the item's channel.
-    pub rules: RuleOptions,
-    /// The control variable, when the rules check it.
-    pub control: Option<ItemKey>,
-    /// The variables holding the definition's limits (`WarnLow` .. `AlarmHigh` cells that
-    /// name a variable, such as `KW_L002`), each once, when the rules check limits. Their
-    /// `variable` is the name as the limit gives it: the quality rules look limits up by it.
-    pub limits: Vec<ItemKey>,
-}
+/// What a source item is on the asix network: the pipeline's resolution with asix
+/// variables ([`ItemKey`]s) as handles.
+pub type Resolved = crate::pipeline::Resolved<ItemKey>;
 
-impl Resolved {
-    /// The variables the item's quality rules read (control and limit variables), each
-    /// once: they are subscribed with the item.
-    pub fn rule_variables(&self) -> Vec<&ItemKey> {
-        let mut v: Vec<&ItemKey> = Vec::with_capacity(self.limits.len() + 1);
-        for k in self.control.iter().chain(&self.limits) {
-            if !v.contains(&k) {
-                v.push(k);
-            }
-        }
-        v
-    }
-}
-
-/// The names of the variables a definition's limits are held in, each once.
-pub fn limit_variables(def: &Variable) -> Vec<&str> {
-    let mut names: Vec<&str> = Vec::new();
-    for l in [
-        &def.warn_low,
-        &def.warn_high,
-        &def.alarm_low,
-        &def.alarm_high,
-    ] {
-        if let Some(Limit::Variable(name)) = l {
-            if !names.contains(&name.as_str()) {
-                names.push(name);
-            }
-        }
-    }
-    names
-}
+pub use crate::pipeline::{limit_variables, CHANNEL_ATTRIBUTE};
 
 /// Maps source items onto the asix network.
 pub trait Resolver: Send {
@@ -124,9 +76,6 @@ pub fn client_config_from_server_options(
     c
 }
 
-/// The attribute of the variable database naming a variable's asix channel.
-pub const CHANNEL_ATTRIBUTE: &str = "Channel";
-
 /// Resolves through the asix namespace of the core: descriptive IDs carry their channel,
 /// database variables take it from the `Channel` attribute (empty when there is none: the
 /// server then finds the variable by name).
@@ -144,59 +93,13 @@ impl NamespaceResolver {
     }
 }
 
-impl NamespaceResolver {
-    /// The asix channel of a database variable (its `Channel` attribute; "" if none).
-    fn db_channel(&self, channel: &str, def: &Variable) -> String {
-        self.ns
-            .database(channel)
-            .and_then(|db| db.attribute(def, CHANNEL_ATTRIBUTE))
-            .unwrap_or("")
-            .trim()
-            .to_owned()
-    }
-}
-
 impl Resolver for NamespaceResolver {
     fn resolve(&self, item: &SourceItem) -> Option<Resolved> {
-        let live = self.ns.live_item(&item.channel, &item.item_id)?;
-        let channel = match (&live.asmen_channel, &live.definition) {
-            (Some(c), _) => c.clone(),
-            (None, Some(def)) => self.db_channel(&item.channel, def),
-            (None, None) => String::new(),
-        };
-        let rules = self
-            .ns
-            .config()
-            .resolve_channel(&item.channel)
-            .map(|r| RuleOptions::from(r.options))
-            .unwrap_or_default();
-        // Control and limit variables are asix names of the item's database, on their own
-        // `Channel`.
-        let rule_key = |name: &str| {
-            let ch = self
-                .ns
-                .database(&item.channel)
-                .and_then(|db| db.find_real(name))
-                .map(|v| self.db_channel(&item.channel, v))
-                .unwrap_or_default();
-            ItemKey::new(&ch, name)
-        };
-        let control = match (&live.definition, rules.check_control_variables) {
-            (Some(def), true) => def.control_variable.as_deref().map(rule_key),
-            _ => None,
-        };
-        let limits = match (&live.definition, rules.check_limits) {
-            (Some(def), true) => limit_variables(def).into_iter().map(rule_key).collect(),
-            _ => Vec::new(),
-        };
-        Some(Resolved {
-            key: ItemKey::new(&channel, &live.variable),
-            derivation: live.derivation,
-            definition: live.definition,
-            rules,
-            control,
-            limits,
-        })
+        // Any asix variable may exist somewhere on the network: the server answers for it.
+        match crate::pipeline::resolve(&self.ns, item, |k| Some(k.clone())) {
+            Resolution::Resolved(r) => Some(r),
+            Resolution::NotLive | Resolution::NoVariable(_) => None,
+        }
     }
 
     fn client_config(&self, channel: &str) -> ClientConfig {
@@ -573,33 +476,14 @@ impl<R: Resolver> AsixSource<R> {
         self.last.get(&(channel.clone(), k.clone()))
     }
 
-    /// An item's VQT from its variable's: the quality rules, then the derivation.
+    /// An item's VQT from its variable's: the pipeline's quality rules and derivation
+    /// ([`Resolved::sample`]).
     ///
     /// The rules read the last values of the item's control and limit variables, known
     /// while some subscribed item needs them (a read of an item nothing subscribes finds
-    /// them unknown). A limit variable without a usable value (none yet, BAD quality, not
-    /// numeric) is an unknown limit: the rules then skip that limit.
+    /// them unknown).
     fn item_vqt(&self, channel: &Arc<str>, r: &Resolved, v: Vqt) -> Vqt {
-        let quality = match &r.definition {
-            Some(def) if r.rules.check_limits || r.rules.check_control_variables => {
-                let control = r
-                    .control
-                    .as_ref()
-                    .and_then(|c| self.last_of(channel, c))
-                    .map(|c| &c.value);
-                let limit_of = |name: &str| {
-                    let k = r.limits.iter().find(|k| &*k.variable == name)?;
-                    let l = self.last_of(channel, k)?;
-                    if l.quality.is_bad() {
-                        return None;
-                    }
-                    l.value.as_f64()
-                };
-                apply_quality_rules_with(def, &v.value, v.quality, control, r.rules, &limit_of)
-            }
-            _ => v.quality,
-        };
-        derive(&r.derivation, Vqt::new(v.value, quality, v.timestamp))
+        r.sample(v, |k| self.last_of(channel, k).cloned())
     }
 
     /// A subscribed item's VQT from the last sample of its variable; `None` before one.
@@ -720,12 +604,8 @@ impl<R: Resolver> AsixSource<R> {
                 continue;
             };
             // Derived items (formatted, percent, bars) cannot be written; values must be
-            // integers or reals.
-            if r.derivation != Derivation::Value {
-                self.fill(req_id, i, Err(OpcError::BadRights));
-                continue;
-            }
-            if let Err(e) = check_write_value(&v.value) {
+            // integers or reals; read-only variables are refused here already.
+            if let Err(e) = r.check_write(&v.value) {
                 self.fill(req_id, i, Err(e));
                 continue;
             }
@@ -819,17 +699,6 @@ impl<R: Resolver> Drop for AsixSource<R> {
         if let Some(rt) = self.own_rt.take() {
             rt.shutdown_background();
         }
-    }
-}
-
-/// Applies a derivation to a sample; a value that cannot be derived is BAD Config Error.
-fn derive(d: &Derivation, v: Vqt) -> Vqt {
-    if matches!(d, Derivation::Value) || v.value == Value::Empty {
-        return v;
-    }
-    match d.apply(&v.value) {
-        Some(value) => Vqt::new(value, v.quality, v.timestamp),
-        None => Vqt::new(Value::Empty, Quality::BAD_CONFIG_ERROR, v.timestamp),
     }
 }
 

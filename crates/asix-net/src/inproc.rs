@@ -13,10 +13,9 @@
 //! that the engine's source timeout and Cancel2 can be exercised. Subscriptions are not
 //! delayed.
 
+use crate::pipeline::{self, Resolution};
 use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
-use asix_model::{
-    apply_quality_rules_with, check_write_value, AsixNamespace, Derivation, RuleOptions, Variable,
-};
+use asix_model::{AsixNamespace, Derivation};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -27,53 +26,25 @@ pub const TICK_MS: u64 = 250;
 /// The plant channel of database variables that name no `Channel` attribute.
 pub const DEFAULT_PLANT_CHANNEL: &str = "*";
 
-/// A source item resolved once: its plant variable, control variable, rules and what the
-/// namespace made of it. Items the plant cannot serve share one of three constant
-/// resolutions (see [`Unserved`]), so that many distinct unknown items cost only their
-/// [`Slot`].
-struct Resolved {
-    /// Plant variable index; `None` for a variable the plant does not know.
-    var: Option<u32>,
-    control: Option<u32>,
-    rules: RuleOptions,
-    /// `None`: not a live asix item (the namespace does not know it).
-    live: Option<Live>,
-}
-
-/// The parts of a [`asix_model::LiveItem`] the simulation uses.
-struct Live {
-    derivation: Derivation,
-    definition: Option<Variable>,
-}
+/// A source item resolved once by the asix pipeline ([`crate::pipeline`]), with plant
+/// variable indices as handles.
+type Res = Resolution<u32>;
 
 /// The shared resolutions of items without a plant variable: they differ only in how a
-/// write is refused (unknown item, or a derived item that is never writable).
+/// write is refused (unknown item, or a derived item that is never writable), so that many
+/// distinct unknown items cost only their [`Slot`].
 struct Unserved {
-    not_live: Arc<Resolved>,
-    value: Arc<Resolved>,
-    derived: Arc<Resolved>,
+    not_live: Arc<Res>,
+    value: Arc<Res>,
+    derived: Arc<Res>,
 }
 
 impl Unserved {
     fn new() -> Unserved {
-        let r = |live: Option<Live>| {
-            Arc::new(Resolved {
-                var: None,
-                control: None,
-                rules: RuleOptions::default(),
-                live,
-            })
-        };
         Unserved {
-            not_live: r(None),
-            value: r(Some(Live {
-                derivation: Derivation::Value,
-                definition: None,
-            })),
-            derived: r(Some(Live {
-                derivation: Derivation::Formatted(None),
-                definition: None,
-            })),
+            not_live: Arc::new(Resolution::NotLive),
+            value: Arc::new(Resolution::NoVariable(Derivation::Value)),
+            derived: Arc::new(Resolution::NoVariable(Derivation::Formatted(None))),
         }
     }
 }
@@ -84,7 +55,7 @@ struct Slot {
     /// Sampling rate in ms; 0 when not subscribed (resolved for a read or write only).
     rate_ms: u32,
     next_due: Timestamp,
-    r: Arc<Resolved>,
+    r: Arc<Res>,
 }
 
 /// A device answer held back until its due time (see [`InProcessSim::with_device_delay`]).
@@ -183,24 +154,6 @@ impl InProcessSim {
         }
     }
 
-    fn find_var(&self, asmen_channel: Option<&str>, variable: &str) -> Option<usize> {
-        match asmen_channel {
-            Some(ch) => self.plant.lookup(ch, variable),
-            None => self
-                .plant
-                .channels()
-                .iter()
-                .find_map(|ch| self.plant.lookup(ch, variable)),
-        }
-    }
-
-    fn rules_for(&self, channel: &str) -> RuleOptions {
-        match self.ns.config().resolve_channel(channel) {
-            Ok(r) => RuleOptions::from(r.options),
-            Err(_) => RuleOptions::default(),
-        }
-    }
-
     /// The item's slot, resolved on first use (parsing the item ID and looking the
     /// variables up costs far more than the simulation itself); a slot left by an earlier
     /// item at the same index (older generation) is replaced.
@@ -240,31 +193,18 @@ impl InProcessSim {
         })
     }
 
-    fn resolve(&self, item: &SourceItem) -> Arc<Resolved> {
-        let Some(live) = self.ns.live_item(&item.channel, &item.item_id) else {
-            return Arc::clone(&self.unserved.not_live);
-        };
-        let Some(var) = self.find_var(live.asmen_channel.as_deref(), &live.variable) else {
-            return Arc::clone(if live.derivation == Derivation::Value {
-                &self.unserved.value
-            } else {
-                &self.unserved.derived
-            });
-        };
-        let control = live
-            .definition
-            .as_ref()
-            .and_then(|d| d.control_variable.as_deref())
-            .and_then(|c| self.find_var(None, c));
-        Arc::new(Resolved {
-            var: Some(var as u32),
-            control: control.map(|c| c as u32),
-            rules: self.rules_for(&item.channel),
-            live: Some(Live {
-                derivation: live.derivation,
-                definition: live.definition,
-            }),
-        })
+    fn resolve(&self, item: &SourceItem) -> Arc<Res> {
+        let plant = &self.plant;
+        match pipeline::resolve(&self.ns, item, |k| {
+            plant
+                .lookup(&k.channel, &k.variable)
+                .and_then(|i| u32::try_from(i).ok())
+        }) {
+            Resolution::NotLive => Arc::clone(&self.unserved.not_live),
+            Resolution::NoVariable(Derivation::Value) => Arc::clone(&self.unserved.value),
+            Resolution::NoVariable(_) => Arc::clone(&self.unserved.derived),
+            r @ Resolution::Resolved(_) => Arc::new(r),
+        }
     }
 
     fn subscribe(&mut self, now: Timestamp, item: &SourceItem, rate_ms: u32) {
@@ -274,9 +214,10 @@ impl InProcessSim {
         self.next_due = Some(self.next_due.map_or(now, |t| t.min(now)));
     }
 
-    /// The item's current VQT: the plant variable's, derived and with the quality rules.
-    fn sample(&self, r: &Resolved) -> Vqt {
-        let (Some(i), Some(live)) = (r.var, r.live.as_ref()) else {
+    /// The item's current VQT: the plant variable's, through the pipeline (quality rules
+    /// over the plant's control and limit variables, derivation).
+    fn sample(&self, r: &Res) -> Vqt {
+        let Resolution::Resolved(r) = r else {
             // Not a variable of the plant: asix would answer "unknown item".
             return Vqt {
                 value: Value::Empty,
@@ -284,59 +225,32 @@ impl InProcessSim {
                 timestamp: self.plant.time_of(self.plant.tick()),
             };
         };
-        let raw = self.plant.vqt(i as usize);
-        let control_value = r.control.map(|c| self.plant.vqt(c as usize).value);
-        let quality = match &live.definition {
-            // Limits held as variable names (asix limit variables) read the plant's values.
-            Some(def) => apply_quality_rules_with(
-                def,
-                &raw.value,
-                raw.quality,
-                control_value.as_ref(),
-                r.rules,
-                &|name| {
-                    self.find_var(None, name)
-                        .and_then(|v| self.plant.vqt(v).value.as_f64())
-                },
-            ),
-            None => raw.quality,
-        };
-        match live.derivation.apply(&raw.value) {
-            Some(value) => Vqt {
-                value,
-                quality,
-                timestamp: raw.timestamp,
-            },
-            None => Vqt {
-                value: Value::Empty,
-                quality: Quality::BAD_CONFIG_ERROR,
-                timestamp: raw.timestamp,
-            },
-        }
+        r.sample(self.plant.vqt(r.key as usize), |&i| {
+            Some(self.plant.vqt(i as usize))
+        })
     }
 
     fn read(&mut self, item: &SourceItem) -> Result<Vqt, OpcError> {
         let r = Arc::clone(&self.slot(item).r);
-        if r.live.is_none() || r.var.is_none() {
-            return Err(OpcError::ItemUnknown);
+        match *r {
+            Resolution::Resolved(_) => Ok(self.sample(&r)),
+            Resolution::NotLive | Resolution::NoVariable(_) => Err(OpcError::ItemUnknown),
         }
-        Ok(self.sample(&r))
     }
 
     fn write(&mut self, item: &SourceItem, vqt: &ItemVqt) -> Result<(), OpcError> {
         let r = Arc::clone(&self.slot(item).r);
-        let live = r.live.as_ref().ok_or(OpcError::ItemUnknown)?;
-        if live.derivation != Derivation::Value {
-            return Err(OpcError::BadRights);
-        }
-        check_write_value(&vqt.value)?;
-        let var = r.var.ok_or(OpcError::ItemUnknown)? as usize;
-        let writable = live
-            .definition
-            .as_ref()
-            .is_none_or(|d: &Variable| d.writable)
-            && self.plant.vars()[var].spec.writable;
-        if !writable {
+        let r = match &*r {
+            Resolution::NotLive => return Err(OpcError::ItemUnknown),
+            Resolution::NoVariable(d) => {
+                pipeline::check_write(d, None, &vqt.value)?;
+                return Err(OpcError::ItemUnknown);
+            }
+            Resolution::Resolved(r) => r,
+        };
+        r.check_write(&vqt.value)?;
+        let var = r.key as usize;
+        if !self.plant.vars()[var].spec.writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
         }
         let x = numeric(&vqt.value).ok_or(OpcError::BadType)?;

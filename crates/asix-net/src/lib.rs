@@ -5,6 +5,8 @@
 //! - [`client`]: the discovery-and-failover client ([`AsixClient`], a non-blocking handle
 //!   over a sans-IO [`client::ClientCore`]).
 //! - [`datasource`]: the client as the engine's data-source `Backend` ([`datasource::network_backend`]).
+//! - [`pipeline`]: the per-sample asix pipeline both data sources share (resolution once
+//!   per item, quality rules, derivation, write checks).
 //! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant
 //!   (also the model of [`inproc`], the in-process simulation backend).
 //! - [`discovery`]: choosing a server from the announcements (ranking, variants).
@@ -18,6 +20,7 @@ pub mod datasource;
 pub mod discovery;
 pub mod inproc;
 pub mod naming;
+pub mod pipeline;
 pub mod proto;
 pub mod sim;
 

@@ -489,3 +489,85 @@ fn cancel2_beats_a_slow_device_and_no_read_complete_follows() {
         "completed already"
     );
 }
+
+/// The pipeline's rule for limit variables, in the simulation as over the network
+/// (`engine_adapter.rs`, `a_limit_variable_without_a_value_is_an_unknown_limit`): a limit
+/// variable whose value is BAD is an unknown limit. KW_A342 (0..2000) has WarnHigh
+/// KW_L005 and AlarmHigh KW_L006, no low limits; both limits are written as -1, so that
+/// any plant value is above them, then made BAD one after the other.
+#[test]
+fn a_bad_limit_variable_is_an_unknown_limit_in_the_simulation() {
+    use ctopc_core::model::datasource::ItemVqt;
+    use ctopc_core::Quality;
+    let (mut e, mut s, t0, _, _) = setup();
+    let session = e.open_session();
+    let g = e
+        .add_group(
+            t0,
+            session,
+            &GroupParams {
+                name: "limits",
+                active: true,
+                update_rate: 1000,
+                client_handle: 2,
+                time_bias: 0,
+                percent_deadband: 0.0,
+                lcid: 0x409,
+            },
+        )
+        .unwrap()
+        .group;
+    let defs: Vec<ItemDefinition> = ["KW_A342", "KW_L005", "KW_L006"]
+        .iter()
+        .enumerate()
+        .map(|(i, id)| ItemDefinition {
+            item_id: id,
+            access_path: "",
+            active: true,
+            client_handle: i as u32,
+            requested_type: VarType::EMPTY,
+        })
+        .collect();
+    let h: Vec<u32> = e
+        .add_items(t0, g, &defs)
+        .unwrap()
+        .into_iter()
+        .map(|r| r.unwrap().server_handle)
+        .collect();
+    step(&mut e, &mut s, t0);
+    let mut now = t0;
+    let mut quality_after = |l005: Quality, l006: Quality| {
+        now = now.add_millis(100);
+        let limit = |q| ItemVqt {
+            value: Value::R4(-1.0),
+            quality: Some(q),
+            timestamp: None,
+        };
+        let items = [(h[1], limit(l005)), (h[2], limit(l006))];
+        if let SyncOutcome::Pending(id) = e.write_vqt(now, g, &items).unwrap() {
+            step(&mut e, &mut s, now);
+            match e.take_sync_result(id) {
+                Some(SyncResult::Write(r)) => assert_eq!(r, vec![Ok(()), Ok(())]),
+                other => panic!("{other:?}"),
+            }
+        }
+        let r = match e.read(now, g, DataSource::Device, &h[..1]).unwrap() {
+            SyncOutcome::Ready(r) => r,
+            SyncOutcome::Pending(id) => {
+                step(&mut e, &mut s, now);
+                match e.take_sync_result(id) {
+                    Some(SyncResult::Read(r)) => r,
+                    other => panic!("{other:?}"),
+                }
+            }
+        };
+        r[0].as_ref().unwrap().quality
+    };
+    let high = Quality::GOOD.with_limit(Quality::LIMIT_HIGH);
+    assert_eq!(
+        quality_after(Quality::GOOD, Quality::GOOD),
+        high.with_vendor(Quality::VENDOR_SECOND_LIMIT)
+    );
+    assert_eq!(quality_after(Quality::GOOD, Quality::BAD), high);
+    assert_eq!(quality_after(Quality::BAD, Quality::BAD), Quality::GOOD);
+}
