@@ -6,23 +6,25 @@
 //! for out-parameters can be asserted (through the proxy a NULL `[ref]` pointer is
 //! answered by RPC_X_NULL_REF_POINTER before the server sees it).
 //!
-//! All process setup is here, in [`start`]: the thread joins the multithreaded apartment,
-//! and the server's runtime and context are started once per test process over the
-//! embedded demo plant (`asix_model::embedded_demo()`) with the in-process simulation the
-//! binary uses (`asix_net::inproc::InProcessSim`, as `crates/server/src/backend.rs`), the
-//! way `host::start` does it for `ServerCTOPC.exe`. Each test then makes its own server
-//! object **through the class factory** ([`new_server`], [`server`]) and QueryInterfaces
-//! the OPC interfaces. (When the process globals give way to a context per test, only
-//! [`start`] and [`factory`] change.)
+//! All setup is here, in [`start`]: the thread joins the multithreaded apartment, and a
+//! new server context is started, with its own runtime, over the embedded demo plant
+//! (`asix_model::embedded_demo()`, loaded once per test process) with the in-process
+//! simulation the binary uses (`asix_net::inproc::InProcessSim`, as
+//! `crates/server/src/backend.rs`), the way `host::start` does it for `ServerCTOPC.exe`.
+//! [`factory`] makes a class object over a new context, so each server a test makes
+//! **through the class factory** ([`new_server`], [`server`]) has its own engine and
+//! plant (call CreateInstance twice on one [`factory`] for two clients of one server).
+//! When a test has released the server's objects and the class object, the context
+//! drops and its driver thread ends.
 //!
 //! Out-parameter checks: a test pre-fills an out-parameter with [`POISON`] (a pointer
 //! value that is never dereferenced) and asserts that a failed call wrote NULL/0 there.
 #![allow(dead_code, unused_imports)]
 
 use asix_net::inproc::InProcessSim;
-use ctopc_com::factory::ClassFactory;
+use ctopc_com::context::{self, Context};
 use ctopc_com::interfaces::*;
-use ctopc_com::{context, host, server};
+use ctopc_com::{host, server};
 use ctopc_core::source::Backend;
 use std::cell::Cell;
 use std::ffi::c_void;
@@ -79,45 +81,61 @@ fn join_mta() {
     });
 }
 
-static STARTED: OnceLock<Result<(), String>> = OnceLock::new();
+/// The embedded demo plant and its browse tree (immutable: shared by every context).
+struct Demo {
+    ns: Arc<asix_model::AsixNamespace>,
+    address_space: Arc<ctopc_core::browse::AddressSpace>,
+}
 
-/// Joins the MTA (this thread) and starts the runtime and context (once per process).
-pub fn start() {
-    join_mta();
-    let started = STARTED.get_or_init(|| {
+static DEMO: OnceLock<Result<Demo, String>> = OnceLock::new();
+
+fn demo() -> &'static Demo {
+    let demo = DEMO.get_or_init(|| {
         let loaded = asix_model::embedded_demo()?;
         let ns = Arc::new(loaded.namespace);
-        // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
-        let server = &ns.config().server;
-        let setup = context::Setup {
-            namespace: Arc::clone(&ns) as Arc<dyn ctopc_core::namespace::Namespace>,
-            address_space: Arc::new(
-                asix_model::address_space::build_address_space(&ns)
-                    .map_err(|e| format!("{e:?}"))?,
-            ),
-            engine_config: server.engine_config(),
-            default_language: server.default_language.fixed(),
-            no_config_reason: ns.no_config_reason(),
-        };
-        host::start(
-            setup,
-            Box::new(move |_wake| {
-                let sim = InProcessSim::new(Arc::clone(&ns), SIM_SEED, ctopc_com::clock::now());
-                Ok(Box::new(sim) as Box<dyn Backend>)
-            }),
-        )
-        .map(|_| ())
+        let address_space = Arc::new(
+            asix_model::address_space::build_address_space(&ns).map_err(|e| format!("{e:?}"))?,
+        );
+        Ok(Demo { ns, address_space })
     });
-    if let Err(e) = started {
-        panic!("cannot start the server runtime: {e}");
+    match demo {
+        Ok(d) => d,
+        Err(e) => panic!("cannot load the embedded demo: {e}"),
     }
 }
 
-/// The class object `ServerCTOPC.exe` registers (a new one; each CreateInstance makes a
-/// new server object).
+/// Joins the MTA (this thread) and starts a new server context: its own runtime (engine
+/// and simulated plant) over the demo.
+pub fn start() -> Arc<Context> {
+    join_mta();
+    let Demo { ns, address_space } = demo();
+    // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
+    let server = &ns.config().server;
+    let setup = context::Setup {
+        namespace: Arc::clone(ns) as Arc<dyn ctopc_core::namespace::Namespace>,
+        address_space: Arc::clone(address_space),
+        engine_config: server.engine_config(),
+        default_language: server.default_language.fixed(),
+        no_config_reason: ns.no_config_reason(),
+    };
+    let ns = Arc::clone(ns);
+    let started = host::start(
+        setup,
+        Box::new(move |_wake| {
+            let sim = InProcessSim::new(ns, SIM_SEED, ctopc_com::clock::now());
+            Ok(Box::new(sim) as Box<dyn Backend>)
+        }),
+    );
+    match started {
+        Ok(ctx) => ctx,
+        Err(e) => panic!("cannot start the server runtime: {e}"),
+    }
+}
+
+/// The class object `ServerCTOPC.exe` registers, over a new context ([`start`]): each
+/// CreateInstance makes a new server object of that context.
 pub fn factory() -> IClassFactory {
-    start();
-    ClassFactory::new(server::create_instance)
+    server::class_factory(&start())
 }
 
 /// A new server object through IClassFactory::CreateInstance(NULL, IID_IUnknown).
