@@ -5,7 +5,7 @@
 //! There is no process-wide context: `host::start` makes one (`Arc<Context>`), the class
 //! factory's constructor captures it, every server object holds it and hands it to its
 //! groups. `ServerCTOPC.exe` makes one per process; the in-process tests make one per
-//! server. When the last object of a context has gone, the context drops and stops its
+//! test. When the last object of a context has gone, the context drops and stops its
 //! runtime's driver thread (the callback workers end with their sessions).
 //!
 //! The COM layer knows no configuration file and no asix type: the server binary loads

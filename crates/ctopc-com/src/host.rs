@@ -150,7 +150,7 @@ pub fn install_dir() -> Result<PathBuf, String> {
 }
 
 /// Starts a runtime over a configuration and makes its context (one per call: the
-/// in-process tests make one per server). The server state comes from the data source: a
+/// in-process tests make one per test). The server state comes from the data source: a
 /// backend that simulates current data is OPC_STATUS_TEST. Dropping the last reference
 /// (the context, the class object and every object made from it) stops the runtime.
 pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Context>, String> {
