@@ -1,17 +1,26 @@
-//! The process context every COM object works in: the runtime (engine + data source), the
-//! namespace, the browse address space, the server state and the default language.
+//! The context every COM object of one server works in: the runtime (engine + data source),
+//! the namespace, the browse address space, the server state, the default language, the
+//! group identity registry and the lifetime counts.
+//!
+//! There is no process-wide context: `host::start` makes one (`Arc<Context>`), the class
+//! factory's constructor captures it, every server object holds it and hands it to its
+//! groups. `ServerCTOPC.exe` makes one per process; the in-process tests make one per
+//! test. When the last object of a context has gone, the context drops and stops its
+//! runtime's driver thread (the callback workers end with their sessions).
 //!
 //! The COM layer knows no configuration file and no asix type: the server binary loads
 //! the configuration (`crates/server/src/config.rs`) and hands over a [`Setup`] of plain
 //! values and the core's [`Namespace`] trait.
 
+use crate::group::Registry;
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
+use crate::lifetime::Lifetime;
 use crate::runtime::Runtime;
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::model::EngineConfig;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::Lang;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 /// What the server binary hands the COM host to serve: the namespace and what the COM
 /// layer needs of the configuration, as plain values.
@@ -28,7 +37,7 @@ pub struct Setup {
     pub no_config_reason: Option<String>,
 }
 
-/// Everything COM objects share.
+/// Everything the COM objects of one server share (made by `host::start`).
 pub struct Context {
     pub runtime: Arc<Runtime>,
     pub namespace: Arc<dyn Namespace>,
@@ -37,6 +46,10 @@ pub struct Context {
     /// Why the state is OPC_STATUS_NOCONFIG, if it is.
     pub no_config_reason: Option<String>,
     pub default_lang: Lang,
+    /// The live objects and LockServer locks that keep this server up, and its stop request.
+    pub lifetime: Arc<Lifetime>,
+    /// One COM identity per engine group (`crate::group`), one registry per runtime.
+    pub(crate) groups: Registry,
 }
 
 impl Context {
@@ -54,19 +67,9 @@ impl Context {
     }
 }
 
-static CONTEXT: OnceLock<Context> = OnceLock::new();
-
-/// Installs the process context (once per process).
-pub fn install(ctx: Context) -> Result<&'static Context, String> {
-    CONTEXT
-        .set(ctx)
-        .map_err(|_| "the server context is already installed".to_string())?;
-    CONTEXT
-        .get()
-        .ok_or_else(|| "the server context is missing".to_string())
-}
-
-/// The process context, once the server has started.
-pub fn get() -> Option<&'static Context> {
-    CONTEXT.get()
+impl Drop for Context {
+    /// The last object of this server has gone: its driver thread stops (joined here).
+    fn drop(&mut self) {
+        self.runtime.stop_driver();
+    }
 }

@@ -1,23 +1,36 @@
 //! The class object registered with CoRegisterClassObject (REGCLS_MULTIPLEUSE): every
-//! CreateInstance makes a new server object for that client.
+//! CreateInstance makes a new server object for that client, through a constructor that
+//! captures what it needs (the server's: its `Arc<Context>`, `server::class_factory`);
+//! LockServer counts in the [`Lifetime`] it is given.
 
-use crate::lifetime;
+use crate::lifetime::Lifetime;
 use std::ffi::c_void;
+use std::sync::Arc;
 use windows::core::{implement, IUnknown, Interface, Ref, BOOL, GUID};
 use windows::Win32::Foundation::{CLASS_E_NOAGGREGATION, E_POINTER};
 use windows::Win32::System::Com::{IClassFactory, IClassFactory_Impl};
 
 /// Makes a new object for one client.
-pub type Constructor = fn() -> windows::core::Result<IUnknown>;
+pub type Constructor = Box<dyn Fn() -> windows::core::Result<IUnknown> + Send + Sync>;
 
 #[implement(IClassFactory)]
 pub struct ClassFactory {
     create: Constructor,
+    lifetime: Arc<Lifetime>,
 }
 
 impl ClassFactory {
-    pub fn new(create: Constructor) -> IClassFactory {
-        ClassFactory { create }.into()
+    /// A class object whose CreateInstance calls `create`, and whose LockServer locks
+    /// count in `lifetime`.
+    pub fn new(
+        lifetime: Arc<Lifetime>,
+        create: impl Fn() -> windows::core::Result<IUnknown> + Send + Sync + 'static,
+    ) -> IClassFactory {
+        ClassFactory {
+            create: Box::new(create),
+            lifetime,
+        }
+        .into()
     }
 }
 
@@ -49,7 +62,7 @@ impl IClassFactory_Impl for ClassFactory_Impl {
     }
 
     fn LockServer(&self, lock: BOOL) -> windows::core::Result<()> {
-        lifetime::lock_server(lock.as_bool());
+        self.lifetime.lock_server(lock.as_bool());
         Ok(())
     }
 }

@@ -1,15 +1,22 @@
 //! What ServerCTOPC.exe does for each switch: register, unregister, serve.
+//!
+//! Serving ([`serve_as`]) takes the configuration ([`Setup`]), the data source's maker and
+//! the shutdown signal ([`StopSignal`]) as parameters: [`start`] makes the server's
+//! [`Context`] (no process-wide one), the class object captures it, and the stop request
+//! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
+//! the NT service's control handler (`service::run`) trigger.
 
-use crate::context::{self, Context, Setup};
+use crate::context::{Context, Setup};
 use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
+use crate::lifetime::{ExitReason, Lifetime, StopSignal};
 use crate::registry::{self, Category, ServerRegistration};
 use crate::runtime::Runtime;
-use crate::{factory::ClassFactory, lifetime, server};
+use crate::server;
 use ctopc_core::model::Engine;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use windows::core::{BOOL, GUID};
 use windows::Win32::Foundation::E_FAIL;
@@ -142,10 +149,11 @@ pub fn install_dir() -> Result<PathBuf, String> {
     Ok(exe.parent().map(PathBuf::from).unwrap_or_default())
 }
 
-/// Starts the runtime over a configuration and installs the process context. The server
-/// state comes from the data source: a backend that simulates current data is
-/// OPC_STATUS_TEST.
-pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<&'static Context, String> {
+/// Starts a runtime over a configuration and makes its context (one per call: the
+/// in-process tests make one per test). The server state comes from the data source: a
+/// backend that simulates current data is OPC_STATUS_TEST. Dropping the last reference
+/// (the context, the class object and every object made from it) stops the runtime.
+pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Context>, String> {
     let Setup {
         namespace,
         address_space,
@@ -176,9 +184,17 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<&'stati
         namespace,
         state: Context::state_for(no_config_reason.as_deref(), simulation),
         no_config_reason,
+        lifetime: Lifetime::new(),
+        groups: Default::default(),
     };
-    context::install(ctx)
+    Ok(Arc::new(ctx))
 }
+
+/// The stop signal the console control handler triggers. A console control handler is a
+/// plain `extern "system" fn` with no user data, so this one process-level hook is
+/// unavoidable; it holds nothing but the signal to trigger (set by
+/// [`stop_on_console_ctrl`]) and no server state.
+static CONSOLE_STOP: Mutex<Option<StopSignal>> = Mutex::new(None);
 
 unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
     // CTRL_LOGOFF_EVENT (5) and CTRL_SHUTDOWN_EVENT (6): the system is going down.
@@ -187,15 +203,39 @@ unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
     } else {
         "ServerCTOPC was stopped from its console"
     };
-    lifetime::request_stop_with(reason);
+    let signal = CONSOLE_STOP
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clone();
+    if let Some(s) = signal {
+        s.trigger(reason);
+    }
     BOOL(1)
 }
 
+/// Ctrl+C, closing the console, a log-off or a system shutdown trigger `signal` (the
+/// process's console handler forwards to the signal set last).
+pub fn stop_on_console_ctrl(signal: &StopSignal) {
+    let first = CONSOLE_STOP
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .replace(signal.clone())
+        .is_none();
+    if first {
+        // SAFETY: a plain function pointer with the handler signature, valid for the process.
+        let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };
+    }
+}
+
 /// `-Embedding`: start, register the class object for multiple use, serve until the last
-/// client has gone (or Ctrl+C / a stop request), then revoke it and exit. On a requested
-/// stop every connected client first gets IOPCShutdown::ShutdownRequest.
-pub fn serve(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> windows::core::Result<()> {
-    serve_as(setup, make_backend, ServeMode::UntilUnused)
+/// client has gone (or `stop` is triggered), then revoke it and exit. On a requested stop
+/// every connected client first gets IOPCShutdown::ShutdownRequest.
+pub fn serve(
+    setup: Setup,
+    make_backend: Box<MakeBackend<'_>>,
+    stop: &StopSignal,
+) -> windows::core::Result<()> {
+    serve_as(setup, make_backend, ServeMode::UntilUnused, stop)
 }
 
 /// How long the server process serves.
@@ -207,11 +247,13 @@ pub enum ServeMode {
     UntilStopped,
 }
 
-/// Serves in the given mode (see [`serve`]).
+/// Serves in the given mode until the server is unused or `stop` is triggered (see
+/// [`serve`]); the reason of the trigger is what clients get in IOPCShutdown.
 pub fn serve_as(
     setup: Setup,
     make_backend: Box<MakeBackend<'_>>,
     mode: ServeMode,
+    stop: &StopSignal,
 ) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     // Authentication level NONE and identify-level impersonation: the usual OPC setting,
@@ -235,9 +277,8 @@ pub fn serve_as(
         tracing::error!("cannot start: {e}");
         crate::error::error(E_FAIL, &e)
     })?;
-    // SAFETY: a plain function pointer with the handler signature, valid for the process.
-    let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };
-    let factory = ClassFactory::new(server::create_instance);
+    ctx.lifetime.stop_on(stop);
+    let factory = server::class_factory(&ctx);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe {
         CoRegisterClassObject(
@@ -249,16 +290,16 @@ pub fn serve_as(
     };
     tracing::info!("serving {PROGID}");
     let reason = match mode {
-        ServeMode::UntilUnused => lifetime::wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
+        ServeMode::UntilUnused => ctx.lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
         ServeMode::UntilStopped => {
-            lifetime::wait_for_stop();
-            lifetime::ExitReason::StopRequested
+            ctx.lifetime.wait_for_stop();
+            ExitReason::StopRequested
         }
     };
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
-    if reason == lifetime::ExitReason::StopRequested {
-        ctx.runtime.shutdown(lifetime::stop_reason());
+    if reason == ExitReason::StopRequested {
+        ctx.runtime.shutdown(ctx.lifetime.stop_reason());
     }
     tracing::info!("exiting ({reason:?})");
     Ok(())

@@ -1,6 +1,9 @@
-//! The server's runtime: the engine (shared by every client of the process), the data
+//! The server's runtime: the engine (shared by every client of one context), the data
 //! source, one driver thread that runs the scheduler and moves data between them, and one
-//! callback worker per client so that a slow or dead client never stalls another.
+//! callback worker per client so that a slow or dead client never stalls another. A
+//! runtime belongs to one `Context` (no process-wide runtime): the driver thread holds
+//! only a weak reference and is stopped and joined when the context drops
+//! ([`Runtime::stop_driver`]); a worker ends when its session closes.
 //!
 //! The step itself and the pacing bookkeeping are pure and tested natively
 //! (`ctopc_core::driver`); this module owns the threads, condvars, worker queues and the
@@ -97,7 +100,8 @@ impl Worker {
     }
 }
 
-/// The server's runtime (one per server process).
+/// The server's runtime (one per [`Context`](crate::context::Context); its driver thread
+/// stops when the context drops, [`Runtime::stop_driver`]).
 pub struct Runtime {
     /// Itself, for the jobs queued to the workers (which must not keep it alive).
     me: Weak<Runtime>,
@@ -115,6 +119,8 @@ pub struct Runtime {
     /// driver to tell the engine at its next step: a worker never waits for the engine's
     /// lock, it goes on with its next call.
     reports: Mutex<Vec<Report>>,
+    /// The driver thread, joined by [`Runtime::stop_driver`].
+    driver_thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     pub start_time: Timestamp,
 }
 
@@ -142,14 +148,34 @@ impl Runtime {
             shutdown_sinks: Mutex::new(HashMap::new()),
             workers: Mutex::new(HashMap::new()),
             reports: Mutex::new(Vec::new()),
+            driver_thread: Mutex::new(None),
             start_time: clock::now(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
             .name("driver".into())
             .spawn(move || drive(weak));
-        spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
+        let handle = spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
+        *rt.driver_thread.lock().unwrap_or_else(|p| p.into_inner()) = Some(handle);
         Ok(rt)
+    }
+
+    /// Stops the driver thread and waits for it to end (not when called on the driver
+    /// thread itself). Idempotent; the engine and the data source are dropped with the
+    /// runtime.
+    pub fn stop_driver(&self) {
+        self.stop.store(true, Ordering::SeqCst);
+        self.signal.wake();
+        let handle = self
+            .driver_thread
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        if let Some(h) = handle {
+            if h.thread().id() != std::thread::current().id() {
+                let _ = h.join();
+            }
+        }
     }
 
     /// The engine and source, locked (keep the section short; never call a client inside).

@@ -39,7 +39,7 @@ use crate::abi::{self, write_out, OutArray, TaskMem};
 use crate::clock;
 use crate::comdef::RawConnectionPointContainer;
 use crate::connpoint::SinkSlot;
-use crate::context::{self, Context};
+use crate::context::Context;
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
 use ctopc_core::browse::BrowseCursor;
@@ -48,7 +48,7 @@ use ctopc_core::model::SessionHandle;
 use ctopc_core::OpcError;
 use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG};
+use windows::Win32::Foundation::E_INVALIDARG;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
 pub const VENDOR_INFO: &str =
@@ -69,7 +69,7 @@ struct Session {
     RawConnectionPointContainer
 )]
 pub struct OpcServer {
-    ctx: &'static Context,
+    ctx: Arc<Context>,
     handle: SessionHandle,
     session: Mutex<Session>,
     /// IOPCBrowseServerAddressSpace's position (per client, as the spec requires).
@@ -79,17 +79,23 @@ pub struct OpcServer {
     _guard: ObjectGuard,
 }
 
-/// The class factory's constructor: a new server object (and engine session) for one client.
-pub fn create_instance() -> windows::core::Result<IUnknown> {
-    let Some(ctx) = context::get() else {
-        tracing::error!("a server object was asked for before the server started");
-        return Err(crate::error::error(E_FAIL, "the server has not started"));
-    };
+/// The class object of the server for `ctx`: every CreateInstance makes a new server
+/// object of that context ([`create_instance`]); LockServer counts in its lifetime.
+pub fn class_factory(ctx: &Arc<Context>) -> windows::Win32::System::Com::IClassFactory {
+    let for_factory = Arc::clone(ctx);
+    crate::factory::ClassFactory::new(Arc::clone(&ctx.lifetime), move || {
+        create_instance(&for_factory)
+    })
+}
+
+/// The class factory's constructor: a new server object (and engine session) of `ctx` for
+/// one client.
+pub fn create_instance(ctx: &Arc<Context>) -> windows::core::Result<IUnknown> {
     let handle = ctx.runtime.open_session();
     let shutdown = Arc::new(SinkSlot::<IOPCShutdown>::default());
     ctx.runtime.set_shutdown_sink(handle, Arc::clone(&shutdown));
     let server = OpcServer {
-        ctx,
+        ctx: Arc::clone(ctx),
         handle,
         session: Mutex::new(Session {
             lcid: ctx.default_lang.lcid(),
@@ -97,7 +103,7 @@ pub fn create_instance() -> windows::core::Result<IUnknown> {
         }),
         browse: Mutex::new(BrowseCursor::new(Arc::clone(&ctx.address_space))),
         shutdown,
-        _guard: ObjectGuard::new(),
+        _guard: ObjectGuard::new(&ctx.lifetime),
     };
     Ok(server.into())
 }
@@ -116,15 +122,13 @@ impl OpcServer {
     fn cursor(&self) -> MutexGuard<'_, BrowseCursor> {
         self.browse.lock().unwrap_or_else(|p| p.into_inner())
     }
-}
 
-/// The language for an LCID a client passes: Polish, any English, or the system/user
-/// default and neutral locales (the server's default language). Others are not available.
-fn lang_for(lcid: u32) -> Option<Lang> {
-    Lang::from_lcid(
-        lcid,
-        context::get().map_or(Lang::English, |c| c.default_lang),
-    )
+    /// The language for an LCID a client passes: Polish, any English, or the system/user
+    /// default and neutral locales (the server's default language). Others are not
+    /// available.
+    fn lang_for(&self, lcid: u32) -> Option<Lang> {
+        Lang::from_lcid(lcid, self.ctx.default_lang)
+    }
 }
 
 /// The text of `code` in `lang`: our own codes from the core table, else the system's.
@@ -142,7 +146,8 @@ fn error_text(code: HRESULT, lang: Lang) -> windows::core::Result<String> {
 
 impl IOPCCommon_Impl for OpcServer_Impl {
     unsafe fn SetLocaleID(&self, lcid: u32) -> windows::core::Result<()> {
-        lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
+        self.lang_for(lcid)
+            .ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
         self.session().lcid = lcid;
         Ok(())
     }
@@ -184,7 +189,9 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let lang = lang_for(self.session().lcid).unwrap_or(self.ctx.default_lang);
+        let lang = self
+            .lang_for(self.session().lcid)
+            .unwrap_or(self.ctx.default_lang);
         let text = abi::OwnedWstr::new(&error_text(code, lang)?)?;
         // SAFETY: `pstring` is this method's [out] parameter (checked non-null above).
         unsafe { write_out(pstring, text.into_raw()) }
@@ -236,7 +243,9 @@ impl IOPCServer_Impl for OpcServer_Impl {
         if pstring.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let lang = lang_for(lcid).ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
+        let lang = self
+            .lang_for(lcid)
+            .ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
         let text = abi::OwnedWstr::new(&error_text(code, lang)?)?;
         // SAFETY: `pstring` is this method's [out] parameter (checked non-null above).
         unsafe { write_out(pstring, text.into_raw()) }
@@ -255,7 +264,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
         // Cleared first (NULL), before any allocation can fail.
         // SAFETY: `pstatus` is this method's [out] parameter.
         let out = unsafe { OutArray::new(pstatus) }?;
-        let ctx = self.ctx;
+        let ctx = &self.ctx;
         let (groups, last_update) = ctx.runtime.with_engine(|e, _| {
             (
                 e.groups(self.handle).map(|g| g.len()).unwrap_or(0),

@@ -1,9 +1,10 @@
 //! ServerCTOPC as an NT service: installation (on demand, as LocalService; COM starts it
 //! when a client activates the server because the AppID names it in `LocalService`),
 //! removal, and the service main, which serves until the service control manager stops
-//! it and then sends IOPCShutdown to every connected client.
+//! it and then sends IOPCShutdown to every connected client: the control handler only
+//! triggers the [`StopSignal`] it hands to the serving function.
 
-use crate::lifetime;
+use crate::lifetime::StopSignal;
 use std::ffi::OsString;
 use std::path::Path;
 use std::time::Duration;
@@ -95,14 +96,19 @@ pub fn uninstall() -> Result<(), String> {
         .map_err(|e| format!("cannot delete the service {SERVICE_NAME}: {e}"))
 }
 
-type ServeFn = Box<dyn FnOnce() -> Result<(), String> + Send>;
+/// Serves until the given signal is triggered (the service control manager's stop or a
+/// system shutdown).
+pub type ServeFn = Box<dyn FnOnce(StopSignal) -> Result<(), String> + Send>;
 
+/// The serving function for the service main. The service main is a plain function the
+/// dispatcher calls with no user data, so this process-level hook is unavoidable; it holds
+/// only the function handed to [`run`], taken once.
 static SERVE: std::sync::Mutex<Option<ServeFn>> = std::sync::Mutex::new(None);
 
 windows_service::define_windows_service!(ffi_service_main, service_main);
 
-/// Runs the service control dispatcher; `serve` runs the server until a stop request.
-/// Returns when the service has stopped.
+/// Runs the service control dispatcher; `serve` runs the server until its stop signal is
+/// triggered. Returns when the service has stopped.
 pub fn run(serve: ServeFn) -> Result<(), String> {
     *SERVE.lock().unwrap_or_else(|p| p.into_inner()) = Some(serve);
     windows_service::service_dispatcher::start(SERVICE_NAME, ffi_service_main)
@@ -110,15 +116,17 @@ pub fn run(serve: ServeFn) -> Result<(), String> {
 }
 
 fn service_main(_args: Vec<OsString>) {
-    let handler = |control| match control {
+    let stop = StopSignal::new();
+    let trigger = stop.clone();
+    let handler = move |control| match control {
         ServiceControl::Stop => {
             tracing::info!("service control: stop");
-            lifetime::request_stop_with("the ServerCTOPC service is stopping");
+            trigger.trigger("the ServerCTOPC service is stopping");
             ServiceControlHandlerResult::NoError
         }
         ServiceControl::Shutdown => {
             tracing::info!("service control: system shutdown");
-            lifetime::request_stop_with("the system is shutting down");
+            trigger.trigger("the system is shutting down");
             ServiceControlHandlerResult::NoError
         }
         ServiceControl::Interrogate => ServiceControlHandlerResult::NoError,
@@ -145,7 +153,7 @@ fn service_main(_args: Vec<OsString>) {
     };
     report(ServiceState::Running, 0);
     let serve = SERVE.lock().unwrap_or_else(|p| p.into_inner()).take();
-    let code = match serve.map(|f| f()) {
+    let code = match serve.map(|f| f(stop)) {
         Some(Ok(())) => 0,
         Some(Err(e)) => {
             tracing::error!("the service failed: {e}");

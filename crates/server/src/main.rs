@@ -30,14 +30,17 @@ mod backend;
 #[cfg(windows)]
 fn run(cmd: cli::Command) -> ExitCode {
     use ctopc_com::host;
+    use ctopc_com::lifetime::StopSignal;
     let result = match cmd {
         cli::Command::RegServer => host::register(),
         cli::Command::UnregServer => host::unregister(),
-        cli::Command::Embedding => return embedding(host::ServeMode::UntilUnused),
+        cli::Command::Embedding => {
+            return embedding(host::ServeMode::UntilUnused, &StopSignal::new())
+        }
         cli::Command::Service => host::register_service(),
         cli::Command::ServiceRun => {
-            return match ctopc_com::service::run(Box::new(|| {
-                match embedding(host::ServeMode::UntilStopped) {
+            return match ctopc_com::service::run(Box::new(|stop| {
+                match embedding(host::ServeMode::UntilStopped, &stop) {
                     code if code == ExitCode::SUCCESS => Ok(()),
                     _ => Err("the server stopped with an error (see the log)".into()),
                 }
@@ -60,9 +63,11 @@ fn run(cmd: cli::Command) -> ExitCode {
     }
 }
 
-/// `-Embedding` (and the service): configuration, then logging as configured, then serve.
+/// `-Embedding` (and the service): configuration, then logging as configured, then serve
+/// until the server is unused (`-Embedding`) or `stop` is triggered (the service's stop,
+/// or Ctrl+C / a system shutdown on the console, in both modes).
 #[cfg(windows)]
-fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
+fn embedding(mode: ctopc_com::host::ServeMode, stop: &ctopc_com::lifetime::StopSignal) -> ExitCode {
     use ctopc_com::host;
     use std::sync::Arc;
     let loaded = host::install_dir().and_then(|dir| config::load(&dir).map(|l| (dir, l)));
@@ -95,7 +100,8 @@ fn embedding(mode: ctopc_com::host::ServeMode) -> ExitCode {
     let setup = setup(&ns);
     let make_backend =
         Box::new(move |wake: Arc<dyn ctopc_core::source::Wake>| backend::make(&ns, wake));
-    match host::serve_as(setup, make_backend, mode) {
+    host::stop_on_console_ctrl(stop);
+    match host::serve_as(setup, make_backend, mode, stop) {
         Ok(()) => {
             tracing::info!("ServerCTOPC stopped");
             ExitCode::SUCCESS

@@ -24,10 +24,10 @@ use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
 use ctopc_com::client::ComThread;
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::interfaces::*;
-use ctopc_com::lifetime::{self, ObjectGuard};
+use ctopc_com::lifetime::{Lifetime, ObjectGuard};
 use ctopc_com::registry::{self, ServerRegistration};
 use ctopc_com::{clock, error};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 use windows::core::{implement, IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL, E_POINTER, S_FALSE, S_OK};
@@ -207,10 +207,17 @@ pub struct ProbeServer {
     _guard: ObjectGuard,
 }
 
+/// The probe process's lifetime counts (the probe is a test server with one class object
+/// per process, so one static suffices here).
+fn probe_lifetime() -> &'static Arc<Lifetime> {
+    static LIFETIME: OnceLock<Arc<Lifetime>> = OnceLock::new();
+    LIFETIME.get_or_init(Lifetime::new)
+}
+
 /// The class factory's constructor: a new probe server object.
 pub fn create_instance() -> windows::core::Result<IUnknown> {
     Ok(ProbeServer {
-        _guard: ObjectGuard::new(),
+        _guard: ObjectGuard::new(probe_lifetime()),
     }
     .into())
 }
@@ -251,7 +258,7 @@ unsafe fn string_enum(name: &str, riid: *const GUID, out: *mut Option<IUnknown>)
     let e: IUnknown = StringEnum {
         items,
         pos: Mutex::new(0),
-        _guard: ObjectGuard::new(),
+        _guard: ObjectGuard::new(probe_lifetime()),
     }
     .into();
     // SAFETY: contract of this function.
@@ -307,7 +314,7 @@ impl IOPCServer_Impl for ProbeServer_Impl {
             return E_INVALIDARG;
         }
         let group: IUnknown = ProbeGroup {
-            _guard: ObjectGuard::new(),
+            _guard: ObjectGuard::new(probe_lifetime()),
         }
         .into();
         let hr = query_out(&group, riid, unk);
@@ -831,7 +838,7 @@ impl IOPCItemMgt_Impl for ProbeGroup_Impl {
     unsafe fn CreateEnumerator(&self, riid: *const GUID, unk: *mut Option<IUnknown>) -> HRESULT {
         let e: IUnknown = ItemEnum {
             pos: Mutex::new(0),
-            _guard: ObjectGuard::new(),
+            _guard: ObjectGuard::new(probe_lifetime()),
         }
         .into();
         query_out(&e, riid, unk)
@@ -986,7 +993,7 @@ impl IEnumString_Impl for StringEnum_Impl {
         Ok(StringEnum {
             items: self.items.clone(),
             pos: Mutex::new(pos),
-            _guard: ObjectGuard::new(),
+            _guard: ObjectGuard::new(probe_lifetime()),
         }
         .into())
     }
@@ -1051,7 +1058,7 @@ pub fn serve() -> windows::core::Result<()> {
             None,
         )
     };
-    let factory = ClassFactory::new(create_instance);
+    let factory = ClassFactory::new(Arc::clone(probe_lifetime()), create_instance);
     // SAFETY: the factory outlives the registration (revoked below before it is dropped).
     let cookie = unsafe {
         CoRegisterClassObject(
@@ -1061,7 +1068,7 @@ pub fn serve() -> windows::core::Result<()> {
             REGCLS_MULTIPLEUSE,
         )?
     };
-    let reason = lifetime::wait_until_unused(STARTUP_GRACE, LINGER);
+    let reason = probe_lifetime().wait_until_unused(STARTUP_GRACE, LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
     eprintln!("marshal-probe: exiting ({reason:?})");

@@ -298,7 +298,8 @@ impl IOPCItemMgt_Impl for Group_Impl {
             Err(e) => return error::hresult(e),
         };
         let empty = items.is_empty();
-        let enumerator: IEnumOPCItemAttributes = ItemAttributesEnum::create(items);
+        let enumerator: IEnumOPCItemAttributes =
+            ItemAttributesEnum::create(items, ObjectGuard::new(&self.ctx.lifetime));
         // SAFETY: checked non-null above.
         unsafe { ppunk.write(Some(enumerator.into())) };
         if empty {
@@ -321,10 +322,11 @@ pub struct ItemAttributesEnum {
 }
 
 impl ItemAttributesEnum {
-    pub fn create(items: Vec<ItemAttributes>) -> IEnumOPCItemAttributes {
+    /// `guard`: the group's context counts the enumerator as a live object.
+    pub fn create(items: Vec<ItemAttributes>, guard: ObjectGuard) -> IEnumOPCItemAttributes {
         ItemAttributesEnum {
             cursor: Cursor::new(items),
-            _guard: ObjectGuard::new(),
+            _guard: guard,
         }
         .into()
     }
@@ -432,7 +434,7 @@ impl IEnumOPCItemAttributes_Impl for ItemAttributesEnum_Impl {
         }
         let clone: IEnumOPCItemAttributes = ItemAttributesEnum {
             cursor: self.cursor.fork(),
-            _guard: ObjectGuard::new(),
+            _guard: self._guard.clone(),
         }
         .into();
         // SAFETY: checked non-null; an [out] interface pointer.

@@ -2,8 +2,9 @@
 //! IOPCItemSamplingMgt, IConnectionPointContainer (one point, IOPCDataCallback) and, in
 //! [`io`], the sync and async I/O interfaces.
 //!
-//! **One COM identity per engine group**: a process-wide registry maps each engine group
-//! to a weak reference to its live COM object and to the object's callback slot.
+//! **One COM identity per engine group**: the context's registry ([`Registry`], one per
+//! runtime, `Context::groups`) maps each engine group to a weak reference to its live COM
+//! object and to the object's callback slot.
 //! [`lookup_or_create`] hands out the live object or makes a new one; [`create`] always
 //! makes a new one (AddGroup, CloneGroup). Each object holds one engine reference
 //! (`group_add_ref`), released by `Drop` (`group_release`): a group removed with
@@ -50,7 +51,7 @@ pub use items::ItemAttributesEnum;
     RawConnectionPointContainer
 )]
 pub struct Group {
-    pub(crate) ctx: &'static Context,
+    pub(crate) ctx: Arc<Context>,
     pub(crate) session: SessionHandle,
     pub(crate) handle: GroupHandle,
     /// The IOPCDataCallback connection (registered with the runtime while the object lives).
@@ -71,32 +72,36 @@ struct Entry {
     slot: Arc<SinkSlot<IOPCDataCallback>>,
 }
 
-static REGISTRY: Mutex<BTreeMap<GroupHandle, Entry>> = Mutex::new(BTreeMap::new());
+/// The group identities of one context (`Context::groups`).
+#[derive(Default)]
+pub struct Registry(Mutex<BTreeMap<GroupHandle, Entry>>);
 
-fn registry() -> MutexGuard<'static, BTreeMap<GroupHandle, Entry>> {
-    REGISTRY.lock().unwrap_or_else(|p| p.into_inner())
+impl Registry {
+    fn lock(&self) -> MutexGuard<'_, BTreeMap<GroupHandle, Entry>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
 }
 
 /// A new COM object for the engine group `group` (AddGroup, CloneGroup): takes an engine
 /// reference, registers the object's callback slot with the runtime and makes it the
 /// group's identity for [`lookup_or_create`].
 pub fn create(
-    ctx: &'static Context,
+    ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
-    let mut reg = registry();
+    let mut reg = ctx.groups.lock();
     create_locked(&mut reg, ctx, session, group)
 }
 
 /// The COM object of the engine group `group`: the live one if there is one (same
 /// identity for every caller), else a new one as [`create`] makes.
 pub fn lookup_or_create(
-    ctx: &'static Context,
+    ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
-    let mut reg = registry();
+    let mut reg = ctx.groups.lock();
     if let Some(live) = reg.get(&group).and_then(|e| e.object.upgrade()) {
         // Returned to the caller: not dropped under the lock.
         return Ok(live);
@@ -106,7 +111,7 @@ pub fn lookup_or_create(
 
 fn create_locked(
     reg: &mut BTreeMap<GroupHandle, Entry>,
-    ctx: &'static Context,
+    ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
@@ -115,17 +120,17 @@ fn create_locked(
         .map_err(error::to_com)?;
     let sink = Arc::new(SinkSlot::<IOPCDataCallback>::default());
     let point: Arc<dyn Slot> = Arc::new(DataCallbackPoint {
-        ctx,
+        ctx: Arc::clone(ctx),
         group,
         slot: Arc::clone(&sink),
     });
     let object = Group {
-        ctx,
+        ctx: Arc::clone(ctx),
         session,
         handle: group,
         sink: Arc::clone(&sink),
         point,
-        _guard: ObjectGuard::new(),
+        _guard: ObjectGuard::new(&ctx.lifetime),
     };
     let unknown: IUnknown = object.into();
     // Nothing below may fail: dropping `unknown` here would run `Drop`, which locks the
@@ -161,7 +166,7 @@ impl Drop for Group {
         // Unregister only if this object is still the group's identity (a new object may
         // have replaced it between its last Release and this Drop).
         let (mine, old) = {
-            let mut reg = registry();
+            let mut reg = self.ctx.groups.lock();
             if reg
                 .get(&handle)
                 .is_some_and(|e| Arc::ptr_eq(&e.slot, &self.sink))
@@ -383,7 +388,7 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
                 .runtime
                 .with_engine(|e, now| e.remove_group(now, session, new, true));
         };
-        let object = match create(self.ctx, session, new) {
+        let object = match create(&self.ctx, session, new) {
             Ok(o) => o,
             Err(e) => {
                 undo();
@@ -446,7 +451,7 @@ impl IOPCGroupStateMgt2_Impl for Group_Impl {
 /// The group's IOPCDataCallback point: the slot, plus telling the engine whether a sink is
 /// connected (callbacks are only scheduled for connected groups).
 struct DataCallbackPoint {
-    ctx: &'static Context,
+    ctx: Arc<Context>,
     group: GroupHandle,
     slot: Arc<SinkSlot<IOPCDataCallback>>,
 }

@@ -33,7 +33,8 @@ use crate::context::Context;
 use crate::enums::{StringEnum, UnknownEnum};
 use crate::interfaces::*;
 use ctopc_core::model::{GroupHandle, GroupParams, RemoveGroupOutcome, SessionHandle};
-use ctopc_core::OpcError;
+use ctopc_core::{Lang, OpcError};
+use std::sync::Arc;
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{E_NOINTERFACE, S_FALSE, S_OK};
 use windows::Win32::Globalization::{IsValidLocale, LCID_SUPPORTED};
@@ -43,7 +44,7 @@ use windows::Win32::System::Time::{GetTimeZoneInformation, TIME_ZONE_INFORMATION
 /// The COM object of an engine group: the existing one while it lives, else a new one
 /// (`crate::group`'s registry keeps one identity per group).
 fn group_object(
-    ctx: &'static Context,
+    ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
@@ -52,7 +53,7 @@ fn group_object(
 
 /// A new COM object for a group just added (it becomes the group's identity).
 fn new_group_object(
-    ctx: &'static Context,
+    ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
@@ -84,8 +85,10 @@ pub fn local_time_bias() -> i32 {
 
 /// A group LCID the server accepts (see the module documentation).
 fn lcid_accepted(lcid: u32) -> bool {
+    // Ours: Polish, English and the default/neutral locales (whatever the default is).
+    let ours = Lang::from_lcid(lcid, Lang::English).is_some();
     // SAFETY: plain value arguments.
-    super::lang_for(lcid).is_some() || unsafe { IsValidLocale(lcid, LCID_SUPPORTED) }.as_bool()
+    ours || unsafe { IsValidLocale(lcid, LCID_SUPPORTED) }.as_bool()
 }
 
 impl OpcServer {
@@ -130,7 +133,7 @@ impl OpcServer {
             .runtime
             .with_engine(|e, now| e.add_group(now, self.handle, &params))
             .map_err(crate::error::to_com)?;
-        let object = match new_group_object(self.ctx, self.handle, added.group) {
+        let object = match new_group_object(&self.ctx, self.handle, added.group) {
             Ok(o) => o,
             Err(e) => {
                 self.remove_forced(added.group);
@@ -170,7 +173,7 @@ impl OpcServer {
             .engine
             .group_by_name(self.handle, &name)
             .map_err(crate::error::to_com)?;
-        let object = group_object(self.ctx, self.handle, group)?;
+        let object = group_object(&self.ctx, self.handle, group)?;
         query_out(&object, riid, ppunk)
     }
 
@@ -232,7 +235,7 @@ impl OpcServer {
             // Objects are made outside the engine lock; a group removed meanwhile is skipped.
             let objects: Vec<IUnknown> = groups
                 .into_iter()
-                .filter_map(|(g, _)| group_object(self.ctx, self.handle, g).ok())
+                .filter_map(|(g, _)| group_object(&self.ctx, self.handle, g).ok())
                 .collect();
             let n = objects.len();
             (UnknownEnum::create(objects).into(), n)

@@ -30,7 +30,8 @@ use windows::Win32::System::Variant::{VARENUM, VARIANT};
 impl OpcServer {
     /// The session's language (descriptions, texts).
     pub(super) fn lang(&self) -> Lang {
-        super::lang_for(self.session().lcid).unwrap_or(self.ctx.default_lang)
+        self.lang_for(self.session().lcid)
+            .unwrap_or(self.ctx.default_lang)
     }
 
     /// The engine's minimum update rate (the "Server Scan Rate" property).

@@ -6,27 +6,31 @@
 //! for out-parameters can be asserted (through the proxy a NULL `[ref]` pointer is
 //! answered by RPC_X_NULL_REF_POINTER before the server sees it).
 //!
-//! All process setup is here, in [`start`]: the thread joins the multithreaded apartment,
-//! and the server's runtime and context are started once per test process over the
-//! embedded demo plant (`asix_model::embedded_demo()`) with the in-process simulation the
-//! binary uses (`asix_net::inproc::InProcessSim`, as `crates/server/src/backend.rs`), the
-//! way `host::start` does it for `ServerCTOPC.exe`. Each test then makes its own server
-//! object **through the class factory** ([`new_server`], [`server`]) and QueryInterfaces
-//! the OPC interfaces. (When the process globals give way to a context per test, only
-//! [`start`] and [`factory`] change.)
+//! All setup is here, in [`start`]: the thread joins the multithreaded apartment, and the
+//! test gets **its own server context**, with its own runtime, over the embedded demo
+//! plant (`asix_model::embedded_demo()`, loaded once per test process) with the in-process
+//! simulation the binary uses (`asix_net::inproc::InProcessSim`, as
+//! `crates/server/src/backend.rs`), the way `host::start` does it for `ServerCTOPC.exe`.
+//! Each test runs on a thread of its own, and the context is the test thread's: every
+//! server a test makes **through the class factory** ([`factory`], [`new_server`],
+//! [`server`]) while another of its objects lives is a client of the same server (one
+//! engine, one plant), as two clients of one `ServerCTOPC.exe`; no two tests share one.
+//! The thread keeps only a weak reference: when the test has released the server's
+//! objects and class objects, the context drops and its driver thread ends (on the test's
+//! thread, not in a thread-local destructor). [`new_context`] makes a further one.
 //!
 //! Out-parameter checks: a test pre-fills an out-parameter with [`POISON`] (a pointer
 //! value that is never dereferenced) and asserts that a failed call wrote NULL/0 there.
 #![allow(dead_code, unused_imports)]
 
 use asix_net::inproc::InProcessSim;
-use ctopc_com::factory::ClassFactory;
+use ctopc_com::context::{self, Context};
 use ctopc_com::interfaces::*;
-use ctopc_com::{context, host, server};
+use ctopc_com::{host, server};
 use ctopc_core::source::Backend;
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, OnceLock, Weak};
 pub use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::System::Com::{
     CoInitializeEx, CoTaskMemFree, IClassFactory, COINIT_MULTITHREADED,
@@ -79,50 +83,89 @@ fn join_mta() {
     });
 }
 
-static STARTED: OnceLock<Result<(), String>> = OnceLock::new();
+/// The embedded demo plant and its browse tree (immutable: shared by every context).
+struct Demo {
+    ns: Arc<asix_model::AsixNamespace>,
+    address_space: Arc<ctopc_core::browse::AddressSpace>,
+}
 
-/// Joins the MTA (this thread) and starts the runtime and context (once per process).
-pub fn start() {
-    join_mta();
-    let started = STARTED.get_or_init(|| {
+static DEMO: OnceLock<Result<Demo, String>> = OnceLock::new();
+
+fn demo() -> &'static Demo {
+    let demo = DEMO.get_or_init(|| {
         let loaded = asix_model::embedded_demo()?;
         let ns = Arc::new(loaded.namespace);
-        // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
-        let server = &ns.config().server;
-        let setup = context::Setup {
-            namespace: Arc::clone(&ns) as Arc<dyn ctopc_core::namespace::Namespace>,
-            address_space: Arc::new(
-                asix_model::address_space::build_address_space(&ns)
-                    .map_err(|e| format!("{e:?}"))?,
-            ),
-            engine_config: server.engine_config(),
-            default_language: server.default_language.fixed(),
-            no_config_reason: ns.no_config_reason(),
-        };
-        host::start(
-            setup,
-            Box::new(move |_wake| {
-                let sim = InProcessSim::new(Arc::clone(&ns), SIM_SEED, ctopc_com::clock::now());
-                Ok(Box::new(sim) as Box<dyn Backend>)
-            }),
-        )
-        .map(|_| ())
+        let address_space = Arc::new(
+            asix_model::address_space::build_address_space(&ns).map_err(|e| format!("{e:?}"))?,
+        );
+        Ok(Demo { ns, address_space })
     });
-    if let Err(e) = started {
-        panic!("cannot start the server runtime: {e}");
+    match demo {
+        Ok(d) => d,
+        Err(e) => panic!("cannot load the embedded demo: {e}"),
     }
 }
 
-/// The class object `ServerCTOPC.exe` registers (a new one; each CreateInstance makes a
-/// new server object).
-pub fn factory() -> IClassFactory {
-    start();
-    ClassFactory::new(server::create_instance)
+thread_local! {
+    /// This test's context while any of its objects lives (weak: the context drops with
+    /// the test's last object, never in a thread-local destructor).
+    static TEST_CONTEXT: RefCell<Weak<Context>> = const { RefCell::new(Weak::new()) };
 }
 
-/// A new server object through IClassFactory::CreateInstance(NULL, IID_IUnknown).
+/// Joins the MTA (this thread) and gives this test's server context: the live one, else
+/// a new one ([`new_context`]).
+pub fn start() -> Arc<Context> {
+    join_mta();
+    if let Some(ctx) = TEST_CONTEXT.with(|c| c.borrow().upgrade()) {
+        return ctx;
+    }
+    let ctx = new_context();
+    TEST_CONTEXT.with(|c| *c.borrow_mut() = Arc::downgrade(&ctx));
+    ctx
+}
+
+/// Joins the MTA (this thread) and starts a new server context, not this test's: its own
+/// runtime (engine and simulated plant) over the demo.
+pub fn new_context() -> Arc<Context> {
+    join_mta();
+    let Demo { ns, address_space } = demo();
+    // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
+    let server = &ns.config().server;
+    let setup = context::Setup {
+        namespace: Arc::clone(ns) as Arc<dyn ctopc_core::namespace::Namespace>,
+        address_space: Arc::clone(address_space),
+        engine_config: server.engine_config(),
+        default_language: server.default_language.fixed(),
+        no_config_reason: ns.no_config_reason(),
+    };
+    let ns = Arc::clone(ns);
+    let started = host::start(
+        setup,
+        Box::new(move |_wake| {
+            let sim = InProcessSim::new(ns, SIM_SEED, ctopc_com::clock::now());
+            Ok(Box::new(sim) as Box<dyn Backend>)
+        }),
+    );
+    match started {
+        Ok(ctx) => ctx,
+        Err(e) => panic!("cannot start the server runtime: {e}"),
+    }
+}
+
+/// The class object `ServerCTOPC.exe` registers, over this test's context ([`start`]):
+/// each CreateInstance makes a new server object of that context.
+pub fn factory() -> IClassFactory {
+    server::class_factory(&start())
+}
+
+/// A new server object through IClassFactory::CreateInstance(NULL, IID_IUnknown), of this
+/// test's context.
 pub fn new_server() -> IUnknown {
-    let f = factory();
+    new_server_of(&factory())
+}
+
+/// A new server object of the class object `f` (of `f`'s context).
+pub fn new_server_of(f: &IClassFactory) -> IUnknown {
     // SAFETY: a valid class object; no aggregation.
     unsafe { f.CreateInstance::<_, IUnknown>(None) }.expect("CreateInstance(IID_IUnknown)")
 }
@@ -351,7 +394,12 @@ pub unsafe fn raw_query(unk: &IUnknown, riid: *const GUID, ppv: *mut *mut c_void
 /// A new server object wrapped in the client library's `Server` (for success paths: its
 /// readers copy and free what the server hands out).
 pub fn client() -> ctopc_com::client::Server {
-    ctopc_com::client::Server::from_unknown(new_server()).expect("IOPCServer and IOPCCommon")
+    client_from(&factory())
+}
+
+/// [`client`] over a new server object of the class object `f` (its context).
+pub fn client_from(f: &IClassFactory) -> ctopc_com::client::Server {
+    ctopc_com::client::Server::from_unknown(new_server_of(f)).expect("IOPCServer and IOPCCommon")
 }
 
 /// The environment variable that tells a child test process which helper test to run.
