@@ -16,6 +16,7 @@ pub struct ClassFactory {
 }
 
 impl ClassFactory {
+    #[allow(clippy::new_ret_no_self)] // a class object is only used through IClassFactory
     pub fn new(create: Constructor) -> IClassFactory {
         ClassFactory { create }.into()
     }
