@@ -441,8 +441,8 @@ fn item_io_write_vqt_argument_branches() {
     let id = wide("KW_A110");
     let ids = [pcwstr(&id)];
     let vqt = [OPCITEMVQT::default()];
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         unsafe { io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), null_mut()) },
         E_INVALIDARG
     );

@@ -21,8 +21,8 @@ const Z101_ID: &str = "Magazyn siarki/Zbiornik siarki ciekłej Z101";
 fn leaves() -> IEnumString {
     let a = server::<IOPCBrowseServerAddressSpace>();
     let to = wide(Z101_ID);
-    // SAFETY: a valid string.
     assert_eq!(
+        // SAFETY: a valid string.
         hr(unsafe { a.ChangeBrowsePosition(OPC_BROWSE_TO, pcwstr(&to)) }),
         S_OK
     );
