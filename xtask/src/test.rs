@@ -10,7 +10,7 @@
 //! 6. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner) and the COM
 //!    crate's unit tests (Windows-only).
 //!
-//! Steps 5 and 6 always end every Wine process of the prefix; everything has a timeout.
+//! Steps 5 and 6 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::{build, setup, util, wine};
