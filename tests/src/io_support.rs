@@ -164,12 +164,12 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
                 );
             }
         }
-        // SAFETY: the stub passes `n`-element arrays.
         self.0.push(|| Callback::DataChange {
             transaction,
             group,
             master_quality,
             master_error,
+            // SAFETY: the stub passes `n`-element arrays, read before `push` returns.
             items: unsafe { items(n, h, v, q, t, e) },
         });
         Ok(())
@@ -188,12 +188,12 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
         t: *const FILETIME,
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
-        // SAFETY: the stub passes `n`-element arrays.
         self.0.push(|| Callback::ReadComplete {
             transaction,
             group,
             master_quality,
             master_error,
+            // SAFETY: the stub passes `n`-element arrays, read before `push` returns.
             items: unsafe { items(n, h, v, q, t, e) },
         });
         Ok(())

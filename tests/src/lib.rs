@@ -4,8 +4,8 @@
 //! project's own proxy/stub DLL, both registered in the test Wine prefix by xtask. Tests
 //! that pass deliberately invalid raw pointers call the interfaces directly (`unsafe`):
 //! that is what they test. [`probe`] is the marshal probe, the test COM server of
-//! `marshal-probe.exe` (its `unsafe` blocks carry `// SAFETY:` comments, checked by the
-//! tidy test as in the COM crate).
+//! `marshal-probe.exe` (its `unsafe` blocks carry `// SAFETY:` comments, checked by
+//! clippy's `undocumented_unsafe_blocks` as in the COM crate).
 #![cfg(windows)]
 
 pub mod io_support;

@@ -139,17 +139,18 @@ fn each_client_gets_its_own_server_object() {
 #[test]
 fn create_instance_for_an_interface_the_server_lacks_is_e_nointerface() {
     let _com = ComThread::mta().unwrap();
-    // SAFETY (test): valid ProgID string.
+    // SAFETY: valid ProgID string.
     let clsid = unsafe { CLSIDFromProgID(windows::core::w!("ServerCTOPC.App")) }.unwrap();
     // IOPCServerList is OPCEnum's interface, never the server's.
     let r: windows::core::Result<IOPCServerList> =
+        // SAFETY: a CLSID on a thread in the MTA (`_com`); no outer object.
         unsafe { CoCreateInstance(&clsid, None, CLSCTX_LOCAL_SERVER) };
     assert_eq!(code(&r), E_NOINTERFACE);
     // A GUID nobody defines.
     let unknown = GUID::from_u128(0x0badc0de_0000_4000_8000_000000000001);
     let server = Server::connect(PROGID).unwrap();
     let mut out: *mut std::ffi::c_void = std::ptr::null_mut();
-    // SAFETY (test): valid IID and out-pointer.
+    // SAFETY: valid IID and out-pointer.
     let hr = unsafe { server.unknown.query(&unknown, &mut out) };
     assert_eq!(hr, E_NOINTERFACE);
     assert!(out.is_null());

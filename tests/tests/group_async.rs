@@ -335,7 +335,7 @@ fn cancel2_sends_on_cancel_complete_or_fails_once_completed() {
     let mut cancelled = 0;
     for tid in 601..611u32 {
         let (_, cancel, _) = client::async_read(&io, &p.h, tid).unwrap();
-        // SAFETY (test): plain value.
+        // SAFETY: plain value.
         match unsafe { io.Cancel2(cancel) } {
             Ok(()) => {
                 cancelled += 1;
@@ -370,7 +370,7 @@ fn cancel2_sends_on_cancel_complete_or_fails_once_completed() {
     // before Cancel2 arrives (group_slow_source.rs covers the certain cancellation).
     eprintln!("Cancel2: {cancelled} of 10 cancelled before completion");
     // Unknown cancel IDs, and one that completed long ago.
-    // SAFETY (test): plain values.
+    // SAFETY: plain values.
     unsafe {
         assert_eq!(code(&io.Cancel2(0)), E_FAIL);
         assert_eq!(code(&io.Cancel2(0xFFFF_FFF0)), E_FAIL);
@@ -389,7 +389,7 @@ fn set_enable_false_stops_subscription_callbacks_but_not_refreshes() {
         })
         .expect("subscription callbacks");
 
-    // SAFETY (test): plain value.
+    // SAFETY: plain value.
     unsafe { io.SetEnable(BOOL::from(false)) }.expect("SetEnable(FALSE)");
     assert!(!client::get_enable(&io).unwrap());
     std::thread::sleep(Duration::from_millis(500)); // a callback already queued may still arrive
@@ -410,7 +410,7 @@ fn set_enable_false_stops_subscription_callbacks_but_not_refreshes() {
     let (_, _, _) = client::async_read(&io, &p.h, 702).unwrap();
     assert!(matches!(wait_tx(&p, 702), Callback::ReadComplete { .. }));
 
-    // SAFETY (test): plain value.
+    // SAFETY: plain value.
     unsafe { io.SetEnable(BOOL::from(true)) }.expect("SetEnable(TRUE)");
     assert!(client::get_enable(&io).unwrap());
     p.rec
@@ -435,7 +435,7 @@ fn async_calls_without_a_connected_callback_are_connect_e_noconnection() {
         code(&client::async_write_vqt(&io3, &vqt, 5)),
         code(&client::refresh_max_age(&io3, 0, 6)),
         code(&client::get_enable(&io)),
-        // SAFETY (test): plain value.
+        // SAFETY: plain value.
         code(&unsafe { io.SetEnable(BOOL::from(false)) }),
     ];
     assert_eq!(codes, [CONNECT_E_NOCONNECTION; 8]);
@@ -478,7 +478,7 @@ fn count_zero_invalid_source_and_null_pointers_are_rejected() {
     let age = 0u32;
     let vqt = OPCITEMVQT::default();
     let rejected = |hr: HRESULT| hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER;
-    // SAFETY (test): deliberately NULL pointers; the valid ones are live for each call.
+    // SAFETY: deliberately NULL pointers; the valid ones are live for each call.
     unsafe {
         let h = p.h.as_ptr();
         let hrs = [

@@ -229,8 +229,8 @@ fn one_connection_per_group_and_connection_point_rules() {
     }
 
     // The point's interface and container; no point for other interfaces.
-    // SAFETY: plain calls on valid interfaces.
     assert_eq!(
+        // SAFETY: plain calls on valid interfaces.
         unsafe { cp.GetConnectionInterface() }.unwrap(),
         IOPCDataCallback::IID
     );

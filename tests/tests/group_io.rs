@@ -581,7 +581,7 @@ fn null_pointers_are_rejected_and_the_server_survives() {
     let mut qualities: *mut u16;
     let mut times: *mut windows::Win32::Foundation::FILETIME;
     let vqt = OPCITEMVQT::default();
-    // SAFETY (test): deliberately NULL pointers; the valid ones are live for each call.
+    // SAFETY: deliberately NULL pointers; the valid ones are live for each call.
     // When the server rejects a call (E_INVALIDARG) every out-array it got is NULL. A call
     // the proxy rejects (RPC_X_NULL_REF_POINTER) never reaches the server; Wine's proxy
     // may then leave a non-NULL value in the other out-parameters, which says nothing

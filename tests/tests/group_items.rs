@@ -233,16 +233,16 @@ fn set_active_state_client_handles_and_datatypes() {
 
     // Count 0 and a NULL second array.
     let mut errors: *mut HRESULT = std::ptr::null_mut();
-    // SAFETY: valid pointers, count 0.
     assert_eq!(
+        // SAFETY: valid pointers, count 0.
         unsafe {
             g.item_mgt
                 .SetActiveState(0, h.as_ptr(), true.into(), &mut errors)
         },
         E_INVALIDARG
     );
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: as above.
         unsafe {
             g.item_mgt
                 .SetClientHandles(0, h.as_ptr(), h.as_ptr(), &mut errors)
@@ -250,8 +250,8 @@ fn set_active_state_client_handles_and_datatypes() {
         E_INVALIDARG
     );
     let types = [windows::Win32::System::Variant::VARENUM(VT_R8)];
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: as above.
         unsafe {
             g.item_mgt
                 .SetDatatypes(0, h.as_ptr(), types.as_ptr(), &mut errors)
@@ -438,13 +438,13 @@ fn item_deadband_set_get_clear() {
     let d: IOPCItemDeadbandMgt = g.unknown.cast().unwrap();
     let mut errors: *mut HRESULT = std::ptr::null_mut();
     let db = [1.0f32];
-    // SAFETY: valid pointers, count 0.
     assert_eq!(
+        // SAFETY: valid pointers, count 0.
         unsafe { d.SetItemDeadband(0, h.as_ptr(), db.as_ptr(), &mut errors) },
         E_INVALIDARG
     );
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: as above.
         unsafe { d.ClearItemDeadband(0, h.as_ptr(), &mut errors) },
         E_INVALIDARG
     );
@@ -495,8 +495,8 @@ fn item_sampling_rate_and_buffering() {
     let s: IOPCItemSamplingMgt = g.unknown.cast().unwrap();
     let mut errors: *mut HRESULT = std::ptr::null_mut();
     let mut rates: *mut u32 = std::ptr::null_mut();
-    // SAFETY: valid pointers, count 0.
     assert_eq!(
+        // SAFETY: valid pointers, count 0.
         unsafe { s.GetItemSamplingRate(0, h.as_ptr(), &mut rates, &mut errors) },
         E_INVALIDARG
     );

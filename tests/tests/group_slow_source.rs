@@ -319,7 +319,7 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
 
     // Cancelled before the timeout: OnCancelComplete instead.
     let (_, cancel, _) = client::async_read(&p.group.async2(), &p.h, 12).expect("async Read");
-    // SAFETY (test): plain value.
+    // SAFETY: plain value.
     unsafe { p.group.async2().Cancel2(cancel) }.expect("Cancel2 of a read waiting for the device");
     assert_eq!(
         wait_tx(p, 12),
@@ -333,8 +333,8 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
     std::thread::sleep(Duration::from_millis(3_500));
     assert_eq!(callbacks_of(p, 11).len(), 1, "{:?}", p.rec.all());
     assert_eq!(callbacks_of(p, 12).len(), 1, "{:?}", p.rec.all());
-    // SAFETY (test): plain value.
     assert_eq!(
+        // SAFETY: plain value.
         code(&unsafe { p.group.async2().Cancel2(cancel) }),
         E_FAIL,
         "cancelled already"
@@ -432,7 +432,7 @@ fn cancel2_of_operations_waiting_for_a_slow_device_sends_on_cancel_complete_only
         let cancel = start(*tid);
         assert_ne!(cancel, 0, "{what}");
         // Cancel2 through the interface of the call (IOPCAsyncIO3 inherits it).
-        // SAFETY (test): plain value.
+        // SAFETY: plain value.
         let r = unsafe {
             if *tid < 24 {
                 io2.Cancel2(cancel)
@@ -502,8 +502,8 @@ fn cancel2_of_operations_waiting_for_a_slow_device_sends_on_cancel_complete_only
             }],
             "{what}"
         );
-        // SAFETY (test): plain value.
         assert_eq!(
+            // SAFETY: plain value.
             code(&unsafe { io2.Cancel2(*cancel) }),
             E_FAIL,
             "{what} cancelled already"

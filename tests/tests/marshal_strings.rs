@@ -644,10 +644,10 @@ mod through_the_proxy {
             IOPCBrowse::IID,
         ] {
             let mut out = std::ptr::null_mut();
-            // SAFETY (test): valid IID and out-pointer; the reference is released below.
+            // SAFETY: valid IID and out-pointer; the reference is released below.
             let hr = unsafe { server.unknown.query(&iid, &mut out) };
             assert_eq!(hr, S_OK, "QueryInterface({iid:?})");
-            // SAFETY (test): `out` holds the reference QueryInterface added.
+            // SAFETY: `out` holds the reference QueryInterface added.
             drop(unsafe { windows::core::IUnknown::from_raw(out) });
         }
     }

@@ -32,7 +32,7 @@ fn wide(s: &str) -> Vec<u16> {
 fn key_exists(path: &str) -> bool {
     let p = wide(path);
     let mut k = HKEY::default();
-    // SAFETY (test): valid strings and out handle.
+    // SAFETY: valid strings and out handle.
     let ok = unsafe {
         RegOpenKeyExW(
             HKEY_CLASSES_ROOT,
@@ -44,7 +44,7 @@ fn key_exists(path: &str) -> bool {
     }
     .is_ok();
     if ok {
-        // SAFETY (test): opened above.
+        // SAFETY: opened above.
         let _ = unsafe { RegCloseKey(k) };
     }
     ok
@@ -64,7 +64,7 @@ fn value(path: &str, name: &str) -> Option<String> {
     } else {
         PCWSTR(n.as_ptr())
     };
-    // SAFETY (test): valid strings and buffer.
+    // SAFETY: valid strings and buffer.
     let r = unsafe {
         RegGetValueW(
             HKEY_CLASSES_ROOT,

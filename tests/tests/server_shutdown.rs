@@ -37,10 +37,10 @@ struct Sink {
 
 impl IOPCShutdown_Impl for Sink_Impl {
     unsafe fn ShutdownRequest(&self, reason: PCWSTR) -> windows::core::Result<()> {
-        // SAFETY: a non-null [in, string] is a NUL-terminated UTF-16 string for the call.
         let reason = if reason.is_null() {
             None
         } else {
+            // SAFETY: a non-null [in, string] is a NUL-terminated UTF-16 string for the call.
             unsafe { reason.to_string() }.ok()
         };
         let _ = self.tx.lock().map(|tx| tx.send(reason));
@@ -67,13 +67,13 @@ fn one_connection_point_for_iopcshutdown() {
     // SAFETY: valid IID pointers for the calls.
     let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }
         .expect("FindConnectionPoint(IOPCShutdown)");
-    // SAFETY: no arguments.
     assert_eq!(
+        // SAFETY: no arguments.
         unsafe { cp.GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
-    // SAFETY: valid IID pointer.
     assert_eq!(
+        // SAFETY: valid IID pointer.
         code(&unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback) }),
         CONNECT_E_NOCONNECTION
     );
@@ -93,8 +93,8 @@ fn one_connection_point_for_iopcshutdown() {
         assert!(points.len() < 10);
     }
     assert_eq!(points.len(), 1);
-    // SAFETY: no arguments.
     assert_eq!(
+        // SAFETY: no arguments.
         unsafe { points[0].GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
@@ -127,8 +127,8 @@ fn advise_rules_of_the_shutdown_point() {
     // SAFETY: valid IID pointer.
     let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.unwrap();
     let not_a_sink: IUnknown = server.unknown.clone();
-    // SAFETY: a live interface pointer.
     assert_eq!(
+        // SAFETY: a live interface pointer.
         code(&unsafe { cp.Advise(&not_a_sink) }),
         CONNECT_E_CANNOTCONNECT
     );

@@ -47,7 +47,7 @@ fn reg_string(
     let value: Vec<u16> = value.encode_utf16().chain([0]).collect();
     let mut buf = vec![0u16; 1024];
     let mut len = (buf.len() * 2) as u32;
-    // SAFETY (test): valid strings and buffer.
+    // SAFETY: valid strings and buffer.
     let r = unsafe {
         RegGetValueW(
             root,
@@ -70,13 +70,13 @@ fn reg_string(
 struct Scm(SC_HANDLE);
 impl Drop for Scm {
     fn drop(&mut self) {
-        // SAFETY (test): handle opened below.
+        // SAFETY: handle opened below.
         let _ = unsafe { CloseServiceHandle(self.0) };
     }
 }
 
 fn open_service(access: u32) -> Option<(Scm, Scm)> {
-    // SAFETY (test): plain Win32 calls with valid arguments.
+    // SAFETY: plain Win32 calls with valid arguments.
     unsafe {
         let m = Scm(OpenSCManagerW(None, None, SC_MANAGER_CONNECT).ok()?);
         let s = Scm(OpenServiceW(m.0, SERVICE, access).ok()?);
@@ -87,7 +87,7 @@ fn open_service(access: u32) -> Option<(Scm, Scm)> {
 fn service_state() -> Option<u32> {
     let (_m, s) = open_service(SERVICE_QUERY_STATUS)?;
     let mut st = SERVICE_STATUS::default();
-    // SAFETY (test): valid handle and out struct.
+    // SAFETY: valid handle and out struct.
     unsafe { QueryServiceStatus(s.0, &mut st).ok()? };
     Some(st.dwCurrentState.0)
 }
@@ -97,7 +97,7 @@ struct ShutdownSink(Arc<Mutex<Vec<String>>>);
 
 impl IOPCShutdown_Impl for ShutdownSink_Impl {
     unsafe fn ShutdownRequest(&self, reason: PCWSTR) -> windows::core::Result<()> {
-        // SAFETY (test): the server passes a NUL-terminated string.
+        // SAFETY: the server passes a NUL-terminated string.
         let text = unsafe { reason.to_string() }.unwrap_or_default();
         self.0.lock().unwrap().push(text);
         Ok(())
@@ -144,17 +144,17 @@ fn the_service_is_installed_started_by_com_stopped_with_shutdown_requests_and_re
     let got = Arc::new(Mutex::new(Vec::new()));
     let sink: IOPCShutdown = ShutdownSink(Arc::clone(&got)).into();
     let cpc: IConnectionPointContainer = server.unknown.cast().expect("IConnectionPointContainer");
-    // SAFETY (test): valid IID pointer.
+    // SAFETY: valid IID pointer.
     let cp = unsafe { cpc.FindConnectionPoint(&IOPCShutdown::IID) }
         .expect("IOPCShutdown connection point");
-    // SAFETY (test): valid sink.
     let sink_unknown: windows::core::IUnknown = sink.cast().unwrap();
+    // SAFETY: valid sink.
     let cookie = unsafe { cp.Advise(&sink_unknown) }.expect("Advise");
     assert_ne!(cookie, 0);
     {
         let (_m, s) = open_service(SERVICE_STOP).expect("open the service to stop it");
         let mut st = SERVICE_STATUS::default();
-        // SAFETY (test): valid handle and out struct.
+        // SAFETY: valid handle and out struct.
         unsafe { ControlService(s.0, SERVICE_CONTROL_STOP, &mut st) }
             .expect("ControlService(STOP)");
     }

@@ -1,10 +1,17 @@
 //! `cargo xtask test`: the one test command (README, .ci/run).
 //!
-//! 1. setup (idempotent), 2. native `cargo test` of every host crate, 3. the Windows
-//! build, 4. registration of the proxy/stub DLL and the server in the project's Wine
-//! prefix, 5. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner)
-//! and the COM crate's unit tests (Windows-only),
-//! always ending every Wine process of the prefix, with timeouts on everything.
+//! 1. setup (idempotent);
+//! 2. the static checks, early: `cargo fmt --all --check`, then `cargo clippy` with
+//!    `-D warnings` for the host and for Windows (the lint levels are the `[lints]` tables
+//!    of the manifests, the settings `clippy.toml`);
+//! 3. native `cargo test` of every host crate;
+//! 4. the Windows build;
+//! 5. registration of the proxy/stub DLL and the server in the project's Wine prefix;
+//! 6. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner) and the COM
+//!    crate's unit tests (Windows-only).
+//!
+//! Steps 5 and 6 always end every Wine process of the prefix and run with timeouts.
+//! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::{build, setup, util, wine};
 use std::time::Duration;
@@ -15,6 +22,7 @@ const E2E_LIMIT: Duration = Duration::from_secs(25 * 60);
 pub fn run(args: &[String]) -> Result<(), String> {
     let native_only = args.iter().any(|a| a == "--native");
     setup::run(&[])?;
+    static_checks(native_only)?;
 
     println!("test: native tests (cargo test --workspace)");
     util::run(util::cargo().args(["test", "--workspace", "--release"]))?;
@@ -50,6 +58,53 @@ pub fn run(args: &[String]) -> Result<(), String> {
     })();
     wine::kill_all();
     result
+}
+
+/// Formatting and clippy, before anything is built for testing: each fails the run with
+/// what to do about it.
+fn static_checks(native_only: bool) -> Result<(), String> {
+    println!("test: formatting (cargo fmt --all --check)");
+    util::run(util::cargo().args(["fmt", "--all", "--check"])).map_err(|e| {
+        format!("{e}\nthe code is not formatted as rustfmt.toml says: run `cargo fmt --all`")
+    })?;
+    println!("test: clippy for the host (cargo clippy --workspace --all-targets --release)");
+    util::run(util::cargo().args([
+        "clippy",
+        "--workspace",
+        "--all-targets",
+        "--release",
+        "--",
+        "-D",
+        "warnings",
+    ]))
+    .map_err(|e| format!("{e}\nclippy (host) found the problems printed above: fix them"))?;
+    if native_only {
+        return Ok(());
+    }
+    // xtask is host-only (std::os::unix): it is not checked for Windows.
+    println!(
+        "test: clippy for {} (cargo clippy --workspace --exclude xtask)",
+        setup::TARGET
+    );
+    util::run(util::cargo().args([
+        "clippy",
+        "--workspace",
+        "--exclude",
+        "xtask",
+        "--all-targets",
+        "--release",
+        "--target",
+        setup::TARGET,
+        "--",
+        "-D",
+        "warnings",
+    ]))
+    .map_err(|e| {
+        format!(
+            "{e}\nclippy ({}) found the problems printed above: fix them",
+            setup::TARGET
+        )
+    })
 }
 
 /// `cargo xtask e2e [ARGS...]`: the Windows build, registration in the project's prefix,

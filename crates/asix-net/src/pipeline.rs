@@ -54,6 +54,9 @@ pub struct Resolved<V> {
 }
 
 /// What a source item is, as far as the pipeline can tell.
+// Made once per subscribed item and kept (behind an Arc, or unwrapped into the slot):
+// boxing the large variant would only add an allocation per item.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Resolution<V> {
     /// Not a live asix item (the namespace does not know it): ASKOM_E_ItemUnknown.

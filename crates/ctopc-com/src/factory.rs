@@ -22,6 +22,7 @@ pub struct ClassFactory {
 impl ClassFactory {
     /// A class object whose CreateInstance calls `create`, and whose LockServer locks
     /// count in `lifetime`.
+    #[allow(clippy::new_ret_no_self)] // a class object is only used through IClassFactory
     pub fn new(
         lifetime: Arc<Lifetime>,
         create: impl Fn() -> windows::core::Result<IUnknown> + Send + Sync + 'static,

@@ -66,8 +66,8 @@ fn set_key(
 ) -> windows::core::Result<()> {
     let mut key = HKEY::default();
     let wpath = HSTRING::from(path);
-    // SAFETY: all pointers are valid for the call; `key` receives an open handle on success.
     check(
+        // SAFETY: all pointers are valid for the call; `key` receives an open handle on success.
         unsafe {
             RegCreateKeyExW(
                 HKEY_CLASSES_ROOT,

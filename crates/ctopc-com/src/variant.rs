@@ -153,7 +153,7 @@ unsafe fn write_element(
 ) -> windows::core::Result<()> {
     let mismatch =
         || windows::core::Error::from(windows::core::HRESULT(OpcError::BadType.hresult()));
-    // SAFETY (whole body): guaranteed by the caller; each arm writes one element of the
+    // SAFETY: (whole body) guaranteed by the caller; each arm writes one element of the
     // array's element type at index i.
     unsafe {
         match (vt, e) {

@@ -4,6 +4,8 @@
 //! the success paths over the embedded demo plant. The rules are the module docs of
 //! `crates/ctopc-com/src/server.rs` and `server/browse.rs`.
 #![cfg(windows)]
+// Test code (helpers included): a panic fails the test, it crosses no COM boundary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
@@ -215,14 +217,14 @@ fn browse_opc_item_ids_success() {
 fn get_item_id_argument_branches() {
     let a = space();
     let empty = wide("");
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         hr(unsafe { a.GetItemID(pcwstr(&empty), null_mut()) }),
         E_INVALIDARG
     );
     let mut p = PWSTR(poison());
-    // SAFETY: a NULL [in, string] is what is tested; a valid out-pointer.
     assert_eq!(
+        // SAFETY: a NULL [in, string] is what is tested; a valid out-pointer.
         hr(unsafe { a.GetItemID(PCWSTR::null(), &mut p) }),
         E_INVALIDARG
     );
@@ -247,22 +249,22 @@ fn get_item_id_success() {
 fn browse_access_paths_branches() {
     let a = space();
     let id = wide("KW_A000");
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         unsafe { a.BrowseAccessPaths(pcwstr(&id), null_mut()) },
         E_INVALIDARG
     );
     let mut out = OutUnk::poisoned();
-    // SAFETY: a NULL [in, string] is what is tested; a valid out-pointer.
     assert_eq!(
+        // SAFETY: a NULL [in, string] is what is tested; a valid out-pointer.
         unsafe { a.BrowseAccessPaths(PCWSTR::null(), out.as_out()) },
         E_INVALIDARG
     );
     assert!(out.is_null());
     // asix channels are not browsable: E_NOTIMPL, as the original; no enumerator.
     let mut out = OutUnk::poisoned();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         unsafe { a.BrowseAccessPaths(pcwstr(&id), out.as_out()) },
         E_NOTIMPL
     );
@@ -474,8 +476,8 @@ fn assert_failed_cleanly(
         assert!(o.elements.is_null(), "{what}: ppBrowseElements not cleared");
     }
     // The client's continuation point is untouched (still ours to free).
-    // SAFETY: the string this test allocated; the failed call did not free it.
     assert_eq!(
+        // SAFETY: the string this test allocated; the failed call did not free it.
         unsafe { take_wstr(o.cp) }.as_deref(),
         Some("client's"),
         "{what}"
@@ -651,14 +653,14 @@ fn browse_success_and_paging() {
 fn strings_that_are_not_utf16_answer_each_methods_code() {
     let a = space();
     // ChangeBrowsePosition, GetItemID: E_INVALIDARG.
-    // SAFETY: a NUL-terminated (invalid) UTF-16 string.
     assert_eq!(
+        // SAFETY: a NUL-terminated (invalid) UTF-16 string.
         hr(unsafe { a.ChangeBrowsePosition(OPC_BROWSE_DOWN, bad_utf16()) }),
         E_INVALIDARG
     );
     let mut p = PWSTR(poison());
-    // SAFETY: as above; a valid out-pointer.
     assert_eq!(
+        // SAFETY: as above; a valid out-pointer.
         hr(unsafe { a.GetItemID(bad_utf16(), &mut p) }),
         E_INVALIDARG
     );
@@ -669,8 +671,8 @@ fn strings_that_are_not_utf16_answer_each_methods_code() {
     assert!(out.is_null());
     // BrowseAccessPaths: OPC_E_INVALIDITEMID.
     let mut out = OutUnk::poisoned();
-    // SAFETY: as above; a valid out-pointer.
     assert_eq!(
+        // SAFETY: as above; a valid out-pointer.
         unsafe { a.BrowseAccessPaths(bad_utf16(), out.as_out()) },
         OPC_E_INVALIDITEMID
     );

@@ -7,6 +7,8 @@
 //! Calls that would write through a NULL out-parameter run in a child process
 //! (`common::passes_in_child`), so a crash fails one test instead of the binary.
 #![cfg(windows)]
+// Test code (helpers included): a panic fails the test, it crosses no COM boundary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
@@ -83,8 +85,8 @@ fn enum_connection_points_lists_the_shutdown_point() {
     assert_eq!((r, fetched), (S_FALSE, 1), "one point only");
     let cp = cps[0].take().expect("the point");
     assert!(cps[1].is_none());
-    // SAFETY: a valid interface.
     assert_eq!(
+        // SAFETY: a valid interface.
         unsafe { cp.GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
@@ -164,8 +166,8 @@ fn enum_connection_points_null_out_is_e_pointer() {
 fn the_point_names_its_interface_and_container() {
     let c = container();
     let cp = shutdown_point(&c);
-    // SAFETY: a valid interface.
     assert_eq!(
+        // SAFETY: a valid interface.
         unsafe { cp.GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
@@ -185,8 +187,8 @@ fn advise_argument_branches() {
     assert_eq!(r, E_POINTER);
     // A sink without IOPCShutdown: CONNECT_E_CANNOTCONNECT.
     let not_a_sink = new_server();
-    // SAFETY: a valid interface.
     assert_eq!(
+        // SAFETY: a valid interface.
         code(&unsafe { cp.Advise(&not_a_sink) }),
         CONNECT_E_CANNOTCONNECT
     );
@@ -230,8 +232,8 @@ fn unadvise_unknown_cookies_are_connect_e_noconnection() {
     let c = container();
     let cp = shutdown_point(&c);
     for cookie in [0u32, 1, 0x7FFF_FFFF, u32::MAX] {
-        // SAFETY: plain value.
         assert_eq!(
+            // SAFETY: plain value.
             hr(unsafe { cp.Unadvise(cookie) }),
             CONNECT_E_NOCONNECTION,
             "{cookie}"
@@ -242,15 +244,15 @@ fn unadvise_unknown_cookies_are_connect_e_noconnection() {
     let cookie = unsafe { cp.Advise(&s) }.unwrap();
     // A cookie of another server object's point is unknown here.
     let other = shutdown_point(&container());
-    // SAFETY: plain value.
     assert_eq!(
+        // SAFETY: plain value.
         hr(unsafe { other.Unadvise(cookie) }),
         CONNECT_E_NOCONNECTION
     );
     // SAFETY: plain value.
     assert_eq!(hr(unsafe { cp.Unadvise(cookie) }), S_OK);
-    // SAFETY: plain value.
     assert_eq!(
+        // SAFETY: plain value.
         hr(unsafe { cp.Unadvise(cookie) }),
         CONNECT_E_NOCONNECTION,
         "twice"

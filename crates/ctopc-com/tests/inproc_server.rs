@@ -4,6 +4,8 @@
 //! `crates/ctopc-com/src/server.rs`; the group rules that of `server/groups.rs`. The
 //! harness is `common/mod.rs`.
 #![cfg(windows)]
+// Test code (helpers included): a panic fails the test, it crosses no COM boundary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
@@ -48,8 +50,8 @@ fn the_group_helper_adds_a_group() {
     assert_eq!(g.code, S_OK);
     assert_ne!(g.server_handle, 0);
     assert_eq!(g.revised_rate, 1000);
-    // SAFETY: a valid handle of this client's group.
     assert_eq!(
+        // SAFETY: a valid handle of this client's group.
         unsafe { server.RemoveGroup(g.server_handle, true.into()) },
         S_OK
     );
@@ -342,8 +344,8 @@ fn add_group_with_an_empty_name_gets_a_unique_name() {
 #[test]
 fn server_get_error_string_null_out_is_invalidarg() {
     let s = opc_server();
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         hr(unsafe { s.GetErrorString(E_FAIL, EN, null_mut()) }),
         E_INVALIDARG
     );
@@ -353,8 +355,8 @@ fn server_get_error_string_null_out_is_invalidarg() {
 fn server_get_error_string_unknown_lcid_is_invalidarg_and_clears_the_out() {
     let s = opc_server();
     let mut p = PWSTR(poison());
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { s.GetErrorString(E_FAIL, BAD_LCID, &mut p) }),
         E_INVALIDARG
     );
@@ -365,8 +367,8 @@ fn server_get_error_string_unknown_lcid_is_invalidarg_and_clears_the_out() {
 fn server_get_error_string_unknown_lcid_is_invalidarg() {
     let s = opc_server();
     let mut p = PWSTR::null();
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { s.GetErrorString(E_FAIL, BAD_LCID, &mut p) }),
         E_INVALIDARG
     );
@@ -377,8 +379,8 @@ fn server_get_error_string_unknown_lcid_is_invalidarg() {
 fn server_get_error_string_code_without_text_clears_the_out() {
     let s = opc_server();
     let mut p = PWSTR(poison());
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { s.GetErrorString(NO_TEXT, EN, &mut p) }),
         E_INVALIDARG
     );
@@ -452,8 +454,8 @@ fn get_group_by_name_argument_branches() {
     for (what, n, riid, null_out, expected) in cases {
         let mut out = OutUnk::poisoned();
         let p = if null_out { null_mut() } else { out.as_out() };
-        // SAFETY: every pointer is NULL or valid for the call.
         assert_eq!(
+            // SAFETY: every pointer is NULL or valid for the call.
             hr(unsafe { s.GetGroupByName(n, riid, p) }),
             expected,
             "{what}"
@@ -464,8 +466,8 @@ fn get_group_by_name_argument_branches() {
     }
     // Success: the same COM identity as AddGroup's object.
     let mut out = OutUnk::poisoned();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         hr(unsafe { s.GetGroupByName(pcwstr(&name), &IOPCItemMgt::IID, out.as_out()) }),
         S_OK
     );
@@ -474,8 +476,8 @@ fn get_group_by_name_argument_branches() {
     // Another client does not see it.
     let other = opc_server();
     let mut out = OutUnk::poisoned();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         hr(unsafe { other.GetGroupByName(pcwstr(&name), &IUnknown::IID, out.as_out()) }),
         E_INVALIDARG
     );
@@ -554,29 +556,29 @@ fn remove_group_in_use_and_forced() {
     let s = opc_server();
     let g = add_group(&s, "inuse");
     // Referenced: marked deleted, OPC_S_INUSE; the name is gone at once.
-    // SAFETY: plain values.
     assert_eq!(
+        // SAFETY: plain values.
         unsafe { s.RemoveGroup(g.server_handle, false.into()) },
         OPC_S_INUSE
     );
     let name = wide("inuse");
     let mut out = OutUnk::poisoned();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         hr(unsafe { s.GetGroupByName(pcwstr(&name), &IUnknown::IID, out.as_out()) }),
         E_INVALIDARG
     );
     assert!(out.is_null());
     // Removed again: no longer a group of this client.
-    // SAFETY: plain values.
     assert_eq!(
+        // SAFETY: plain values.
         unsafe { s.RemoveGroup(g.server_handle, true.into()) },
         E_INVALIDARG
     );
     // Forced removal of a referenced group, and of an unreferenced one.
     let g2 = add_group(&s, "forced");
-    // SAFETY: plain values.
     assert_eq!(
+        // SAFETY: plain values.
         unsafe { s.RemoveGroup(g2.server_handle, true.into()) },
         S_OK
     );
@@ -769,8 +771,8 @@ fn query_available_locale_ids_success() {
     let c = server::<IOPCCommon>();
     let mut n = U32_POISON;
     let mut p: *mut u32 = poison();
-    // SAFETY: valid out-pointers.
     assert_eq!(
+        // SAFETY: valid out-pointers.
         hr(unsafe { c.QueryAvailableLocaleIDs(&mut n, &mut p) }),
         S_OK
     );
@@ -788,8 +790,8 @@ fn query_available_locale_ids_success() {
 #[test]
 fn common_get_error_string_branches() {
     let c = server::<IOPCCommon>();
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         hr(unsafe { c.GetErrorString(E_FAIL, null_mut()) }),
         E_INVALIDARG
     );
@@ -815,8 +817,8 @@ fn common_get_error_string_branches() {
     // The same text as IOPCServer::GetErrorString in that locale.
     let s: IOPCServer = c.cast().unwrap();
     let mut p = PWSTR::null();
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { s.GetErrorString(OPC_E_UNKNOWNITEMID, EN, &mut p) }),
         S_OK
     );
@@ -828,8 +830,8 @@ fn common_get_error_string_branches() {
 fn common_get_error_string_code_without_text_clears_the_out() {
     let c = server::<IOPCCommon>();
     let mut p = PWSTR(poison());
-    // SAFETY: a valid out-pointer.
     assert_eq!(
+        // SAFETY: a valid out-pointer.
         hr(unsafe { c.GetErrorString(NO_TEXT, &mut p) }),
         E_INVALIDARG
     );
@@ -843,8 +845,8 @@ fn set_client_name_branches() {
     assert_eq!(hr(unsafe { c.SetClientName(PCWSTR::null()) }), E_INVALIDARG);
     // Not valid UTF-16 (an unpaired surrogate).
     let bad: [u16; 3] = [0x0041, 0xD800, 0];
-    // SAFETY: a NUL-terminated UTF-16 buffer alive for the call.
     assert_eq!(
+        // SAFETY: a NUL-terminated UTF-16 buffer alive for the call.
         hr(unsafe { c.SetClientName(PCWSTR(bad.as_ptr())) }),
         E_INVALIDARG
     );
@@ -877,8 +879,8 @@ fn add_group_name_that_is_not_utf16_is_invalidarg() {
     assert_eq!(r, E_INVALIDARG);
     o.assert_cleared("invalid UTF-16 name");
     let mut out = OutUnk::poisoned();
-    // SAFETY: valid pointers.
     assert_eq!(
+        // SAFETY: valid pointers.
         hr(unsafe { s.GetGroupByName(bad_utf16(), &IUnknown::IID, out.as_out()) }),
         E_INVALIDARG
     );

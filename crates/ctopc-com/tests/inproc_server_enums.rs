@@ -4,6 +4,8 @@
 //! pceltFetched only for one element, else E_INVALIDARG), Skip past the end, Reset, and
 //! Clone keeping the position.
 #![cfg(windows)]
+// Test code (helpers included): a panic fails the test, it crosses no COM boundary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
@@ -19,8 +21,8 @@ const Z101_ID: &str = "Magazyn siarki/Zbiornik siarki ciekłej Z101";
 fn leaves() -> IEnumString {
     let a = server::<IOPCBrowseServerAddressSpace>();
     let to = wide(Z101_ID);
-    // SAFETY: a valid string.
     assert_eq!(
+        // SAFETY: a valid string.
         hr(unsafe { a.ChangeBrowsePosition(OPC_BROWSE_TO, pcwstr(&to)) }),
         S_OK
     );

@@ -3,6 +3,8 @@
 //! QueryInterface (NULL → E_POINTER; an interface the object lacks → E_NOINTERFACE with
 //! the out-parameter NULL; one IUnknown per object).
 #![cfg(windows)]
+// Test code (helpers included): a panic fails the test, it crosses no COM boundary.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
@@ -26,13 +28,13 @@ unsafe fn create_raw(
 #[test]
 fn create_instance_null_out_is_e_pointer() {
     let f = factory();
-    // SAFETY: a NULL out-parameter is what is tested.
     assert_eq!(
+        // SAFETY: a NULL out-parameter is what is tested.
         unsafe { create_raw(&f, null_mut(), &IUnknown::IID, null_mut()) },
         E_POINTER
     );
-    // SAFETY: as above, with a NULL riid too.
     assert_eq!(
+        // SAFETY: as above, with a NULL riid too.
         unsafe { create_raw(&f, null_mut(), null(), null_mut()) },
         E_POINTER
     );
@@ -79,8 +81,8 @@ fn create_instance_success_for_each_server_interface() {
         IConnectionPointContainer::IID,
     ] {
         let mut out: *mut c_void = poison();
-        // SAFETY: valid pointers.
         assert_eq!(
+            // SAFETY: valid pointers.
             unsafe { create_raw(&f, null_mut(), &iid, &mut out) },
             S_OK,
             "{iid:?}"
@@ -120,8 +122,8 @@ fn query_interface_null_arguments_are_e_pointer() {
     // Through another interface of the object too.
     let common: IOPCCommon = unk.cast().unwrap();
     let common_unk: &IUnknown = &common.into();
-    // SAFETY: as above.
     assert_eq!(
+        // SAFETY: as above.
         unsafe { raw_query(common_unk, null(), &mut out) },
         E_POINTER
     );
@@ -138,8 +140,8 @@ fn query_interface_unknown_iid_is_e_nointerface_with_null_out() {
         GUID::from_u128(0x01234567_89ab_cdef_0123_456789abcdef),
     ] {
         let mut out: *mut c_void = poison();
-        // SAFETY: valid pointers.
         assert_eq!(
+            // SAFETY: valid pointers.
             unsafe { raw_query(&unk, &iid, &mut out) },
             E_NOINTERFACE,
             "{iid:?}"

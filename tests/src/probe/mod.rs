@@ -20,6 +20,10 @@
 //! outputs for the test (every raw call and every CoTaskMem free of the test is there, so
 //! that the test itself has no `unsafe`).
 
+// A COM server like the product's: a panic would cross COM (clippy.toml allows unwrap in
+// its tests).
+#![deny(clippy::unwrap_used, clippy::expect_used)]
+
 use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
 use ctopc_com::client::ComThread;
 use ctopc_com::factory::ClassFactory;
