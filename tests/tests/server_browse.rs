@@ -5,24 +5,16 @@
 
 use ctopc_com::client::{BrowseArgs, Server};
 use ctopc_core::Value;
-use e2e_tests::{assert_alive, code, connect, interfaces::*};
+use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_NOTIMPL, S_FALSE, S_OK};
 use windows::Win32::System::Com::IEnumString;
 
-const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
 const RPC_X_BAD_STUB_DATA: HRESULT = HRESULT(0x800706F5u32 as i32);
 
 const SULPHUR: &str = "Magazyn siarki";
 const Z101: &str = "Zbiornik siarki ciekłej Z101";
 const Z101_ID: &str = "Magazyn siarki/Zbiornik siarki ciekłej Z101";
-
-fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(
-        hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
-        "{what}: {hr:?}"
-    );
-}
 
 fn to_z101(server: &Server) {
     server

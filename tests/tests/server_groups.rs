@@ -3,23 +3,15 @@
 #![cfg(windows)]
 
 use ctopc_com::client::{GroupSpec, OpcGroup, Server};
-use e2e_tests::{assert_alive, code, connect, interfaces::*};
+use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, S_FALSE, S_OK};
 use windows::Win32::System::Com::{IEnumString, IEnumUnknown};
 
 /// The proxy's answer to a NULL top-level [ref] pointer (the call never reaches the server).
-const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
 
 fn spec(name: &str) -> GroupSpec {
     GroupSpec::new(name)
-}
-
-fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(
-        hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
-        "{what}: {hr:?}"
-    );
 }
 
 fn identity(u: &IUnknown) -> *mut std::ffi::c_void {

@@ -5,20 +5,12 @@
 
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{Quality, Timestamp, Value};
-use e2e_tests::{assert_alive, connect, interfaces::*};
+use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, connect, interfaces::*};
 use windows::core::{HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, FILETIME, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;
 
-const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
 const VT_R4: u16 = 4;
-
-fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(
-        hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
-        "{what}: {hr:?}"
-    );
-}
 
 fn now() -> Timestamp {
     let ms = std::time::SystemTime::now()

@@ -6,21 +6,13 @@
 
 use ctopc_com::client::Server;
 use ctopc_core::{Timestamp, Value};
-use e2e_tests::{assert_alive, code, connect, interfaces::*};
+use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;
 
-const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
 const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
-
-fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(
-        hr == E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
-        "{what}: {hr:?}"
-    );
-}
 
 fn english() -> (ctopc_com::client::ComThread, Server) {
     let (com, server) = connect();

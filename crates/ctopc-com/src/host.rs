@@ -227,17 +227,6 @@ pub fn stop_on_console_ctrl(signal: &StopSignal) {
     }
 }
 
-/// `-Embedding`: start, register the class object for multiple use, serve until the last
-/// client has gone (or `stop` is triggered), then revoke it and exit. On a requested stop
-/// every connected client first gets IOPCShutdown::ShutdownRequest.
-pub fn serve(
-    setup: Setup,
-    make_backend: Box<MakeBackend<'_>>,
-    stop: &StopSignal,
-) -> windows::core::Result<()> {
-    serve_as(setup, make_backend, ServeMode::UntilUnused, stop)
-}
-
 /// How long the server process serves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ServeMode {
@@ -247,8 +236,10 @@ pub enum ServeMode {
     UntilStopped,
 }
 
-/// Serves in the given mode until the server is unused or `stop` is triggered (see
-/// [`serve`]); the reason of the trigger is what clients get in IOPCShutdown.
+/// Serves in the given mode: start, register the class object for multiple use, serve
+/// until the last client has gone (`ServeMode::UntilUnused`, `-Embedding`) or `stop` is
+/// triggered, then revoke it and exit. On a triggered stop every connected client first
+/// gets IOPCShutdown::ShutdownRequest with the trigger's reason.
 pub fn serve_as(
     setup: Setup,
     make_backend: Box<MakeBackend<'_>>,

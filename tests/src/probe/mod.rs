@@ -1048,7 +1048,7 @@ pub fn unregister() -> windows::core::Result<()> {
 /// `-Embedding`: serve until the last client has gone (as ServerCTOPC.exe does).
 pub fn serve() -> windows::core::Result<()> {
     let _com = ComThread::mta()?;
-    // SAFETY: called once, before any marshalling in this process (as in host::serve).
+    // SAFETY: called once, before any marshalling in this process (as in host::serve_as).
     let _ = unsafe {
         CoInitializeSecurity(
             None,
