@@ -8,8 +8,6 @@ use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, S_FALSE, S_OK};
 use windows::Win32::System::Com::{IEnumString, IEnumUnknown};
 
-/// The proxy's answer to a NULL top-level [ref] pointer (the call never reaches the server).
-
 fn spec(name: &str) -> GroupSpec {
     GroupSpec::new(name)
 }
