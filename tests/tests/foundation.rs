@@ -2,6 +2,7 @@
 #![cfg(windows)]
 
 use ctopc_com::client::{ComThread, Server};
+use ctopc_com::clock;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
 use std::time::Duration;
 use windows::core::{IUnknown, Interface, GUID, HRESULT};
@@ -11,20 +12,12 @@ use windows::Win32::System::Com::{CLSIDFromProgID, CoCreateInstance, CLSCTX_LOCA
 const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
 
-fn unix_now() -> ctopc_core::Timestamp {
-    let ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_millis();
-    ctopc_core::Timestamp::from_unix_millis(ms as i64)
-}
-
 #[test]
 fn get_status_reports_vendor_times_version_and_state() {
     let (_com, server) = connect();
-    let before = unix_now();
+    let before = clock::now();
     let s = server.status().expect("GetStatus");
-    let after = unix_now();
+    let after = clock::now();
     assert_eq!(
         s.vendor_info.as_deref(),
         Some(ctopc_com::server::VENDOR_INFO)

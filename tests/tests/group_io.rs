@@ -5,6 +5,7 @@
 #![cfg(windows)]
 
 use ctopc_com::client::{self, ReadItem};
+use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
@@ -93,10 +94,6 @@ fn device_read(p: &Plant, handles: &[u32]) -> Vec<ReadItem> {
         client::sync_read(&p.group.sync(), OPC_DS_DEVICE, handles).expect("Read(DEVICE)");
     assert_eq!(hr, S_OK, "{items:?}");
     items
-}
-
-fn now() -> Timestamp {
-    ctopc_com::clock::now()
 }
 
 fn r4(v: &Value) -> f32 {

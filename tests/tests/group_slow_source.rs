@@ -21,8 +21,9 @@
 #![cfg(windows)]
 
 use ctopc_com::client;
+use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
-use ctopc_core::{OpcError, Timestamp, Value};
+use ctopc_core::{OpcError, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, ComThread,
@@ -62,14 +63,6 @@ struct SlowServer {
     dir: PathBuf,
     _com: ComThread,
     _serial: MutexGuard<'static, ()>,
-}
-
-fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_millis();
-    Timestamp::from_unix_millis(ms as i64)
 }
 
 /// Waits until no ServerCTOPC.exe runs; false after `limit`.

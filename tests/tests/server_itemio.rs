@@ -3,22 +3,15 @@
 //! cannot occur.)
 #![cfg(windows)]
 
+use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
-use ctopc_core::{Quality, Timestamp, Value};
+use ctopc_core::{Quality, Value};
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, connect, interfaces::*};
 use windows::core::{HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, FILETIME, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;
 
 const VT_R4: u16 = 4;
-
-fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_millis();
-    Timestamp::from_unix_millis(ms as i64)
-}
 
 #[test]
 fn read_from_the_device_and_from_the_cache() {

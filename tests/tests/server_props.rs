@@ -5,6 +5,7 @@
 #![cfg(windows)]
 
 use ctopc_com::client::Server;
+use ctopc_com::clock::now;
 use ctopc_core::{Timestamp, Value};
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
@@ -18,14 +19,6 @@ fn english() -> (ctopc_com::client::ComThread, Server) {
     let (com, server) = connect();
     server.set_locale(LCID_ENGLISH_US).unwrap();
     (com, server)
-}
-
-fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_millis();
-    Timestamp::from_unix_millis(ms as i64)
 }
 
 // ---- IOPCItemProperties ----------------------------------------------------------------

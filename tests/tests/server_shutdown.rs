@@ -13,6 +13,7 @@
 #![cfg(windows)]
 
 use ctopc_com::client::Server;
+use ctopc_com::clock::now;
 use ctopc_core::Timestamp;
 use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID,
@@ -141,14 +142,6 @@ fn advise_rules_of_the_shutdown_point() {
     assert_eq!(listed, [cookie]);
     server.unadvise_shutdown(cookie).unwrap();
     assert_alive(&server);
-}
-
-fn now() -> Timestamp {
-    let ms = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_millis();
-    Timestamp::from_unix_millis(ms as i64)
 }
 
 /// Connects to the server process the test started (started at or after `since`).
