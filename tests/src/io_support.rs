@@ -208,18 +208,8 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
         h: *const u32,
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
-        let items = if n == 0 || h.is_null() || e.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: the stub passes `n`-element arrays.
-            unsafe {
-                std::slice::from_raw_parts(h, n as usize)
-                    .iter()
-                    .copied()
-                    .zip(std::slice::from_raw_parts(e, n as usize).iter().copied())
-                    .collect()
-            }
-        };
+        // SAFETY: the stub passes `n`-element arrays.
+        let items = unsafe { ctopc_com::client::diag::write_results(n, h, e) };
         self.0.push(|| Callback::WriteComplete {
             transaction,
             group,

@@ -40,6 +40,27 @@ pub fn data_change_sink(tx: Sender<DataChange>) -> IOPCDataCallback {
     ChangeSink { tx: Mutex::new(tx) }.into()
 }
 
+/// Copies the `[in, size_is(n)]` arrays of an OnWriteComplete into (client handle, error)
+/// pairs; empty when either pointer is NULL.
+///
+/// # Safety
+/// Each non-null pointer must point at `n` elements, as the stub passes them.
+pub unsafe fn write_results(n: u32, h: *const u32, e: *const HRESULT) -> Vec<(u32, HRESULT)> {
+    if n == 0 || h.is_null() || e.is_null() {
+        return Vec::new();
+    }
+    let n = n as usize;
+    // SAFETY: the caller guarantees `n`-element arrays (checked non-null above); they are
+    // only read here and copied out.
+    let (h, e) = unsafe {
+        (
+            std::slice::from_raw_parts(h, n),
+            std::slice::from_raw_parts(e, n),
+        )
+    };
+    h.iter().copied().zip(e.iter().copied()).collect()
+}
+
 /// Copies the `[in, size_is(n)]` arrays of an OnDataChange / OnReadComplete into owned
 /// items (for any IOPCDataCallback implementation: opcdiag's sink, the tests' sink).
 ///

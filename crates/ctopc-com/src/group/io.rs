@@ -260,6 +260,31 @@ impl Group_Impl {
     /// # Safety
     /// `p_cancel` was checked non-null and zeroed by [`cancel_out`] (the method's `[out]`
     /// parameter).
+    /// Starts an asynchronous write of `items` (IOPCAsyncIO2::Write, IOPCAsyncIO3::WriteVQT)
+    /// and hands out its results merged with the errors found before the engine call.
+    ///
+    /// # Safety
+    /// `p_cancel` is the method's non-null `[out]` cancel ID (checked by the caller).
+    unsafe fn async_write(
+        &self,
+        transaction: u32,
+        items: Vec<(u32, ItemVqt)>,
+        pre: PreErrors,
+        p_cancel: *mut u32,
+        pp_errors: OutArray<HRESULT>,
+    ) -> ComResult<HRESULT> {
+        let started = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        let started = started.map(|mut s| {
+            pre.apply(&mut s.results);
+            s
+        });
+        // SAFETY: the caller's contract.
+        unsafe { self.async_out(started, p_cancel, pp_errors) }
+    }
+
     unsafe fn async_out(
         &self,
         started: Result<AsyncStarted, OpcError>,
@@ -540,18 +565,8 @@ impl Group_Impl {
         let values = in_array(p_values, count)?;
         let mut pre = PreErrors::default();
         let items = value_items(handles, values, &mut pre);
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
-        self.async_out(
-            started.map(|mut s| {
-                pre.apply(&mut s.results);
-                s
-            }),
-            p_cancel,
-            pp_errors,
-        )
+        // SAFETY: p_cancel was checked non-null by cancel_out above.
+        unsafe { self.async_write(transaction, items, pre, p_cancel, pp_errors) }
     }
 
     /// # Safety
@@ -688,18 +703,8 @@ impl Group_Impl {
         let vqts = in_array(p_vqt, count)?;
         let mut pre = PreErrors::default();
         let items = vqt_items(handles, vqts, &mut pre);
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
-        self.async_out(
-            started.map(|mut s| {
-                pre.apply(&mut s.results);
-                s
-            }),
-            p_cancel,
-            pp_errors,
-        )
+        // SAFETY: p_cancel was checked non-null by cancel_out above.
+        unsafe { self.async_write(transaction, items, pre, p_cancel, pp_errors) }
     }
 }
 

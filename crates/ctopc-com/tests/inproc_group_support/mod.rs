@@ -376,20 +376,6 @@ impl Sink {
     }
 }
 
-/// # Safety
-/// Each pointer is NULL or points to `n` elements.
-unsafe fn cb_items(
-    n: u32,
-    h: *const u32,
-    v: *const VARIANT,
-    q: *const u16,
-    t: *const FILETIME,
-    e: *const HRESULT,
-) -> Vec<ReadItem> {
-    // SAFETY: contract of this function.
-    unsafe { ctopc_com::client::diag::callback_items(n, h, v, q, t, e) }
-}
-
 impl IOPCDataCallback_Impl for Sink_Impl {
     unsafe fn OnDataChange(
         &self,
@@ -405,7 +391,7 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { cb_items(n, h, v, q, t, e) };
+        let items = unsafe { ctopc_com::client::diag::callback_items(n, h, v, q, t, e) };
         self.0.push(Callback::DataChange {
             transaction,
             group,
@@ -430,7 +416,7 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { cb_items(n, h, v, q, t, e) };
+        let items = unsafe { ctopc_com::client::diag::callback_items(n, h, v, q, t, e) };
         self.0.push(Callback::ReadComplete {
             transaction,
             group,
@@ -450,18 +436,8 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         h: *const u32,
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
-        let items = if n == 0 || h.is_null() || e.is_null() {
-            Vec::new()
-        } else {
-            // SAFETY: the server passes `n`-element arrays.
-            unsafe {
-                std::slice::from_raw_parts(h, n as usize)
-                    .iter()
-                    .copied()
-                    .zip(std::slice::from_raw_parts(e, n as usize).iter().copied())
-                    .collect()
-            }
-        };
+        // SAFETY: the server passes `n`-element arrays.
+        let items = unsafe { ctopc_com::client::diag::write_results(n, h, e) };
         self.0.push(Callback::WriteComplete {
             transaction,
             group,
