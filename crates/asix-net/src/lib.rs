@@ -4,25 +4,32 @@
 //!   documented for gateway writers in `docs/asix-net-protocol.md`.
 //! - [`client`]: the discovery-and-failover client ([`AsixClient`], a non-blocking handle
 //!   over a sans-IO [`client::ClientCore`]).
-//! - [`datasource`]: the client as the engine's data-source `Backend` ([`datasource::network_backend`]).
-//! - [`pipeline`]: the per-sample asix pipeline both data sources share (resolution once
-//!   per item, quality rules, derivation, write checks).
-//! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant
-//!   (also the model of [`inproc`], the in-process simulation backend).
+//! - [`backend`]: the one asix data-source `Backend`, [`backend::AsixBackend`], over a raw
+//!   [`backend::VariableSource`] (item slots resolved at subscribe time, fan-out, rates,
+//!   request bookkeeping) that the network and the simulation implement.
+//! - [`datasource`]: the network clients as a raw variable source, and the network backend
+//!   ([`datasource::network_backend`], [`datasource::AsixSource`]).
+//! - [`pipeline`]: the per-sample asix pipeline of the adapter (resolution once per item,
+//!   quality rules, derivation, write checks).
+//! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant, and
+//!   the in-process simulation over the same plant ([`sim::inproc`], re-exported as
+//!   [`inproc`]).
 //! - [`discovery`]: choosing a server from the announcements (ranking, variants).
 //! - [`naming`], [`config`]: the client's asix name, channel options and external server
 //!   lists (INI files are read by the core's reader, [`asix_model::ini`]).
 #![forbid(unsafe_code)]
 
+pub mod backend;
 pub mod client;
 pub mod config;
 pub mod datasource;
 pub mod discovery;
-pub mod inproc;
 pub mod naming;
 pub mod pipeline;
 pub mod proto;
 pub mod sim;
+
+pub use sim::inproc;
 
 pub use client::{channel_sink, AsixClient, ClientEvent, EventSink, ItemKey, RequestId};
 pub use config::{ClientConfig, ConnectOptions, ExternalServerLists, ServerChoice};

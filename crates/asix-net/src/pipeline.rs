@@ -1,11 +1,12 @@
-//! The per-sample asix pipeline, once for every data source (the network backend,
-//! [`crate::datasource`], and the in-process simulation, [`crate::inproc`]):
+//! The per-sample asix pipeline, once for every data source, run by the one adapter
+//! [`crate::backend::AsixBackend`] (over the network, [`crate::datasource`], and the
+//! in-process simulation, [`crate::sim::inproc`]):
 //!
 //! 1. **resolution** ([`resolve`]), once per source item (at subscribe time, or once per
 //!    request for an item read or written while nothing subscribes it): the item's asix
 //!    variable, its derivation, database definition and channel rules, and the variables
 //!    its quality rules read (control variable, limits held in variables), each mapped by
-//!    the data source to its own handle `V` (an [`ItemKey`] on the network, a plant index
+//!    the data source to its own handle `V` (an [`ItemKey`] on a channel's client on the network, a plant index
 //!    in the simulation);
 //! 2. **a sample** ([`Resolved::sample`]): the CheckLimits / CheckControlVariables quality
 //!    rules over the current values of the rule variables, then the derivation;

@@ -1,7 +1,9 @@
 //! `asix-sim`: a simulated asix data server. It answers discovery, serves links, samples a
 //! deterministic [`plant::Plant`], honours write rights from an asix application ini
-//! ([`rights::WriteRights`]) and injects faults on command ([`SimHandle`]).
+//! ([`rights::WriteRights`]) and injects faults on command ([`SimHandle`]). The same plant
+//! runs inside the server as the in-process simulation ([`inproc`]).
 
+pub mod inproc;
 pub mod plant;
 pub mod rights;
 

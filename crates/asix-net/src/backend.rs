@@ -1,0 +1,842 @@
+//! One asix data-source backend over a raw variable source: [`AsixBackend`] implements the
+//! engine's [`Backend`] once, for the in-process simulation ([`crate::sim::inproc`]) and
+//! for the asix network ([`crate::datasource`]), over a small raw [`VariableSource`] trait
+//! that knows variables, not asix items.
+//!
+//! What the adapter holds, once:
+//! - **Item slots** at [`SourceKey::index`] (dense: the engine reuses freed indices), each
+//!   with its rate and its resolution by the asix pipeline ([`crate::pipeline::resolve`]),
+//!   made when the item is subscribed and kept; reads and writes of subscribed items reuse
+//!   it, reads and writes of items nothing subscribes resolve once per request.
+//! - **Fan-out**: a raw variable is subscribed once, at the fastest rate any item reading
+//!   it (or whose quality rules read it) asks for, and each of its samples goes to every
+//!   item on it (value item, derived items, the same variable on other access paths).
+//!   The control and limit variables an item's quality rules read are subscribed with the
+//!   item, without being items, and let go with the last item needing them; when one of
+//!   them changes, the items whose quality it changes are reported again.
+//! - **Quality rules, derivation and write checks** of the pipeline
+//!   ([`crate::pipeline::Resolved::sample`], [`crate::pipeline::Resolved::check_write`]).
+//! - **Device requests** spread over the source's parts ([`VariableSource::Part`]: the
+//!   AsixConnect channel's client on the network, one part in the simulation), answered to
+//!   the engine when every part has answered, one result per item in request order.
+//!
+//! Decided for both sources (they used to differ; pinned by the tests below):
+//! - A variable is sampled at the fastest rate of its items and every sample fans out (the
+//!   network's way). The simulation used to sample each item with a phase of its own; an
+//!   item added to a variable already sampled now gets the variable's current value at
+//!   once (the simulation's current plant value, the network's last sample) instead.
+//! - An item the source has no variable for ([`Resolution::NoVariable`], and items the
+//!   namespace does not know as live) is reported once, when subscribed, with
+//!   BAD_CONFIG_ERROR, as the asix client reports a variable its server does not know;
+//!   the simulation used to report it again at every tick (nothing ever changes), the
+//!   network skipped it.
+//!
+//! Nothing here reads a clock or blocks: time is the `now` of the engine's calls.
+
+use std::collections::{btree_map, BTreeMap, HashMap};
+use std::fmt::Debug;
+use std::hash::Hash;
+use std::sync::Arc;
+
+use asix_model::{AsixNamespace, Derivation};
+use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
+use ctopc_core::source::{Backend, SourceOutput};
+use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
+
+use crate::client::ItemKey;
+use crate::pipeline::{self, Resolution};
+
+/// Identifies one raw device read or write of a [`VariableSource`] (chosen by the adapter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct RawId(pub u64);
+
+/// What a raw source has ready.
+#[derive(Debug)]
+pub struct RawOutput<V> {
+    /// New samples of subscribed variables.
+    pub samples: Vec<(V, Vqt)>,
+    /// Answers of raw reads: one result per variable, in request order.
+    pub reads: Vec<(RawId, Vec<Result<Vqt, OpcError>>)>,
+    /// Answers of raw writes: one result per variable, in request order.
+    pub writes: Vec<(RawId, Vec<Result<(), OpcError>>)>,
+}
+
+impl<V> Default for RawOutput<V> {
+    fn default() -> Self {
+        RawOutput {
+            samples: Vec::new(),
+            reads: Vec::new(),
+            writes: Vec::new(),
+        }
+    }
+}
+
+impl<V> RawOutput<V> {
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty() && self.reads.is_empty() && self.writes.is_empty()
+    }
+}
+
+/// A raw source of asix variables: subscriptions, device reads and writes, samples. No asix
+/// semantics (items, derivations, quality rules, write checks are the adapter's); never
+/// blocks.
+pub trait VariableSource: Send {
+    /// The source's handle of a variable.
+    type Var: Clone + Eq + Hash + Ord + Debug + Send + Sync;
+    /// What a device request is spread over (each part is one raw request).
+    type Part: Clone + Ord;
+
+    /// The handle of the asix variable `key` as seen from the AsixConnect channel
+    /// `channel`; `None`: the source has no such variable.
+    fn lookup(&self, channel: &Arc<str>, key: &ItemKey) -> Option<Self::Var>;
+    /// The part a variable's device requests go to.
+    fn part(&self, var: &Self::Var) -> Self::Part;
+    /// The variable's current value without asking a device, if the source has one (the
+    /// simulation knows its plant; the network does not, and the adapter then takes the
+    /// last sample).
+    fn peek(&self, _var: &Self::Var) -> Option<Vqt> {
+        None
+    }
+    /// Subscribes variables, or changes their rates (ms): push their samples from now on.
+    fn subscribe(&mut self, now: Timestamp, vars: Vec<(Self::Var, u32)>);
+    /// Lets variables go.
+    fn unsubscribe(&mut self, now: Timestamp, vars: Vec<Self::Var>);
+    /// Reads variables of one part from the device; answer once under `id`.
+    fn read(&mut self, now: Timestamp, id: RawId, vars: Vec<Self::Var>);
+    /// Writes variables of one part, all simple writes (no quality, no timestamp) or all
+    /// extended ones; answer once under `id`.
+    fn write(&mut self, now: Timestamp, id: RawId, items: Vec<(Self::Var, ItemVqt)>);
+    /// Appends what is ready by `now`.
+    fn poll(&mut self, now: Timestamp, out: &mut RawOutput<Self::Var>);
+    /// When `poll` should next be called without a wake-up.
+    fn poll_timeout(&self) -> Option<Timestamp>;
+    /// Simulated data (OPC_STATUS_TEST)?
+    fn is_simulation(&self) -> bool {
+        false
+    }
+}
+
+/// A source item's resolution with the source's handles.
+type Res<V> = Resolution<V>;
+
+/// The shared resolutions of items without a source variable: they differ only in how a
+/// write is refused (unknown item, or a derived item that is never writable), so that many
+/// distinct unknown items cost only their [`Slot`].
+struct Unserved<V> {
+    not_live: Arc<Res<V>>,
+    value: Arc<Res<V>>,
+    derived: Arc<Res<V>>,
+}
+
+impl<V> Unserved<V> {
+    fn new() -> Self {
+        Unserved {
+            not_live: Arc::new(Resolution::NotLive),
+            value: Arc::new(Resolution::NoVariable(Derivation::Value)),
+            derived: Arc::new(Resolution::NoVariable(Derivation::Formatted(None))),
+        }
+    }
+}
+
+/// A subscribed source item, at its [`SourceKey::index`] (24 bytes).
+struct Slot<V> {
+    key: SourceKey,
+    /// Sampling rate asked for, ms.
+    rate: u32,
+    /// Resolved when subscribed.
+    r: Arc<Res<V>>,
+}
+
+/// A raw variable wanted by subscribed items.
+struct VarState {
+    /// The items reading it.
+    items: Vec<SourceKey>,
+    /// The items whose quality rules read it (control and limit variables), an item once
+    /// per variable (twice while it is subscribed again).
+    rule_users: Vec<SourceKey>,
+    /// Its last sample: the value the quality rules read when the source cannot
+    /// [`VariableSource::peek`].
+    last: Option<Vqt>,
+}
+
+/// The variables a request touched, with the rate each was subscribed at before it
+/// (`None`: not subscribed).
+type Touched<V> = BTreeMap<V, Option<u32>>;
+
+/// One device request of the engine, possibly spread over several parts.
+struct Pending<V> {
+    write: bool,
+    /// Each position's result once known (writes: `Vqt::default()` for success); empty
+    /// while no position is known (a request of one part is then answered in one go).
+    results: Vec<Option<Result<Vqt, OpcError>>>,
+    /// Reads: the items (the answers go through the pipeline with their resolutions: the
+    /// subscribed items' from their slots, the others' in `own`).
+    items: Vec<SourceItem>,
+    /// Reads: the resolutions made for this request, by ascending position.
+    own: Vec<(usize, Arc<Res<V>>)>,
+    remaining: usize,
+}
+
+/// What a raw answer answers.
+enum Answered<V> {
+    /// The whole engine request (one part, nothing refused before).
+    Whole(SourceReqId, Pending<V>),
+    /// These positions of it.
+    Part(SourceReqId, Vec<usize>),
+}
+
+/// A request spread over parts: each part with its positions in the request and what it
+/// asks of the source, in the order the parts first appear.
+type Parts<P, T> = Vec<(P, Vec<usize>, Vec<T>)>;
+
+/// The entry of part `p`, added if new.
+fn part_entry<P: PartialEq, T>(parts: &mut Parts<P, T>, p: P) -> &mut (P, Vec<usize>, Vec<T>) {
+    let i = match parts.iter().position(|(q, ..)| *q == p) {
+        Some(i) => i,
+        None => {
+            parts.push((p, Vec::new(), Vec::new()));
+            parts.len() - 1
+        }
+    };
+    &mut parts[i]
+}
+
+/// The positions of a raw request in its engine request (`None`: all of them, in order).
+type Positions = Option<Vec<usize>>;
+
+impl<V> Pending<V> {
+    /// A position answered before any part is asked (refused by the checks).
+    fn refuse(&mut self, pos: usize, r: Result<Vqt, OpcError>) {
+        if self.results.is_empty() {
+            self.results = vec![None; self.remaining];
+        }
+        if let Some(slot @ None) = self.results.get_mut(pos) {
+            *slot = Some(r);
+            self.remaining -= 1;
+        }
+    }
+}
+
+/// The asix data source over a raw variable source. See the module doc.
+pub struct AsixBackend<S: VariableSource> {
+    ns: Arc<AsixNamespace>,
+    source: S,
+    /// Indexed by [`SourceKey::index`].
+    slots: Vec<Option<Slot<S::Var>>>,
+    vars: HashMap<S::Var, VarState>,
+    unserved: Unserved<S::Var>,
+    /// Items subscribed since the last poll that get a sample at once (their variable was
+    /// sampled already, or they have none).
+    fresh: Vec<SourceKey>,
+    next_raw: u64,
+    /// Raw request -> (engine request, its positions).
+    parts: HashMap<RawId, (SourceReqId, Positions)>,
+    pending: HashMap<SourceReqId, Pending<S::Var>>,
+    /// Answers complete, not yet polled.
+    ready: SourceOutput,
+    raw: RawOutput<S::Var>,
+}
+
+impl<S: VariableSource> AsixBackend<S> {
+    /// The adapter over `source`, resolving items through `ns`.
+    pub fn from_source(ns: Arc<AsixNamespace>, source: S) -> Self {
+        AsixBackend {
+            ns,
+            source,
+            slots: Vec::new(),
+            vars: HashMap::new(),
+            unserved: Unserved::new(),
+            fresh: Vec::new(),
+            next_raw: 0,
+            parts: HashMap::new(),
+            pending: HashMap::new(),
+            ready: SourceOutput::default(),
+            raw: RawOutput::default(),
+        }
+    }
+
+    /// The raw source.
+    pub fn source(&self) -> &S {
+        &self.source
+    }
+
+    /// The raw source, mutably.
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
+
+    fn slot_of(&self, key: SourceKey) -> Option<&Slot<S::Var>> {
+        self.slots
+            .get(key.index() as usize)?
+            .as_ref()
+            .filter(|s| s.key == key)
+    }
+
+    /// Resolves an item through the pipeline, with the source's handles.
+    fn resolve(&self, item: &SourceItem) -> Arc<Res<S::Var>> {
+        let source = &self.source;
+        match pipeline::resolve(&self.ns, item, |k| source.lookup(&item.channel, k)) {
+            Resolution::NotLive => Arc::clone(&self.unserved.not_live),
+            Resolution::NoVariable(Derivation::Value) => Arc::clone(&self.unserved.value),
+            Resolution::NoVariable(_) => Arc::clone(&self.unserved.derived),
+            r @ Resolution::Resolved(_) => Arc::new(r),
+        }
+    }
+
+    /// A variable's current raw VQT: the source's, else the last sample.
+    fn current(&self, v: &S::Var) -> Option<Vqt> {
+        self.source
+            .peek(v)
+            .or_else(|| self.vars.get(v)?.last.clone())
+    }
+
+    /// An item's VQT from a raw sample of its variable (quality rules over the current
+    /// values of its rule variables, then the derivation).
+    fn item_vqt(&self, r: &pipeline::Resolved<S::Var>, raw: Vqt) -> Vqt {
+        r.sample(raw, |v| self.current(v))
+    }
+
+    /// A subscribed item's current VQT; `None` before its variable has one.
+    fn current_vqt(&self, k: SourceKey) -> Option<Vqt> {
+        let Resolution::Resolved(r) = &*self.slot_of(k)?.r else {
+            return None;
+        };
+        let raw = self.current(&r.key)?;
+        Some(self.item_vqt(r, raw))
+    }
+
+    /// The rate a variable is subscribed at: the fastest of the items reading it or whose
+    /// rules read it; `None` when nothing wants it.
+    fn rate_of(&self, v: &S::Var) -> Option<u32> {
+        let st = self.vars.get(v)?;
+        st.items
+            .iter()
+            .chain(&st.rule_users)
+            .filter_map(|k| self.slot_of(*k))
+            .map(|s| s.rate)
+            .min()
+    }
+
+    /// Notes the rate of a variable a request is about to change (the first note of a
+    /// request is the state before it).
+    fn touch(&self, touched: &mut Touched<S::Var>, v: &S::Var) {
+        if let btree_map::Entry::Vacant(e) = touched.entry(v.clone()) {
+            let rate = self.rate_of(e.key());
+            e.insert(rate);
+        }
+    }
+
+    /// [`Self::touch`] for an item's variable and its rule variables.
+    fn touch_item(&self, touched: &mut Touched<S::Var>, r: &Res<S::Var>) {
+        if let Resolution::Resolved(r) = r {
+            self.touch(touched, &r.key);
+            for v in r.rule_variables() {
+                self.touch(touched, v);
+            }
+        }
+    }
+
+    /// Adds item `k` to the fan-out of its variable and to the users of its rule variables.
+    fn attach(&mut self, k: SourceKey, r: &Res<S::Var>) {
+        let Resolution::Resolved(r) = r else {
+            return;
+        };
+        let st = self.vars.entry(r.key.clone()).or_insert_with(VarState::new);
+        if !st.items.contains(&k) {
+            st.items.push(k);
+        }
+        for v in r.rule_variables() {
+            let st = self.vars.entry(v.clone()).or_insert_with(VarState::new);
+            st.rule_users.push(k);
+        }
+    }
+
+    /// Takes item `k` out of the fan-out of its variable and one use out of its rule
+    /// variables. (A variable nothing wants any more goes in [`Self::apply_touched`].)
+    fn detach(&mut self, k: SourceKey, r: &Res<S::Var>) {
+        let Resolution::Resolved(r) = r else {
+            return;
+        };
+        if let Some(st) = self.vars.get_mut(&r.key) {
+            st.items.retain(|x| *x != k);
+        }
+        for v in r.rule_variables() {
+            if let Some(st) = self.vars.get_mut(v) {
+                if let Some(i) = st.rule_users.iter().position(|x| *x == k) {
+                    st.rule_users.swap_remove(i);
+                }
+            }
+        }
+    }
+
+    /// Brings the source in line with the variables a request touched: lets go of those
+    /// nothing wants any more (forgetting their last samples), subscribes those newly
+    /// wanted or wanted at another rate. Done once per request, from the state before and
+    /// after it, so that a variable let go and taken again in one request is never
+    /// unsubscribed, and the rate asked for is the final one. Returns the variables newly
+    /// subscribed (their first sample comes from the source).
+    fn apply_touched(&mut self, now: Timestamp, touched: Touched<S::Var>) -> Vec<S::Var> {
+        let mut gone = Vec::new();
+        let mut wanted = Vec::new();
+        let mut new = Vec::new();
+        for (v, before) in touched {
+            match self.rate_of(&v) {
+                None => {
+                    self.vars.remove(&v);
+                    if before.is_some() {
+                        gone.push(v);
+                    }
+                }
+                Some(after) if before != Some(after) => {
+                    if before.is_none() {
+                        new.push(v.clone());
+                    }
+                    wanted.push((v, after));
+                }
+                Some(_) => {}
+            }
+        }
+        if !gone.is_empty() {
+            self.source.unsubscribe(now, gone);
+        }
+        if !wanted.is_empty() {
+            self.source.subscribe(now, wanted);
+        }
+        new
+    }
+
+    fn subscribe(&mut self, now: Timestamp, subs: Vec<(SourceItem, u32)>) {
+        let mut touched = Touched::new();
+        let mut subscribed = Vec::with_capacity(subs.len());
+        for (item, rate) in subs {
+            let key = item.key;
+            let i = key.index() as usize;
+            if self.slots.len() <= i {
+                if self.slots.capacity() <= i {
+                    // Grow by a quarter, not double (large configurations: see the engine's
+                    // source table).
+                    self.slots.reserve_exact(
+                        (i + 1 - self.slots.len())
+                            .max(self.slots.len() / 4)
+                            .max(1024),
+                    );
+                }
+                self.slots.resize_with(i + 1, || None);
+            }
+            // The rates before, with the item (or a stale one) still in its slot.
+            let existing = self.slots[i].as_ref().map(|s| (s.key, Arc::clone(&s.r)));
+            if let Some((_, r)) = &existing {
+                self.touch_item(&mut touched, r);
+            }
+            match existing {
+                // Subscribed again (another rate): the resolution stays.
+                Some((k, _)) if k == key => {
+                    if let Some(s) = self.slots[i].as_mut() {
+                        s.rate = rate;
+                    }
+                }
+                old => {
+                    if let Some((old_key, old_r)) = old {
+                        // A stale item of an older generation.
+                        self.slots[i] = None;
+                        self.detach(old_key, &old_r);
+                    }
+                    let r = self.resolve(&item);
+                    self.touch_item(&mut touched, &r);
+                    self.attach(key, &r);
+                    self.slots[i] = Some(Slot { key, rate, r });
+                }
+            }
+            subscribed.push(key);
+        }
+        let new = self.apply_touched(now, touched);
+        for k in subscribed {
+            let at_once = match self.slot_of(k).map(|s| &*s.r) {
+                Some(Resolution::Resolved(r)) => !new.contains(&r.key),
+                Some(_) => true,
+                None => false,
+            };
+            if at_once {
+                self.fresh.push(k);
+            }
+        }
+    }
+
+    fn set_rates(&mut self, now: Timestamp, rates: Vec<(SourceKey, u32)>) {
+        let mut touched = Touched::new();
+        for (k, rate) in rates {
+            let Some(s) = self.slot_of(k) else {
+                continue;
+            };
+            let r = Arc::clone(&s.r);
+            self.touch_item(&mut touched, &r);
+            if let Some(Some(s)) = self.slots.get_mut(k.index() as usize) {
+                s.rate = rate;
+            }
+        }
+        self.apply_touched(now, touched);
+    }
+
+    fn unsubscribe(&mut self, now: Timestamp, keys: Vec<SourceKey>) {
+        let mut touched = Touched::new();
+        for k in keys {
+            let Some(s) = self.slot_of(k) else {
+                continue;
+            };
+            // The rates before, with the item still in its slot.
+            let r = Arc::clone(&s.r);
+            self.touch_item(&mut touched, &r);
+            self.slots[k.index() as usize] = None;
+            self.detach(k, &r);
+        }
+        self.apply_touched(now, touched);
+    }
+
+    /// Answers the engine's request if every part has answered.
+    fn finish(&mut self, req: SourceReqId) {
+        if self.pending.get(&req).is_none_or(|p| p.remaining > 0) {
+            return;
+        }
+        let Some(p) = self.pending.remove(&req) else {
+            return;
+        };
+        let results = p
+            .results
+            .into_iter()
+            .map(|r| r.unwrap_or(Err(OpcError::Fail)));
+        if p.write {
+            let results = results.map(|r| r.map(|_| ())).collect();
+            self.ready.write_results.push((req, results));
+            return;
+        }
+        let results = results
+            .enumerate()
+            .map(|(i, r)| self.read_vqt(&p.items, &p.own, i, r?))
+            .collect();
+        self.ready.read_results.push((req, results));
+    }
+
+    /// A read item's VQT from the raw answer of position `i`: through the pipeline, with
+    /// the resolution made for the request, else the subscribed item's (an item let go
+    /// before the answer came is unknown by then).
+    fn read_vqt(
+        &self,
+        items: &[SourceItem],
+        own: &[(usize, Arc<Res<S::Var>>)],
+        i: usize,
+        raw: Vqt,
+    ) -> Result<Vqt, OpcError> {
+        let r = match own.binary_search_by_key(&i, |(j, _)| *j) {
+            Ok(j) => &*own[j].1,
+            Err(_) => {
+                let key = items.get(i).ok_or(OpcError::Fail)?.key;
+                &*self.slot_of(key).ok_or(OpcError::ItemUnknown)?.r
+            }
+        };
+        Ok(match r {
+            Resolution::Resolved(r) => self.item_vqt(r, raw),
+            Resolution::NotLive | Resolution::NoVariable(_) => raw,
+        })
+    }
+
+    /// The engine request a raw answer belongs to.
+    fn answered(&mut self, id: RawId) -> Option<Answered<S::Var>> {
+        let (req, positions) = self.parts.remove(&id)?;
+        let Some(positions) = positions else {
+            return self.pending.remove(&req).map(|p| Answered::Whole(req, p));
+        };
+        let p = self.pending.get_mut(&req)?;
+        if p.results.is_empty() {
+            p.results = vec![None; p.remaining];
+        }
+        Some(Answered::Part(req, positions))
+    }
+
+    /// A raw answer of one part: its results into their positions (a short answer fails
+    /// the rest).
+    fn fill(
+        &mut self,
+        req: SourceReqId,
+        positions: Vec<usize>,
+        mut results: impl Iterator<Item = Result<Vqt, OpcError>>,
+    ) {
+        if let Some(p) = self.pending.get_mut(&req) {
+            for pos in positions {
+                let r = results.next().unwrap_or(Err(OpcError::Fail));
+                if let Some(slot @ None) = p.results.get_mut(pos) {
+                    *slot = Some(r);
+                    p.remaining -= 1;
+                }
+            }
+        }
+        self.finish(req);
+    }
+
+    fn answer_read(&mut self, id: RawId, results: Vec<Result<Vqt, OpcError>>) {
+        match self.answered(id) {
+            Some(Answered::Whole(req, p)) => {
+                let mut results = results.into_iter();
+                let out = (0..p.remaining)
+                    .map(|i| {
+                        let raw = results.next().unwrap_or(Err(OpcError::Fail))?;
+                        self.read_vqt(&p.items, &p.own, i, raw)
+                    })
+                    .collect();
+                self.ready.read_results.push((req, out));
+            }
+            Some(Answered::Part(req, positions)) => self.fill(req, positions, results.into_iter()),
+            None => {}
+        }
+    }
+
+    fn answer_write(&mut self, id: RawId, mut results: Vec<Result<(), OpcError>>) {
+        match self.answered(id) {
+            Some(Answered::Whole(req, p)) => {
+                results.resize(p.remaining, Err(OpcError::Fail));
+                self.ready.write_results.push((req, results));
+            }
+            Some(Answered::Part(req, positions)) => {
+                let results = results.into_iter().map(|r| r.map(|()| Vqt::default()));
+                self.fill(req, positions, results)
+            }
+            None => {}
+        }
+    }
+
+    /// Sends the parts of a request to the source (`ask`), each under a raw id of its own.
+    fn send_parts<P, T>(
+        &mut self,
+        req: SourceReqId,
+        parts: Parts<P, T>,
+        mut ask: impl FnMut(&mut S, RawId, Vec<T>),
+    ) {
+        // One part with every position: answered in one go when it comes.
+        let whole =
+            parts.len() == 1 && self.pending.get(&req).is_some_and(|p| p.results.is_empty());
+        for (_, positions, vars) in parts {
+            self.next_raw += 1;
+            let id = RawId(self.next_raw);
+            self.parts.insert(id, (req, (!whole).then_some(positions)));
+            ask(&mut self.source, id, vars);
+        }
+        self.finish(req);
+    }
+
+    fn read(&mut self, now: Timestamp, req: SourceReqId, items: Vec<SourceItem>) {
+        let n = items.len();
+        let mut p = Pending {
+            write: false,
+            results: Vec::new(),
+            items: Vec::new(),
+            own: Vec::new(),
+            remaining: n,
+        };
+        let mut by_part: Parts<S::Part, S::Var> = Vec::new();
+        for (i, item) in items.iter().enumerate() {
+            // The subscribed item's resolution, else one made for this request.
+            let own;
+            let r = match self.slot_of(item.key) {
+                Some(s) => &*s.r,
+                None => {
+                    own = self.resolve(item);
+                    p.own.push((i, Arc::clone(&own)));
+                    &*own
+                }
+            };
+            match r {
+                Resolution::Resolved(x) => {
+                    let e = part_entry(&mut by_part, self.source.part(&x.key));
+                    e.1.push(i);
+                    e.2.push(x.key.clone());
+                }
+                Resolution::NotLive | Resolution::NoVariable(_) => {
+                    p.refuse(i, Err(OpcError::ItemUnknown));
+                }
+            }
+        }
+        p.items = items;
+        self.pending.insert(req, p);
+        self.send_parts(req, by_part, |s, id, vars| s.read(now, id, vars));
+    }
+
+    fn write(
+        &mut self,
+        now: Timestamp,
+        req: SourceReqId,
+        items: impl ExactSizeIterator<Item = (SourceItem, ItemVqt)>,
+    ) {
+        let n = items.len();
+        let mut p = Pending {
+            write: true,
+            results: Vec::new(),
+            items: Vec::new(),
+            own: Vec::new(),
+            remaining: n,
+        };
+        let mut by_part: Parts<(S::Part, bool), (S::Var, ItemVqt)> = Vec::new();
+        for (i, (item, v)) in items.enumerate() {
+            let own;
+            let r = match self.slot_of(item.key) {
+                Some(s) => &*s.r,
+                None => {
+                    own = self.resolve(&item);
+                    &*own
+                }
+            };
+            let checked = match r {
+                Resolution::NotLive => Err(OpcError::ItemUnknown),
+                Resolution::NoVariable(d) => {
+                    pipeline::check_write(d, None, &v.value).and(Err(OpcError::ItemUnknown))
+                }
+                // Derived items cannot be written; values must be integers or reals;
+                // read-only variables are refused here already.
+                Resolution::Resolved(x) => x.check_write(&v.value).map(|()| x),
+            };
+            match checked {
+                Ok(x) => {
+                    // Simple and extended writes go in requests of their own.
+                    let part = (
+                        self.source.part(&x.key),
+                        v.quality.is_some() || v.timestamp.is_some(),
+                    );
+                    let e = part_entry(&mut by_part, part);
+                    e.1.push(i);
+                    e.2.push((x.key.clone(), v));
+                }
+                Err(e) => p.refuse(i, Err(e)),
+            }
+        }
+        self.pending.insert(req, p);
+        self.send_parts(req, by_part, |s, id, items| s.write(now, id, items));
+    }
+
+    /// A new sample of a subscribed variable: fanned out to the items reading it, kept,
+    /// and, when it changes a control or limit variable, the items whose rules read it are
+    /// reported again if their quality changes. (Their next sample would use the new value
+    /// anyway, but an item sampled seldom would keep showing a limit state that no longer
+    /// holds.) Such a report keeps the item's value and takes the later of the two
+    /// timestamps, the time the quality became what it is.
+    fn update(&mut self, v: S::Var, vqt: Vqt, out: &mut SourceOutput) {
+        let Some(st) = self.vars.get(&v) else {
+            // A late sample of a variable let go.
+            return;
+        };
+        for &k in &st.items {
+            if let Some(Resolution::Resolved(r)) = self.slot_of(k).map(|s| &*s.r) {
+                out.updates.push((k, self.item_vqt(r, vqt.clone())));
+            }
+        }
+        // Only a new value or quality of a rule variable can change the rules' outcome.
+        let same = |l: &Vqt| l.value == vqt.value && l.quality == vqt.quality;
+        let users = if st.rule_users.is_empty() || st.last.as_ref().is_some_and(same) {
+            Vec::new()
+        } else {
+            st.rule_users.clone()
+        };
+        let before: Vec<(SourceKey, Quality)> = users
+            .into_iter()
+            .filter_map(|k| Some((k, self.current_vqt(k)?.quality)))
+            .collect();
+        let at = vqt.timestamp;
+        if let Some(st) = self.vars.get_mut(&v) {
+            st.last = Some(vqt);
+        }
+        for (k, q) in before {
+            if let Some(mut x) = self.current_vqt(k) {
+                if x.quality != q {
+                    x.timestamp = x.timestamp.max(at);
+                    out.updates.push((k, x));
+                }
+            }
+        }
+    }
+
+    /// The first samples of items just subscribed whose variable the source will not
+    /// sample anew: the variable's current value, or BAD_CONFIG_ERROR for an item without
+    /// a variable.
+    fn fresh_samples(&mut self, now: Timestamp, out: &mut SourceOutput) {
+        for k in std::mem::take(&mut self.fresh) {
+            let Some(s) = self.slot_of(k) else {
+                continue;
+            };
+            match &*s.r {
+                Resolution::Resolved(r) => {
+                    if let Some(raw) = self.current(&r.key) {
+                        out.updates.push((k, self.item_vqt(r, raw)));
+                    }
+                }
+                Resolution::NotLive | Resolution::NoVariable(_) => out.updates.push((
+                    k,
+                    Vqt {
+                        value: Value::Empty,
+                        quality: Quality::BAD_CONFIG_ERROR,
+                        timestamp: now,
+                    },
+                )),
+            }
+        }
+    }
+}
+
+impl VarState {
+    fn new() -> Self {
+        VarState {
+            items: Vec::new(),
+            rule_users: Vec::new(),
+            last: None,
+        }
+    }
+}
+
+impl<S: VariableSource> Backend for AsixBackend<S> {
+    fn request(&mut self, now: Timestamp, req: SourceRequest) {
+        match req {
+            SourceRequest::Subscribe(subs) => self.subscribe(
+                now,
+                subs.into_iter()
+                    .map(|s| (s.item, s.sampling_rate_ms))
+                    .collect(),
+            ),
+            SourceRequest::SetSamplingRate(rates) => self.set_rates(now, rates),
+            SourceRequest::Unsubscribe(keys) => self.unsubscribe(now, keys),
+            SourceRequest::Read { req_id, items } => self.read(now, req_id, items),
+            SourceRequest::Write { req_id, items } => {
+                let items = items.into_iter().map(|(i, v)| (i, ItemVqt::value(v)));
+                self.write(now, req_id, items)
+            }
+            SourceRequest::WriteVqt { req_id, items } => self.write(now, req_id, items.into_iter()),
+        }
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut SourceOutput) {
+        let mut raw = std::mem::take(&mut self.raw);
+        self.source.poll(now, &mut raw);
+        if !self.fresh.is_empty() {
+            self.fresh_samples(now, out);
+        }
+        out.updates.reserve(raw.samples.len());
+        for (v, vqt) in raw.samples.drain(..) {
+            self.update(v, vqt, out);
+        }
+        for (id, r) in raw.reads.drain(..) {
+            self.answer_read(id, r);
+        }
+        for (id, r) in raw.writes.drain(..) {
+            self.answer_write(id, r);
+        }
+        self.raw = raw;
+        out.read_results.append(&mut self.ready.read_results);
+        out.write_results.append(&mut self.ready.write_results);
+    }
+
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        if !self.ready.is_empty() || !self.fresh.is_empty() {
+            return Some(Timestamp(0));
+        }
+        self.source.poll_timeout()
+    }
+
+    fn is_simulation(&self) -> bool {
+        self.source.is_simulation()
+    }
+}

@@ -1,0 +1,252 @@
+//! Simulation of current data inside the server (the original's "symulacja danych
+//! bieżących"): the plant model of `asix-sim` ([`Plant`]) as a raw [`VariableSource`], under
+//! the one asix adapter ([`AsixBackend`]), which applies the asix item semantics on the way
+//! (derived items such as PercentageCV or FormatedCV, the CheckLimits /
+//! CheckControlVariables quality rules, write checks). The server reports OPC_STATUS_TEST
+//! while it is in use.
+//!
+//! Deterministic: the plant advances in fixed ticks computed from `now`; nothing here
+//! reads a clock or blocks.
+//!
+//! A slow device (`SimulationDeviceDelay`, [`InProcessSim::with_device_delay`]): device
+//! reads and writes are carried out when requested, but their answers are held until
+//! `now + delay` and only then handed out by `poll` (and announced by `poll_timeout`), so
+//! that the engine's source timeout and Cancel2 can be exercised. Subscriptions are not
+//! delayed.
+
+use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
+use crate::client::ItemKey;
+use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
+use asix_model::AsixNamespace;
+use ctopc_core::model::datasource::ItemVqt;
+use ctopc_core::{OpcError, Timestamp, Vqt};
+use std::sync::Arc;
+
+/// Plant tick of the in-process simulation.
+pub const TICK_MS: u64 = 250;
+/// The plant channel of database variables that name no `Channel` attribute.
+pub const DEFAULT_PLANT_CHANNEL: &str = "*";
+
+/// The in-process simulated data source: the adapter over the plant.
+pub type InProcessSim = AsixBackend<PlantSource>;
+
+impl AsixBackend<PlantSource> {
+    /// A plant with every variable of every loaded database (channels from the `Channel`
+    /// attribute, else `*`), seeded deterministically, starting at `now`.
+    pub fn new(ns: Arc<AsixNamespace>, seed: u64, now: Timestamp) -> InProcessSim {
+        let source = PlantSource::new(&ns, seed, now);
+        AsixBackend::from_source(ns, source)
+    }
+
+    /// A slow device: answers of device reads and writes (`SourceRequest::Read`, `Write`,
+    /// `WriteVqt`) are released by `poll` only `delay_ms` after the request (0: at once,
+    /// the default). The operation itself happens at request time: a read samples the
+    /// plant then, a write sets the value then; only the answer is late.
+    pub fn with_device_delay(mut self, delay_ms: u32) -> InProcessSim {
+        self.source_mut().device_delay_ms = u64::from(delay_ms);
+        self
+    }
+}
+
+/// A device answer held back until its due time (see [`InProcessSim::with_device_delay`]).
+enum Held {
+    Read(RawId, Vec<Result<Vqt, OpcError>>),
+    Write(RawId, Vec<Result<(), OpcError>>),
+}
+
+/// The plant as a raw variable source; variables are plant indices.
+pub struct PlantSource {
+    plant: Plant,
+    epoch: Timestamp,
+    /// Per plant variable: its sampling rate in ms (0: not subscribed) and when it is next
+    /// due. Each variable keeps its phase; missed periods are skipped, not burst.
+    sampling: Vec<(u32, Timestamp)>,
+    /// No variable is due before this (the scan is skipped until then).
+    next_due: Option<Timestamp>,
+    /// How long device reads and writes take to answer, ms (0: at once).
+    device_delay_ms: u64,
+    /// Answers not yet due, in request order, with their due times.
+    held: Vec<(Timestamp, Held)>,
+    ready: RawOutput<u32>,
+}
+
+impl PlantSource {
+    /// A plant with every variable of every loaded database of `ns` (channels from the
+    /// `Channel` attribute, else `*`), seeded deterministically, starting at `now`.
+    pub fn new(ns: &AsixNamespace, seed: u64, now: Timestamp) -> PlantSource {
+        let mut channels: Vec<ChannelDef> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for name in ns.config().channels.keys() {
+            if let Some(db) = ns.database(name) {
+                if seen.insert(Arc::as_ptr(db)) {
+                    channels.extend(channels_from_database(db, DEFAULT_PLANT_CHANNEL));
+                }
+            }
+        }
+        let plant = Plant::new(&channels, seed, TICK_MS, now);
+        PlantSource {
+            sampling: vec![(0, Timestamp(0)); plant.vars().len()],
+            plant,
+            epoch: now,
+            next_due: None,
+            device_delay_ms: 0,
+            held: Vec::new(),
+            ready: RawOutput::default(),
+        }
+    }
+
+    /// The plant.
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    fn advance(&mut self, now: Timestamp) {
+        let t = now.millis_since(self.epoch) / TICK_MS;
+        if t > self.plant.tick() {
+            self.plant.advance_to(t);
+        }
+    }
+
+    /// Hands a device answer out at the next `poll`, or holds it until it is due.
+    fn answer(&mut self, now: Timestamp, answer: Held) {
+        if self.device_delay_ms > 0 {
+            self.held
+                .push((now.add_millis(self.device_delay_ms), answer));
+            return;
+        }
+        match answer {
+            Held::Read(id, r) => self.ready.reads.push((id, r)),
+            Held::Write(id, r) => self.ready.writes.push((id, r)),
+        }
+    }
+
+    /// Moves the held answers due by `now` to `out`, in request order.
+    fn release_due(&mut self, now: Timestamp, out: &mut RawOutput<u32>) {
+        if self.held.iter().all(|(due, _)| *due > now) {
+            return;
+        }
+        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.held)
+            .into_iter()
+            .partition(|(t, _)| *t <= now);
+        self.held = later;
+        for (_, answer) in due {
+            match answer {
+                Held::Read(id, r) => out.reads.push((id, r)),
+                Held::Write(id, r) => out.writes.push((id, r)),
+            }
+        }
+    }
+
+    fn write_one(&mut self, var: u32, v: &ItemVqt) -> Result<(), OpcError> {
+        let var = var as usize;
+        if !self.plant.vars()[var].spec.writable {
+            return Err(OpcError::WriteErrorDeviceRequestIllegal);
+        }
+        let x = numeric(&v.value).ok_or(OpcError::BadType)?;
+        self.plant.set(var, x, v.quality, v.timestamp);
+        Ok(())
+    }
+}
+
+impl VariableSource for PlantSource {
+    type Var = u32;
+    type Part = ();
+
+    fn lookup(&self, _channel: &Arc<str>, key: &ItemKey) -> Option<u32> {
+        self.plant
+            .lookup(&key.channel, &key.variable)
+            .and_then(|i| u32::try_from(i).ok())
+    }
+
+    fn part(&self, _var: &u32) {}
+
+    /// The plant's current value (the quality rules read their control and limit variables
+    /// as they are now, also right after a write).
+    fn peek(&self, var: &u32) -> Option<Vqt> {
+        Some(self.plant.vqt(*var as usize))
+    }
+
+    fn subscribe(&mut self, now: Timestamp, vars: Vec<(u32, u32)>) {
+        self.advance(now);
+        for (v, rate) in vars {
+            let Some(s) = self.sampling.get_mut(v as usize) else {
+                continue;
+            };
+            let rate = rate.max(1);
+            // A new variable is sampled at once; a faster rate comes into effect within
+            // one new period.
+            s.1 = if s.0 == 0 {
+                now
+            } else {
+                s.1.min(now.add_millis(u64::from(rate)))
+            };
+            s.0 = rate;
+            self.next_due = Some(self.next_due.map_or(s.1, |t| t.min(s.1)));
+        }
+    }
+
+    fn unsubscribe(&mut self, _now: Timestamp, vars: Vec<u32>) {
+        for v in vars {
+            if let Some(s) = self.sampling.get_mut(v as usize) {
+                s.0 = 0;
+            }
+        }
+    }
+
+    fn read(&mut self, now: Timestamp, id: RawId, vars: Vec<u32>) {
+        self.advance(now);
+        let results = vars
+            .iter()
+            .map(|&v| Ok(self.plant.vqt(v as usize)))
+            .collect();
+        self.answer(now, Held::Read(id, results));
+    }
+
+    fn write(&mut self, now: Timestamp, id: RawId, items: Vec<(u32, ItemVqt)>) {
+        self.advance(now);
+        let results = items
+            .iter()
+            .map(|(var, v)| self.write_one(*var, v))
+            .collect();
+        self.answer(now, Held::Write(id, results));
+    }
+
+    fn poll(&mut self, now: Timestamp, out: &mut RawOutput<u32>) {
+        self.advance(now);
+        if self.next_due.is_some_and(|t| t <= now) {
+            let mut next: Option<Timestamp> = None;
+            for (v, s) in self.sampling.iter_mut().enumerate() {
+                if s.0 == 0 {
+                    continue;
+                }
+                if s.1 <= now {
+                    // Keep the phase; skip missed periods instead of bursting.
+                    while s.1 <= now {
+                        s.1 = s.1.add_millis(u64::from(s.0));
+                    }
+                    out.samples.push((v as u32, self.plant.vqt(v)));
+                }
+                next = Some(next.map_or(s.1, |t| t.min(s.1)));
+            }
+            self.next_due = next;
+        }
+        out.reads.append(&mut self.ready.reads);
+        out.writes.append(&mut self.ready.writes);
+        self.release_due(now, out);
+    }
+
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        if !self.ready.is_empty() {
+            return Some(Timestamp(0));
+        }
+        let held = self.held.iter().map(|(due, _)| *due).min();
+        match (held, self.next_due) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn is_simulation(&self) -> bool {
+        true
+    }
+}
