@@ -840,3 +840,418 @@ impl<S: VariableSource> Backend for AsixBackend<S> {
         self.source.is_simulation()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The adapter against a fake raw source (variables from a fixed table, samples and
+    //! device answers given by the test), with source items made by the engine over the
+    //! embedded demo (channel `*` checks limits and control variables). Network-like: the
+    //! fake cannot `peek`, so the rules read the last samples.
+    use super::*;
+    use ctopc_core::model::datasource::Subscription;
+    use ctopc_core::model::{Engine, EngineConfig, GroupParams, ItemDefinition};
+
+    /// The fake's variables: (asix channel = part, name).
+    const VARS: &[(&str, &str)] = &[
+        ("SIARKA", "KW_A000"),
+        ("DIAGNOSTYKA", "KW_K001"),
+        ("PIEC", "KW_A110"),
+        ("DIAGNOSTYKA", "KW_K002"),
+    ];
+    const A000: u32 = 0;
+    const K001: u32 = 1;
+    const A110: u32 = 2;
+
+    #[derive(Default)]
+    struct Fake {
+        /// Subscribed variables with their rates.
+        subs: BTreeMap<u32, u32>,
+        /// Every subscribe and unsubscribe, in order.
+        log: Vec<String>,
+        reads: Vec<(RawId, Vec<u32>)>,
+        writes: Vec<(RawId, Vec<(u32, ItemVqt)>)>,
+        /// Handed out at the next poll.
+        out: RawOutput<u32>,
+    }
+
+    impl VariableSource for Fake {
+        type Var = u32;
+        type Part = &'static str;
+        fn lookup(&self, _channel: &Arc<str>, key: &ItemKey) -> Option<u32> {
+            let i = VARS
+                .iter()
+                .position(|(c, n)| **c == *key.channel && **n == *key.variable)?;
+            u32::try_from(i).ok()
+        }
+        fn part(&self, var: &u32) -> &'static str {
+            VARS[*var as usize].0
+        }
+        fn subscribe(&mut self, _now: Timestamp, vars: Vec<(u32, u32)>) {
+            for (v, rate) in vars {
+                self.log.push(format!("sub {}@{rate}", VARS[v as usize].1));
+                self.subs.insert(v, rate);
+            }
+        }
+        fn unsubscribe(&mut self, _now: Timestamp, vars: Vec<u32>) {
+            for v in vars {
+                self.log.push(format!("unsub {}", VARS[v as usize].1));
+                self.subs.remove(&v);
+            }
+        }
+        fn read(&mut self, _now: Timestamp, id: RawId, vars: Vec<u32>) {
+            self.reads.push((id, vars));
+        }
+        fn write(&mut self, _now: Timestamp, id: RawId, items: Vec<(u32, ItemVqt)>) {
+            self.writes.push((id, items));
+        }
+        fn poll(&mut self, _now: Timestamp, out: &mut RawOutput<u32>) {
+            let o = std::mem::take(&mut self.out);
+            out.samples.extend(o.samples);
+            out.reads.extend(o.reads);
+            out.writes.extend(o.writes);
+        }
+        fn poll_timeout(&self) -> Option<Timestamp> {
+            (!self.out.is_empty()).then_some(Timestamp(0))
+        }
+    }
+
+    const T: Timestamp = Timestamp(1_000_000);
+
+    fn ns() -> Arc<AsixNamespace> {
+        Arc::new(asix_model::embedded_demo().unwrap().namespace)
+    }
+
+    /// The source items the engine makes of these item IDs (in order).
+    fn items(ns: &Arc<AsixNamespace>, ids: &[&str]) -> Vec<SourceItem> {
+        let mut e = Engine::new(EngineConfig::default(), ns.clone());
+        let s = e.open_session();
+        let params = GroupParams {
+            name: "",
+            active: true,
+            update_rate: 1000,
+            ..Default::default()
+        };
+        let g = e.add_group(T, s, &params).unwrap().group;
+        let defs: Vec<ItemDefinition> = ids
+            .iter()
+            .map(|id| ItemDefinition {
+                item_id: id,
+                access_path: "",
+                active: true,
+                client_handle: 0,
+                requested_type: ctopc_core::VarType::EMPTY,
+            })
+            .collect();
+        for r in e.add_items(T, g, &defs).unwrap() {
+            r.unwrap();
+        }
+        let mut items = Vec::new();
+        while let Some(r) = e.poll_source_request() {
+            if let SourceRequest::Subscribe(subs) = r {
+                items.extend(subs.into_iter().map(|s| s.item));
+            }
+        }
+        // In the order asked for.
+        ids.iter()
+            .map(|id| {
+                items
+                    .iter()
+                    .find(|i| &*i.item_id == *id)
+                    .cloned()
+                    .unwrap_or_else(|| panic!("no source item {id}"))
+            })
+            .collect()
+    }
+
+    fn backend() -> (AsixBackend<Fake>, Arc<AsixNamespace>) {
+        let ns = ns();
+        (AsixBackend::from_source(ns.clone(), Fake::default()), ns)
+    }
+
+    fn subscribe(b: &mut AsixBackend<Fake>, items: &[(&SourceItem, u32)]) {
+        let subs = items
+            .iter()
+            .map(|(i, rate)| Subscription {
+                item: (*i).clone(),
+                sampling_rate_ms: *rate,
+            })
+            .collect();
+        b.request(T, SourceRequest::Subscribe(subs));
+    }
+
+    fn poll(b: &mut AsixBackend<Fake>, samples: &[(u32, Value)]) -> SourceOutput {
+        b.source.out.samples.extend(
+            samples
+                .iter()
+                .map(|(v, x)| (*v, Vqt::new(x.clone(), Quality::GOOD, T))),
+        );
+        let mut out = SourceOutput::default();
+        b.poll(T, &mut out);
+        out
+    }
+
+    fn log(b: &mut AsixBackend<Fake>) -> Vec<String> {
+        std::mem::take(&mut b.source.log)
+    }
+
+    /// Decided for both sources (the network's way): a variable is subscribed once, at the
+    /// fastest rate of its items and of the items whose rules read it, and each sample goes
+    /// to every item on it; the simulation used to sample each item with its own phase.
+    #[test]
+    fn a_variable_is_subscribed_once_at_the_fastest_rate_and_its_samples_fan_out() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        let (a, pct) = (&it[0], &it[1]);
+        subscribe(&mut b, &[(a, 1000), (pct, 250)]);
+        // The item's variable and its control variable (channel * checks it), once each.
+        assert_eq!(log(&mut b), ["sub KW_A000@250", "sub KW_K001@250"]);
+
+        let out = poll(&mut b, &[(K001, Value::I2(0)), (A000, Value::R4(4.0))]);
+        let mut got: Vec<(SourceKey, Value, Quality)> = out
+            .updates
+            .into_iter()
+            .map(|(k, v)| (k, v.value, v.quality))
+            .collect();
+        got.sort_by_key(|(k, ..)| *k);
+        let mut want = vec![
+            (a.key, Value::R4(4.0), Quality::GOOD),
+            (pct.key, Value::R8(50.0), Quality::GOOD),
+        ];
+        want.sort_by_key(|(k, ..)| *k);
+        assert_eq!(
+            got, want,
+            "one sample, both items; the control variable is no item"
+        );
+
+        b.request(T, SourceRequest::SetSamplingRate(vec![(pct.key, 2000)]));
+        assert_eq!(log(&mut b), ["sub KW_A000@1000", "sub KW_K001@1000"]);
+        b.request(T, SourceRequest::Unsubscribe(vec![a.key]));
+        assert_eq!(log(&mut b), ["sub KW_A000@2000", "sub KW_K001@2000"]);
+        b.request(T, SourceRequest::Unsubscribe(vec![pct.key]));
+        assert_eq!(log(&mut b), ["unsub KW_A000", "unsub KW_K001"]);
+        assert!(b.source.subs.is_empty());
+        // A late sample of a variable let go reaches nobody.
+        assert!(poll(&mut b, &[(A000, Value::R4(5.0))]).updates.is_empty());
+    }
+
+    /// Only a changed fastest rate reaches the source: an item subscribed again at its rate
+    /// asks nothing; a variable is let go with its last item and taken again with the
+    /// next; an item leaving a variable that keeps a faster one changes nothing.
+    #[test]
+    fn rates_reach_the_source_only_when_the_fastest_changes() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        subscribe(&mut b, &[(&it[0], 1000)]);
+        log(&mut b);
+        subscribe(&mut b, &[(&it[0], 1000)]);
+        assert!(log(&mut b).is_empty(), "the same rate again");
+        b.request(T, SourceRequest::Unsubscribe(vec![it[0].key]));
+        subscribe(&mut b, &[(&it[1], 1000)]);
+        assert_eq!(
+            log(&mut b),
+            [
+                "unsub KW_A000",
+                "unsub KW_K001",
+                "sub KW_A000@1000",
+                "sub KW_K001@1000"
+            ]
+        );
+        let subs = vec![Subscription {
+            item: it[0].clone(),
+            sampling_rate_ms: 500,
+        }];
+        b.request(T, SourceRequest::Subscribe(subs));
+        b.request(T, SourceRequest::Unsubscribe(vec![it[1].key]));
+        assert_eq!(log(&mut b), ["sub KW_A000@500", "sub KW_K001@500"]);
+    }
+
+    /// An item added to a variable already sampled gets the variable's current value at
+    /// once (here the last sample), not only at the variable's next sample.
+    #[test]
+    fn an_item_added_to_a_sampled_variable_gets_its_value_at_once() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        subscribe(&mut b, &[(&it[0], 1000)]);
+        poll(&mut b, &[(K001, Value::I2(0)), (A000, Value::R4(2.0))]);
+        log(&mut b);
+        subscribe(&mut b, &[(&it[1], 1000)]);
+        assert!(log(&mut b).is_empty(), "nothing new to subscribe");
+        assert_eq!(b.poll_timeout(), Some(Timestamp(0)));
+        let out = poll(&mut b, &[]);
+        assert_eq!(out.updates.len(), 1);
+        assert_eq!(out.updates[0].0, it[1].key);
+        assert_eq!(out.updates[0].1.value, Value::R8(25.0));
+        assert_eq!(b.poll_timeout(), None);
+    }
+
+    /// Decided for both sources: an item the source has no variable for is reported once,
+    /// when subscribed, with BAD_CONFIG_ERROR (as the asix client reports a variable its
+    /// server does not know); the simulation used to repeat it every tick, the network
+    /// skipped it. Device reads and writes of it fail without asking the source.
+    #[test]
+    fn an_item_without_a_variable_is_reported_once_with_config_error() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["asmen.NIC.NIE_MA.R4"]);
+        subscribe(&mut b, &[(&it[0], 100)]);
+        assert!(log(&mut b).is_empty());
+        let out = poll(&mut b, &[]);
+        assert_eq!(out.updates.len(), 1);
+        let (k, v) = &out.updates[0];
+        assert_eq!(
+            (*k, &v.value, v.quality),
+            (it[0].key, &Value::Empty, Quality::BAD_CONFIG_ERROR)
+        );
+        assert!(poll(&mut b, &[(A000, Value::R4(1.0))]).updates.is_empty());
+        assert_eq!(b.poll_timeout(), None, "nothing to repeat");
+
+        b.request(
+            T,
+            SourceRequest::Read {
+                req_id: SourceReqId(1),
+                items: it.clone(),
+            },
+        );
+        b.request(
+            T,
+            SourceRequest::Write {
+                req_id: SourceReqId(2),
+                items: vec![(it[0].clone(), Value::R4(1.0))],
+            },
+        );
+        assert!(b.source.reads.is_empty() && b.source.writes.is_empty());
+        let out = poll(&mut b, &[]);
+        assert_eq!(
+            out.read_results,
+            vec![(SourceReqId(1), vec![Err(OpcError::ItemUnknown)])]
+        );
+        assert_eq!(
+            out.write_results,
+            vec![(SourceReqId(2), vec![Err(OpcError::ItemUnknown)])]
+        );
+    }
+
+    /// A new value of a control variable reports the items whose quality it changes again,
+    /// with their last value, without a sample of their own; the same value again does not.
+    #[test]
+    fn a_rule_variable_change_reports_its_users_again() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A000"]);
+        subscribe(&mut b, &[(&it[0], 60_000)]);
+        let out = poll(&mut b, &[(K001, Value::I2(0)), (A000, Value::R4(4.0))]);
+        assert_eq!(out.updates[0].1.quality, Quality::GOOD);
+        let out = poll(&mut b, &[(K001, Value::I2(1))]);
+        assert_eq!(out.updates.len(), 1);
+        assert_eq!(out.updates[0].1.value, Value::R4(4.0));
+        assert_eq!(out.updates[0].1.quality, Quality::BAD_SENSOR_FAILURE);
+        assert!(poll(&mut b, &[(K001, Value::I2(1))]).updates.is_empty());
+    }
+
+    /// A device read is spread over the source's parts and answered once every part has
+    /// answered, one result per item in request order, through the pipeline (items not
+    /// subscribed are resolved for the request).
+    #[test]
+    fn a_device_read_is_spread_over_parts_and_answered_when_complete() {
+        let (mut b, ns) = backend();
+        let it = items(
+            &ns,
+            &[
+                "KW_A000",
+                "KW_A110",
+                "asmen.NIC.NIE_MA.R4",
+                "KW_A000.PercentageCV",
+            ],
+        );
+        b.request(
+            T,
+            SourceRequest::Read {
+                req_id: SourceReqId(7),
+                items: it.clone(),
+            },
+        );
+        let reads = std::mem::take(&mut b.source.reads);
+        let asked: Vec<Vec<u32>> = reads.iter().map(|(_, v)| v.clone()).collect();
+        assert_eq!(asked, [vec![A000, A000], vec![A110]]);
+        let vqt = |x: f32| Ok(Vqt::new(Value::R4(x), Quality::GOOD, T));
+        b.source.out.reads.push((reads[1].0, vec![vqt(12.5)]));
+        assert!(
+            poll(&mut b, &[]).read_results.is_empty(),
+            "a part is missing"
+        );
+        b.source
+            .out
+            .reads
+            .push((reads[0].0, vec![vqt(4.0), vqt(4.0)]));
+        let out = poll(&mut b, &[]);
+        let [(id, r)] = &out.read_results[..] else {
+            panic!("{:?}", out.read_results)
+        };
+        assert_eq!(*id, SourceReqId(7));
+        let values: Vec<Result<Value, OpcError>> =
+            r.iter().map(|r| r.clone().map(|v| v.value)).collect();
+        assert_eq!(
+            values,
+            [
+                Ok(Value::R4(4.0)),
+                Ok(Value::R4(12.5)),
+                Err(OpcError::ItemUnknown),
+                Ok(Value::R8(50.0)),
+            ]
+        );
+    }
+
+    /// Writes are checked before the source sees them (derived items, read-only variables);
+    /// simple and extended writes go in raw writes of their own; a short answer fails the
+    /// positions it leaves out.
+    #[test]
+    fn writes_are_checked_first_and_split_by_kind() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A110", "KW_A000", "KW_A000.PercentageCV"]);
+        let vqt = ItemVqt {
+            value: Value::R4(3.0),
+            quality: Some(Quality::UNCERTAIN),
+            timestamp: None,
+        };
+        b.request(
+            T,
+            SourceRequest::WriteVqt {
+                req_id: SourceReqId(3),
+                items: vec![
+                    (it[0].clone(), ItemVqt::value(Value::R4(12.5))),
+                    (it[1].clone(), ItemVqt::value(Value::R4(1.0))),
+                    (it[2].clone(), ItemVqt::value(Value::R4(1.0))),
+                    (it[0].clone(), vqt.clone()),
+                    (it[0].clone(), ItemVqt::value(Value::R4(13.0))),
+                ],
+            },
+        );
+        let writes = std::mem::take(&mut b.source.writes);
+        let asked: Vec<Vec<(u32, ItemVqt)>> = writes.iter().map(|(_, w)| w.clone()).collect();
+        assert_eq!(
+            asked,
+            [
+                vec![
+                    (A110, ItemVqt::value(Value::R4(12.5))),
+                    (A110, ItemVqt::value(Value::R4(13.0)))
+                ],
+                vec![(A110, vqt)],
+            ]
+        );
+        b.source.out.writes.push((writes[1].0, vec![Ok(())]));
+        // The simple write answers one result of two.
+        b.source.out.writes.push((writes[0].0, vec![Ok(())]));
+        let out = poll(&mut b, &[]);
+        assert_eq!(
+            out.write_results,
+            vec![(
+                SourceReqId(3),
+                vec![
+                    Ok(()),
+                    Err(OpcError::WriteErrorDeviceRequestIllegal),
+                    Err(OpcError::BadRights),
+                    Ok(()),
+                    Err(OpcError::Fail),
+                ]
+            )]
+        );
+    }
+}

@@ -571,3 +571,57 @@ fn a_bad_limit_variable_is_an_unknown_limit_in_the_simulation() {
     assert_eq!(quality_after(Quality::GOOD, Quality::BAD), high);
     assert_eq!(quality_after(Quality::BAD, Quality::BAD), Quality::GOOD);
 }
+
+/// The adapter's rule for an item without a plant variable, in the simulation: one
+/// BAD_CONFIG_ERROR sample when subscribed (the cache shows it), and no sampling of it
+/// afterwards (the simulation used to report it again every tick).
+#[test]
+fn an_item_without_a_plant_variable_is_config_error_once() {
+    let ns = demo();
+    let t0 = Timestamp::from_unix_millis(1_700_000_000_000);
+    let mut e = Engine::new(EngineConfig::default(), ns.clone());
+    let mut s = InProcessSim::new(ns, 7, t0);
+    let session = e.open_session();
+    let params = GroupParams {
+        name: "g",
+        active: true,
+        update_rate: 1000,
+        ..Default::default()
+    };
+    let g = e.add_group(t0, session, &params).unwrap().group;
+    let def = ItemDefinition {
+        item_id: "asmen.NIC.NIE_MA.R4",
+        access_path: "",
+        active: true,
+        client_handle: 1,
+        requested_type: VarType::EMPTY,
+    };
+    let h = e.add_items(t0, g, &[def]).unwrap()[0]
+        .as_ref()
+        .unwrap()
+        .server_handle;
+    while let Some(r) = e.poll_source_request() {
+        s.request(t0, r);
+    }
+    let mut out = SourceOutput::default();
+    s.poll(t0, &mut out);
+    assert_eq!(out.updates.len(), 1);
+    assert_eq!(
+        out.updates[0].1.quality,
+        ctopc_core::Quality::BAD_CONFIG_ERROR
+    );
+    e.handle_source_updates(t0, out.updates);
+    let SyncOutcome::Ready(r) = e.read(t0, g, DataSource::Cache, &[h]).unwrap() else {
+        panic!("cache read pends")
+    };
+    assert_eq!(
+        r[0].as_ref().unwrap().quality,
+        ctopc_core::Quality::BAD_CONFIG_ERROR
+    );
+    assert_eq!(s.poll_timeout(), None, "nothing to sample");
+    for k in 1..10 {
+        let mut out = SourceOutput::default();
+        s.poll(t0.add_millis(k * 1000), &mut out);
+        assert!(out.is_empty(), "{out:?}");
+    }
+}
