@@ -122,8 +122,9 @@ fn write_timed_out(n: usize) -> WriteResults {
 // ---- shared bodies ---------------------------------------------------------------------
 
 /// Per-item conversion failures of the values to write, recorded before the engine call
-/// (the engine gets VT_EMPTY for them, which it rejects with OPC_E_BADTYPE after checking
-/// the handle and the access rights; those more basic errors win).
+/// (the engine gets VT_EMPTY for them, which it rejects after checking the handle and the
+/// access rights, with OPC_E_BADTYPE, or OPC_E_NOTSUPPORTED when a quality or timestamp
+/// came with it; the handle and rights errors, more basic, win).
 #[derive(Default)]
 struct PreErrors(Vec<(usize, OpcError)>);
 
@@ -145,7 +146,7 @@ impl PreErrors {
     fn apply(&self, results: &mut WriteResults) {
         for &(i, e) in &self.0 {
             if let Some(r) = results.get_mut(i) {
-                if *r == Err(OpcError::BadType) {
+                if matches!(r, Err(OpcError::BadType | OpcError::NotSupported)) {
                     *r = Err(e);
                 }
             }
