@@ -31,6 +31,7 @@
 
 mod browse;
 mod groups;
+pub(crate) use groups::lcid_accepted;
 mod itemio;
 mod props;
 mod shutdown;
