@@ -17,9 +17,11 @@
 //! (the driver stuck), the call abandons the transaction and answers the same code per
 //! item.
 //!
-//! Writes: the value is converted to the item's canonical type by the engine
-//! (OPC_E_BADTYPE when impossible, OPC_E_RANGE on overflow), read-only items answer
-//! OPC_E_BADRIGHTS, and the data source accepts only integers and reals (OPC_E_BADTYPE).
+//! Writes: the value is converted to the item's canonical type by the engine as
+//! VariantChangeTypeEx with the group's LCID would (`ctopc_core::convert::convert_for_write`:
+//! numeric text, BOOL as 1/0, CY, every number; OPC_E_BADTYPE for DATE and other text,
+//! OPC_E_RANGE on overflow), read-only items answer OPC_E_BADRIGHTS; a VT_EMPTY value
+//! with a quality or timestamp (WriteVQT) is OPC_E_NOTSUPPORTED.
 //! A 1-D array of 3 elements written to a scalar item is the asix extended write
 //! `[value, quality, timestamp]` (AsixConnect §6.6); the engine sends it to the data
 //! source as a value-quality-timestamp write.
