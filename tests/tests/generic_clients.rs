@@ -18,7 +18,7 @@
 use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
-use ctopc_core::{OpcError, Quality, Timestamp, Value, VarType};
+use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, connect, interfaces::*, ComThread, Server};
 use std::sync::{Mutex, MutexGuard};
@@ -30,7 +30,6 @@ use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
 const SETPOINT: &str = "KW_A110";
 /// Heater mode (UI1 0..2, writable).
 const MODE: &str = "KW_D201";
-const OPC_E_NOTSUPPORTED: HRESULT = HRESULT(OpcError::NotSupported.hresult());
 
 static WRITES: Mutex<()> = Mutex::new(());
 
