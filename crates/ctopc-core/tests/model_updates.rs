@@ -1124,3 +1124,28 @@ fn the_first_callback_after_a_group_becomes_active_waits_too() {
         "the cached sample at once"
     );
 }
+
+/// A sample (or the end of the wait) arriving while the client is still busy with the
+/// group's callbacks waits for the delivery's end, as every update does (and the
+/// scheduler does not spin on it).
+#[test]
+fn held_items_wait_for_the_pacing_slot() {
+    let mut sim = Sim::with_config(EngineConfig {
+        max_pending_data_changes: 1,
+        ..EngineConfig::default()
+    });
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1", "A2"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(1.0))]);
+    sim.push_good("A2", 2.0);
+    sim.advance(100);
+    assert!(sim.data_changes().is_empty(), "the client has not returned");
+    sim.advance(u64::from(DEFAULT_FIRST_SAMPLE_WAIT_MS));
+    assert!(sim.data_changes().is_empty(), "nor at the bound");
+    sim.e.data_change_delivered(sim.now, g);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(101, Value::R8(2.0))]);
+}

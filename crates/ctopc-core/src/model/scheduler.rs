@@ -35,6 +35,8 @@ impl Engine {
     /// (Re)computes a group's deadline. `start_now`: the group (re)starts ticking, its
     /// first update is due at once and the keep-alive period starts now.
     pub(crate) fn schedule_group(&mut self, slot: usize, now: Timestamp, start_now: bool) {
+        let paces = self.cfg.paces();
+        let max_pending = self.cfg.max_pending_data_changes;
         let g = self.groups[slot].as_mut().expect("group");
         if !g.ticking() {
             g.wake = None;
@@ -51,8 +53,12 @@ impl Engine {
         if g.keep_alive > 0 {
             due = due.min(g.last_callback.add_millis(u64::from(g.keep_alive)));
         }
+        // Held items are due when their sample arrived or the wait ends, unless the client
+        // is still busy with the group's callbacks (then the delivery's end reschedules).
         if let Some(until) = g.first_sample_until {
-            due = due.min(if g.first_sample_ready { now } else { until });
+            if !(paces && g.delivering >= max_pending) {
+                due = due.min(if g.first_sample_ready { now } else { until });
+            }
         }
         if !matches!(g.wake, Some(w) if w <= due) {
             g.sched_seq = g.sched_seq.wrapping_add(1);
@@ -233,6 +239,7 @@ impl Engine {
         if !first_only && !g.needs_scan && g.scanned_seq == *change_seq {
             return false;
         }
+        g.first_sample_ready = false;
         // Hold items without data while the group's wait runs (it starts now if none does).
         let holding = cfg.first_sample_wait_ms > 0 && g.first_sample_until.is_none_or(|u| now < u);
         let mut held = 0usize;
