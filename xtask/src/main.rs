@@ -2,6 +2,7 @@
 //! std only (plus the small `ctrlc` crate for the demo's Ctrl+C), so that it compiles in
 //! seconds on a fresh machine.
 
+mod arch;
 mod bench;
 mod build;
 mod demo;
