@@ -22,8 +22,9 @@ commands:
   setup   install what the build and tests need on Debian 12 (apt packages, the
           rustup target, the bcryptprimitives shim, a Wine prefix under target/wine);
           idempotent: skips what exists
-  build   build the Windows artifacts (ServerCTOPC.exe, opc_ps.dll, clients) into
-          target/x86_64-pc-windows-gnu/release
+  build   build the Windows artifacts: ServerCTOPC.exe, opc_ps.dll and opcdiag.exe into
+          target/x86_64-pc-windows-gnu/release, the 32-bit opc_ps.dll and opcdiag.exe
+          into target/i686-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
   e2e     the Windows build, registration, then only the Wine tests named by its
           cargo arguments, e.g. `cargo xtask e2e -p e2e-tests --test group_io`
@@ -32,9 +33,10 @@ commands:
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
           stops after SECONDS
-  proxy   build only the proxy/stub DLL from idl/
-  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag, example
-          configuration, demo database, deployment guide and docs
+  proxy   build only the proxy/stub DLLs from idl/ (64-bit and 32-bit)
+  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag (the last
+          two also 32-bit, in x86/), example configuration, demo database, deployment
+          guide and docs
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run
@@ -55,11 +57,11 @@ fn main() -> ExitCode {
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),
-        "proxy" => {
-            let root = util::root();
-            let out = root.join("target/x86_64-pc-windows-gnu/release");
-            proxy::build_proxy(&root, &out).map(|p| println!("built {}", p.display()))
-        }
+        "proxy" => proxy::build_both(&util::root()).map(|dlls| {
+            for p in dlls {
+                println!("built {}", p.display());
+            }
+        }),
         "help" | "--help" | "-h" => {
             print!("{USAGE}");
             Ok(())

@@ -13,6 +13,7 @@
 //! Steps 5 and 6 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
+use crate::arch::Arch;
 use crate::{build, setup, util, wine};
 use std::time::Duration;
 
@@ -143,13 +144,21 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
     result
 }
 
-/// Registers the proxy/stub DLL (its own DllRegisterServer, through regsvr32) and the
-/// server (/RegServer) in the prefix.
+/// Registers the proxy/stub DLLs (their own DllRegisterServer, through regsvr32: the
+/// 64-bit DLL with the 64-bit regsvr32 of system32, the 32-bit DLL with the 32-bit one of
+/// syswow64, each into its own registry view) and the server (/RegServer) in the prefix.
 pub fn register(a: &build::Artifacts) -> Result<(), String> {
     let limit = Duration::from_secs(120);
-    let status = util::run_with_timeout(wine::wine("regsvr32").arg("/s").arg(&a.proxy), limit)?;
-    if !status.success() {
-        return Err(format!("regsvr32 {} failed: {status}", a.proxy.display()));
+    for (arch, dll) in [(Arch::X64, &a.proxy), (Arch::X86, &a.proxy32)] {
+        let status =
+            util::run_with_timeout(wine::wine_arch(arch, "regsvr32").arg("/s").arg(dll), limit)?;
+        if !status.success() {
+            return Err(format!(
+                "regsvr32 ({}) {} failed: {status}",
+                arch.target(),
+                dll.display()
+            ));
+        }
     }
     let status = util::run_with_timeout(wine::wine(&a.server).arg("/RegServer"), limit)?;
     if !status.success() {
@@ -159,8 +168,9 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
         ));
     }
     println!(
-        "test: registered {} and {}",
+        "test: registered {}, {} and {}",
         a.proxy.display(),
+        a.proxy32.display(),
         a.server.display()
     );
     Ok(())
