@@ -71,17 +71,17 @@ fn with_registration<R>(
     let exe = exe_path()?;
     let categories = [
         Category {
-            catid: CATID_OPCDAServer20,
+            catid: CATID_OPCDAServer20.to_u128(),
             description: "OPC Data Access Servers Version 2.0",
         },
         Category {
-            catid: CATID_OPCDAServer30,
+            catid: CATID_OPCDAServer30.to_u128(),
             description: "OPC Data Access Servers Version 3.0",
         },
     ];
     let reg = ServerRegistration {
-        clsid: CLSID_SERVERCTOPC,
-        appid: CLSID_SERVERCTOPC,
+        clsid: CLSID_SERVERCTOPC.to_u128(),
+        appid: CLSID_SERVERCTOPC.to_u128(),
         progid: PROGID,
         progid_versioned: PROGID_VERSIONED,
         description: DESCRIPTION,
