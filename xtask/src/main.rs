@@ -26,9 +26,12 @@ commands:
           target/x86_64-pc-windows-gnu/release, the 32-bit opc_ps.dll and opcdiag.exe
           into target/i686-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
+          (64-bit client, then most of them again as a 32-bit client)
   e2e     the Windows build, registration, then only the Wine tests named by its
           cargo arguments, e.g. `cargo xtask e2e -p e2e-tests --test group_io`
-          (default `-p e2e-tests -p ctopc-com`; after `--`, test-binary arguments)
+          (default `-p e2e-tests -p ctopc-com`; after `--`, test-binary arguments);
+          `e2e --x86 [ARGS...]` runs them as a 32-bit client (default: the e2e files
+          `cargo xtask test` runs at 32-bit)
   demo    the server with the demo plant Wytwornia_Kwasu, read over the asix network from
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
