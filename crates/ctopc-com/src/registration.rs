@@ -69,6 +69,53 @@ pub struct ServerRegistration<'a> {
     pub opc_key_vendor: Option<&'a str>,
 }
 
+// ---------------------------------------------------------------------------------------
+// ServerCTOPC.App itself
+
+/// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
+pub const CLSID_SERVERCTOPC: u128 = 0x3277b556_ba68_4bde_8687_8ee4e4b46336;
+pub const PROGID: &str = "ServerCTOPC.App";
+pub const PROGID_VERSIONED: &str = "ServerCTOPC.App.1";
+pub const DESCRIPTION: &str = "ServerCTOPC OPC DA Server for asix";
+pub const EXE_NAME: &str = "ServerCTOPC.exe";
+/// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
+pub const VENDOR_INFO: &str =
+    "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
+/// `CATID_OPCDAServer20` (opcda.idl).
+pub const CATID_OPC_DA_SERVER_20: u128 = 0x63d5f432_cfe4_11d1_b2c8_0060083ba1fb;
+/// `CATID_OPCDAServer30` (opcda.idl).
+pub const CATID_OPC_DA_SERVER_30: u128 = 0xcc603642_66d7_48f1_b69a_b625e73652d7;
+/// The categories ServerCTOPC implements, with the OPC Foundation's descriptions.
+pub const SERVERCTOPC_CATEGORIES: &[Category<'static>] = &[
+    Category {
+        catid: CATID_OPC_DA_SERVER_20,
+        description: "OPC Data Access Servers Version 2.0",
+    },
+    Category {
+        catid: CATID_OPC_DA_SERVER_30,
+        description: "OPC Data Access Servers Version 3.0",
+    },
+];
+
+/// The registration of ServerCTOPC.App for the exe at `exe_path` (a full Windows path),
+/// with `service` the NT service's name when installed by `/Service`. `/RegServer`,
+/// `/Service` and `/UnregServer` use it; an installer gets its registry entries from
+/// `serverctopc(path, service).keys()`.
+pub fn serverctopc<'a>(exe_path: &'a str, service: Option<&'a str>) -> ServerRegistration<'a> {
+    ServerRegistration {
+        clsid: CLSID_SERVERCTOPC,
+        appid: CLSID_SERVERCTOPC,
+        progid: PROGID,
+        progid_versioned: PROGID_VERSIONED,
+        description: DESCRIPTION,
+        exe_path,
+        exe_name: EXE_NAME,
+        service_name: service,
+        categories: SERVERCTOPC_CATEGORIES,
+        opc_key_vendor: Some(VENDOR_INFO),
+    }
+}
+
 /// `{XXXXXXXX-XXXX-XXXX-XXXX-XXXXXXXXXXXX}`, upper case, as the registry spells GUIDs.
 pub fn guid_string(g: u128) -> String {
     format!(
@@ -183,28 +230,19 @@ mod tests {
     const DA30: u128 = 0xcc603642_66d7_48f1_b69a_b625e73652d7;
 
     fn reg(service: Option<&'static str>) -> ServerRegistration<'static> {
-        const CATS: &[Category<'static>] = &[
-            Category {
-                catid: DA20,
-                description: "OPC Data Access Servers Version 2.0",
-            },
-            Category {
-                catid: DA30,
-                description: "OPC Data Access Servers Version 3.0",
-            },
-        ];
-        ServerRegistration {
-            clsid: CLSID,
-            appid: CLSID,
-            progid: "ServerCTOPC.App",
-            progid_versioned: "ServerCTOPC.App.1",
-            description: "ServerCTOPC OPC DA Server for asix",
-            exe_path: "C:\\Program Files\\ServerCTOPC\\ServerCTOPC.exe",
-            exe_name: "ServerCTOPC.exe",
-            service_name: service,
-            categories: CATS,
-            opc_key_vendor: Some("vendor"),
-        }
+        serverctopc("C:\\Program Files\\ServerCTOPC\\ServerCTOPC.exe", service)
+    }
+
+    #[test]
+    fn serverctopc_is_registered_as_the_readme_says() {
+        assert_eq!(CLSID_SERVERCTOPC, CLSID);
+        assert_eq!(CATID_OPC_DA_SERVER_20, DA20);
+        assert_eq!(CATID_OPC_DA_SERVER_30, DA30);
+        let r = reg(None);
+        assert_eq!(r.progid, "ServerCTOPC.App");
+        assert_eq!(r.progid_versioned, "ServerCTOPC.App.1");
+        assert_eq!(r.opc_key_vendor, Some(VENDOR_INFO));
+        assert_eq!(r.categories.len(), 2);
     }
 
     fn value<'k>(keys: &'k [Key], view: View, path: &str, name: &str) -> Option<&'k str> {
@@ -292,7 +330,7 @@ mod tests {
                 assert!(has(&keys, v, &format!("{p}\\OPC")));
                 assert_eq!(
                     value(&keys, v, &format!("{p}\\OPC\\Vendor"), ""),
-                    Some("vendor")
+                    Some(VENDOR_INFO)
                 );
             }
             assert_eq!(

@@ -133,3 +133,16 @@ pub fn unregister(r: &ServerRegistration) -> windows::core::Result<()> {
         .iter()
         .try_for_each(|(view, path)| delete_tree(*view, path))
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
+    use crate::registration::{CATID_OPC_DA_SERVER_20, CATID_OPC_DA_SERVER_30};
+    use windows::core::GUID;
+
+    #[test]
+    fn the_registrations_categories_are_the_interface_definitions() {
+        assert_eq!(GUID::from_u128(CATID_OPC_DA_SERVER_20), CATID_OPCDAServer20);
+        assert_eq!(GUID::from_u128(CATID_OPC_DA_SERVER_30), CATID_OPCDAServer30);
+    }
+}
