@@ -12,7 +12,8 @@
 //!    crate's unit tests (Windows-only), then the third-party client;
 //! 7. the end-to-end tests again as a **32-bit client** ([`E2E_32`]: built for
 //!    `i686-pc-windows-gnu`, run by Wine's 32-bit loader in the same prefix, through the
-//!    32-bit proxy/stub, against the same 64-bit server).
+//!    32-bit proxy/stub, against the same 64-bit server), then the third-party client
+//!    built for 32-bit.
 //!
 //! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
@@ -59,7 +60,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
         if !status.success() {
             return Err(format!("end-to-end tests failed: {status}"));
         }
-        thirdparty_client()?;
+        thirdparty_client(Arch::X64)?;
         println!(
             "test: end-to-end tests as a 32-bit client ({})",
             Arch::X86.target()
@@ -68,7 +69,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
         if !status.success() {
             return Err(format!("end-to-end tests (32-bit client) failed: {status}"));
         }
-        Ok(())
+        thirdparty_client(Arch::X86)
     })();
     wine::kill_all();
     result
@@ -278,11 +279,14 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
     Ok(())
 }
 
-/// Builds and runs tests/thirdparty-client: an OPC DA client we did not write (the opc_da
-/// crate, with bindings from the OPC Foundation's IDL) reads the server's status through
-/// our proxy/stub DLL.
-fn thirdparty_client() -> Result<(), String> {
-    println!("test: third-party OPC client (opc_da crate) under Wine");
+/// Builds and runs tests/thirdparty-client for `arch`: an OPC DA client we did not write
+/// (the opc_da crate, with bindings from the OPC Foundation's IDL) reads the server's
+/// status through our proxy/stub DLL of that bitness.
+fn thirdparty_client(arch: Arch) -> Result<(), String> {
+    println!(
+        "test: third-party OPC client (opc_da crate) under Wine, {}",
+        arch.target()
+    );
     let root = util::root();
     let target_dir = root.join("target/thirdparty");
     util::run(
@@ -291,19 +295,23 @@ fn thirdparty_client() -> Result<(), String> {
                 "build",
                 "--release",
                 "--target",
-                setup::TARGET,
+                arch.target(),
                 "--manifest-path",
             ])
             .arg(root.join("tests/thirdparty-client/Cargo.toml"))
             .env("CARGO_TARGET_DIR", &target_dir),
     )?;
     let exe = target_dir
-        .join(setup::TARGET)
+        .join(arch.target())
         .join("release/thirdparty-client.exe");
-    let status = util::run_with_timeout(&mut wine::wine(&exe), Duration::from_secs(120))?;
+    let status =
+        util::run_with_timeout(&mut wine::wine_arch(arch, &exe), Duration::from_secs(120))?;
     if status.success() {
         Ok(())
     } else {
-        Err(format!("third-party client failed: {status}"))
+        Err(format!(
+            "third-party client ({}) failed: {status}",
+            arch.target()
+        ))
     }
 }
