@@ -84,6 +84,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
 /// client's side of the wire). Measured: that one passes at 32-bit too.
 pub const E2E_32: &[&str] = &[
     "foundation",
+    "generic_clients",
     "group_async",
     "group_callbacks",
     "group_io",
