@@ -25,14 +25,45 @@ pub fn connect() -> (ComThread, Server) {
     (com, server)
 }
 
-/// A Windows build artifact next to the test binaries (target/<triple>/release/<name>).
+/// The 64-bit target (the server's): where `cargo xtask build` puts ServerCTOPC.exe.
+const SERVER_TARGET: &str = "x86_64-pc-windows-gnu";
+
+/// A file of the server's build (`cargo xtask build`: ServerCTOPC.exe, its `Log\\`, the
+/// 64-bit opc_ps.dll), in target/x86_64-pc-windows-gnu/release. The server is 64-bit
+/// whatever the bitness of the test client: a 32-bit test binary
+/// (target/i686-pc-windows-gnu/release/deps) finds it in the 64-bit folder beside its own.
 pub fn artifact(name: &str) -> PathBuf {
+    let release = own_artifact_dir();
+    let triple_dir = release.parent();
+    match triple_dir
+        .and_then(|t| t.file_name())
+        .and_then(|n| n.to_str())
+    {
+        Some(triple) if triple != SERVER_TARGET && triple.ends_with("-pc-windows-gnu") => {
+            triple_dir
+                .and_then(|t| t.parent())
+                .expect("target dir")
+                .join(SERVER_TARGET)
+                .join("release")
+                .join(name)
+        }
+        _ => release.join(name),
+    }
+}
+
+/// A Windows build artifact of the test binary's own bitness, next to it
+/// (target/<triple>/release/<name>): opcdiag.exe, marshal-probe.exe.
+pub fn own_artifact(name: &str) -> PathBuf {
+    own_artifact_dir().join(name)
+}
+
+fn own_artifact_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("current_exe");
-    // .../release/deps/test-xxxx.exe -> .../release/<name>
+    // .../release/deps/test-xxxx.exe -> .../release
     exe.parent()
         .and_then(|d| d.parent())
         .expect("artifact dir")
-        .join(name)
+        .to_path_buf()
 }
 
 /// The HRESULT of a failed call, or S_OK.

@@ -255,6 +255,30 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
     );
     let p = s.p();
 
+    // Issue 15: the first OnDataChange carries the items' first samples, not BAD Waiting
+    // for Initial Data (0x20), also with a device that answers reads 3 s late (the
+    // subscription's samples are not delayed).
+    let first = p
+        .rec
+        .wait_for(WAIT, |c| {
+            matches!(c, Callback::DataChange { transaction: 0, items, .. } if !items.is_empty())
+        })
+        .expect("the first OnDataChange");
+    let Callback::DataChange { items, .. } = first else {
+        unreachable!()
+    };
+    assert_eq!(
+        items.len(),
+        2,
+        "both items in the first callback: {items:?}"
+    );
+    assert!(
+        items
+            .iter()
+            .all(|i| i.quality != 0x20 && i.value != Value::Empty),
+        "{items:?}"
+    );
+
     let ((hr, items), took) =
         timed(|| client::sync_read(&p.group.sync(), OPC_DS_DEVICE, &p.h).expect("Read(DEVICE)"));
     assert_at_the_timeout("IOPCSyncIO::Read(DEVICE)", took, TIMEOUT_MS);

@@ -550,7 +550,8 @@ mod through_the_proxy {
         }
     }
 
-    /// Runs `marshal-probe.exe /RegServer` (next to the test binaries) once per test run.
+    /// Runs `marshal-probe.exe /RegServer` (the 64-bit one, as the server is: a 32-bit run
+    /// of this suite tests the 32-bit proxy against the 64-bit stub) once per test run.
     fn register_probe() -> Result<(), String> {
         let exe = artifact("marshal-probe.exe");
         let mut child = Command::new(&exe)

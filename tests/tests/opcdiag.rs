@@ -3,7 +3,7 @@
 //! and checks what it prints and its exit code.
 #![cfg(windows)]
 
-use e2e_tests::artifact;
+use e2e_tests::own_artifact;
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -28,7 +28,7 @@ impl std::fmt::Debug for Run {
 /// Runs opcdiag.exe with `args` (English texts unless `args` says otherwise), killed after
 /// `limit`.
 fn opcdiag_for(args: &[&str], limit: Duration) -> Run {
-    let exe = artifact("opcdiag.exe");
+    let exe = own_artifact("opcdiag.exe");
     let mut child = Command::new(&exe)
         .args(args)
         .stdin(Stdio::null())

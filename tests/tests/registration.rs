@@ -1,10 +1,19 @@
-//! /RegServer and /UnregServer: every key, idempotence, switch spellings, usage errors.
+//! /RegServer and /UnregServer: every key in both registry views, idempotence, switch
+//! spellings, usage errors; and that this process (the suite runs as a 64-bit and as a
+//! 32-bit client, `cargo xtask test`) finds the server the ways OPC clients look for it:
+//! by category (ICatInformation::EnumClassesOfCategories, DA 2.0 and 3.0) and by ProgID.
 #![cfg(windows)]
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use e2e_tests::artifact;
-use windows::core::PCWSTR;
+use windows::core::{GUID, PCWSTR};
+use windows::Win32::System::Com::{
+    CLSIDFromProgID, CoCreateInstance, ICatInformation, CLSCTX_INPROC_SERVER,
+};
 use windows::Win32::System::Registry::{
-    RegCloseKey, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ, RRF_RT_REG_SZ,
+    RegCloseKey, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ, KEY_WOW64_32KEY,
+    KEY_WOW64_64KEY, REG_ROUTINE_FLAGS, REG_SAM_FLAGS, RRF_RT_REG_SZ, RRF_SUBKEY_WOW6432KEY,
+    RRF_SUBKEY_WOW6464KEY,
 };
 
 const CLSID: &str = "{3277B556-BA68-4BDE-8687-8EE4E4B46336}";
@@ -29,7 +38,17 @@ fn wide(s: &str) -> Vec<u16> {
     s.encode_utf16().chain([0]).collect()
 }
 
+/// The registry views: what 64-bit and what 32-bit processes see.
+const VIEWS: [(&str, REG_SAM_FLAGS, REG_ROUTINE_FLAGS); 2] = [
+    ("64-bit view", KEY_WOW64_64KEY, RRF_SUBKEY_WOW6464KEY),
+    ("32-bit view", KEY_WOW64_32KEY, RRF_SUBKEY_WOW6432KEY),
+];
+
 fn key_exists(path: &str) -> bool {
+    key_exists_in(REG_SAM_FLAGS(0), path)
+}
+
+fn key_exists_in(view: REG_SAM_FLAGS, path: &str) -> bool {
     let p = wide(path);
     let mut k = HKEY::default();
     // SAFETY: valid strings and out handle.
@@ -38,7 +57,7 @@ fn key_exists(path: &str) -> bool {
             HKEY_CLASSES_ROOT,
             PCWSTR(p.as_ptr()),
             None,
-            KEY_READ,
+            KEY_READ | view,
             &mut k,
         )
     }
@@ -55,6 +74,10 @@ fn default_value(path: &str) -> Option<String> {
 }
 
 fn value(path: &str, name: &str) -> Option<String> {
+    value_in(REG_ROUTINE_FLAGS(0), path, name)
+}
+
+fn value_in(view: REG_ROUTINE_FLAGS, path: &str, name: &str) -> Option<String> {
     let p = wide(path);
     let n = wide(name);
     let mut buf = vec![0u16; 1024];
@@ -70,7 +93,7 @@ fn value(path: &str, name: &str) -> Option<String> {
             HKEY_CLASSES_ROOT,
             PCWSTR(p.as_ptr()),
             name_ptr,
-            RRF_RT_REG_SZ,
+            RRF_RT_REG_SZ | view,
             None,
             Some(buf.as_mut_ptr().cast()),
             Some(&mut len),
@@ -90,6 +113,17 @@ fn regserver_writes_every_key_and_unregserver_removes_them_idempotently() {
     assert!(!key_exists("ServerCTOPC.App"));
     assert!(!key_exists(&format!("CLSID\\{CLSID}")));
     assert!(!key_exists(&format!("AppID\\{CLSID}")));
+    for (what, view, _) in VIEWS {
+        for key in [
+            format!("CLSID\\{CLSID}"),
+            "ServerCTOPC.App".into(),
+            "ServerCTOPC.App.1".into(),
+            format!("AppID\\{CLSID}"),
+            "AppID\\ServerCTOPC.exe".into(),
+        ] {
+            assert!(!key_exists_in(view, &key), "{what}: {key} left");
+        }
+    }
 
     for args in [["/RegServer"], ["-REGSERVER"]] {
         assert!(run(&args).status.success(), "{args:?}");
@@ -135,6 +169,97 @@ fn regserver_writes_every_key_and_unregserver_removes_them_idempotently() {
         assert!(
             key_exists(&format!("Component Categories\\{cat}")),
             "category {cat} registered"
+        );
+    }
+    // The same in both views, so that 32-bit clients find the (64-bit) server.
+    for (what, view, rrf) in VIEWS {
+        let exe32 = value_in(rrf, &format!("CLSID\\{CLSID}\\LocalServer32"), "");
+        assert_eq!(exe32.as_deref(), Some(exe.as_str()), "{what}");
+        assert_eq!(
+            value_in(rrf, &format!("CLSID\\{CLSID}"), "AppID").as_deref(),
+            Some(CLSID),
+            "{what}"
+        );
+        assert_eq!(
+            value_in(rrf, &format!("CLSID\\{CLSID}\\ProgID"), "").as_deref(),
+            Some("ServerCTOPC.App.1"),
+            "{what}"
+        );
+        for (path, expect) in [
+            ("ServerCTOPC.App\\CLSID", CLSID),
+            ("ServerCTOPC.App\\CurVer", "ServerCTOPC.App.1"),
+            ("ServerCTOPC.App.1\\CLSID", CLSID),
+        ] {
+            assert_eq!(
+                value_in(rrf, path, "").as_deref(),
+                Some(expect),
+                "{what}: {path}"
+            );
+        }
+        assert!(
+            value_in(rrf, "ServerCTOPC.App\\OPC\\Vendor", "").is_some(),
+            "{what}: legacy OPC key"
+        );
+        assert!(key_exists_in(view, &format!("AppID\\{CLSID}")), "{what}");
+        for cat in [CATID_DA20, CATID_DA30] {
+            assert!(
+                key_exists_in(
+                    view,
+                    &format!("CLSID\\{CLSID}\\Implemented Categories\\{cat}")
+                ),
+                "{what}: {cat}"
+            );
+            assert!(
+                key_exists_in(view, &format!("Component Categories\\{cat}")),
+                "{what}: category {cat} registered"
+            );
+        }
+    }
+}
+
+/// `CLSID_StdComponentCategoriesMgr`.
+const CLSID_STD_COMPONENT_CATEGORIES_MGR: GUID =
+    GUID::from_u128(0x0002e005_0000_0000_c000_000000000046);
+
+fn guid(s: &str) -> GUID {
+    GUID::try_from(s.trim_matches(|c| c == '{' || c == '}')).expect("GUID")
+}
+
+#[test]
+fn this_process_finds_the_server_by_category_and_by_progid() {
+    let bits = 8 * std::mem::size_of::<usize>();
+    let _com = e2e_tests::ComThread::mta().expect("CoInitializeEx");
+    let clsid = guid(CLSID);
+    // SAFETY: a valid NUL-terminated string.
+    let found = unsafe { CLSIDFromProgID(windows::core::w!("ServerCTOPC.App")) };
+    assert_eq!(found.ok(), Some(clsid), "{bits}-bit CLSIDFromProgID");
+    // SAFETY: COM is initialised on this thread; the manager is an in-process system class.
+    let cats: ICatInformation = unsafe {
+        CoCreateInstance(
+            &CLSID_STD_COMPONENT_CATEGORIES_MGR,
+            None,
+            CLSCTX_INPROC_SERVER,
+        )
+    }
+    .expect("StdComponentCategoriesMgr");
+    for cat in [CATID_DA20, CATID_DA30] {
+        // SAFETY: a one-element slice valid for the call.
+        let e = unsafe { cats.EnumClassesOfCategories(&[guid(cat)], &[]) }
+            .expect("EnumClassesOfCategories");
+        let mut classes = Vec::new();
+        loop {
+            let mut buf = [GUID::zeroed(); 16];
+            let mut n = 0u32;
+            // SAFETY: `buf` and `n` are valid for the call.
+            let hr = unsafe { e.Next(&mut buf, Some(&mut n)) };
+            classes.extend_from_slice(&buf[..n as usize]);
+            if hr.0 != 0 || n == 0 {
+                break;
+            }
+        }
+        assert!(
+            classes.contains(&clsid),
+            "{bits}-bit EnumClassesOfCategories({cat}): {classes:?}"
         );
     }
 }

@@ -150,11 +150,48 @@ fn flat_listing_and_filters() {
     to_z101(&server);
     let (_, leaves) = server.browse_item_ids(OPC_LEAF, "*[12]", 0, 0).unwrap();
     assert_eq!(leaves, ["KW_A001", "KW_A002"]);
-    // Filters are case-insensitive (MatchPattern default); data type and rights are ignored.
+    // Filters are case-insensitive (MatchPattern default); KW_A000 is R4 and readable.
     let (_, leaves) = server
         .browse_item_ids(OPC_LEAF, "kw_a000", VT_R4_U16, OPC_READABLE)
         .unwrap();
     assert_eq!(leaves, ["KW_A000"]);
+    // The access-rights and data-type filters (DA 2.05a; issue 15: they were ignored).
+    // Z101's variables are read-only R4s.
+    assert_eq!(
+        server
+            .browse_item_ids(OPC_LEAF, "", 0, OPC_WRITEABLE)
+            .unwrap(),
+        (S_FALSE, vec![])
+    );
+    assert_eq!(
+        server.browse_item_ids(OPC_LEAF, "", 17, 0).unwrap(),
+        (S_FALSE, vec![]),
+        "no UI1 there"
+    );
+    assert_eq!(
+        server
+            .browse_item_ids(OPC_LEAF, "", VT_R4_U16, 0)
+            .unwrap()
+            .1
+            .len(),
+        3
+    );
+    server.change_browse_position(OPC_BROWSE_TO, "").unwrap();
+    let (_, writable) = server
+        .browse_item_ids(OPC_FLAT, "", 0, OPC_WRITEABLE)
+        .unwrap();
+    assert!(
+        writable.iter().any(|i| i == "KW_A110") && !writable.iter().any(|i| i == "KW_A000"),
+        "{writable:?}"
+    );
+    assert!(writable.len() < all.len());
+    let (_, ui1) = server.browse_item_ids(OPC_FLAT, "", 17, 0).unwrap();
+    assert!(ui1.iter().any(|i| i == "KW_D201") && !ui1.iter().any(|i| i == "KW_A000"));
+    let (_, both) = server
+        .browse_item_ids(OPC_FLAT, "", 17, OPC_WRITEABLE)
+        .unwrap();
+    assert!(both.iter().any(|i| i == "KW_D201") && both.len() <= ui1.len());
+    to_z101(&server);
     assert_eq!(
         server.browse_item_ids(OPC_LEAF, "nic*", 0, 0).unwrap(),
         (S_FALSE, vec![])

@@ -39,26 +39,6 @@ fn wineserver(pfx: &Path, arg: &str, limit: Duration) {
     );
 }
 
-/// Creates the benchmark prefix (as `setup` does the test prefix) and installs the shim.
-fn ensure_prefix(pfx: &Path) -> Result<(), String> {
-    if !pfx.join("system.reg").exists() {
-        println!("bench: creating Wine prefix {}", pfx.display());
-        std::fs::create_dir_all(pfx).map_err(|e| e.to_string())?;
-        let status =
-            util::run_with_timeout(wine_in(pfx, "wineboot").arg("-i"), Duration::from_secs(180))?;
-        if !status.success() {
-            return Err(format!("wineboot -i failed: {status}"));
-        }
-        wineserver(pfx, "-w", Duration::from_secs(120));
-    }
-    let shim = util::root().join("target/wine/bcryptprimitives.dll");
-    let dest = pfx.join("drive_c/windows/system32/bcryptprimitives.dll");
-    if !util::up_to_date(&dest, std::slice::from_ref(&shim)) {
-        std::fs::copy(&shim, &dest).map_err(|e| format!("copy shim to {}: {e}", dest.display()))?;
-    }
-    Ok(())
-}
-
 pub fn run(args: &[String]) -> Result<(), String> {
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
@@ -74,7 +54,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     ]))?;
     let exe = artifacts.dir.join("bench-com.exe");
     let pfx = prefix();
-    ensure_prefix(&pfx)?;
+    wine::ensure_prefix(&pfx)?;
     wineserver(&pfx, "-k", Duration::from_secs(20));
     let result = (|| {
         let limit = Duration::from_secs(120);

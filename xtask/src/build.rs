@@ -1,33 +1,51 @@
-//! `cargo xtask build`: the Windows artifacts.
+//! `cargo xtask build`: the Windows artifacts of both bitnesses.
 
-use crate::{proxy, setup::TARGET, util};
+use crate::arch::Arch;
+use crate::{proxy, util};
 use std::path::PathBuf;
 
 pub struct Artifacts {
+    /// target/x86_64-pc-windows-gnu/release: the server, the 64-bit proxy/stub, opcdiag.
     pub dir: PathBuf,
     pub server: PathBuf,
     pub proxy: PathBuf,
+    /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
+    pub dir32: PathBuf,
+    pub proxy32: PathBuf,
 }
 
 pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     let root = util::root();
-    let dir = root.join("target").join(TARGET).join("release");
+    // The server is 64-bit only (COM starts it for clients of either bitness); opcdiag
+    // is built for both, so that a plant engineer can check what a 32-bit client sees.
     util::run(util::cargo().args([
         "build",
         "--release",
         "--target",
-        TARGET,
+        Arch::X64.target(),
         "-p",
         "serverctopc",
         "-p",
         "opc-client",
         "--bins",
     ]))?;
-    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-    let proxy = proxy::build_proxy(&root, &dir)?;
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        Arch::X86.target(),
+        "-p",
+        "opc-client",
+        "--bins",
+    ]))?;
+    let proxy = proxy::build_proxy(&root, Arch::X64)?;
+    let proxy32 = proxy::build_proxy(&root, Arch::X86)?;
+    let dir = Arch::X64.release_dir(&root);
     Ok(Artifacts {
         server: dir.join("ServerCTOPC.exe"),
         proxy,
         dir,
+        dir32: Arch::X86.release_dir(&root),
+        proxy32,
     })
 }

@@ -1,5 +1,5 @@
 //! `cargo xtask dist`: target/dist/ServerCTOPC-<version>.zip with the server, the
-//! proxy/stub DLL, the diagnostic client, the example configuration, the demo database
+//! proxy/stub DLL, the diagnostic client (the last two also 32-bit, in `x86/`), the example configuration, the demo database
 //! and the documentation (the deployment guide first).
 //!
 //! The ZIP is written here (entries stored, CRC-32 checked by every unzip tool), so that
@@ -17,6 +17,9 @@ pub fn run(_args: &[String]) -> Result<(), String> {
         ("ServerCTOPC.exe".into(), a.server.clone()),
         ("opc_ps.dll".into(), a.proxy.clone()),
         ("opcdiag.exe".into(), a.dir.join("opcdiag.exe")),
+        // For 32-bit OPC clients (docs/deployment.md: the 32-bit regsvr32 registers it).
+        ("x86/opc_ps.dll".into(), a.proxy32.clone()),
+        ("x86/opcdiag.exe".into(), a.dir32.join("opcdiag.exe")),
         (
             "asixconnect.ini.example".into(),
             root.join("asixconnect.ini.example"),

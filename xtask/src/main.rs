@@ -2,6 +2,7 @@
 //! std only (plus the small `ctrlc` crate for the demo's Ctrl+C), so that it compiles in
 //! seconds on a fresh machine.
 
+mod arch;
 mod bench;
 mod build;
 mod demo;
@@ -21,19 +22,24 @@ commands:
   setup   install what the build and tests need on Debian 12 (apt packages, the
           rustup target, the bcryptprimitives shim, a Wine prefix under target/wine);
           idempotent: skips what exists
-  build   build the Windows artifacts (ServerCTOPC.exe, opc_ps.dll, clients) into
-          target/x86_64-pc-windows-gnu/release
+  build   build the Windows artifacts: ServerCTOPC.exe, opc_ps.dll and opcdiag.exe into
+          target/x86_64-pc-windows-gnu/release, the 32-bit opc_ps.dll and opcdiag.exe
+          into target/i686-pc-windows-gnu/release
   test    native `cargo test` of every host crate, then the Wine end-to-end tests
+          (64-bit client, then most of them again as a 32-bit client)
   e2e     the Windows build, registration, then only the Wine tests named by its
           cargo arguments, e.g. `cargo xtask e2e -p e2e-tests --test group_io`
-          (default `-p e2e-tests -p ctopc-com`; after `--`, test-binary arguments)
+          (default `-p e2e-tests -p ctopc-com`; after `--`, test-binary arguments);
+          `e2e --x86 [ARGS...]` runs them as a 32-bit client (default: the e2e files
+          `cargo xtask test` runs at 32-bit)
   demo    the server with the demo plant Wytwornia_Kwasu, read over the asix network from
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
           stops after SECONDS
-  proxy   build only the proxy/stub DLL from idl/
-  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag, example
-          configuration, demo database, deployment guide and docs
+  proxy   build only the proxy/stub DLLs from idl/ (64-bit and 32-bit)
+  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag (the last
+          two also 32-bit, in x86/), example configuration, demo database, deployment
+          guide and docs
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run
@@ -54,11 +60,11 @@ fn main() -> ExitCode {
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),
-        "proxy" => {
-            let root = util::root();
-            let out = root.join("target/x86_64-pc-windows-gnu/release");
-            proxy::build_proxy(&root, &out).map(|p| println!("built {}", p.display()))
-        }
+        "proxy" => proxy::build_both(&util::root()).map(|dlls| {
+            for p in dlls {
+                println!("built {}", p.display());
+            }
+        }),
         "help" | "--help" | "-h" => {
             print!("{USAGE}");
             Ok(())

@@ -2,7 +2,14 @@
 //! (OPC Common 1.10 and OPC DA 2.05a/3.0), a full replacement of the OPC Foundation's
 //! `opcproxy.dll` + `opccomn_ps.dll`.
 //!
-//! Recipe (`build_proxy`):
+//! Built for both bitnesses from the same IDL (`build_proxy` per [`Arch`]): the 64-bit DLL
+//! into `target/x86_64-pc-windows-gnu/release/`, the 32-bit one (for 32-bit OPC clients,
+//! registered with the 32-bit `regsvr32` of syswow64) into
+//! `target/i686-pc-windows-gnu/release/`. The only differences are the tools
+//! (`x86_64-`/`i686-w64-mingw32-`) and widl's `-m64`/`-m32`; the widl-bug-2 fix and its
+//! check against the IDL run on each.
+//!
+//! Recipe (`build_proxy`, shown for 64-bit):
 //! 1. `x86_64-w64-mingw32-widl -m64 -Oicf` compiles each IDL unit (`opccomn`, `opcda`)
 //!    separately into `<unit>.h`, `<unit>_p.c`, `<unit>_i.c`; `--dlldata-only` writes one
 //!    `dlldata.c` listing both proxy files, so one DLL serves both (as MIDL does for a
@@ -79,24 +86,31 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::SystemTime;
 
+use crate::arch::Arch;
 use crate::util;
 
 /// IDL compilation units in `idl/`, in the order of the DLL's proxy file list.
 const UNITS: &[&str] = &["opccomn", "opcda"];
-const WIDL: &str = "x86_64-w64-mingw32-widl";
-const GCC: &str = "x86_64-w64-mingw32-gcc";
 /// System IDL files (oaidl.idl, objidl.idl, ...) come only with Debian's libwine-dev.
 const WINE_IDL_DIR: &str = "/usr/include/wine/wine/windows";
 const DLL_NAME: &str = "opc_ps.dll";
 const DEF_FILE: &str = "idl/ps/opc_ps.def";
 const FIX_HEADER: &str = "idl/ps/opc_ps_fix.h";
-const INSTALL_HINT: &str =
-    "apt-get install -y --no-install-recommends gcc-mingw-w64-x86-64 mingw-w64-tools libwine-dev";
+const INSTALL_HINT: &str = "cargo xtask setup (or apt-get install -y --no-install-recommends gcc-mingw-w64-x86-64 gcc-mingw-w64-i686 mingw-w64-tools libwine-dev)";
 
-/// Builds `opc_ps.dll` from `idl/` into `out_dir` (generated C sources go to
-/// `out_dir/opc_ps/`) and returns the DLL's path. Skips the work when the DLL is newer
-/// than every input.
-pub fn build_proxy(root: &Path, out_dir: &Path) -> Result<PathBuf, String> {
+/// Builds both `opc_ps.dll`s (64-bit, then 32-bit) and returns their paths in that order.
+pub fn build_both(root: &Path) -> Result<Vec<PathBuf>, String> {
+    Arch::ALL.iter().map(|&a| build_proxy(root, a)).collect()
+}
+
+/// Builds `opc_ps.dll` for `arch` from `idl/` into `target/<triple>/release` (generated C
+/// sources go to its `opc_ps/`) and returns the DLL's path. Skips the work when the DLL
+/// is newer than every input.
+pub fn build_proxy(root: &Path, arch: Arch) -> Result<PathBuf, String> {
+    let out_dir = arch.release_dir(root);
+    fs::create_dir_all(&out_dir)
+        .map_err(|e| format!("proxy: cannot create {}: {e}", out_dir.display()))?;
+    let out_dir = out_dir.as_path();
     let idl_dir = root.join("idl");
     let def = root.join(DEF_FILE);
     let fix_header = root.join(FIX_HEADER);
@@ -121,7 +135,7 @@ pub fn build_proxy(root: &Path, out_dir: &Path) -> Result<PathBuf, String> {
         println!("proxy: {} is up to date", dll.display());
         return Ok(dll);
     }
-    for tool in [WIDL, GCC] {
+    for tool in [arch.widl(), arch.gcc()] {
         if !tool_exists(tool) {
             return Err(format!(
                 "proxy: `{tool}` not found; install it with: {INSTALL_HINT}"
@@ -141,9 +155,9 @@ pub fn build_proxy(root: &Path, out_dir: &Path) -> Result<PathBuf, String> {
         let idl = idl_dir.join(format!("{unit}.idl"));
         // Relative output names (cwd = gen) keep absolute paths out of the #includes.
         util::run(
-            Command::new(WIDL)
+            Command::new(arch.widl())
                 .current_dir(&gen)
-                .args(["-m64", "-Oicf"])
+                .args([arch.widl_m(), "-Oicf"])
                 .arg(format!("-I{WINE_IDL_DIR}"))
                 .arg(format!("-I{}", idl_dir.display()))
                 .args(["-h", "-H", &format!("{unit}.h")])
@@ -164,23 +178,24 @@ pub fn build_proxy(root: &Path, out_dir: &Path) -> Result<PathBuf, String> {
         fs::write(&p_c, &fixed.source)
             .map_err(|e| format!("proxy: cannot write {}: {e}", p_c.display()))?;
         println!(
-            "proxy: {unit}_p.c: re-pointed {} string out-parameter(s) at their FC_RP descriptor (widl bug 2){}{}",
+            "proxy: {}/{unit}_p.c: re-pointed {} string out-parameter(s) at their FC_RP descriptor (widl bug 2){}{}",
+            arch.target(),
             fixed.repointed.len(),
             if fixed.repointed.is_empty() { "" } else { ": " },
             fixed.repointed.join(", ")
         );
     }
 
-    let mut dlldata = Command::new(WIDL);
+    let mut dlldata = Command::new(arch.widl());
     dlldata
         .current_dir(&gen)
-        .args(["-m64", "--dlldata-only", "-o", "dlldata.c"])
+        .args([arch.widl_m(), "--dlldata-only", "-o", "dlldata.c"])
         .args(UNITS);
     util::run(&mut dlldata).map_err(|e| format!("proxy: {e}"))?;
 
     // Link to a temporary name so that a failed link never leaves an "up to date" DLL.
     let tmp = out_dir.join(format!("{DLL_NAME}.tmp"));
-    let mut gcc = Command::new(GCC);
+    let mut gcc = Command::new(arch.gcc());
     gcc.current_dir(&gen)
         .args(["-O2", "-shared", "-include"])
         .arg(&fix_header)
@@ -192,6 +207,11 @@ pub fn build_proxy(root: &Path, out_dir: &Path) -> Result<PathBuf, String> {
     }
     gcc.arg(&def)
         .args(["-lrpcrt4", "-loleaut32", "-lole32", "-luuid"]);
+    if arch == Arch::X86 {
+        // The .def names the undecorated Dll* functions; ld maps them to their stdcall
+        // symbols (_DllGetClassObject@12, ...), as it would with a warning each.
+        gcc.arg("-Wl,--enable-stdcall-fixup");
+    }
     util::run(&mut gcc).map_err(|e| format!("proxy: {e}"))?;
     fs::rename(&tmp, &dll).map_err(|e| {
         format!(

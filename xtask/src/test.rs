@@ -5,14 +5,20 @@
 //!    `-D warnings` for the host and for Windows (the lint levels are the `[lints]` tables
 //!    of the manifests, the settings `clippy.toml`);
 //! 3. native `cargo test` of every host crate;
-//! 4. the Windows build;
-//! 5. registration of the proxy/stub DLL and the server in the project's Wine prefix;
+//! 4. the Windows build (both bitnesses, `build.rs`);
+//! 5. registration of the proxy/stub DLLs (64-bit and 32-bit) and the server in the
+//!    project's Wine prefix;
 //! 6. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner) and the COM
-//!    crate's unit tests (Windows-only).
+//!    crate's unit tests (Windows-only), then the third-party client;
+//! 7. the end-to-end tests again as a **32-bit client** ([`E2E_32`]: built for
+//!    `i686-pc-windows-gnu`, run by Wine's 32-bit loader in the same prefix, through the
+//!    32-bit proxy/stub, against the same 64-bit server), then the third-party client
+//!    built for 32-bit.
 //!
-//! Steps 5 and 6 always end every Wine process of the prefix and run with timeouts.
+//! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
+use crate::arch::Arch;
 use crate::{build, setup, util, wine};
 use std::time::Duration;
 
@@ -54,10 +60,63 @@ pub fn run(args: &[String]) -> Result<(), String> {
         if !status.success() {
             return Err(format!("end-to-end tests failed: {status}"));
         }
-        thirdparty_client()
+        thirdparty_client(Arch::X64)?;
+        println!(
+            "test: end-to-end tests as a 32-bit client ({})",
+            Arch::X86.target()
+        );
+        let status = util::run_with_timeout(&mut e2e_32(&[], &[]), E2E_LIMIT)?;
+        if !status.success() {
+            return Err(format!("end-to-end tests (32-bit client) failed: {status}"));
+        }
+        thirdparty_client(Arch::X86)
     })();
     wine::kill_all();
     result
+}
+
+/// The end-to-end test files that also run from a 32-bit client: every interface and
+/// method of the server, the callbacks (OnDataChange, OnReadComplete, OnWriteComplete,
+/// ShutdownRequest, and OnCancelComplete of requests waiting for a slow device in
+/// `group_slow_source`), every string out-parameter (marshal_strings, the 32-bit proxy
+/// against the 64-bit probe's stub), registration as 32-bit processes see it, and the
+/// 32-bit opcdiag. Left out: `service` (it tests the server as an NT service, not the
+/// client's side of the wire). Measured: that one passes at 32-bit too.
+pub const E2E_32: &[&str] = &[
+    "foundation",
+    "generic_clients",
+    "group_async",
+    "group_callbacks",
+    "group_io",
+    "group_items",
+    "group_slow_source",
+    "group_state",
+    "marshal_strings",
+    "opcdiag",
+    "registration",
+    "server_browse",
+    "server_groups",
+    "server_itemio",
+    "server_props",
+    "server_shutdown",
+];
+
+/// `cargo test --release --target i686-pc-windows-gnu -p e2e-tests` of `cargo_args` (none:
+/// the [`E2E_32`] test files) `-- --test-threads=1 test_args`. The 32-bit runner
+/// (xtask/wine-runner32.sh) runs the binaries with Wine's 32-bit loader.
+fn e2e_32(cargo_args: &[String], test_args: &[String]) -> std::process::Command {
+    let mut c = util::cargo();
+    c.args(["test", "--release", "--target", Arch::X86.target()]);
+    if cargo_args.is_empty() {
+        c.args(["-p", "e2e-tests"]);
+        for t in E2E_32 {
+            c.args(["--test", t]);
+        }
+    } else {
+        c.args(cargo_args);
+    }
+    c.arg("--").arg("--test-threads=1").args(test_args);
+    c
 }
 
 /// Formatting and clippy, before anything is built for testing: each fails the run with
@@ -104,7 +163,30 @@ fn static_checks(native_only: bool) -> Result<(), String> {
             "{e}\nclippy ({}) found the problems printed above: fix them",
             setup::TARGET
         )
-    })
+    })?;
+    // What is built for 32-bit Windows: opcdiag and the e2e tests (the 32-bit client), with
+    // the client library and the core beneath them.
+    let x86 = Arch::X86.target();
+    println!("test: clippy for {x86} (the 32-bit client side)");
+    util::run(util::cargo().args([
+        "clippy",
+        "-p",
+        "e2e-tests",
+        "-p",
+        "opc-client",
+        "-p",
+        "ctopc-com",
+        "-p",
+        "ctopc-core",
+        "--all-targets",
+        "--release",
+        "--target",
+        x86,
+        "--",
+        "-D",
+        "warnings",
+    ]))
+    .map_err(|e| format!("{e}\nclippy ({x86}) found the problems printed above: fix them"))
 }
 
 /// `cargo xtask e2e [ARGS...]`: the Windows build, registration in the project's prefix,
@@ -113,7 +195,11 @@ fn static_checks(native_only: bool) -> Result<(), String> {
 /// `cargo xtask e2e -p e2e-tests --test group_io` or `cargo xtask e2e -p ctopc-com`.
 /// Arguments after a `--` go to the test binaries (a name filter, say). For working on
 /// one part; `cargo xtask test` stays the one command that runs everything.
+/// `--x86` first runs the tests as a 32-bit client instead (default: the [`E2E_32`]
+/// files), e.g. `cargo xtask e2e --x86 -p e2e-tests --test group_io`.
 pub fn e2e(args: &[String]) -> Result<(), String> {
+    let x86 = args.first().is_some_and(|a| a == "--x86");
+    let args = if x86 { &args[1..] } else { args };
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
     let (cargo_args, test_args) = match args.iter().position(|a| a == "--") {
@@ -123,6 +209,25 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
+        if x86 {
+            // marshal_strings talks to the 64-bit marshal probe: build it first.
+            util::run(util::cargo().args([
+                "build",
+                "--release",
+                "--target",
+                setup::TARGET,
+                "-p",
+                "e2e-tests",
+                "--bin",
+                "marshal-probe",
+            ]))?;
+            let status = util::run_with_timeout(&mut e2e_32(cargo_args, test_args), E2E_LIMIT)?;
+            return if status.success() {
+                Ok(())
+            } else {
+                Err(format!("end-to-end tests (32-bit client) failed: {status}"))
+            };
+        }
         let mut c = util::cargo();
         c.args(["test", "--release", "--target", setup::TARGET]);
         if cargo_args.is_empty() {
@@ -143,13 +248,21 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
     result
 }
 
-/// Registers the proxy/stub DLL (its own DllRegisterServer, through regsvr32) and the
-/// server (/RegServer) in the prefix.
+/// Registers the proxy/stub DLLs (their own DllRegisterServer, through regsvr32: the
+/// 64-bit DLL with the 64-bit regsvr32 of system32, the 32-bit DLL with the 32-bit one of
+/// syswow64, each into its own registry view) and the server (/RegServer) in the prefix.
 pub fn register(a: &build::Artifacts) -> Result<(), String> {
     let limit = Duration::from_secs(120);
-    let status = util::run_with_timeout(wine::wine("regsvr32").arg("/s").arg(&a.proxy), limit)?;
-    if !status.success() {
-        return Err(format!("regsvr32 {} failed: {status}", a.proxy.display()));
+    for (arch, dll) in [(Arch::X64, &a.proxy), (Arch::X86, &a.proxy32)] {
+        let status =
+            util::run_with_timeout(wine::wine_arch(arch, "regsvr32").arg("/s").arg(dll), limit)?;
+        if !status.success() {
+            return Err(format!(
+                "regsvr32 ({}) {} failed: {status}",
+                arch.target(),
+                dll.display()
+            ));
+        }
     }
     let status = util::run_with_timeout(wine::wine(&a.server).arg("/RegServer"), limit)?;
     if !status.success() {
@@ -159,18 +272,22 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
         ));
     }
     println!(
-        "test: registered {} and {}",
+        "test: registered {}, {} and {}",
         a.proxy.display(),
+        a.proxy32.display(),
         a.server.display()
     );
     Ok(())
 }
 
-/// Builds and runs tests/thirdparty-client: an OPC DA client we did not write (the opc_da
-/// crate, with bindings from the OPC Foundation's IDL) reads the server's status through
-/// our proxy/stub DLL.
-fn thirdparty_client() -> Result<(), String> {
-    println!("test: third-party OPC client (opc_da crate) under Wine");
+/// Builds and runs tests/thirdparty-client for `arch`: an OPC DA client we did not write
+/// (the opc_da crate, with bindings from the OPC Foundation's IDL) reads the server's
+/// status through our proxy/stub DLL of that bitness.
+fn thirdparty_client(arch: Arch) -> Result<(), String> {
+    println!(
+        "test: third-party OPC client (opc_da crate) under Wine, {}",
+        arch.target()
+    );
     let root = util::root();
     let target_dir = root.join("target/thirdparty");
     util::run(
@@ -179,19 +296,23 @@ fn thirdparty_client() -> Result<(), String> {
                 "build",
                 "--release",
                 "--target",
-                setup::TARGET,
+                arch.target(),
                 "--manifest-path",
             ])
             .arg(root.join("tests/thirdparty-client/Cargo.toml"))
             .env("CARGO_TARGET_DIR", &target_dir),
     )?;
     let exe = target_dir
-        .join(setup::TARGET)
+        .join(arch.target())
         .join("release/thirdparty-client.exe");
-    let status = util::run_with_timeout(&mut wine::wine(&exe), Duration::from_secs(120))?;
+    let status =
+        util::run_with_timeout(&mut wine::wine_arch(arch, &exe), Duration::from_secs(120))?;
     if status.success() {
         Ok(())
     } else {
-        Err(format!("third-party client failed: {status}"))
+        Err(format!(
+            "third-party client ({}) failed: {status}",
+            arch.target()
+        ))
     }
 }

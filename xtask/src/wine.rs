@@ -1,12 +1,12 @@
 //! The project's own Wine prefix under target/wine/prefix, and helpers for prefixes of
 //! their own (the demo's).
 
+use crate::arch::Arch;
 use crate::util;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-pub const WINE64: &str = "/usr/lib/wine/wine64";
 pub const WINESERVER: &str = "/usr/lib/wine/wineserver";
 
 pub fn prefix() -> PathBuf {
@@ -16,7 +16,13 @@ pub fn prefix() -> PathBuf {
 /// A command that runs `program` (a Windows path or a Unix path to an .exe) under Wine
 /// in the project prefix, quiet, without the Mono/Gecko installers.
 pub fn wine(program: impl AsRef<std::ffi::OsStr>) -> Command {
-    let mut c = Command::new(WINE64);
+    wine_arch(Arch::X64, program)
+}
+
+/// [`wine`] with the loader of `arch`: the 32-bit loader runs 32-bit programs (and the
+/// 32-bit `regsvr32` from syswow64) in the same win64 prefix.
+pub fn wine_arch(arch: Arch, program: impl AsRef<std::ffi::OsStr>) -> Command {
+    let mut c = Command::new(arch.loader());
     env(&mut c);
     c.arg(program);
     c
@@ -44,19 +50,6 @@ pub fn kill_all() {
     );
 }
 
-/// Waits until the prefix's wineserver has exited (wineserver -w), bounded.
-pub fn wait_idle(limit: Duration) -> Result<(), String> {
-    let mut c = Command::new(WINESERVER);
-    env(&mut c);
-    c.arg("-w");
-    util::run_with_timeout(&mut c, limit).map(|_| ())
-}
-
-/// Windows-side system32 of the prefix.
-pub fn system32() -> PathBuf {
-    prefix().join("drive_c/windows/system32")
-}
-
 /// A command that runs `program` under Wine in the prefix `pfx` (not the project's).
 pub fn wine_in(pfx: &Path, program: impl AsRef<std::ffi::OsStr>) -> Command {
     let mut c = wine(program);
@@ -77,8 +70,28 @@ pub fn wineserver_in(pfx: &Path, arg: &str, limit: Duration) {
     );
 }
 
-/// Creates a Wine prefix of its own at `pfx` (as `setup` makes the project's, about 10 s
-/// on first use) and installs the bcryptprimitives shim `setup` built into it.
+/// The bcryptprimitives shim `setup` builds for `arch` (xtask/shim): 64-bit in
+/// target/wine, 32-bit in target/wine/x86.
+pub fn shim(arch: Arch) -> PathBuf {
+    let dir = util::root().join("target/wine");
+    match arch.dist_subdir() {
+        None => dir.join("bcryptprimitives.dll"),
+        Some(sub) => dir.join(sub).join("bcryptprimitives.dll"),
+    }
+}
+
+/// True when the prefix `pfx` can run 32-bit programs: its `syswow64` holds Wine's
+/// 32-bit DLLs. A prefix created before wine32 was installed has an empty `syswow64`.
+pub fn has_wow64(pfx: &Path) -> bool {
+    pfx.join("drive_c/windows/syswow64/kernel32.dll").is_file()
+}
+
+/// Makes the Wine prefix `pfx` ready for both bitnesses: creates it when missing (about
+/// 10 s), repairs a prefix made before wine32 was installed (its syswow64 is empty:
+/// `wineboot -u` after removing `.update-timestamp`, about 60 s once; `wineboot -u`
+/// alone does not fill it), and installs the bcryptprimitives shims `setup` built into
+/// system32 (64-bit) and syswow64 (32-bit). Used for the project's prefix and for the
+/// demo's and the benchmark's own.
 pub fn ensure_prefix(pfx: &Path) -> Result<(), String> {
     if !pfx.join("system.reg").exists() {
         println!("creating Wine prefix {}", pfx.display());
@@ -90,10 +103,40 @@ pub fn ensure_prefix(pfx: &Path) -> Result<(), String> {
         }
         wineserver_in(pfx, "-w", Duration::from_secs(120));
     }
-    let shim = util::root().join("target/wine/bcryptprimitives.dll");
-    let dest = pfx.join("drive_c/windows/system32/bcryptprimitives.dll");
-    if !util::up_to_date(&dest, std::slice::from_ref(&shim)) {
-        std::fs::copy(&shim, &dest).map_err(|e| format!("copy shim to {}: {e}", dest.display()))?;
+    if !has_wow64(pfx) {
+        println!(
+            "repairing Wine prefix {} for 32-bit programs (its syswow64 is empty: made before wine32 was installed)",
+            pfx.display()
+        );
+        // Nothing of the prefix may run during the update.
+        wineserver_in(pfx, "-k", Duration::from_secs(20));
+        let stamp = pfx.join(".update-timestamp");
+        if stamp.exists() {
+            std::fs::remove_file(&stamp).map_err(|e| format!("{}: {e}", stamp.display()))?;
+        }
+        let status =
+            util::run_with_timeout(wine_in(pfx, "wineboot").arg("-u"), Duration::from_secs(300))?;
+        if !status.success() {
+            return Err(format!("wineboot -u failed: {status}"));
+        }
+        wineserver_in(pfx, "-w", Duration::from_secs(120));
+        if !has_wow64(pfx) {
+            return Err(format!(
+                "{}: syswow64 is still empty after wineboot -u; is wine32 (i386) installed? (`cargo xtask setup`)",
+                pfx.display()
+            ));
+        }
+    }
+    for arch in Arch::ALL {
+        let shim = shim(arch);
+        let dest = pfx
+            .join("drive_c/windows")
+            .join(arch.system_dir())
+            .join("bcryptprimitives.dll");
+        if !util::up_to_date(&dest, std::slice::from_ref(&shim)) {
+            std::fs::copy(&shim, &dest)
+                .map_err(|e| format!("copy shim to {}: {e}", dest.display()))?;
+        }
     }
     Ok(())
 }

@@ -62,43 +62,84 @@ mod tests {
 
     #[test]
     fn groups_are_branches_and_variables_leaves() {
-        let space = Arc::new(build_address_space(&demo(false)).unwrap());
+        let ns = demo(false);
+        let space = Arc::new(build_address_space(&ns).unwrap());
         let mut c = BrowseCursor::new(space);
-        let top = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
+        let top = c
+            .browse_opc_item_ids(BrowseType::Branch, "", 0, 0, &ns)
+            .unwrap();
         assert!(top.iter().any(|n| n == "Magazyn siarki"), "{top:?}");
         c.change_browse_position(BrowseDirection::Down, "Magazyn siarki")
             .unwrap();
         c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101")
             .unwrap();
-        let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
+        let leaves = c
+            .browse_opc_item_ids(BrowseType::Leaf, "", 0, 0, &ns)
+            .unwrap();
         assert!(!leaves.is_empty());
         // GetItemID returns the bare variable ID (names are unique).
         let id = c.get_item_id(&leaves[0]).unwrap();
         assert!(!id.contains('/'), "{id}");
-        let flat = BrowseCursor::new(Arc::new(build_address_space(&demo(false)).unwrap()))
-            .browse_opc_item_ids(BrowseType::Flat, "", 0, 0)
+        let flat = BrowseCursor::new(Arc::new(build_address_space(&ns).unwrap()))
+            .browse_opc_item_ids(BrowseType::Flat, "", 0, 0, &ns)
             .unwrap();
         assert!(flat.len() >= 200, "{}", flat.len());
     }
 
     #[test]
     fn attributes_as_items_makes_variables_branches_with_attribute_leaves() {
-        let space = Arc::new(build_address_space(&demo(true)).unwrap());
+        let ns = demo(true);
+        let space = Arc::new(build_address_space(&ns).unwrap());
         let mut c = BrowseCursor::new(Arc::clone(&space));
         c.change_browse_position(BrowseDirection::Down, "Magazyn siarki")
             .unwrap();
         c.change_browse_position(BrowseDirection::Down, "Zbiornik siarki ciekłej Z101")
             .unwrap();
-        let vars = c.browse_opc_item_ids(BrowseType::Branch, "", 0, 0).unwrap();
+        let vars = c
+            .browse_opc_item_ids(BrowseType::Branch, "", 0, 0, &ns)
+            .unwrap();
         assert!(!vars.is_empty());
         c.change_browse_position(BrowseDirection::Down, &vars[0])
             .unwrap();
-        let leaves = c.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0).unwrap();
+        let leaves = c
+            .browse_opc_item_ids(BrowseType::Leaf, "", 0, 0, &ns)
+            .unwrap();
         for want in ["CV", "DESC", "EU_UNIT"] {
             assert!(
                 leaves.iter().any(|l| l == want),
                 "{want} missing in {leaves:?}"
             );
         }
+    }
+
+    /// The BrowseOPCItemIDs filters over the demo plant (issue 15): OPC_WRITEABLE lists
+    /// only the writable variables, a data type only the variables of that canonical type.
+    #[test]
+    fn item_filters_over_the_demo_plant() {
+        use ctopc_core::namespace::{Namespace, OPC_WRITEABLE};
+        let ns = demo(false);
+        let c = BrowseCursor::new(Arc::new(build_address_space(&ns).unwrap()));
+        let flat = |vt: u16, rights: u32| {
+            c.browse_opc_item_ids(BrowseType::Flat, "", vt, rights, &ns)
+                .unwrap()
+        };
+        let all = flat(0, 0);
+        let writable = flat(0, OPC_WRITEABLE);
+        assert!(!writable.is_empty() && writable.len() < all.len());
+        for id in &writable {
+            let d = ns.resolve(id, "").unwrap();
+            assert_ne!(d.access_rights & OPC_WRITEABLE, 0, "{id}");
+        }
+        let r4 = flat(4, 0);
+        assert!(r4.len() < all.len(), "{} of {}", r4.len(), all.len());
+        for id in &r4 {
+            assert_eq!(ns.resolve(id, "").unwrap().canonical_type.0, 4, "{id}");
+        }
+        let typed: usize = [2u16, 3, 4, 5, 11, 17, 18, 19]
+            .into_iter()
+            .map(|vt| flat(vt, 0).len())
+            .sum();
+        assert_eq!(typed, all.len(), "every variable has one canonical type");
+        assert!(flat(8, 0).is_empty(), "no BSTR variables");
     }
 }

@@ -56,6 +56,7 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "LogKeepFiles",
     "SourceTimeout",
     "SimulationDeviceDelay",
+    "FirstSampleWait",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -139,10 +140,18 @@ pub struct ServerOptions {
     /// the simulation answers device reads and writes only after this delay (a slow
     /// device, for testing timeouts and cancellation). Subscriptions are not delayed.
     pub simulation_device_delay_ms: u32,
+    /// `FirstSampleWait`, ms (default [`ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS`],
+    /// 0..=600000; the engine's [`ctopc_core::model::EngineConfig::first_sample_wait_ms`]):
+    /// how long the first OnDataChange of newly active items waits for their first sample
+    /// from the data source before it is sent with what the cache holds (BAD Waiting for
+    /// Initial Data). 0: no wait.
+    pub first_sample_wait_ms: u32,
 }
 
 /// Bounds of `SourceTimeout`, ms.
 const SOURCE_TIMEOUT_RANGE_MS: (u32, u32) = (100, 600_000);
+/// Largest `FirstSampleWait`, ms.
+const MAX_FIRST_SAMPLE_WAIT_MS: u32 = 600_000;
 /// Largest `SimulationDeviceDelay`, ms.
 const MAX_SIMULATION_DEVICE_DELAY_MS: u32 = 600_000;
 
@@ -153,6 +162,7 @@ impl ServerOptions {
         ctopc_core::model::EngineConfig {
             min_update_rate_ms: self.min_update_rate_ms,
             source_timeout_ms: self.source_timeout_ms,
+            first_sample_wait_ms: self.first_sample_wait_ms,
             max_pending_data_changes: ctopc_core::model::SERVER_PENDING_DATA_CHANGES,
             ..ctopc_core::model::EngineConfig::default()
         }
@@ -186,6 +196,7 @@ impl Default for ServerOptions {
             log_max_file_size_mb: 10,
             log_keep_files: 30,
             source_timeout_ms: ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS,
+            first_sample_wait_ms: ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS,
             simulation_device_delay_ms: 0,
         }
     }
@@ -532,6 +543,13 @@ fn apply_server_option(
             let (min, max) = SOURCE_TIMEOUT_RANGE_MS;
             set_number(&mut o.source_timeout_ms, file, e, min, max)?
         }
+        "firstsamplewait" => set_number(
+            &mut o.first_sample_wait_ms,
+            file,
+            e,
+            0,
+            MAX_FIRST_SAMPLE_WAIT_MS,
+        )?,
         "simulationdevicedelay" => set_number(
             &mut o.simulation_device_delay_ms,
             file,
@@ -898,6 +916,13 @@ mod tests {
             ("simulationdevicedelay", " 20 ", |o| {
                 o.simulation_device_delay_ms == 20
             }),
+            ("FirstSampleWait", "0", |o| o.first_sample_wait_ms == 0),
+            ("FirstSampleWait", "500", |o| {
+                o.first_sample_wait_ms == 500 && o.engine_config().first_sample_wait_ms == 500
+            }),
+            ("FirstSampleWait", "", |o| {
+                o.first_sample_wait_ms == ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS
+            }),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();
@@ -926,6 +951,8 @@ mod tests {
             ("SimulationDeviceDelay", "600001"),
             ("SimulationDeviceDelay", "-1"),
             ("SimulationDeviceDelay", "1.5"),
+            ("FirstSampleWait", "600001"),
+            ("FirstSampleWait", "-1"),
         ] {
             let err = parse(&format!("[Server]\n{key}={value}\n")).unwrap_err();
             assert_eq!((err.line, err.option.as_deref()), (2, Some(key)));

@@ -133,8 +133,12 @@ pub fn apply_quality_rules_with(
 }
 
 /// A value written to a process variable must be an integer or a real (VT_I1..VT_UI8,
-/// VT_R4, VT_R8); anything else (strings, even numeric ones, BOOL, DATE, CY, EMPTY,
-/// arrays) is `OPC_E_BADTYPE`.
+/// VT_R4, VT_R8); anything else (strings, BOOL, DATE, CY, EMPTY, arrays) is
+/// `OPC_E_BADTYPE`. This is checked on the value **after** the engine converted what the
+/// client sent to the variable's canonical type (`ctopc_core::convert::convert_for_write`:
+/// numeric text in the group's locale, BOOL as 1/0, CY and DECIMAL convert; DATE and other
+/// text do not), so a client may write `"12,5"`, TRUE or a CY to a numeric variable; it is
+/// the last guard before a value reaches the asix network (`asix_net::pipeline`).
 pub fn check_write_value(value: &Value) -> OpcResult<()> {
     match value {
         Value::I1(_)

@@ -222,7 +222,9 @@ impl<V> Resolved<V> {
 }
 
 /// The write checks of an item: a derived item (formatted, percent, bars) is never
-/// writable (OPC_E_BADRIGHTS), values must be integers or reals, and a variable the
+/// writable (OPC_E_BADRIGHTS), values must be integers or reals (the engine has already
+/// converted what the client sent, text and BOOL included, to the variable's canonical
+/// type: `ctopc_core::convert::convert_for_write`), and a variable the
 /// database does not mark `Writable` is refused (ASKOM_E_WriteErrorDeviceRequestIllegal:
 /// a second guard behind the engine's access rights).
 pub fn check_write(

@@ -7,9 +7,9 @@
 //! the NT service's control handler (`service::run`) trigger.
 
 use crate::context::{Context, Setup};
-use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
-use crate::registry::{self, Category, ServerRegistration};
+use crate::registration;
+use crate::registry::{self, ServerRegistration};
 use crate::runtime::Runtime;
 use crate::server;
 use ctopc_core::model::Engine;
@@ -29,11 +29,8 @@ use windows::Win32::System::Com::{
 use windows::Win32::System::Console::SetConsoleCtrlHandler;
 
 /// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
-pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(0x3277b556_ba68_4bde_8687_8ee4e4b46336);
-pub const PROGID: &str = "ServerCTOPC.App";
-pub const PROGID_VERSIONED: &str = "ServerCTOPC.App.1";
-pub const DESCRIPTION: &str = "ServerCTOPC OPC DA Server for asix";
-pub const EXE_NAME: &str = "ServerCTOPC.exe";
+pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(registration::CLSID_SERVERCTOPC);
+pub use crate::registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
 /// How long a server started by COM waits for its first client before it exits.
 pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 /// How long the server stays up after its last client has gone, so that a client
@@ -69,29 +66,7 @@ fn with_registration<R>(
     f: impl FnOnce(&ServerRegistration) -> R,
 ) -> windows::core::Result<R> {
     let exe = exe_path()?;
-    let categories = [
-        Category {
-            catid: CATID_OPCDAServer20,
-            description: "OPC Data Access Servers Version 2.0",
-        },
-        Category {
-            catid: CATID_OPCDAServer30,
-            description: "OPC Data Access Servers Version 3.0",
-        },
-    ];
-    let reg = ServerRegistration {
-        clsid: CLSID_SERVERCTOPC,
-        appid: CLSID_SERVERCTOPC,
-        progid: PROGID,
-        progid_versioned: PROGID_VERSIONED,
-        description: DESCRIPTION,
-        exe_path: &exe,
-        exe_name: EXE_NAME,
-        service_name: service,
-        categories: &categories,
-        opc_key_vendor: Some(server::VENDOR_INFO),
-    };
-    Ok(f(&reg))
+    Ok(f(&registration::serverctopc(&exe, service)))
 }
 
 /// `/RegServer`.

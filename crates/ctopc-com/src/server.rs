@@ -31,6 +31,7 @@
 
 mod browse;
 mod groups;
+pub(crate) use groups::lcid_accepted;
 mod itemio;
 mod props;
 mod shutdown;
@@ -50,9 +51,9 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use windows::core::{implement, IUnknown, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::E_INVALIDARG;
 
-/// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key.
-pub const VENDOR_INFO: &str =
-    "ServerCTOPC: OPC DA 2.05a/3.0 server for asix (Rust rewrite of AsixConnect ServerCTOPC)";
+/// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key (defined
+/// with the registration, which an installer builds natively).
+pub const VENDOR_INFO: &str = crate::registration::VENDOR_INFO;
 
 struct Session {
     lcid: u32,

@@ -987,3 +987,53 @@ fn cancel2_ends_a_transaction_with_on_cancel_complete_or_fails_once_it_completed
     }
     eprintln!("Cancel2: {cancelled} of 20 cancelled before completion");
 }
+
+/// WriteVQT of a VT_EMPTY value with a quality or a timestamp (issue 15): OPC_E_NOTSUPPORTED
+/// per item (DA 3.0: "the server does not support the requested combination (which could be
+/// a single quantity such as just timestamp)"); VT_EMPTY alone is OPC_E_BADTYPE; a VARIANT
+/// that decodes to no value keeps its decoding error (OPC_E_BADTYPE) even with a quality;
+/// the handle and rights checks still come first. Nothing is written.
+#[test]
+fn write_vqt_of_an_empty_value_with_a_quality_or_timestamp_is_opc_e_notsupported() {
+    let p = plant("io-write-vqt-empty", false);
+    let vqt = |value: VARIANT, quality: bool, stamp: bool| OPCITEMVQT {
+        vDataValue: value,
+        bQualitySpecified: quality.into(),
+        wQuality: 0xC0,
+        bTimeStampSpecified: stamp.into(),
+        ftTimeStamp: FILETIME {
+            dwLowDateTime: 1,
+            dwHighDateTime: 0x01D8_0000,
+        },
+        ..Default::default()
+    };
+    let h = [p.h[1], p.h[1], p.h[1], p.h[1], p.h[1], p.h[0], BAD_HANDLE];
+    let vqts = [
+        vqt(VARIANT::default(), true, false),
+        vqt(VARIANT::default(), false, true),
+        vqt(VARIANT::default(), true, true),
+        vqt(VARIANT::default(), false, false),
+        vqt(null_variant(), true, true),
+        vqt(VARIANT::default(), true, false),
+        vqt(VARIANT::default(), true, false),
+    ];
+    let r = errors_of(7, |e| {
+        // SAFETY: valid arrays of the same length.
+        unsafe { p.sync().WriteVQT(7, h.as_ptr(), vqts.as_ptr(), e) }
+    });
+    assert_eq!(
+        r,
+        (
+            S_FALSE,
+            vec![
+                OPC_E_NOTSUPPORTED,
+                OPC_E_NOTSUPPORTED,
+                OPC_E_NOTSUPPORTED,
+                OPC_E_BADTYPE,
+                OPC_E_BADTYPE,
+                OPC_E_BADRIGHTS,
+                OPC_E_INVALIDHANDLE
+            ]
+        )
+    );
+}

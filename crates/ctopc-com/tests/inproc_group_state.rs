@@ -270,6 +270,39 @@ fn set_state_with_a_deadband_out_of_range_is_e_invalidarg_and_changes_nothing() 
     }
 }
 
+/// SetState validates the LCID as AddGroup does (issue 15: it accepted 0xDEADBEEF, which
+/// AddGroup refuses): E_INVALIDARG and nothing changed; the LCIDs AddGroup takes are taken.
+#[test]
+fn set_state_validates_the_lcid_as_add_group_does() {
+    let (_s, g) = server_with_group("state-set-lcid");
+    let sm: IOPCGroupStateMgt = iface(&g);
+    let before = get_state(&sm);
+    // AddGroup's refusal of the same LCID: inproc_server.rs, add_group_unknown_lcid_is_invalidarg.
+    for lcid in [0xDEAD_BEEFu32, 0x7FFF_1234] {
+        let (hr, _) = set_state(
+            &sm,
+            SetArgs {
+                rate: Some(4000),
+                lcid: Some(lcid),
+                ..Default::default()
+            },
+        );
+        assert_eq!(hr, E_INVALIDARG, "lcid {lcid:#x}");
+        assert_eq!(get_state(&sm), before, "lcid {lcid:#x}: nothing changed");
+    }
+    for lcid in [0x0415u32, 0x0409, 0x0809, 0x0407, 0x0800, 0x0400, 0x0000] {
+        let (hr, _) = set_state(
+            &sm,
+            SetArgs {
+                lcid: Some(lcid),
+                ..Default::default()
+            },
+        );
+        assert_eq!(hr, S_OK, "lcid {lcid:#x}");
+        assert_eq!(get_state(&sm).lcid, lcid);
+    }
+}
+
 #[test]
 fn set_state_failure_clears_the_revised_rate() {
     let (_s, g) = server_with_group("state-set-clear");

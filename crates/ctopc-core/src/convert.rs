@@ -131,6 +131,45 @@ impl Value {
     }
 }
 
+/// A value a client writes (IOPCSyncIO::Write, IOPCAsyncIO2/3 Write, WriteVQT, the value
+/// element of the asix extended write), converted to the item's canonical type `to` as
+/// `VariantChangeTypeEx(.., lcid of the group, 0, to)` would, with the write rules of
+/// OPC DA generic clients rely on:
+///
+/// - every integer and real type, CY (also from a DECIMAL, which the COM layer decodes)
+///   and numeric text in the group's locale (pl-PL `"12,5"`, en-US `"12.5"`, blanks
+///   around it, sign, exponent, thousands separators, `&H` hex: the `VarParseNumFromStr`
+///   syntax of [`Value::convert_in`]) convert; then the range check: a value the target
+///   cannot hold is `OPC_E_RANGE` (DISP_E_OVERFLOW of the conversion);
+/// - BOOL written to an integer or real item is **TRUE -> 1, FALSE -> 0**. Here we depart
+///   from VariantChangeType, which gives VARIANT_TRUE = -1 (and 255, 65535, ... for
+///   unsigned targets): a client that writes TRUE to a process variable (a switch, a
+///   set-point enable, an Excel check box) means "on", i.e. 1 in the PLC register, and -1
+///   would be out of range of every unsigned or 0/1 variable (issue 15 asks for 1);
+/// - text that is not a number (also "True"/"False": VarI4FromStr refuses them too), DATE
+///   (a point in time is no process value, although VariantChangeType would give its day
+///   count), VT_ERROR, VT_EMPTY and arrays to a scalar item are `OPC_E_BADTYPE`;
+/// - an item whose canonical type is not a number (other namespaces than asix) converts
+///   as [`Value::convert_in`] does, its overflow `OPC_E_RANGE`, any other failure
+///   `OPC_E_BADTYPE`.
+pub fn convert_for_write(value: &Value, to: VarType, locale: Locale) -> Result<Value, OpcError> {
+    let numeric_target = int_width(to).is_some() || to == VarType::R4 || to == VarType::R8;
+    let value = match value {
+        Value::Empty | Value::Error(_) => return Err(OpcError::BadType),
+        _ if !numeric_target => value,
+        Value::Date(_) | Value::Array(_) => return Err(OpcError::BadType),
+        Value::Bool(b) => &Value::I4(i32::from(*b)),
+        v => v,
+    };
+    if value.var_type() == to {
+        return Ok(value.clone());
+    }
+    value.convert_in(to, locale).map_err(|e| match e {
+        OpcError::Overflow => OpcError::Range,
+        _ => OpcError::BadType,
+    })
+}
+
 /// True for the types [`Value::convert`] can produce: EMPTY, VARIANT, the scalar types of
 /// [`Value`] and 1-D arrays of them (or of VARIANT). OPC's AddItems/SetDatatypes use this
 /// to answer OPC_E_BADTYPE up front.

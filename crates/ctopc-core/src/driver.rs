@@ -91,7 +91,7 @@ impl Driver {
     }
 
     /// Applies the workers' reports, then one step: source in, timers, requests out, source
-    /// in again (an in-process source answers at once). Returns the events to deliver, the
+    /// in again (an in-process source answers at once) and the timers due after it. Returns the events to deliver, the
     /// synchronous operations completed, and when to run next.
     pub fn step(&mut self, now: Timestamp, reports: impl IntoIterator<Item = Report>) -> Step {
         for report in reports {
@@ -114,6 +114,11 @@ impl Driver {
         }
         if asked {
             self.pull_source(now);
+            // What the source answered at once may be due now (the first samples of newly
+            // subscribed items, which their groups were holding back).
+            if self.engine.poll_timeout().is_some_and(|t| t <= now) {
+                self.engine.handle_timeout(now);
+            }
         }
         let sync_completed = std::iter::from_fn(|| self.engine.poll_sync_completion()).collect();
         let events = std::iter::from_fn(|| self.engine.poll_event()).collect();

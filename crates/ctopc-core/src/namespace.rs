@@ -69,10 +69,11 @@ pub struct LimitProps {
 pub trait Namespace: Send + Sync {
     fn resolve(&self, item_id: &str, access_path: &str) -> OpcResult<ItemDef>;
 
-    /// Checks a value a client writes to a writable item, as the client sent it (before
-    /// the conversion to the canonical type; for the asix extended write, the value
-    /// element). The default accepts every value; asix accepts only integers and reals
-    /// (OPC_E_BADTYPE otherwise).
+    /// Checks a value a client writes to a writable item, after its conversion to the
+    /// item's canonical type ([`crate::convert::convert_for_write`]: numeric text, BOOL,
+    /// CY and every number convert; for the asix extended write, the value element). The
+    /// default accepts every value; asix accepts only integers and reals (OPC_E_BADTYPE
+    /// otherwise), which every converted value of an asix variable is.
     fn check_write_value(&self, _value: &Value) -> OpcResult<()> {
         Ok(())
     }

@@ -43,9 +43,130 @@ fn first_update_sends_all_active_items_then_only_changes() {
     assert_eq!(values(&dc[0]), vec![(101, Value::R8(2.5))]);
 }
 
+/// Issue 15: the first OnDataChange of a new item waits (bounded) for its first sample from
+/// the source, and goes as soon as it arrives, not at the next tick.
 #[test]
-fn items_waiting_for_initial_data_report_bad_waiting_quality() {
+fn the_first_callback_waits_for_the_first_sample_and_goes_when_it_arrives() {
     let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1", "A2"]);
+    sim.tick();
+    assert!(
+        sim.data_changes().is_empty(),
+        "held: no placeholder callback"
+    );
+    sim.advance(300);
+    assert!(sim.data_changes().is_empty());
+    sim.push_good("A1", 3.0);
+    sim.tick();
+    let dc = sim.data_changes();
+    assert_eq!(dc.len(), 1, "at once, 300 ms after the tick");
+    assert_eq!(values(&dc[0]), vec![(100, Value::R8(3.0))]);
+    assert_eq!(
+        (dc[0].items[0].quality, dc[0].master_quality),
+        (Quality::GOOD, None)
+    );
+    // A2 is still held; A1's changes keep the update rate.
+    sim.push_good("A1", 4.0);
+    sim.advance(100);
+    assert!(sim.data_changes().is_empty(), "a change waits for the tick");
+    sim.push_good("A2", 5.0);
+    sim.tick();
+    let dc = sim.data_changes();
+    assert_eq!(
+        values(&dc[0]),
+        vec![(101, Value::R8(5.0))],
+        "A2 at once, alone"
+    );
+    sim.advance(600);
+    let dc = sim.data_changes();
+    assert_eq!(
+        values(&dc[0]),
+        vec![(100, Value::R8(4.0))],
+        "A1 at its tick"
+    );
+}
+
+/// Items still without data when the wait ends go as they are (BAD Waiting for Initial
+/// Data); the real value follows as a change. Items with data are never held.
+#[test]
+fn items_without_data_at_the_bound_go_as_they_are() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1", "CONST"]);
+    sim.tick();
+    let dc = sim.data_changes();
+    assert_eq!(
+        values(&dc[0]),
+        vec![(101, Value::R8(42.0))],
+        "the constant at once"
+    );
+    sim.advance(u64::from(DEFAULT_FIRST_SAMPLE_WAIT_MS) - 1);
+    assert!(sim.data_changes().is_empty(), "A1 held until the bound");
+    sim.advance(1);
+    let dc = sim.data_changes();
+    assert_eq!(dc.len(), 1, "at the bound, between ticks");
+    assert_eq!(
+        dc[0].items[0].quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA
+    );
+    assert_eq!(dc[0].master_quality, Some(OpcError::False));
+    sim.push_good("A1", 3.0);
+    sim.advance(1000);
+    let dc = sim.data_changes();
+    assert_eq!(
+        (dc[0].items[0].quality, dc[0].master_quality),
+        (Quality::GOOD, None)
+    );
+}
+
+/// Refresh2 and cache reads in the window answer from the cache, as DA defines them: a
+/// held item is BAD Waiting for Initial Data there; the refresh counts as its first report.
+#[test]
+fn refresh_and_cache_reads_in_the_window_answer_from_the_cache() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let h = sim.items(g, &["A1"]);
+    sim.tick();
+    assert!(sim.data_changes().is_empty());
+    let SyncOutcome::Ready(r) = sim.e.read(sim.now, g, DataSource::Cache, &h).unwrap() else {
+        panic!("a cache read answers at once")
+    };
+    assert_eq!(
+        r[0].as_ref().unwrap().quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA
+    );
+    sim.e.refresh2(sim.now, g, DataSource::Cache, 9).unwrap();
+    let refreshed: Vec<DataChange> = sim
+        .events()
+        .into_iter()
+        .filter_map(|e| match e {
+            Event::DataChange(d) if d.kind == DataChangeKind::Refresh => Some(d),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        refreshed[0].items[0].quality,
+        Quality::BAD_WAITING_FOR_INITIAL_DATA
+    );
+    // Sent by the refresh: not held any more; its value follows as a change at the tick.
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert!(sim.data_changes().is_empty());
+    sim.advance(1000);
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(1.0))]);
+}
+
+/// `first_sample_wait_ms = 0`: no wait, the placeholder goes at once (the old behaviour).
+#[test]
+fn without_a_wait_items_waiting_for_initial_data_report_bad_waiting_quality() {
+    let mut sim = Sim::with_config(EngineConfig {
+        first_sample_wait_ms: 0,
+        ..EngineConfig::default()
+    });
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
     sim.items(g, &["A1"]);
@@ -753,6 +874,7 @@ fn last_update_time_follows_data_callbacks() {
     let g = sim.group(s, "g", 1000, 0.0);
     assert_eq!(sim.e.last_update_time(s), Ok(Timestamp(0)));
     sim.items(g, &["A1"]);
+    sim.push_good("A1", 1.0);
     sim.advance(1000);
     assert!(sim.e.last_update_time(s).unwrap() > Timestamp(0));
 }
@@ -962,4 +1084,68 @@ fn paced_with_two_pending_prepares_the_next_callback_while_one_travels() {
     sim.push_good("A1", 10.0);
     sim.advance(1000);
     assert!(sim.data_changes().is_empty(), "two under way again");
+}
+
+/// The same wait when a group becomes active: items subscribed then are held until their
+/// first sample; items reactivated with a value in the cache are not.
+#[test]
+fn the_first_callback_after_a_group_becomes_active_waits_too() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let set_active = |sim: &mut Sim, on: bool| {
+        sim.e
+            .set_group_state(
+                sim.now,
+                g,
+                &SetGroupState {
+                    active: Some(on),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+        sim.pump();
+    };
+    set_active(&mut sim, false);
+    sim.items(g, &["A1"]);
+    set_active(&mut sim, true);
+    sim.tick();
+    assert!(sim.data_changes().is_empty(), "held");
+    sim.push_good("A1", 2.0);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(2.0))]);
+    set_active(&mut sim, false);
+    sim.advance(5000);
+    set_active(&mut sim, true);
+    sim.tick();
+    assert_eq!(
+        values(&sim.data_changes()[0]),
+        vec![(100, Value::R8(2.0))],
+        "the cached sample at once"
+    );
+}
+
+/// A sample (or the end of the wait) arriving while the client is still busy with the
+/// group's callbacks waits for the delivery's end, as every update does (and the
+/// scheduler does not spin on it).
+#[test]
+fn held_items_wait_for_the_pacing_slot() {
+    let mut sim = Sim::with_config(EngineConfig {
+        max_pending_data_changes: 1,
+        ..EngineConfig::default()
+    });
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    sim.items(g, &["A1", "A2"]);
+    sim.push_good("A1", 1.0);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(1.0))]);
+    sim.push_good("A2", 2.0);
+    sim.advance(100);
+    assert!(sim.data_changes().is_empty(), "the client has not returned");
+    sim.advance(u64::from(DEFAULT_FIRST_SAMPLE_WAIT_MS));
+    assert!(sim.data_changes().is_empty(), "nor at the bound");
+    sim.e.data_change_delivered(sim.now, g);
+    sim.tick();
+    assert_eq!(values(&sim.data_changes()[0]), vec![(101, Value::R8(2.0))]);
 }

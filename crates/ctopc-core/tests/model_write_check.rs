@@ -1,8 +1,11 @@
-//! Server model: the namespace's check of written values (`Namespace::check_write_value`)
-//! sees the value as the client sent it, before the conversion to the canonical type, in
-//! every write path (Write, WriteVQT, async Write/WriteVQT, the extended-write array).
-//! asix accepts only integers and reals (AsixConnect §5), so a numeric string such as
-//! "2.5", which would convert to R8 without trouble, is still OPC_E_BADTYPE.
+//! Server model: written values are converted to the canonical type as
+//! `VariantChangeTypeEx` with the group's LCID would (`ctopc_core::convert::convert_for_write`),
+//! in every write path (Write, WriteVQT, async Write/WriteVQT, the extended-write array),
+//! and only then checked by the namespace (`Namespace::check_write_value`; asix: integers
+//! and reals, AsixConnect §5). Numeric text ("2.5", Polish "12,5"), BOOL (TRUE = 1) and CY
+//! reach the source as numbers; DATE and text that is not a number are OPC_E_BADTYPE; a
+//! value out of the target's range is OPC_E_RANGE. (Issue 15 changed this: before it,
+//! everything but integers and reals was OPC_E_BADTYPE.)
 
 mod model_util;
 
@@ -25,13 +28,29 @@ impl Namespace for NumericOnly {
     }
 }
 
-fn sim() -> (Sim, GroupHandle, Vec<u32>) {
+fn sim_with_lcid(lcid: u32) -> (Sim, GroupHandle, Vec<u32>) {
     let mut sim = Sim::new();
     sim.e.set_namespace(Arc::new(NumericOnly));
     let s = sim.session();
     let g = sim.group(s, "g", 1000, 0.0);
+    if lcid != 0 {
+        sim.e
+            .set_group_state(
+                sim.now,
+                g,
+                &SetGroupState {
+                    lcid: Some(lcid),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+    }
     let h = sim.items(g, &["A1", "RO", "D1"]);
     (sim, g, h)
+}
+
+fn sim() -> (Sim, GroupHandle, Vec<u32>) {
+    sim_with_lcid(0)
 }
 
 /// The values of the write request the engine sent to the data source, and its ID.
@@ -48,16 +67,41 @@ fn written(sim: &mut Sim) -> (SourceReqId, Vec<Value>) {
     }
 }
 
-fn ext(value: Value) -> Value {
+fn ext_q(value: Value, quality: i32) -> Value {
     let stamp = Timestamp::from_unix_millis(1_600_000_000_000);
     Value::Array(ArrayValue::new(
         VarType::VARIANT,
-        vec![value, Value::I4(0xC0), Value::Date(stamp.to_ole_date())],
+        vec![value, Value::I4(quality), Value::Date(stamp.to_ole_date())],
     ))
 }
 
+fn ext(value: Value) -> Value {
+    ext_q(value, 0xC0)
+}
+
+/// A sync write of `items`, answered OK by the source; (values sent, results).
+fn sync_write(
+    sim: &mut Sim,
+    g: GroupHandle,
+    items: &[(u32, Value)],
+) -> (Vec<Value>, Vec<Result<(), OpcError>>) {
+    let out = sim.e.write(sim.now, g, items).unwrap();
+    let id = match out {
+        SyncOutcome::Ready(r) => return (vec![], r),
+        SyncOutcome::Pending(id) => id,
+    };
+    let (req, values) = written(sim);
+    let n = values.len();
+    sim.e
+        .handle_source_write_result(sim.now, req, vec![Ok(()); n]);
+    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else {
+        panic!("no result")
+    };
+    (values, r)
+}
+
 #[test]
-fn sync_write_accepts_integers_and_reals_only() {
+fn sync_write_converts_text_bool_and_cy_and_refuses_dates() {
     let (mut sim, g, h) = sim();
     let items = [
         (h[0], Value::I2(3)),
@@ -67,41 +111,141 @@ fn sync_write_accepts_integers_and_reals_only() {
         (h[0], Value::Cy(10_000)),
         (h[1], Value::Bstr("x".into())),
         (h[0], ext(Value::R4(7.5))),
-        (h[0], ext(Value::Bstr("7.5".into()))),
+        (h[0], ext(Value::Bstr(" 7.5 ".into()))),
         (h[2], Value::R8(1e300)),
+        (h[0], Value::Bstr("abc".into())),
+        (h[2], Value::Bool(false)),
+        (h[2], Value::Bstr("1e39".into())),
     ];
-    let SyncOutcome::Pending(id) = sim.e.write(sim.now, g, &items).unwrap() else {
-        panic!("not sent")
-    };
-    let (req, values) = written(&mut sim);
+    let (values, r) = sync_write(&mut sim, g, &items);
     assert_eq!(
         values,
-        vec![Value::R8(3.0), Value::R8(7.5)],
-        "only the numeric values reach the source"
+        vec![
+            Value::R8(3.0),
+            Value::R8(2.5),
+            Value::R8(1.0),
+            Value::R8(1.0),
+            Value::R8(7.5),
+            Value::R8(7.5),
+            Value::R4(0.0),
+        ],
+        "converted values reach the source in the canonical type"
     );
-    sim.e
-        .handle_source_write_result(sim.now, req, vec![Ok(()), Ok(())]);
-    let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else {
-        panic!("no result")
-    };
     assert_eq!(
         r,
         vec![
             Ok(()),
-            Err(OpcError::BadType),
-            Err(OpcError::BadType),
-            Err(OpcError::BadType),
-            Err(OpcError::BadType),
-            Err(OpcError::BadRights),
+            Ok(()),
             Ok(()),
             Err(OpcError::BadType),
+            Ok(()),
+            Err(OpcError::BadRights),
+            Ok(()),
+            Ok(()),
+            Err(OpcError::Range),
+            Err(OpcError::BadType),
+            Ok(()),
             Err(OpcError::Range),
         ]
     );
 }
 
 #[test]
-fn write_vqt_and_async_writes_apply_the_same_check() {
+fn text_converts_in_the_groups_locale() {
+    let (mut sim, g, h) = sim_with_lcid(0x0415);
+    let (values, r) = sync_write(
+        &mut sim,
+        g,
+        &[
+            (h[0], Value::Bstr("12,5".into())),
+            (h[2], Value::Bstr(" -0,5 ".into())),
+            (h[0], Value::Bstr("12.5".into())),
+        ],
+    );
+    assert_eq!(values, vec![Value::R8(12.5), Value::R4(-0.5)]);
+    assert_eq!(r, vec![Ok(()), Ok(()), Err(OpcError::BadType)]);
+
+    let (mut sim, g, h) = sim_with_lcid(0x0409);
+    let (values, r) = sync_write(&mut sim, g, &[(h[0], Value::Bstr("12.5".into()))]);
+    assert_eq!(values, vec![Value::R8(12.5)]);
+    assert_eq!(r, vec![Ok(())]);
+}
+
+#[test]
+fn extended_write_refuses_qualities_outside_16_bits_and_an_empty_value() {
+    let (mut sim, g, h) = sim();
+    let (values, r) = sync_write(
+        &mut sim,
+        g,
+        &[
+            (h[0], ext_q(Value::R8(1.0), 0x100C0)),
+            (h[0], ext_q(Value::R8(1.0), -1)),
+            (h[0], ext(Value::Empty)),
+            (h[0], ext_q(Value::R8(2.0), 0xFFFF)),
+        ],
+    );
+    assert_eq!(values, vec![Value::R8(2.0)], "not truncated to 0xC0");
+    assert_eq!(
+        r,
+        vec![
+            Err(OpcError::Range),
+            Err(OpcError::Range),
+            Err(OpcError::NotSupported),
+            Ok(()),
+        ]
+    );
+}
+
+/// WriteVQT with a VT_EMPTY value: quality only or timestamp only. OPC DA 3.0 (IOPCSyncIO2 /
+/// IOPCItemIO::WriteVQT, per-item errors): "OPC_E_NOTSUPPORTED: If a client attempts to
+/// write any value, quality, timestamp combination and the server does not support the
+/// requested combination (which could be a single quantity such as just timestamp), then
+/// the server will not perform any write and will return this error code." (The
+/// specification's text is not in the project's searchable corpus; Advosol's OPCDA.NET
+/// manual, WriteVQT, paraphrases it: "If a client attempts to write VQ, VT, or VQT it
+/// should expect that the server will write them all or none at all.") The asix
+/// network writes a value always (with a quality and a timestamp if given), so a write
+/// without a value is such a combination. VT_EMPTY with neither is no write at all:
+/// OPC_E_BADTYPE, as for IOPCSyncIO::Write.
+#[test]
+fn write_vqt_with_an_empty_value_is_not_supported() {
+    let (mut sim, g, h) = sim();
+    let vqt = |q: Option<Quality>, t: Option<Timestamp>| ItemVqt {
+        value: Value::Empty,
+        quality: q,
+        timestamp: t,
+    };
+    let out = sim
+        .e
+        .write_vqt(
+            sim.now,
+            g,
+            &[
+                (h[0], vqt(Some(Quality::GOOD), None)),
+                (h[0], vqt(None, Some(ts(5)))),
+                (h[0], vqt(Some(Quality::GOOD), Some(ts(5)))),
+                (h[0], vqt(None, None)),
+                (h[1], vqt(Some(Quality::GOOD), None)),
+            ],
+        )
+        .unwrap();
+    let SyncOutcome::Ready(r) = out else {
+        panic!("nothing should reach the source")
+    };
+    assert_eq!(
+        r,
+        vec![
+            Err(OpcError::NotSupported),
+            Err(OpcError::NotSupported),
+            Err(OpcError::NotSupported),
+            Err(OpcError::BadType),
+            Err(OpcError::BadRights),
+        ]
+    );
+}
+
+#[test]
+fn write_vqt_and_async_writes_apply_the_same_conversion() {
     let (mut sim, g, h) = sim();
     let vqt = |v: Value| ItemVqt {
         value: v,
@@ -116,13 +260,14 @@ fn write_vqt_and_async_writes_apply_the_same_check() {
             &[
                 (h[0], vqt(Value::UI4(1))),
                 (h[0], vqt(Value::Bstr("1".into()))),
+                (h[0], vqt(Value::Date(1.0))),
             ],
         )
         .unwrap()
     else {
         panic!("not sent")
     };
-    assert_eq!(written(&mut sim).1, vec![Value::R8(1.0)]);
+    assert_eq!(written(&mut sim).1, vec![Value::R8(1.0), Value::R8(1.0)]);
 
     sim.e.set_callback_connected(sim.now, g, true).unwrap();
     let started = sim
@@ -131,15 +276,34 @@ fn write_vqt_and_async_writes_apply_the_same_check() {
             sim.now,
             g,
             5,
-            &[(h[0], Value::Bstr("4".into())), (h[0], Value::I8(4))],
+            &[
+                (h[0], Value::Bstr("4".into())),
+                (h[0], Value::I8(4)),
+                (h[0], Value::Bstr("four".into())),
+            ],
         )
         .unwrap();
-    assert_eq!(started.results, vec![Err(OpcError::BadType), Ok(())]);
-    assert_eq!(written(&mut sim).1, vec![Value::R8(4.0)]);
+    assert_eq!(
+        started.results,
+        vec![Ok(()), Ok(()), Err(OpcError::BadType)]
+    );
+    assert_eq!(written(&mut sim).1, vec![Value::R8(4.0), Value::R8(4.0)]);
     let started = sim
         .e
-        .async_write_vqt(sim.now, g, 6, &[(h[0], vqt(Value::Bool(false)))])
+        .async_write_vqt(
+            sim.now,
+            g,
+            6,
+            &[
+                (h[0], vqt(Value::Bool(true))),
+                (h[2], vqt(Value::Date(2.0))),
+                (h[2], vqt(Value::Empty)),
+            ],
+        )
         .unwrap();
-    assert_eq!(started.results, vec![Err(OpcError::BadType)]);
-    assert_eq!(started.cancel_id, 0, "nothing queued");
+    assert_eq!(
+        started.results,
+        vec![Ok(()), Err(OpcError::BadType), Err(OpcError::NotSupported)]
+    );
+    assert_eq!(written(&mut sim).1, vec![Value::R8(1.0)]);
 }

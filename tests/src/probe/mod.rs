@@ -1012,8 +1012,8 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
         .map_err(|e| error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     let exe = exe.to_string_lossy();
     let reg = ServerRegistration {
-        clsid: CLSID_MARSHAL_PROBE,
-        appid: CLSID_MARSHAL_PROBE,
+        clsid: CLSID_MARSHAL_PROBE.to_u128(),
+        appid: CLSID_MARSHAL_PROBE.to_u128(),
         progid: PROGID,
         progid_versioned: PROGID_VERSIONED,
         description: DESCRIPTION,

@@ -17,9 +17,11 @@
 //! (the driver stuck), the call abandons the transaction and answers the same code per
 //! item.
 //!
-//! Writes: the value is converted to the item's canonical type by the engine
-//! (OPC_E_BADTYPE when impossible, OPC_E_RANGE on overflow), read-only items answer
-//! OPC_E_BADRIGHTS, and the data source accepts only integers and reals (OPC_E_BADTYPE).
+//! Writes: the value is converted to the item's canonical type by the engine as
+//! VariantChangeTypeEx with the group's LCID would (`ctopc_core::convert::convert_for_write`:
+//! numeric text, BOOL as 1/0, CY, every number; OPC_E_BADTYPE for DATE and other text,
+//! OPC_E_RANGE on overflow), read-only items answer OPC_E_BADRIGHTS; a VT_EMPTY value
+//! with a quality or timestamp (WriteVQT) is OPC_E_NOTSUPPORTED.
 //! A 1-D array of 3 elements written to a scalar item is the asix extended write
 //! `[value, quality, timestamp]` (AsixConnect §6.6); the engine sends it to the data
 //! source as a value-quality-timestamp write.
@@ -122,8 +124,9 @@ fn write_timed_out(n: usize) -> WriteResults {
 // ---- shared bodies ---------------------------------------------------------------------
 
 /// Per-item conversion failures of the values to write, recorded before the engine call
-/// (the engine gets VT_EMPTY for them, which it rejects with OPC_E_BADTYPE after checking
-/// the handle and the access rights; those more basic errors win).
+/// (the engine gets VT_EMPTY for them, which it rejects after checking the handle and the
+/// access rights, with OPC_E_BADTYPE, or OPC_E_NOTSUPPORTED when a quality or timestamp
+/// came with it; the handle and rights errors, more basic, win).
 #[derive(Default)]
 struct PreErrors(Vec<(usize, OpcError)>);
 
@@ -145,7 +148,7 @@ impl PreErrors {
     fn apply(&self, results: &mut WriteResults) {
         for &(i, e) in &self.0 {
             if let Some(r) = results.get_mut(i) {
-                if *r == Err(OpcError::BadType) {
+                if matches!(r, Err(OpcError::BadType | OpcError::NotSupported)) {
                     *r = Err(e);
                 }
             }

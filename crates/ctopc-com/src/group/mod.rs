@@ -340,6 +340,12 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         if previsedupdaterate.is_null() {
             return E_INVALIDARG;
         }
+        // The LCID rule of AddGroup (E_INVALIDARG, nothing changed).
+        if let Some(lcid) = abi::in_opt(plcid) {
+            if !crate::server::lcid_accepted(lcid) {
+                return E_INVALIDARG;
+            }
+        }
         let state = SetGroupState {
             update_rate: abi::in_opt(prequestedupdaterate),
             active: abi::in_opt(pactive).map(|b| b.as_bool()),

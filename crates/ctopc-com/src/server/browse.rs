@@ -4,8 +4,10 @@
 //!
 //! - BrowseOPCItemIDs: an empty list is S_FALSE with an empty enumerator (OPC Foundation
 //!   sample: `(uCount > 0) ? S_OK : S_FALSE`); an access-rights filter with bits other
-//!   than OPC_READABLE | OPC_WRITEABLE is E_INVALIDARG (sample); the data-type filter is
-//!   accepted and ignored (as the asix original documents).
+//!   than OPC_READABLE | OPC_WRITEABLE is E_INVALIDARG (sample); the access-rights and
+//!   data-type filters apply as DA 2.05a defines them (the asix original ignored them:
+//!   `ctopc_core::browse::BrowseCursor::browse_opc_item_ids`, items resolved through the
+//!   context's namespace), and so to the strings of the returned enumerator.
 //! - BrowseAccessPaths: E_NOTIMPL, as the original (asix channels are not browsable).
 //! - Browse: the `[in, out]` continuation point is replaced only when the call succeeds
 //!   (the client's string is freed then); when the browse is complete the server writes an
@@ -79,6 +81,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                     &filter,
                     data_type_filter.0,
                     access_rights_filter,
+                    &*self.ctx.namespace,
                 )
                 .map_err(crate::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };

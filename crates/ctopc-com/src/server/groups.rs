@@ -83,8 +83,10 @@ pub fn local_time_bias() -> i32 {
     }
 }
 
-/// A group LCID the server accepts (see the module documentation).
-fn lcid_accepted(lcid: u32) -> bool {
+/// A group LCID the server accepts (see the module documentation): the one rule of
+/// IOPCServer::AddGroup and IOPCGroupStateMgt::SetState (IOPCCommon::SetLocaleID is
+/// stricter: only the languages QueryAvailableLocaleIDs lists, `Lang::from_lcid`).
+pub(crate) fn lcid_accepted(lcid: u32) -> bool {
     // Ours: Polish, English and the default/neutral locales (whatever the default is).
     let ours = Lang::from_lcid(lcid, Lang::English).is_some();
     // SAFETY: plain value arguments.

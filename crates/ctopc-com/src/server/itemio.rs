@@ -207,7 +207,13 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
                 .zip(vqts)
                 .map(|(id, v)| {
                     let id = id?;
-                    let value = variant::from_variant(&v.vDataValue)?;
+                    let value = variant::from_variant(&v.vDataValue).map_err(|e| {
+                        if e == OpcError::Overflow {
+                            OpcError::Range
+                        } else {
+                            e
+                        }
+                    })?;
                     let quality = v.bQualitySpecified.as_bool().then_some(Quality(v.wQuality));
                     let timestamp = v.bTimeStampSpecified.as_bool().then(|| {
                         ctopc_core::Timestamp::from_filetime_parts(

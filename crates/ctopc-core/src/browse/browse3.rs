@@ -419,6 +419,63 @@ mod tests {
         assert_eq!(s.browse(&req), Err(OpcError::InvalidFilter));
     }
 
+    /// Every combination of the browse filter, the element name filter and the vendor
+    /// filter (which has no meaning here, whatever its text), at "Plant" (Boiler: branch;
+    /// Pump: branch and item; Empty: branch) and at the root (Plant: branch; Top: item).
+    #[test]
+    fn browse_filter_combinations() {
+        let s = space();
+        type Row = (
+            &'static str,
+            BrowseFilter,
+            &'static str,
+            &'static [&'static str],
+        );
+        let rows: &[Row] = &[
+            ("Plant", BrowseFilter::All, "", &["Boiler", "Pump", "Empty"]),
+            (
+                "Plant",
+                BrowseFilter::Branches,
+                "",
+                &["Boiler", "Pump", "Empty"],
+            ),
+            ("Plant", BrowseFilter::Items, "", &["Pump"]),
+            ("Plant", BrowseFilter::All, "*p*", &["Pump", "Empty"]),
+            ("Plant", BrowseFilter::Branches, "*p*", &["Pump", "Empty"]),
+            ("Plant", BrowseFilter::Items, "*p*", &["Pump"]),
+            ("Plant", BrowseFilter::All, "B*", &["Boiler"]),
+            ("Plant", BrowseFilter::Items, "B*", &[]),
+            ("", BrowseFilter::All, "", &["Plant", "Top"]),
+            ("", BrowseFilter::Branches, "", &["Plant"]),
+            ("", BrowseFilter::Items, "", &["Top"]),
+            ("", BrowseFilter::Items, "P*", &[]),
+            ("", BrowseFilter::Branches, "t?p", &[]),
+            ("", BrowseFilter::All, "t?p", &["Top"]),
+        ];
+        for &(item_id, filter, name, want) in rows {
+            for vendor in ["", "anything", "[[["] {
+                let req = BrowseRequest {
+                    filter,
+                    element_name_filter: name,
+                    vendor_filter: vendor,
+                    ..BrowseRequest::new(item_id)
+                };
+                assert_eq!(
+                    names(&s.browse(&req).unwrap()),
+                    want,
+                    "{item_id:?} {filter:?} {name:?} {vendor:?}"
+                );
+                // With properties requested: the same elements, properties on items only.
+                let r = s.browse_with_properties(&req, |id| id.len()).unwrap();
+                assert_eq!(names(&r), want);
+                assert!(r
+                    .elements
+                    .iter()
+                    .all(|e| e.properties.is_some() == e.is_item));
+            }
+        }
+    }
+
     #[test]
     fn browse_vendor_filter_is_ignored() {
         let req = BrowseRequest {

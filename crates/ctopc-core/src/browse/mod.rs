@@ -22,6 +22,9 @@
 //!   the position (sample), once per item ID; the name filter is matched against the
 //!   returned string (short name, or item ID for `OPC_FLAT`). A malformed filter is
 //!   `OPC_E_INVALIDFILTER` (a listed return code of the method) rather than an empty list.
+//!   Unlike the original, the data-type and access-rights filters apply (DA 2.05a; the
+//!   data type matched against the canonical type, see
+//!   [`BrowseCursor::browse_opc_item_ids`] for why).
 //! - `GetItemID("")` is the current position's ID (`""` at the root; spec and sample). It
 //!   also accepts the strings `OPC_FLAT` returned at this position (item IDs below it).
 //! - `IOPCBrowse::Browse`: `""` is the root; an ID not in the tree is
@@ -44,7 +47,7 @@ pub mod tree;
 
 pub use browse3::{BrowseElement, BrowseRequest, BrowseResult, PropertySelection};
 pub use pattern::{escape, match_pattern, MatchCase, Pattern, PatternError};
-pub use server_browse::BrowseCursor;
+pub use server_browse::{BrowseCursor, ItemFilter};
 pub use tree::{AddressSpace, AddressSpaceBuilder, BuildError, NodeId, NodeRef};
 
 use crate::OpcError;

@@ -5,7 +5,40 @@ use std::sync::Arc;
 
 use super::tree::{AddressSpace, NodeRef};
 use super::{name_filter, passes, BrowseDirection, BrowseType, NamespaceType};
-use crate::{OpcError, OpcResult};
+use crate::namespace::Namespace;
+use crate::{OpcError, OpcResult, VarType};
+
+/// The item filters of `BrowseOPCItemIDs` (see [`BrowseCursor::browse_opc_item_ids`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ItemFilter {
+    /// VT_EMPTY: any type; otherwise the canonical type an item must have.
+    pub data_type: VarType,
+    /// 0: any; otherwise an item passes when its access rights share a bit with this mask.
+    pub access_rights: u32,
+}
+
+impl ItemFilter {
+    /// Neither filter is set.
+    pub fn is_off(&self) -> bool {
+        self.data_type == VarType::EMPTY && self.access_rights == 0
+    }
+
+    /// Whether an item with this canonical type and these access rights passes.
+    pub fn admits(&self, canonical: VarType, access_rights: u32) -> bool {
+        (self.data_type == VarType::EMPTY || self.data_type == canonical)
+            && (self.access_rights == 0 || self.access_rights & access_rights != 0)
+    }
+
+    /// Whether item `item_id` passes, resolved through `ns` on the basic channel (an item
+    /// that does not resolve passes only when the filter is off).
+    pub fn passes(&self, ns: &dyn Namespace, item_id: &str) -> bool {
+        if self.is_off() {
+            return true;
+        }
+        ns.resolve(item_id, "")
+            .is_ok_and(|d| self.admits(d.canonical_type, d.access_rights))
+    }
+}
 
 /// One client session's browse position. Cheap to create; holds the space it browses, so a
 /// reloaded space only affects cursors created afterwards.
@@ -62,18 +95,40 @@ impl BrowseCursor {
         Ok(())
     }
 
-    /// `BrowseOPCItemIDs`. The data-type and access-rights filters are accepted and ignored
-    /// (as the asix original documents). An empty list is success: the COM layer returns it
-    /// as `S_FALSE` with an empty enumerator.
+    /// `BrowseOPCItemIDs`. An empty list is success: the COM layer returns it as `S_FALSE`
+    /// with an empty enumerator.
+    ///
+    /// The item filters of DA 2.05a apply to the items listed (`OPC_LEAF`, `OPC_FLAT` and
+    /// a flat space; `OPC_BRANCH` lists branches, which are no items, and ignores them),
+    /// each item resolved through `ns` on the basic channel:
+    /// - `access_rights_filter`: "The bits passed in the bitmask are 'ANDed' with the bits
+    ///   that would be returned for this Item by AddItem, ValidateItem or
+    ///   EnumOPCItemAttributes. If the result is non-zero then the item is returned. A 0
+    ///   value in the bitmask indicates that the AccessRights bits should be ignored."
+    /// - `data_type_filter`: VT_EMPTY is no filter; otherwise an item is listed when its
+    ///   **canonical type** is that type. The spec's wording ("the available datatypes
+    ///   (those that would succeed if passed to AddItem)") would also admit every type the
+    ///   canonical one converts to; since every numeric type converts to every other one
+    ///   and to VT_BSTR, that reading would list every asix variable for VT_R4 or VT_BSTR
+    ///   alike, and a client filtering for VT_R4 wants the R4 variables. (The asix
+    ///   original ignored both filters.)
+    ///
+    /// An item the namespace cannot resolve passes only when both filters are off.
     pub fn browse_opc_item_ids(
         &self,
         browse_type: BrowseType,
         filter_criteria: &str,
-        _data_type_filter: u16,
-        _access_rights_filter: u32,
+        data_type_filter: u16,
+        access_rights_filter: u32,
+        ns: &dyn Namespace,
     ) -> OpcResult<Vec<String>> {
         let filter = name_filter(filter_criteria, self.space.filter_case())?;
+        let items = ItemFilter {
+            data_type: VarType(data_type_filter),
+            access_rights: access_rights_filter,
+        };
         let keep = |s: &str| passes(&filter, s);
+        let item_ok = |id: &str| items.passes(ns, id);
         let space = &*self.space;
         let out = if space.is_flat() {
             // "This parameter is ignored for FLAT address space."
@@ -81,24 +136,28 @@ impl BrowseCursor {
                 .flat_items()
                 .iter()
                 .map(|&id| space.node_ref(id).item_id())
-                .filter(|s| keep(s))
+                .filter(|s| keep(s) && item_ok(s))
                 .map(str::to_owned)
                 .collect()
         } else {
             match browse_type {
-                BrowseType::Branch | BrowseType::Leaf => {
-                    let want_branch = browse_type == BrowseType::Branch;
-                    self.position()
-                        .children()
-                        .filter(|c| c.is_branch() == want_branch && keep(c.name()))
-                        .map(|c| c.name().to_owned())
-                        .collect()
-                }
+                BrowseType::Branch => self
+                    .position()
+                    .children()
+                    .filter(|c| c.is_branch() && keep(c.name()))
+                    .map(|c| c.name().to_owned())
+                    .collect(),
+                BrowseType::Leaf => self
+                    .position()
+                    .children()
+                    .filter(|c| !c.is_branch() && keep(c.name()) && item_ok(c.item_id()))
+                    .map(|c| c.name().to_owned())
+                    .collect(),
                 BrowseType::Flat => space
                     .items_below(self.position)
                     .into_iter()
                     .map(|id| space.node_ref(id).item_id())
-                    .filter(|s| keep(s))
+                    .filter(|s| keep(s) && item_ok(s))
                     .map(str::to_owned)
                     .collect(),
             }
@@ -141,6 +200,7 @@ mod tests {
     use super::*;
     use crate::browse::tree::NodeId;
     use crate::browse::MatchCase;
+    use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 
     /// Plant
     ///   Boiler: T1, T2, P1
@@ -168,8 +228,35 @@ mod tests {
         BrowseCursor::new(space())
     }
 
+    /// The types and access rights of the items of [`space`], by the last name of the ID.
+    struct Typed;
+
+    impl Namespace for Typed {
+        fn resolve(&self, item_id: &str, _access_path: &str) -> OpcResult<ItemDef> {
+            let rw = OPC_READABLE | OPC_WRITEABLE;
+            let (t, rights) = match item_id.rsplit('.').next().unwrap_or("") {
+                "T1" => (VarType::R4, rw),
+                "T2" => (VarType::R8, OPC_READABLE),
+                "P1" => (VarType::R4, OPC_READABLE),
+                "Pump" => (VarType::I2, rw),
+                "Speed" => (VarType::R8, rw),
+                "Top" => (VarType::BSTR, OPC_READABLE),
+                "x" | "y" | "b" => (VarType::R8, rw),
+                _ => return Err(OpcError::UnknownItemId),
+            };
+            Ok(ItemDef {
+                source_key: item_id.to_owned(),
+                channel: "*".to_owned(),
+                canonical_type: t,
+                access_rights: rights,
+                eu: EuInfo::None,
+                constant: None,
+            })
+        }
+    }
+
     fn ids(c: &BrowseCursor, t: BrowseType, f: &str) -> Vec<String> {
-        c.browse_opc_item_ids(t, f, 0, 0).unwrap()
+        c.browse_opc_item_ids(t, f, 0, 0, &Typed).unwrap()
     }
 
     #[test]
@@ -380,7 +467,7 @@ mod tests {
     fn browse_opc_item_ids_empty_result_is_success_reported_as_s_false() {
         let c = cursor();
         assert_eq!(
-            c.browse_opc_item_ids(BrowseType::Leaf, "Nothing*", 0, 0),
+            c.browse_opc_item_ids(BrowseType::Leaf, "Nothing*", 0, 0, &Typed),
             Ok(vec![])
         );
     }
@@ -389,26 +476,101 @@ mod tests {
     fn browse_opc_item_ids_malformed_filter_is_opc_e_invalidfilter() {
         let c = cursor();
         assert_eq!(
-            c.browse_opc_item_ids(BrowseType::Leaf, "[T", 0, 0),
+            c.browse_opc_item_ids(BrowseType::Leaf, "[T", 0, 0, &Typed),
             Err(OpcError::InvalidFilter)
         );
     }
 
+    /// Every data-type × access-rights filter combination on `OPC_LEAF`, `OPC_FLAT` and
+    /// `OPC_BRANCH` (issue 15: the filters were ignored, as the asix original documented).
     #[test]
-    fn browse_opc_item_ids_ignores_data_type_and_access_rights_filters() {
+    fn browse_opc_item_ids_applies_the_data_type_and_access_rights_filters() {
+        const R: u32 = OPC_READABLE;
+        const W: u32 = OPC_WRITEABLE;
+        const R4: u16 = 4;
+        const R8: u16 = 5;
+        const BSTR: u16 = 8;
         let mut c = cursor();
         c.change_browse_position(BrowseDirection::To, "Plant.Boiler")
             .unwrap();
+        let leaf = |c: &BrowseCursor, vt: u16, rights: u32| {
+            c.browse_opc_item_ids(BrowseType::Leaf, "", vt, rights, &Typed)
+                .unwrap()
+        };
+        // T1 R4 read/write, T2 R8 read-only, P1 R4 read-only.
+        let table: [(u16, u32, &[&str]); 12] = [
+            (0, 0, &["T1", "T2", "P1"]),
+            (0, R, &["T1", "T2", "P1"]),
+            (0, W, &["T1"]),
+            (0, R | W, &["T1", "T2", "P1"]),
+            (R4, 0, &["T1", "P1"]),
+            (R4, R, &["T1", "P1"]),
+            (R4, W, &["T1"]),
+            (R4, R | W, &["T1", "P1"]),
+            (R8, 0, &["T2"]),
+            (R8, W, &[]),
+            (R8, R, &["T2"]),
+            (BSTR, 0, &[]),
+        ];
+        for (vt, rights, want) in table {
+            assert_eq!(leaf(&c, vt, rights), want, "vt {vt}, rights {rights}");
+        }
+        // The name filter and the item filters together.
         assert_eq!(
-            c.browse_opc_item_ids(
-                BrowseType::Leaf,
-                "",
-                5, /* VT_R8 */
-                2  /* WRITEABLE */
-            )
-            .unwrap(),
-            ["T1", "T2", "P1"]
+            c.browse_opc_item_ids(BrowseType::Leaf, "T*", R4, 0, &Typed)
+                .unwrap(),
+            ["T1"]
         );
+        // OPC_FLAT at the root: every item below, filtered (Pump is I2 read/write, Speed R8
+        // read/write, Top BSTR read-only).
+        let root = cursor();
+        let flat = |vt: u16, rights: u32| {
+            root.browse_opc_item_ids(BrowseType::Flat, "", vt, rights, &Typed)
+                .unwrap()
+        };
+        assert_eq!(
+            flat(0, W),
+            ["Plant.Boiler.T1", "Plant.Pump", "Plant.Pump.Speed"]
+        );
+        assert_eq!(flat(R8, 0), ["Plant.Boiler.T2", "Plant.Pump.Speed"]);
+        assert_eq!(flat(R8, W), ["Plant.Pump.Speed"]);
+        assert_eq!(flat(BSTR, R), ["Top"]);
+        // OPC_BRANCH lists branches, which are no items: the item filters do not apply.
+        let mut p = cursor();
+        p.change_browse_position(BrowseDirection::To, "Plant")
+            .unwrap();
+        assert_eq!(
+            p.browse_opc_item_ids(BrowseType::Branch, "", BSTR, W, &Typed)
+                .unwrap(),
+            ["Boiler", "Pump", "Empty"]
+        );
+        // An item the namespace does not know passes only without filters.
+        let mut b = AddressSpace::builder();
+        b.add_path("Unknown", '.').unwrap();
+        let u = BrowseCursor::new(Arc::new(b.build()));
+        assert_eq!(
+            u.browse_opc_item_ids(BrowseType::Leaf, "", 0, 0, &Typed)
+                .unwrap(),
+            ["Unknown"]
+        );
+        assert!(u
+            .browse_opc_item_ids(BrowseType::Leaf, "", 0, R, &Typed)
+            .unwrap()
+            .is_empty());
+    }
+
+    #[test]
+    fn item_filter_rules() {
+        let f = ItemFilter::default();
+        assert!(f.is_off() && f.admits(VarType::R4, 0));
+        let f = ItemFilter {
+            data_type: VarType::R4,
+            access_rights: OPC_WRITEABLE,
+        };
+        assert!(f.admits(VarType::R4, OPC_READABLE | OPC_WRITEABLE));
+        assert!(!f.admits(VarType::R4, OPC_READABLE));
+        assert!(!f.admits(VarType::R8, OPC_WRITEABLE));
+        assert!(!f.admits(VarType::array_of(VarType::R4), OPC_WRITEABLE));
     }
 
     #[test]

@@ -810,3 +810,104 @@ fn any_target() -> impl Strategy<Value = VarType> {
         (0u16..=21).prop_map(VarType)
     ]
 }
+
+/// Writes ([`convert_for_write`]): every VARIANT kind a client may send × the canonical
+/// types of process variables × the group's locale (pl-PL 0x0415, en-US 0x0409, and the
+/// system default/neutral LCIDs, which take the server's default locale).
+#[test]
+fn writes_convert_as_variant_change_type_ex_with_the_groups_locale() {
+    const RANGE: OpcError = OpcError::Range;
+    const BAD: OpcError = OpcError::BadType;
+    type Row = (Value, VarType, Result<Value, OpcError>);
+    let run = |locale: Locale, rows: &[Row]| {
+        for (from, to, expected) in rows {
+            let got = convert_for_write(from, *to, locale);
+            assert_eq!(&got, expected, "{locale:?}: {from:?} -> {to:?}");
+        }
+    };
+    // The same in every locale.
+    let common: Vec<Row> = vec![
+        // Every integer and real type, into every canonical type, range-checked.
+        (I2(3), VarType::R8, Ok(R8(3.0))),
+        (I1(-5), VarType::I2, Ok(I2(-5))),
+        (UI1(200), VarType::I2, Ok(I2(200))),
+        (UI2(65535), VarType::I4, Ok(I4(65535))),
+        (UI4(7), VarType::UI2, Ok(UI2(7))),
+        (I8(-1), VarType::UI2, Err(RANGE)),
+        (UI8(1 << 40), VarType::I4, Err(RANGE)),
+        (I4(70000), VarType::I2, Err(RANGE)),
+        (R8(2.5), VarType::I2, Ok(I2(2))),
+        (R8(1e300), VarType::R4, Err(RANGE)),
+        (R4(1.5), VarType::R8, Ok(R8(1.5))),
+        (R8(-7.25), VarType::R8, Ok(R8(-7.25))),
+        // BOOL: TRUE -> 1 (not VariantChangeType's -1), FALSE -> 0.
+        (Bool(true), VarType::I2, Ok(I2(1))),
+        (Bool(true), VarType::UI2, Ok(UI2(1))),
+        (Bool(true), VarType::R4, Ok(R4(1.0))),
+        (Bool(false), VarType::R8, Ok(R8(0.0))),
+        (Bool(false), VarType::UI1, Ok(UI1(0))),
+        // CY (and DECIMAL, which reaches the core as R8).
+        (Cy(125_000), VarType::R8, Ok(R8(12.5))),
+        (Cy(125_000), VarType::I4, Ok(I4(12))),
+        (Cy(i64::MAX), VarType::I2, Err(RANGE)),
+        // Text with blanks around, sign, exponent, hex; not a number stays BADTYPE.
+        (s(" 42 "), VarType::I4, Ok(I4(42))),
+        (s("-3"), VarType::UI2, Err(RANGE)),
+        (s("1e3"), VarType::R8, Ok(R8(1000.0))),
+        (s("&H10"), VarType::I2, Ok(I2(16))),
+        (s("70000"), VarType::I2, Err(RANGE)),
+        (s("abc"), VarType::R8, Err(BAD)),
+        (s(""), VarType::R8, Err(BAD)),
+        (s("True"), VarType::I2, Err(BAD)),
+        // DATE, EMPTY, ERROR and arrays are no process value.
+        (Date(1.0), VarType::R8, Err(BAD)),
+        (Date(1.0), VarType::I4, Err(BAD)),
+        (Empty, VarType::R8, Err(BAD)),
+        (Error(0), VarType::I4, Err(BAD)),
+        (
+            Array(ArrayValue::new(VarType::R8, vec![R8(1.0)])),
+            VarType::R8,
+            Err(BAD),
+        ),
+    ];
+    let pl: Vec<Row> = vec![
+        (s("12,5"), VarType::R4, Ok(R4(12.5))),
+        (s(" 12,5 "), VarType::R8, Ok(R8(12.5))),
+        (s("-0,25"), VarType::R8, Ok(R8(-0.25))),
+        (s("1\u{A0}234,5"), VarType::R8, Ok(R8(1234.5))),
+        (s("12,5"), VarType::I2, Ok(I2(12))),
+        (s("13,5"), VarType::I2, Ok(I2(14))),
+        // "12.5" is no Polish number.
+        (s("12.5"), VarType::R8, Err(BAD)),
+    ];
+    let en_rows: Vec<Row> = vec![
+        (s("12.5"), VarType::R4, Ok(R4(12.5))),
+        (s("\t12.5 "), VarType::R8, Ok(R8(12.5))),
+        (s("1,234.5"), VarType::R8, Ok(R8(1234.5))),
+        // As VariantChangeTypeEx in en-US: the comma is the thousands separator.
+        (s("12,5"), VarType::R8, Ok(R8(125.0))),
+    ];
+    for lcid in [0x0415, 0x0409, 0x0800, 0x0400, 0x0000] {
+        for default in [Locale::PlPl, Locale::EnUs] {
+            let locale = Locale::from_lcid(lcid, default);
+            run(locale, &common);
+            match locale {
+                Locale::PlPl => run(locale, &pl),
+                Locale::EnUs => run(locale, &en_rows),
+            }
+        }
+    }
+    assert_eq!(Locale::from_lcid(0x0800, Locale::PlPl), Locale::PlPl);
+    assert_eq!(Locale::from_lcid(0x0415, Locale::EnUs), Locale::PlPl);
+    assert_eq!(Locale::from_lcid(0x0409, Locale::PlPl), Locale::EnUs);
+    // A canonical type that is not a number (other namespaces) converts as VariantChangeType.
+    run(
+        Locale::EnUs,
+        &[
+            (I4(5), VarType::BSTR, Ok(s("5"))),
+            (Bool(true), VarType::I4, Ok(I4(1))),
+            (s("yes"), VarType::BOOL, Err(BAD)),
+            (Date(1.0), VarType::DATE, Ok(Date(1.0))),
+        ],
+    );
+}

@@ -194,6 +194,10 @@ impl SourceEntry {
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
+    /// The data source has delivered a sample (or the item is a constant).
+    pub fn has_sample(&self) -> bool {
+        self.refreshed_at != NEVER
+    }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
     }

@@ -139,6 +139,7 @@ impl Engine {
                 e.changed_seq = self.change_seq;
             }
         }
+        self.wake_first_sample_waiters(now);
     }
 
     /// The next request for the data source, if any.
@@ -200,6 +201,7 @@ impl Engine {
             };
         }
         self.complete_txn(now, tid, txn);
+        self.wake_first_sample_waiters(now);
     }
 
     /// Answers a [`SourceRequest::Write`] or [`SourceRequest::WriteVqt`]: one result per

@@ -27,6 +27,11 @@ pub const DEFAULT_MAX_TRANSACTIONS_PER_GROUP: u32 = 256;
 /// more specific error normally arrives first.
 pub const DEFAULT_SOURCE_TIMEOUT_MS: u32 = 10_000;
 
+/// Default bound of the wait for the first sample of newly active items before their
+/// first OnDataChange ([`EngineConfig::first_sample_wait_ms`]): asix's default
+/// `NetTimeout` (3 s), the time the network client itself gives a data server to answer.
+pub const DEFAULT_FIRST_SAMPLE_WAIT_MS: u32 = 3000;
+
 /// The server's [`EngineConfig::max_pending_data_changes`]: one callback travelling, the
 /// next one ready.
 pub const SERVER_PENDING_DATA_CHANGES: u32 = 2;
@@ -53,6 +58,11 @@ pub struct EngineConfig {
     /// (the server's setting, [`SERVER_PENDING_DATA_CHANGES`]). 0: no pacing, an event at
     /// every update regardless.
     pub max_pending_data_changes: u32,
+    /// How long an active item that has no sample from the data source yet is held back
+    /// from OnDataChange, in ms, so that its first callback carries a real value instead
+    /// of `BAD Waiting for Initial Data` (see [`crate::model`], "first callback"). 0: no
+    /// wait (items are reported at once, with the placeholder).
+    pub first_sample_wait_ms: u32,
 }
 
 impl EngineConfig {
@@ -70,6 +80,7 @@ impl Default for EngineConfig {
             source_timeout_ms: DEFAULT_SOURCE_TIMEOUT_MS,
             default_locale: Locale::EnUs,
             max_pending_data_changes: 0,
+            first_sample_wait_ms: DEFAULT_FIRST_SAMPLE_WAIT_MS,
         }
     }
 }
@@ -126,6 +137,9 @@ pub struct Engine {
     pub(crate) txns: Txns,
     pub(crate) events: VecDeque<Event>,
     pub(crate) requests: VecDeque<SourceRequest>,
+    /// Slots of groups holding items back until their first sample (may hold stale or
+    /// duplicate slots; checked when used).
+    pub(crate) first_sample_waiters: Vec<u32>,
 }
 
 impl Engine {
@@ -149,6 +163,7 @@ impl Engine {
             txns: Txns::default(),
             events: VecDeque::new(),
             requests: VecDeque::new(),
+            first_sample_waiters: Vec::new(),
         }
     }
 

@@ -122,6 +122,11 @@ pub(crate) struct Group {
     pub delivering: u32,
     /// ... and an update fell due meanwhile (run it when the delivery ends).
     pub update_missed: bool,
+    /// Items are held back until their first sample (see "The first callback" in
+    /// `crate::model`): until this deadline.
+    pub first_sample_until: Option<Timestamp>,
+    /// A sample arrived while items were held: report the ready ones at once.
+    pub first_sample_ready: bool,
 }
 
 impl Group {
@@ -271,6 +276,8 @@ impl Engine {
             needs_scan: true,
             delivering: 0,
             update_missed: false,
+            first_sample_until: None,
+            first_sample_ready: false,
         };
         self.insert_group(group);
         Ok(AddGroupResult {
@@ -584,6 +591,8 @@ impl Engine {
             needs_scan: true,
             delivering: 0,
             update_missed: false,
+            first_sample_until: None,
+            first_sample_ready: false,
         };
         let items: Vec<GroupItem> = src.items.clone();
         for mut it in items {

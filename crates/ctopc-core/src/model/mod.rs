@@ -38,6 +38,30 @@
 //! previous sample. Values delivered by Refresh2/RefreshMaxAge also become the last sent
 //! value.
 //!
+//! # The first callback
+//!
+//! An item that is due for its first report but whose cache entry has **no sample from
+//! the data source yet** (it was just subscribed) is held back, so that the client's first
+//! OnDataChange for it carries its first real value rather than the placeholder
+//! `BAD Waiting for Initial Data` (0x20) followed by the real value one update later.
+//! The wait is bounded by [`EngineConfig::first_sample_wait_ms`] (default
+//! [`DEFAULT_FIRST_SAMPLE_WAIT_MS`] = 3 s, asix's default NetTimeout), measured per group
+//! from the first scan that held an item: items still without data then are sent as they
+//! are (with the placeholder), and later values follow as usual. While a group holds
+//! items, a sample arriving for any of them (a subscription update or a device read)
+//! makes the group report its newly ready items at once instead of at its next tick
+//! (only the not yet sent items: changes of the others keep the update rate). Items that
+//! already have a sample (another group subscribes the same source item, constants, a
+//! reactivated item) are never held. Items with data and the other items of the group are
+//! not delayed by held ones.
+//!
+//! In that window Refresh2/RefreshMaxAge and reads from the cache answer from the cache
+//! as DA 2.05a/3.0 define them ("the current value in the cache", whatever its quality):
+//! a held item reads `BAD Waiting for Initial Data` (OPC_QUALITY_WAITING_FOR_INITIAL_DATA,
+//! the code DA 3.0 defines for "no value has been received from the device yet"), and a
+//! refresh that delivers it counts as its first report (its real value then follows as a
+//! change, at the update rate).
+//!
 //! # Documented limits and choices
 //!
 //! - Minimum update rate: [`EngineConfig::min_update_rate_ms`], default
@@ -86,7 +110,7 @@ mod util;
 
 pub use datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription};
 pub use engine::{
-    Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle,
+    Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle, DEFAULT_FIRST_SAMPLE_WAIT_MS,
     DEFAULT_MAX_TRANSACTIONS_PER_GROUP, DEFAULT_MIN_UPDATE_RATE_MS, DEFAULT_SOURCE_TIMEOUT_MS,
     SERVER_PENDING_DATA_CHANGES,
 };

@@ -35,6 +35,8 @@ impl Engine {
     /// (Re)computes a group's deadline. `start_now`: the group (re)starts ticking, its
     /// first update is due at once and the keep-alive period starts now.
     pub(crate) fn schedule_group(&mut self, slot: usize, now: Timestamp, start_now: bool) {
+        let paces = self.cfg.paces();
+        let max_pending = self.cfg.max_pending_data_changes;
         let g = self.groups[slot].as_mut().expect("group");
         if !g.ticking() {
             g.wake = None;
@@ -44,10 +46,19 @@ impl Engine {
         if start_now {
             g.next_update = now;
             g.last_callback = now;
+            g.first_sample_until = None;
+            g.first_sample_ready = false;
         }
         let mut due = g.next_update;
         if g.keep_alive > 0 {
             due = due.min(g.last_callback.add_millis(u64::from(g.keep_alive)));
+        }
+        // Held items are due when their sample arrived or the wait ends, unless the client
+        // is still busy with the group's callbacks (then the delivery's end reschedules).
+        if let Some(until) = g.first_sample_until {
+            if !(paces && g.delivering >= max_pending) {
+                due = due.min(if g.first_sample_ready { now } else { until });
+            }
         }
         if !matches!(g.wake, Some(w) if w <= due) {
             g.sched_seq = g.sched_seq.wrapping_add(1);
@@ -153,10 +164,16 @@ impl Engine {
         }
         let mut sent = false;
         if now >= self.group(slot).next_update {
-            sent = self.scan_group(slot, now);
+            sent = self.scan_group(slot, now, false);
             let g = self.group_mut(slot);
             if g.next_update <= now {
                 g.skip_to_next_update(now);
+            }
+        } else if let Some(until) = self.group(slot).first_sample_until {
+            // Between ticks: held items got their first sample, or the wait is over.
+            let g = self.group_mut(slot);
+            if std::mem::take(&mut g.first_sample_ready) || now >= until {
+                sent = self.scan_group(slot, now, true);
             }
         }
         let pace = u32::from(self.cfg.paces());
@@ -180,10 +197,34 @@ impl Engine {
         self.schedule_group(slot, now, false);
     }
 
+    /// A sample arrived (subscription update, device read): groups holding items for their
+    /// first sample report the ready ones at once.
+    pub(crate) fn wake_first_sample_waiters(&mut self, now: Timestamp) {
+        if self.first_sample_waiters.is_empty() {
+            return;
+        }
+        let mut slots = std::mem::take(&mut self.first_sample_waiters);
+        slots.sort_unstable();
+        slots.dedup();
+        slots.retain(|&slot| {
+            matches!(self.groups.get(slot as usize), Some(Some(g)) if g.first_sample_until.is_some())
+        });
+        for &slot in &slots {
+            let g = self.group_mut(slot as usize);
+            if !g.first_sample_ready {
+                g.first_sample_ready = true;
+                self.schedule_group(slot as usize, now, false);
+            }
+        }
+        self.first_sample_waiters = slots;
+    }
+
     /// Change detection for one group: queues an OnDataChange with every active item whose
-    /// quality changed or whose value changed beyond the deadband since it was last sent.
+    /// quality changed or whose value changed beyond the deadband since it was last sent,
+    /// holding back items without a first sample (bounded: "The first callback" in
+    /// `crate::model`). `first_only`: a scan between ticks, of the items not yet sent only.
     /// True when something was sent.
-    fn scan_group(&mut self, slot: usize, now: Timestamp) -> bool {
+    fn scan_group(&mut self, slot: usize, now: Timestamp, first_only: bool) -> bool {
         let Engine {
             groups,
             sources,
@@ -191,12 +232,17 @@ impl Engine {
             sessions,
             change_seq,
             cfg,
+            first_sample_waiters,
             ..
         } = self;
         let g = groups[slot].as_mut().expect("group");
-        if !g.needs_scan && g.scanned_seq == *change_seq {
+        if !first_only && !g.needs_scan && g.scanned_seq == *change_seq {
             return false;
         }
+        g.first_sample_ready = false;
+        // Hold items without data while the group's wait runs (it starts now if none does).
+        let holding = cfg.first_sample_wait_ms > 0 && g.first_sample_until.is_none_or(|u| now < u);
+        let mut held = 0usize;
         let locale = Locale::from_lcid(g.lcid, cfg.default_locale);
         let scanned = g.scanned_seq;
         let group_deadband = g.deadband;
@@ -209,6 +255,13 @@ impl Engine {
                 continue;
             }
             let e = &sources.entries[it.source as usize];
+            if it.flags & SENT == 0 && holding && !e.has_sample() {
+                held += 1;
+                continue;
+            }
+            if first_only && it.flags & SENT != 0 {
+                continue;
+            }
             if it.flags & SENT != 0
                 && (e.changed_seq <= scanned
                     || (e.quality == it.last_quality
@@ -232,8 +285,22 @@ impl Engine {
             it.last_quality = e.quality;
             it.flags |= SENT;
         }
-        g.scanned_seq = *change_seq;
-        g.needs_scan = false;
+        if held == 0 {
+            g.first_sample_until = None;
+            g.first_sample_ready = false;
+        } else if g.first_sample_until.is_none() {
+            g.first_sample_until = Some(now.add_millis(u64::from(cfg.first_sample_wait_ms)));
+            first_sample_waiters.push(slot as u32);
+        }
+        if !first_only {
+            // (A scan of the unsent items only must not hide the others' changes.)
+            g.scanned_seq = *change_seq;
+        }
+        if first_only {
+            g.needs_scan |= held > 0;
+        } else {
+            g.needs_scan = held > 0;
+        }
         if items.is_empty() {
             return false;
         }

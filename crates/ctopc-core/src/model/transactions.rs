@@ -28,7 +28,7 @@ use super::group::Group;
 use super::item::SENT;
 use super::util::IntMap;
 use super::MAX_AGE_CACHE;
-use crate::convert::Locale;
+use crate::convert::{convert_for_write, Locale};
 use crate::namespace::Namespace;
 use crate::{OpcError, Quality, Timestamp, Value, VarType};
 
@@ -257,17 +257,20 @@ struct PreparedWrite {
     timestamp: Option<Timestamp>,
 }
 
-fn conversion_error_for_write(e: OpcError) -> OpcError {
-    match e {
-        OpcError::Overflow => OpcError::Range,
-        _ => OpcError::BadType,
-    }
-}
-
 /// Checks and converts a value to write. A 1-D 3-element array written to a scalar item is
-/// the asix extended write [value, quality (I4), timestamp (DATE)]. The value as the
-/// client sent it must pass the namespace's [`Namespace::check_write_value`] (asix:
-/// integers and reals only) before it is converted to the canonical type.
+/// the asix extended write [value, quality, timestamp (DATE)]. The value is converted to
+/// the canonical type by [`convert_for_write`] (numeric text in the group's locale, BOOL
+/// as 1/0, CY, every number; range-checked: OPC_E_RANGE; DATE and other text:
+/// OPC_E_BADTYPE), and the converted value must pass the namespace's
+/// [`Namespace::check_write_value`].
+///
+/// A VT_EMPTY value with a quality or a timestamp (WriteVQT/WriteVQE "quality only",
+/// "timestamp only", or the extended write's value element) asks to write the quality
+/// or the timestamp without a value: the data source cannot (an asix write always carries
+/// a value), so it is OPC_E_NOTSUPPORTED, DA 3.0's code for "the server does not support
+/// writing of quality and/or timestamp"; VT_EMPTY alone stays OPC_E_BADTYPE. The
+/// extended write's quality must fit the 16 bits of an OPC quality (OPC_E_RANGE
+/// otherwise: it is not truncated).
 fn prepare_write(
     ns: &dyn Namespace,
     e: &SourceEntry,
@@ -285,32 +288,32 @@ fn prepare_write(
                 && quality.is_none()
                 && timestamp.is_none() =>
         {
-            let q = a.elements[1]
-                .convert_in(VarType::I4, locale)
-                .map_err(|_| OpcError::BadType)?;
+            let q = match a.elements[1].convert_in(VarType::UI2, locale) {
+                Ok(Value::UI2(q)) => q,
+                Err(OpcError::Overflow) => return Err(OpcError::Range),
+                _ => return Err(OpcError::BadType),
+            };
             let t = a.elements[2]
                 .convert_in(VarType::DATE, locale)
                 .map_err(|_| OpcError::BadType)?;
-            let (Value::I4(q), Value::Date(t)) = (q, t) else {
+            let Value::Date(t) = t else {
                 return Err(OpcError::BadType);
             };
-            quality = Some(Quality(q as u16));
+            quality = Some(Quality(q));
             timestamp = Some(Timestamp::from_ole_date(t).ok_or(OpcError::BadType)?);
             &a.elements[0]
         }
         v => v,
     };
     if matches!(value, Value::Empty) {
-        return Err(OpcError::BadType);
+        return Err(if quality.is_some() || timestamp.is_some() {
+            OpcError::NotSupported
+        } else {
+            OpcError::BadType
+        });
     }
-    ns.check_write_value(value)?;
-    let value = if value.var_type() == e.canonical {
-        value.clone()
-    } else {
-        value
-            .convert_in(e.canonical, locale)
-            .map_err(conversion_error_for_write)?
-    };
+    let value = convert_for_write(value, e.canonical, locale)?;
+    ns.check_write_value(&value)?;
     Ok(PreparedWrite {
         value,
         quality,
