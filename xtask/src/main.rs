@@ -6,6 +6,7 @@ mod bench;
 mod build;
 mod demo;
 mod dist;
+mod fuzz;
 mod proxy;
 mod setup;
 mod test;
@@ -34,6 +35,9 @@ commands:
   proxy   build only the proxy/stub DLL from idl/
   dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag, example
           configuration, demo database, deployment guide and docs
+  fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
+          libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
+          random-mutation runner; targets may be named
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run
@@ -54,6 +58,7 @@ fn main() -> ExitCode {
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),
+        "fuzz" => fuzz::run(rest),
         "proxy" => {
             let root = util::root();
             let out = root.join("target/x86_64-pc-windows-gnu/release");
