@@ -107,13 +107,13 @@ pub fn utf16(s: &str) -> Vec<u16> {
 
 // ---- raw calls --------------------------------------------------------------------------
 
-/// IOPCItemMgt::AddItems of `(item ID, access path, requested type)` as raw UTF-16 (NULL
-/// for `None`): the call's HRESULT and, when it succeeded, the per-item codes and server
-/// handles.
-pub fn add_items_raw(
-    mgt: &IOPCItemMgt,
-    defs: &[(Option<&[u16]>, Option<&[u16]>, u16)],
-) -> (HRESULT, Vec<(HRESULT, u32)>) {
+/// One raw item definition: (item ID, access path, requested type), the texts
+/// NUL-terminated UTF-16 or `None` for NULL.
+pub type RawDef<'a> = (Option<&'a [u16]>, Option<&'a [u16]>, u16);
+
+/// IOPCItemMgt::AddItems of raw definitions: the call's HRESULT and, when it succeeded,
+/// the per-item codes and server handles.
+pub fn add_items_raw(mgt: &IOPCItemMgt, defs: &[RawDef]) -> (HRESULT, Vec<(HRESULT, u32)>) {
     let items: Vec<OPCITEMDEF> = defs
         .iter()
         .enumerate()
