@@ -9,6 +9,7 @@ mod dist;
 mod fuzz;
 mod proxy;
 mod setup;
+mod soak;
 mod test;
 mod util;
 mod wine;
@@ -38,6 +39,10 @@ commands:
   fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
           libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
           random-mutation runner; targets may be named
+  soak    the memory soak (not in CI): one client holds the server while rounds of
+          clients churn (connect, add, read, write, subscribe, disconnect); the
+          server's resident memory sampled from /proc, the slope after warm-up;
+          `--minutes M`, `--clients K`, `--items N`, `--round-seconds R`
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run
@@ -59,6 +64,7 @@ fn main() -> ExitCode {
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),
         "fuzz" => fuzz::run(rest),
+        "soak" => soak::run(rest),
         "proxy" => {
             let root = util::root();
             let out = root.join("target/x86_64-pc-windows-gnu/release");
