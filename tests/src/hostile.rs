@@ -274,16 +274,26 @@ impl IOPCDataCallback_Impl for RudeSink_Impl {
 
 // ---- processes ------------------------------------------------------------------------
 
-/// Ends the ServerCTOPC.exe processes of this prefix (other than `keep`) with
-/// TerminateProcess: after a client died without releasing, its references keep the
-/// server alive for ever under Wine (no DCOM ping), and later tests need it gone.
+/// Ends the ServerCTOPC.exe processes of this prefix with TerminateProcess, then its
+/// rpcss.exe: after a client died without releasing, its references keep the server
+/// alive for ever under Wine (no DCOM ping), and later tests need it gone. A killed
+/// server's class registration stays in rpcss (activations then fail with
+/// RPC_S_SERVER_UNAVAILABLE), so rpcss goes too; COM starts it again on the next
+/// activation.
 pub fn terminate_servers() -> usize {
+    let servers = terminate("ServerCTOPC.exe");
+    terminate("rpcss.exe");
+    servers
+}
+
+/// Terminates every process of this prefix named `exe`; how many.
+fn terminate(exe: &str) -> usize {
     use windows::Win32::Foundation::CloseHandle;
     use windows::Win32::System::Threading::{
         OpenProcess, TerminateProcess, WaitForSingleObject, PROCESS_SYNCHRONIZE, PROCESS_TERMINATE,
     };
     let mut n = 0;
-    for pid in crate::other_servers(0) {
+    for pid in crate::processes_named(exe) {
         // SAFETY: a process handle opened, used and closed here.
         unsafe {
             if let Ok(h) = OpenProcess(PROCESS_TERMINATE | PROCESS_SYNCHRONIZE, false, pid) {
