@@ -8,6 +8,7 @@
 //! clippy's `undocumented_unsafe_blocks` as in the COM crate).
 #![cfg(windows)]
 
+pub mod hostile;
 pub mod io_support;
 pub mod probe;
 
@@ -96,6 +97,14 @@ pub fn assert_alive(server: &Server) {
 
 /// The process IDs of the ServerCTOPC.exe processes of this Wine prefix other than `mine`.
 pub fn other_servers(mine: u32) -> Vec<u32> {
+    processes_named("ServerCTOPC.exe")
+        .into_iter()
+        .filter(|p| *p != mine)
+        .collect()
+}
+
+/// The process IDs of this Wine prefix's processes named `exe` (case-insensitive).
+pub fn processes_named(exe: &str) -> Vec<u32> {
     use windows::Win32::Foundation::CloseHandle;
     use windows::Win32::System::Diagnostics::ToolHelp::{
         CreateToolhelp32Snapshot, Process32FirstW, Process32NextW, PROCESSENTRY32W,
@@ -119,7 +128,7 @@ pub fn other_servers(mine: u32) -> Vec<u32> {
                 .position(|&c| c == 0)
                 .unwrap_or(e.szExeFile.len());
             let name = String::from_utf16_lossy(&e.szExeFile[..len]);
-            if name.eq_ignore_ascii_case("ServerCTOPC.exe") && e.th32ProcessID != mine {
+            if name.eq_ignore_ascii_case(exe) {
                 out.push(e.th32ProcessID);
             }
             ok = Process32NextW(snap, &mut e).is_ok();

@@ -7,8 +7,10 @@ mod bench;
 mod build;
 mod demo;
 mod dist;
+mod fuzz;
 mod proxy;
 mod setup;
+mod soak;
 mod test;
 mod util;
 mod wine;
@@ -40,6 +42,13 @@ commands:
   dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag (the last
           two also 32-bit, in x86/), example configuration, demo database, deployment
           guide and docs
+  fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
+          libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
+          random-mutation runner; targets may be named
+  soak    the memory soak (not in CI): one client holds the server while rounds of
+          clients churn (connect, add, read, write, subscribe, disconnect); the
+          server's resident memory sampled from /proc, the slope after warm-up;
+          `--minutes M`, `--clients K`, `--items N`, `--round-seconds R`
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run
@@ -60,6 +69,8 @@ fn main() -> ExitCode {
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
         "bench" => bench::run(rest),
+        "fuzz" => fuzz::run(rest),
+        "soak" => soak::run(rest),
         "proxy" => proxy::build_both(&util::root()).map(|dlls| {
             for p in dlls {
                 println!("built {}", p.display());

@@ -4,7 +4,8 @@
 //! 2. the static checks, early: `cargo fmt --all --check`, then `cargo clippy` with
 //!    `-D warnings` for the host and for Windows (the lint levels are the `[lints]` tables
 //!    of the manifests, the settings `clippy.toml`);
-//! 3. native `cargo test` of every host crate;
+//! 3. native `cargo test` of every host crate, then every fuzz target for a few seconds
+//!    (the stable runner, `xtask/src/fuzz.rs`);
 //! 4. the Windows build (both bitnesses, `build.rs`);
 //! 5. registration of the proxy/stub DLLs (64-bit and 32-bit) and the server in the
 //!    project's Wine prefix;
@@ -19,7 +20,7 @@
 //! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::arch::Arch;
-use crate::{build, setup, util, wine};
+use crate::{build, fuzz, setup, util, wine};
 use std::time::Duration;
 
 /// The whole end-to-end run may not take longer than this.
@@ -32,6 +33,15 @@ pub fn run(args: &[String]) -> Result<(), String> {
 
     println!("test: native tests (cargo test --workspace)");
     util::run(util::cargo().args(["test", "--workspace", "--release"]))?;
+    println!(
+        "test: every fuzz target for {} s (stable runner)",
+        fuzz::CI_SECONDS
+    );
+    fuzz::run(&[
+        "--stable".into(),
+        "--seconds".into(),
+        fuzz::CI_SECONDS.to_string(),
+    ])?;
     if native_only {
         return Ok(());
     }

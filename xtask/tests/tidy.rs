@@ -98,7 +98,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/opc-client",
         "xtask",
     ];
-    let own = ["crates/ctopc-com", "tests"];
+    let own = ["crates/ctopc-com", "tests", "fuzz"];
     let mut all: Vec<&str> = inheriting.iter().chain(&own).copied().collect();
     all.sort_unstable();
     let mut members = workspace_members(&read("Cargo.toml"));
@@ -120,6 +120,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
     for (m, extra) in [
         ("crates/ctopc-com", &["unwrap_used", "expect_used"][..]),
         ("tests", &[][..]),
+        ("fuzz", &[][..]),
     ] {
         let manifest = read(&format!("{m}/Cargo.toml"));
         assert_eq!(

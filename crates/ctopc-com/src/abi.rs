@@ -21,6 +21,7 @@
 //!   caller's out-parameters (`into_raw`).
 
 use crate::error;
+use ctopc_core::limits::{self, TextLimit};
 use ctopc_core::OpcError;
 use std::ffi::c_void;
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
@@ -167,21 +168,22 @@ pub unsafe fn write_out<T>(p: *mut T, value: T) -> ComResult<()> {
     Ok(())
 }
 
-/// A required `[in, string]` parameter: E_INVALIDARG when NULL, `invalid` when it is not
-/// valid UTF-16 (an unpaired surrogate).
+/// A required `[in, string]` parameter: E_INVALIDARG when NULL, `limit.error` when it is
+/// longer than `limit` allows (see [`ctopc_core::limits`]) or not valid UTF-16 (an
+/// unpaired surrogate).
 ///
 /// # Safety
 /// `p` is NULL or a NUL-terminated UTF-16 string that lives for the call.
-pub unsafe fn in_string(p: PCWSTR, invalid: OpcError) -> ComResult<String> {
+pub unsafe fn in_string(p: PCWSTR, limit: TextLimit) -> ComResult<String> {
     if p.is_null() {
         return Err(invalid_arg());
     }
     // SAFETY: contract of this function (non-null checked above).
-    unsafe { p.to_string() }.map_err(|_| error::to_com(invalid))
+    unsafe { limited_wide(p.as_wide(), limit) }.map_err(error::to_com)
 }
 
-/// One element of an `[in, size_is(n)] LPWSTR*` array of item IDs: NULL or not valid
-/// UTF-16 is OPC_E_INVALIDITEMID for that item.
+/// One element of an `[in, size_is(n)] LPWSTR*` array of item IDs: NULL, longer than
+/// [`limits::ITEM_ID`] or not valid UTF-16 is OPC_E_INVALIDITEMID for that item.
 ///
 /// # Safety
 /// As [`in_string`].
@@ -190,7 +192,23 @@ pub unsafe fn item_id_at(p: PCWSTR) -> Result<String, OpcError> {
         return Err(OpcError::InvalidItemId);
     }
     // SAFETY: contract of this function (non-null checked above).
-    unsafe { p.to_string() }.map_err(|_| OpcError::InvalidItemId)
+    limited_wide(unsafe { p.as_wide() }, limits::ITEM_ID)
+}
+
+/// Decodes a client's UTF-16 text after checking its length against `limit` (so an
+/// over-long text costs its length count only); over the limit or invalid UTF-16 is
+/// `limit.error`. An over-long text is logged.
+pub fn limited_wide(wide: &[u16], limit: TextLimit) -> Result<String, OpcError> {
+    limit.check_units(wide.len()).inspect_err(|e| {
+        tracing::warn!(
+            "a client {} of {} UTF-16 units, over the limit of {}: {}",
+            limit.what,
+            wide.len(),
+            limit.max_units,
+            e.symbol()
+        );
+    })?;
+    String::from_utf16(wide).map_err(|_| limit.error)
 }
 
 /// An `[in, size_is(count)]` array that may be empty: E_INVALIDARG when NULL with a

@@ -45,6 +45,7 @@ use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
 use ctopc_core::browse::BrowseCursor;
 use ctopc_core::lang::Lang;
+use ctopc_core::limits;
 use ctopc_core::model::SessionHandle;
 use ctopc_core::OpcError;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -200,7 +201,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
 
     unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
         // SAFETY: `name` is this method's [in, string] parameter.
-        let name = unsafe { abi::in_string(name, OpcError::InvalidArg) }?;
+        let name = unsafe { abi::in_string(name, limits::CLIENT_NAME) }?;
         self.session().client_name = Some(name);
         Ok(())
     }

@@ -2,6 +2,7 @@
 //! VT_ARRAY | VT_VARIANT for mixed arrays such as the original's extended write
 //! [value, quality, timestamp]).
 
+use ctopc_core::limits;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{OpcError, Value, VarType};
 use std::ffi::c_void;
@@ -188,7 +189,28 @@ unsafe fn write_element(
 
 /// The value a client passed in a VARIANT. VT_BYREF is followed; objects (VT_UNKNOWN,
 /// VT_DISPATCH), VT_NULL, records and multi-dimensional arrays are `OPC_E_BADTYPE`.
+///
+/// The work is bounded by [`limits::DecodeBudget`]: more than
+/// [`limits::MAX_VARIANT_DEPTH`] array levels (arrays inside VT_VARIANT elements, BYREF
+/// VARIANTs) or more than [`limits::MAX_VARIANT_ELEMENTS`] elements in all are
+/// `OPC_E_BADTYPE`, found before anything below the limit is read (so a VARIANT nested
+/// 10,000 deep costs five levels of recursion, not a stack overflow).
 pub fn from_variant(v: &VARIANT) -> Result<Value, OpcError> {
+    decode(v, &mut limits::DecodeBudget::new())
+}
+
+/// One array level deeper (see [`from_variant`]); the refusal is logged.
+fn enter(budget: &mut limits::DecodeBudget) -> Result<(), OpcError> {
+    budget.enter().inspect_err(|_| {
+        tracing::warn!(
+            "a client VARIANT nested deeper than {} array levels: OPC_E_BADTYPE",
+            limits::MAX_VARIANT_DEPTH
+        );
+    })
+}
+
+/// One level of [`from_variant`]: `budget` is entered for each array and BYREF VARIANT.
+fn decode(v: &VARIANT, budget: &mut limits::DecodeBudget) -> Result<Value, OpcError> {
     let vt = vt_of(v);
     // SAFETY: each arm reads the union member that `vt` says is valid; BYREF pointers are
     // followed only when non-null.
@@ -216,12 +238,20 @@ pub fn from_variant(v: &VARIANT) -> Result<Value, OpcError> {
                 VT_ERROR => Value::Error(*p.cast::<i32>()),
                 VT_BOOL => Value::Bool((*p.cast::<VARIANT_BOOL>()).0 != 0),
                 VT_BSTR => Value::Bstr((*p.cast::<BSTR>()).to_string()),
-                VT_VARIANT => return from_variant(&*p.cast::<VARIANT>()),
+                VT_VARIANT => {
+                    enter(budget)?;
+                    let r = decode(&*p.cast::<VARIANT>(), budget);
+                    budget.leave();
+                    return r;
+                }
                 _ => return Err(OpcError::BadType),
             });
         }
         if vt & VT_ARRAY.0 != 0 {
-            return from_safearray(u.parray, VarType(vt & !VT_ARRAY.0));
+            enter(budget)?;
+            let r = from_safearray(u.parray, VarType(vt & !VT_ARRAY.0), budget);
+            budget.leave();
+            return r;
         }
         Ok(match VARENUM(vt) {
             VT_EMPTY => Value::Empty,
@@ -252,7 +282,11 @@ pub fn from_variant(v: &VARIANT) -> Result<Value, OpcError> {
     }
 }
 
-fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError> {
+fn from_safearray(
+    psa: *mut SAFEARRAY,
+    elem: VarType,
+    budget: &mut limits::DecodeBudget,
+) -> Result<Value, OpcError> {
     if psa.is_null() {
         return Err(OpcError::BadType);
     }
@@ -268,13 +302,19 @@ fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError>
         if (*psa).cbElements as usize != size {
             return Err(OpcError::BadType);
         }
+        budget.take(n).inspect_err(|_| {
+            tracing::warn!(
+                "a client VARIANT with more than {} elements: OPC_E_BADTYPE",
+                limits::MAX_VARIANT_ELEMENTS
+            );
+        })?;
         let mut data: *mut c_void = std::ptr::null_mut();
         SafeArrayAccessData(psa, &mut data).map_err(|_| OpcError::BadType)?;
         let mut elements = Vec::with_capacity(n);
         let mut result = Ok(());
         for i in 0..n {
             let e = match elem {
-                VarType::VARIANT => from_variant(&*data.cast::<VARIANT>().add(i)),
+                VarType::VARIANT => decode(&*data.cast::<VARIANT>().add(i), budget),
                 VarType::I1 => Ok(Value::I1(*data.cast::<i8>().add(i))),
                 VarType::UI1 => Ok(Value::UI1(*data.cast::<u8>().add(i))),
                 VarType::I2 => Ok(Value::I2(*data.cast::<i16>().add(i))),
@@ -312,6 +352,57 @@ fn from_safearray(psa: *mut SAFEARRAY, elem: VarType) -> Result<Value, OpcError>
 /// The VARTYPE of a VARIANT.
 pub fn var_type(v: &VARIANT) -> VarType {
     VarType(vt_of(v))
+}
+
+/// `v` wrapped in `levels` one-element VT_ARRAY | VT_VARIANT arrays, built without
+/// recursion (for tests of the depth limit: a hostile client's VARIANT). The result owns
+/// `v`; free it with [`clear_nested`] (VariantClear recurses once per level).
+pub fn nest(v: VARIANT, levels: usize) -> windows::core::Result<VARIANT> {
+    let mut v = v;
+    for _ in 0..levels {
+        // SAFETY: plain constructor; null means out of memory.
+        let psa = unsafe { SafeArrayCreateVector(VT_VARIANT, 0, 1) };
+        if psa.is_null() {
+            clear_nested(v);
+            return Err(windows::Win32::Foundation::E_OUTOFMEMORY.into());
+        }
+        // SAFETY: a new one-element VARIANT array: its data is one zeroed VARIANT, into
+        // which `v` moves (the array owns it from then on).
+        unsafe { (*psa).pvData.cast::<VARIANT>().write(v) };
+        let mut outer = VARIANT::default();
+        set(&mut outer, VARENUM(VT_ARRAY.0 | VT_VARIANT.0), |u| {
+            u.parray = psa
+        });
+        v = outer;
+    }
+    Ok(v)
+}
+
+/// Frees a VARIANT made by [`nest`] one level at a time (no recursion however deep).
+pub fn clear_nested(v: VARIANT) {
+    let mut v = v;
+    loop {
+        let vt = vt_of(&v);
+        // SAFETY: VT_ARRAY | VT_VARIANT means `parray` is the valid member.
+        let psa = unsafe { v.Anonymous.Anonymous.Anonymous.parray };
+        let one = vt == VT_ARRAY.0 | VT_VARIANT.0
+            && !psa.is_null()
+            // SAFETY: a non-null SAFEARRAY of a VARIANT.
+            && unsafe { SafeArrayGetDim(psa) == 1 && (*psa).rgsabound[0].cElements == 1 };
+        if !one {
+            clear(&mut v);
+            return;
+        }
+        // SAFETY: a one-element VARIANT array: its element moves out and is replaced by
+        // VT_EMPTY, so destroying the array frees only the array itself.
+        unsafe {
+            let slot = (*psa).pvData.cast::<VARIANT>();
+            let inner = slot.read();
+            slot.write(VARIANT::default());
+            clear(&mut v);
+            v = inner;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -485,6 +576,90 @@ mod tests {
             clear(&mut slot);
             prop_assert!(back.is_ok_and(|b| same(&b, &v)));
         }
+    }
+
+    /// `Value::I4(7)` inside `levels` VT_VARIANT arrays, decoded.
+    fn decode_nested(levels: usize) -> Result<Value, OpcError> {
+        let v = nest(to_variant(&Value::I4(7)).unwrap(), levels).unwrap();
+        let r = from_variant(&v);
+        clear_nested(v);
+        r
+    }
+
+    #[test]
+    fn variants_nested_to_the_depth_limit_decode_and_deeper_ones_are_bad_type() {
+        let mut expect = Value::I4(7);
+        for levels in 0..=limits::MAX_VARIANT_DEPTH {
+            assert!(
+                same(&decode_nested(levels).unwrap(), &expect),
+                "{levels} levels"
+            );
+            expect = Value::Array(ArrayValue {
+                element_type: VarType::VARIANT,
+                elements: vec![expect],
+            });
+        }
+        assert_eq!(
+            decode_nested(limits::MAX_VARIANT_DEPTH + 1),
+            Err(OpcError::BadType)
+        );
+        // The stack overflow: 10,000 levels answer at once, on a test thread's
+        // stack.
+        let t = std::time::Instant::now();
+        assert_eq!(decode_nested(10_000), Err(OpcError::BadType));
+        assert!(t.elapsed() < std::time::Duration::from_secs(5));
+    }
+
+    #[test]
+    fn a_byref_variant_pointing_at_itself_is_bad_type() {
+        let mut v = VARIANT::default();
+        let p: *mut VARIANT = &mut v;
+        set(&mut v, VARENUM(VT_BYREF.0 | VT_VARIANT.0), |u| {
+            u.pvarVal = p
+        });
+        assert_eq!(from_variant(&v), Err(OpcError::BadType));
+        // VARIANT's Drop is VariantClear, which Wine's oleaut32 makes follow the cycle:
+        // empty it first.
+        set(&mut v, VT_EMPTY, |_| {});
+    }
+
+    /// A VT_ARRAY | VT_UI1 of `n` zero bytes.
+    fn bytes(n: u32) -> VARIANT {
+        // SAFETY: plain constructor.
+        let psa = unsafe { SafeArrayCreateVector(VT_UI1, 0, n) };
+        assert!(!psa.is_null());
+        let mut v = VARIANT::default();
+        set(&mut v, VARENUM(VT_ARRAY.0 | VT_UI1.0), |u| u.parray = psa);
+        v
+    }
+
+    #[test]
+    fn arrays_up_to_the_element_limit_decode_and_larger_ones_are_bad_type() {
+        let max = limits::MAX_VARIANT_ELEMENTS as u32;
+        let mut at = bytes(max);
+        match from_variant(&at) {
+            Ok(Value::Array(a)) => assert_eq!(a.elements.len(), max as usize),
+            other => panic!("{other:?}"),
+        }
+        clear(&mut at);
+        let mut over = bytes(max + 1);
+        assert_eq!(from_variant(&over), Err(OpcError::BadType));
+        clear(&mut over);
+        // The limit counts the elements of every level together.
+        let half = limits::MAX_VARIANT_ELEMENTS / 2 + 1;
+        let v = Value::Array(ArrayValue {
+            element_type: VarType::VARIANT,
+            elements: vec![
+                Value::Array(ArrayValue {
+                    element_type: VarType::UI1,
+                    elements: vec![Value::UI1(0); half],
+                });
+                2
+            ],
+        });
+        let mut var = to_variant(&v).unwrap();
+        assert_eq!(from_variant(&var), Err(OpcError::BadType));
+        clear(&mut var);
     }
 
     #[test]

@@ -9,6 +9,7 @@ pub mod convert;
 pub mod driver;
 pub mod error;
 pub mod lang;
+pub mod limits;
 pub mod model;
 pub mod namespace;
 pub mod properties;

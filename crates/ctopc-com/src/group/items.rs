@@ -11,6 +11,7 @@ use crate::enums::{check_next, Cursor};
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
 use crate::{error, variant};
+use ctopc_core::limits::{self, TextLimit};
 use ctopc_core::model::{ItemAttributes, ItemDefinition, ItemResult};
 use ctopc_core::namespace::EuInfo;
 use ctopc_core::value::ArrayValue;
@@ -24,8 +25,9 @@ use windows::Win32::System::Variant::{VARENUM, VARIANT};
 // OPCITEMDEF decoding
 // ---------------------------------------------------------------------------------------
 
-/// Appends the UTF-16 string `p` to `buf`; its range there, or None for invalid UTF-16.
-fn push_wstr(buf: &mut String, p: PWSTR) -> Option<Range<usize>> {
+/// Appends the UTF-16 string `p` to `buf`; its range there, or None for invalid UTF-16
+/// or a text longer than `limit` (logged, not decoded).
+fn push_wstr(buf: &mut String, p: PWSTR, limit: TextLimit) -> Option<Range<usize>> {
     let start = buf.len();
     if p.is_null() {
         return Some(start..start);
@@ -33,6 +35,16 @@ fn push_wstr(buf: &mut String, p: PWSTR) -> Option<Range<usize>> {
     // SAFETY: a non-null string of an OPCITEMDEF is a NUL-terminated UTF-16 string that
     // lives for the call.
     let wide = unsafe { p.as_wide() };
+    if limit.check_units(wide.len()).is_err() {
+        tracing::warn!(
+            "a client {} of {} UTF-16 units, over the limit of {}: {}",
+            limit.what,
+            wide.len(),
+            limit.max_units,
+            limit.error.symbol()
+        );
+        return None;
+    }
     for c in char::decode_utf16(wide.iter().copied()) {
         match c {
             Ok(c) => buf.push(c),
@@ -47,8 +59,8 @@ fn push_wstr(buf: &mut String, p: PWSTR) -> Option<Range<usize>> {
 
 /// The item definitions of an AddItems/ValidateItems call: per item, the decoded
 /// (item ID, access path) ranges in `buf`, or the error the item fails with before the
-/// core sees it (NULL or invalid item ID: OPC_E_INVALIDITEMID; invalid access path:
-/// OPC_E_UNKNOWNPATH).
+/// core sees it (NULL, invalid or too long item ID: OPC_E_INVALIDITEMID; invalid or too
+/// long access path: OPC_E_UNKNOWNPATH; limits in [`ctopc_core::limits`]).
 struct Defs {
     buf: String,
     items: Vec<Result<Decoded, OpcError>>,
@@ -66,8 +78,8 @@ impl Defs {
                 Err(OpcError::InvalidItemId)
             } else {
                 match (
-                    push_wstr(&mut buf, d.szItemID),
-                    push_wstr(&mut buf, d.szAccessPath),
+                    push_wstr(&mut buf, d.szItemID, limits::ITEM_ID),
+                    push_wstr(&mut buf, d.szAccessPath, limits::ACCESS_PATH),
                 ) {
                     (Some(id), Some(path)) => Ok((id, path)),
                     (None, _) => Err(OpcError::InvalidItemId),

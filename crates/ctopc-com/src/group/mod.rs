@@ -25,6 +25,7 @@ use crate::context::Context;
 use crate::error;
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
+use ctopc_core::limits;
 use ctopc_core::model::{Engine, GroupHandle, SessionHandle, SetGroupState};
 use ctopc_core::{OpcError, Timestamp};
 use std::collections::BTreeMap;
@@ -365,7 +366,7 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
     }
 
     unsafe fn SetName(&self, szname: PCWSTR) -> windows::core::Result<()> {
-        let name = abi::in_string(szname, OpcError::InvalidArg)?;
+        let name = abi::in_string(szname, limits::GROUP_NAME)?;
         self.engine(|e, _, g| e.set_group_name(g, &name))
             .map_err(error::to_com)
     }
@@ -381,7 +382,7 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         if riid.is_null() || ppunk.is_null() {
             return Err(E_INVALIDARG.into());
         }
-        let name = abi::in_string(szname, OpcError::InvalidArg)?;
+        let name = abi::in_string(szname, limits::GROUP_NAME)?;
         // SAFETY: checked non-null; an [in] REFIID.
         let iid = unsafe { *riid };
         let new = self

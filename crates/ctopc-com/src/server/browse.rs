@@ -25,6 +25,7 @@ use ctopc_core::browse::{
     BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
     PropertySelection,
 };
+use ctopc_core::limits;
 use ctopc_core::{OpcError, OpcResult};
 use windows::core::{BOOL, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_NOTIMPL, S_FALSE, S_OK};
@@ -52,7 +53,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         pname: PCWSTR,
     ) -> windows::core::Result<()> {
         let direction: BrowseDirection = enum_arg(direction.0)?;
-        let name = in_string(pname, OpcError::InvalidArg)?;
+        let name = in_string(pname, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
         self.cursor()
             .change_browse_position(direction, &name)
             .map_err(crate::error::to_com)
@@ -73,7 +74,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
             if access_rights_filter & !(OPC_READABLE | OPC_WRITEABLE) != 0 {
                 return Err(abi::invalid_arg());
             }
-            let filter = in_string(pfilter, OpcError::InvalidFilter)?;
+            let filter = in_string(pfilter, limits::FILTER)?;
             let names = self
                 .cursor()
                 .browse_opc_item_ids(
@@ -98,7 +99,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
     ) -> windows::core::Result<()> {
         clear(pitem_id, PWSTR::null());
         nonnull(pitem_id)?;
-        let data_id = in_string(pdata_id, OpcError::InvalidArg)?;
+        let data_id = in_string(pdata_id, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
         let id = self
             .cursor()
             .get_item_id(&data_id)
@@ -117,7 +118,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         clear(ppenum, None);
         abi::hresult((|| {
             nonnull(ppenum)?;
-            let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
+            let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             self.cursor()
                 .browse_access_paths(&item_id)
                 .map_err(crate::error::to_com)?;
@@ -203,9 +204,12 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
             nonnull(pcount)?;
             nonnull(ppelements)?;
             let filter: BrowseFilter = enum_arg(filter.0)?;
-            let item_id = in_string(pitem_id, OpcError::UnknownItemId)?;
-            let name_filter = in_string(pname_filter, OpcError::InvalidFilter)?;
-            let vendor_filter = in_string(pvendor_filter, OpcError::InvalidFilter)?;
+            let item_id = in_string(
+                pitem_id,
+                limits::ITEM_ID.with_error(OpcError::UnknownItemId),
+            )?;
+            let name_filter = in_string(pname_filter, limits::FILTER)?;
+            let vendor_filter = in_string(pvendor_filter, limits::FILTER)?;
             // SAFETY: checked non-null: the [in, out] continuation point is a CoTaskMem
             // string or NULL, owned by this call until replaced below.
             let incoming = unsafe { *pcontinuation_point };
@@ -213,8 +217,8 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                 String::new()
             } else {
                 // SAFETY: a non-null [in, out, string] is a NUL-terminated UTF-16 string.
-                unsafe { incoming.to_string() }
-                    .map_err(|_| crate::error::to_com(OpcError::InvalidContinuationPoint))?
+                abi::limited_wide(unsafe { incoming.as_wide() }, limits::CONTINUATION_POINT)
+                    .map_err(crate::error::to_com)?
             };
             let ids = in_slice(pproperty_ids, property_count)?;
             let selection = PropertySelection::from_args(return_all_properties.as_bool(), ids);

@@ -32,6 +32,7 @@ use crate::abi::{self, clear, clear_outs, in_string, nonnull, put, query_out};
 use crate::context::Context;
 use crate::enums::{StringEnum, UnknownEnum};
 use crate::interfaces::*;
+use ctopc_core::limits;
 use ctopc_core::model::{GroupHandle, GroupParams, RemoveGroupOutcome, SessionHandle};
 use ctopc_core::{Lang, OpcError};
 use std::sync::Arc;
@@ -117,7 +118,7 @@ impl OpcServer {
         nonnull(prevised)?;
         nonnull(riid)?;
         nonnull(ppunk)?;
-        let name = in_string(a.name, OpcError::InvalidArg)?;
+        let name = in_string(a.name, limits::GROUP_NAME)?;
         if !lcid_accepted(a.lcid) {
             return Err(abi::invalid_arg());
         }
@@ -167,7 +168,7 @@ impl OpcServer {
         clear(ppunk, None);
         nonnull(riid)?;
         nonnull(ppunk)?;
-        let name = in_string(pname, OpcError::InvalidArg)?;
+        let name = in_string(pname, limits::GROUP_NAME)?;
         let group = self
             .ctx
             .runtime

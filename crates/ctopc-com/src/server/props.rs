@@ -19,6 +19,7 @@ use crate::abi::{
 use crate::interfaces::*;
 use crate::variant;
 use ctopc_core::lang::Lang;
+use ctopc_core::limits;
 use ctopc_core::model::ItemState;
 use ctopc_core::properties::{fill_live, lookup_item_ids, needs_read, PropertyContext};
 pub use ctopc_core::properties::{static_properties, Prop, VALUE_MAX_AGE_FACTOR};
@@ -125,7 +126,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         nonnull(ppids)?;
         nonnull(ppdescriptions)?;
         nonnull(pptypes)?;
-        let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
+        let item_id = in_string(pitem_id, limits::ITEM_ID)?;
         let cx = self.props_ctx();
         let props = static_properties(&cx, &item_id, None, false).map_err(crate::error::to_com)?;
         let n = props.len();
@@ -163,7 +164,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
                 return Err(abi::invalid_arg());
             }
             let ids = in_slice(pids, count)?;
-            let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
+            let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             let cx = self.props_ctx();
             let mut props =
                 static_properties(&cx, &item_id, Some(ids), true).map_err(crate::error::to_com)?;
@@ -202,7 +203,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
                 return Err(abi::invalid_arg());
             }
             let ids = in_slice(pids, count)?;
-            let item_id = in_string(pitem_id, OpcError::InvalidItemId)?;
+            let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             let cx = self.props_ctx();
             let found = lookup_item_ids(&cx, &item_id, ids).map_err(crate::error::to_com)?;
             let mut new_ids = OwnedArray::<PWSTR>::zeroed(found.len())?;

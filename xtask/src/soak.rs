@@ -1,0 +1,245 @@
+//! `cargo xtask soak [--minutes M] [--clients K] [--items N] [--round-seconds R]`: the
+//! memory soak of issue 19 (not in CI).
+//!
+//! Builds the server and `soak-client.exe`, registers them in a Wine prefix of the soak's
+//! own (`target/wine/soak-prefix`), starts one client that holds the server for the whole
+//! run, then runs rounds until M minutes (default 5) have passed: K client processes
+//! (default 4) churn for R seconds (default 60) each — connect, AddItems of N items
+//! (default 1000), Read, Write, a subscription, RemoveGroup, disconnect, again — and 15 s
+//! after each round the server's resident memory is read from outside, from
+//! `/proc/<pid>/status` (VmRSS) of the Wine process running ServerCTOPC.exe. Samples are
+//! taken every 5 s meanwhile. Prints every sample, then the least-squares slope of the
+//! after-round figures from the second round on (the first is warm-up), in MB per round
+//! and per minute. A flat slope means no memory kept per call.
+
+use crate::{build, setup, util, wine};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+fn prefix() -> PathBuf {
+    util::root().join("target/wine/soak-prefix")
+}
+
+struct Options {
+    minutes: f64,
+    clients: u32,
+    items: u32,
+    round_seconds: u32,
+}
+
+fn options(args: &[String]) -> Result<Options, String> {
+    let mut o = Options {
+        minutes: 5.0,
+        clients: 4,
+        items: 1000,
+        round_seconds: 60,
+    };
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let v = it.next().ok_or(format!("soak: {a} needs a value"))?;
+        let bad = || format!("soak: bad value `{v}` for {a}");
+        match a.as_str() {
+            "--minutes" => o.minutes = v.parse().map_err(|_| bad())?,
+            "--clients" => o.clients = v.parse().map_err(|_| bad())?,
+            "--items" => o.items = v.parse().map_err(|_| bad())?,
+            "--round-seconds" => o.round_seconds = v.parse().map_err(|_| bad())?,
+            _ => return Err(format!("soak: unknown option {a}")),
+        }
+    }
+    Ok(o)
+}
+
+/// The Linux PID of the Wine process running the soak's ServerCTOPC.exe: its command line
+/// names the exe by its Windows path under this worktree.
+fn server_pid(exe: &Path) -> Option<u32> {
+    let want = format!("Z:{}", exe.display()).replace('/', "\\");
+    for e in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(e.path().join("cmdline")) else {
+            continue;
+        };
+        let cmd = String::from_utf8_lossy(&cmd);
+        if cmd.contains(&want) && cmd.contains("-Embedding") {
+            return Some(pid);
+        }
+    }
+    None
+}
+
+/// VmRSS of `pid` in MB.
+fn rss_mb(pid: u32) -> Option<f64> {
+    let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// The least-squares slope of `points` (x, y).
+pub fn slope(points: &[(f64, f64)]) -> Option<f64> {
+    let n = points.len() as f64;
+    if points.len() < 2 {
+        return None;
+    }
+    let mx = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+fn spawn(pfx: &Path, exe: &Path, args: &[String]) -> Result<Child, String> {
+    wine::wine_in(pfx, exe)
+        .args(args)
+        .stdin(Stdio::null())
+        .spawn()
+        .map_err(|e| format!("start {}: {e}", exe.display()))
+}
+
+pub fn run(args: &[String]) -> Result<(), String> {
+    let o = options(args)?;
+    setup::run(&[])?;
+    let artifacts = build::run(&[])?;
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        setup::TARGET,
+        "-p",
+        "e2e-tests",
+        "--bin",
+        "soak-client",
+    ]))?;
+    let client = artifacts.dir.join("soak-client.exe");
+    let pfx = prefix();
+    wine::ensure_prefix(&pfx)?;
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    let result = (|| {
+        let limit = Duration::from_secs(120);
+        let mut regsvr = wine::wine_in(&pfx, "regsvr32");
+        regsvr.arg("/s").arg(&artifacts.proxy);
+        let mut reg = wine::wine_in(&pfx, &artifacts.server);
+        reg.arg("/RegServer");
+        for c in [&mut regsvr, &mut reg] {
+            let status = util::run_with_timeout(c, limit)?;
+            if !status.success() {
+                return Err(format!("registration in the soak prefix failed: {status}"));
+            }
+        }
+        soak(&o, &pfx, &client, &artifacts.server)
+    })();
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    result
+}
+
+fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), String> {
+    let total = Duration::from_secs_f64(o.minutes * 60.0);
+    let hold_secs = total.as_secs() + u64::from(o.round_seconds) + 120;
+    let mut holder = spawn(
+        pfx,
+        client,
+        &["--hold".into(), "--seconds".into(), hold_secs.to_string()],
+    )?;
+    let started = Instant::now();
+    let pid = loop {
+        if let Some(p) = server_pid(server) {
+            break p;
+        }
+        if started.elapsed() > Duration::from_secs(60) {
+            let _ = holder.kill();
+            return Err("soak: the server did not start within 60 s".into());
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    };
+    std::thread::sleep(Duration::from_secs(5));
+    println!(
+        "soak: server pid {pid}; {} clients x {} s x {} items per round, {} min",
+        o.clients, o.round_seconds, o.items, o.minutes
+    );
+    let t0 = Instant::now();
+    let sample = |what: &str| -> Option<f64> {
+        let mb = rss_mb(pid)?;
+        println!(
+            "soak: {:7.1} s  {mb:8.1} MB  {what}",
+            t0.elapsed().as_secs_f64()
+        );
+        Some(mb)
+    };
+    sample("before the first round");
+    let mut after_rounds: Vec<(f64, f64)> = Vec::new();
+    let mut round = 0u32;
+    while t0.elapsed() < total {
+        round += 1;
+        let churn: Vec<String> = vec![
+            "--seconds".into(),
+            o.round_seconds.to_string(),
+            "--items".into(),
+            o.items.to_string(),
+        ];
+        let mut kids = Vec::new();
+        for _ in 0..o.clients {
+            kids.push(spawn(pfx, client, &churn)?);
+        }
+        let deadline = Instant::now() + Duration::from_secs(u64::from(o.round_seconds) + 120);
+        loop {
+            let running = kids
+                .iter_mut()
+                .map(|k| k.try_wait())
+                .filter(|w| matches!(w, Ok(None)))
+                .count();
+            if running == 0 {
+                break;
+            }
+            if Instant::now() > deadline {
+                kids.iter_mut().for_each(|k| {
+                    let _ = k.kill();
+                });
+                return Err(format!(
+                    "soak: round {round}: clients still run after the deadline"
+                ));
+            }
+            sample(&format!("round {round}, {running} clients"));
+            std::thread::sleep(Duration::from_secs(5));
+        }
+        let failed = kids
+            .iter_mut()
+            .map(|k| k.wait())
+            .filter(|w| !w.as_ref().is_ok_and(|s| s.success()))
+            .count();
+        std::thread::sleep(Duration::from_secs(15));
+        let mb = sample(&format!(
+            "15 s after round {round} ({failed} clients failed)"
+        ))
+        .ok_or("soak: the server is gone")?;
+        after_rounds.push((f64::from(round), mb));
+    }
+    let _ = holder.kill();
+    let steady: Vec<(f64, f64)> = after_rounds.iter().skip(1).copied().collect();
+    println!("soak: after each round: {after_rounds:?}");
+    match slope(&steady) {
+        Some(s) => println!(
+            "soak: slope after warm-up: {s:+.2} MB per round ({:+.2} MB/min; {} rounds)",
+            s * 60.0 / f64::from(o.round_seconds + 15),
+            steady.len()
+        ),
+        None => println!("soak: too few rounds for a slope (run longer: --minutes)"),
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::slope;
+
+    #[test]
+    fn slope_of_a_line_and_of_flat_data() {
+        let line: Vec<(f64, f64)> = (0..5)
+            .map(|i| (f64::from(i), 3.0 * f64::from(i) + 1.0))
+            .collect();
+        assert!((slope(&line).unwrap() - 3.0).abs() < 1e-9);
+        assert_eq!(slope(&[(1.0, 5.0), (2.0, 5.0)]), Some(0.0));
+        assert_eq!(slope(&[(1.0, 5.0)]), None);
+    }
+}
