@@ -319,7 +319,14 @@ fn item_io_writes_convert_in_the_sessions_locale() {
         quality: None,
         timestamp: None,
     };
-    let cases: [(Option<u32>, &[&str], Vec<Value>, Vec<Result<(), OpcError>>); 4] = [
+    /// (LCID set, texts written to A1, D1, A1; values sent; per-item results)
+    type Case<'a> = (
+        Option<u32>,
+        &'a [&'a str],
+        Vec<Value>,
+        Vec<Result<(), OpcError>>,
+    );
+    let cases: [Case; 4] = [
         (
             Some(0x0415),
             &["12,5", " -0,5 ", "12.5"],
