@@ -6,4 +6,4 @@ export WINEPREFIX="${WINEPREFIX:-$here/target/wine/prefix}"
 export WINEARCH=win64
 export WINEDEBUG="${WINEDEBUG:--all}"
 export WINEDLLOVERRIDES="mscoree,mshtml="
-exec /usr/lib/wine/wine64 "$@"
+exec "$here/xtask/wine-run.sh" /usr/lib/wine/wine64 "$@"
