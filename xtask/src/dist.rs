@@ -51,7 +51,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
     let out = out_dir.join(format!("{base}.zip"));
     std::fs::write(&out, zip(&entries)).map_err(|e| format!("{}: {e}", out.display()))?;
     println!("dist: {} ({} files)", out.display(), entries.len());
-    Ok(())
+    crate::msi::dist(&files, version).map(|_| ())
 }
 
 fn crc32(data: &[u8]) -> u32 {
