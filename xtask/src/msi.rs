@@ -373,3 +373,305 @@ mod tests {
         assert!(e.contains("lacks opc_ps.dll"), "{e}");
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// `cargo xtask msi-test`: the MSI under Wine, in a fresh prefix of its own.
+
+mod wine_test {
+    use super::*;
+    use crate::arch::Arch;
+    use crate::{build, util, wine};
+    use std::time::{Duration, Instant};
+
+    const CLSID: &str = "3277B556-BA68-4BDE-8687-8EE4E4B46336";
+    const INSTALL: &str = "drive_c/Program Files/ServerCTOPC";
+
+    struct Ctx {
+        pfx: PathBuf,
+        dir: PathBuf,
+    }
+
+    fn winpath(p: &Path) -> String {
+        format!(
+            "Z:{}",
+            std::path::absolute(p)
+                .unwrap_or_else(|_| p.to_path_buf())
+                .display()
+                .to_string()
+                .replace('/', "\\")
+        )
+    }
+
+    impl Ctx {
+        /// Runs `program args` under Wine in the test prefix (`arch`'s loader), bounded
+        /// by `limit`, and returns (exit code, stdout + stderr).
+        fn run(&self, arch: Arch, program: &str, args: &[&str], limit: u64) -> (i32, String) {
+            let mut c = Command::new("timeout");
+            wine::env(&mut c);
+            c.env("WINEPREFIX", &self.pfx)
+                .arg(limit.to_string())
+                .arg(arch.loader())
+                .arg(program)
+                .args(args);
+            match c.output() {
+                Ok(o) => (
+                    o.status.code().unwrap_or(-1),
+                    format!(
+                        "{}{}",
+                        String::from_utf8_lossy(&o.stdout),
+                        String::from_utf8_lossy(&o.stderr)
+                    ),
+                ),
+                Err(e) => (-1, format!("cannot start wine: {e}")),
+            }
+        }
+
+        fn msiexec(&self, op: &str, msi: &Path, extra: &[&str], log: &str) -> i32 {
+            let log = self.dir.join(log);
+            let (m, l) = (winpath(msi), winpath(&log));
+            let mut args = vec![op, m.as_str(), "/qn", "/l*v", l.as_str()];
+            args.extend_from_slice(extra);
+            let (code, _) = self.run(Arch::X64, "msiexec", &args, 300);
+            self.settle();
+            code
+        }
+
+        /// Ends every process of the prefix and waits for the registry to be written.
+        fn settle(&self) {
+            wine::wineserver_in(&self.pfx, "-k", Duration::from_secs(20));
+            wine::wineserver_in(&self.pfx, "-w", Duration::from_secs(60));
+        }
+
+        fn install_dir(&self) -> PathBuf {
+            self.pfx.join(INSTALL)
+        }
+
+        /// The registry of the prefix (both views: Wow6432Node is in system.reg too).
+        fn system_reg(&self) -> String {
+            let raw = std::fs::read(self.pfx.join("system.reg")).unwrap_or_default();
+            String::from_utf8_lossy(&raw).to_ascii_lowercase()
+        }
+
+        fn opcdiag(&self, arch: Arch, args: &[&str]) -> Result<String, String> {
+            let exe = match arch {
+                Arch::X64 => "C:\\Program Files\\ServerCTOPC\\opcdiag.exe",
+                Arch::X86 => "C:\\Program Files\\ServerCTOPC\\x86\\opcdiag.exe",
+            };
+            let (code, out) = self.run(arch, exe, args, 120);
+            if code == 0 {
+                Ok(out)
+            } else {
+                Err(format!("{exe} {}: exit {code}\n{out}", args.join(" ")))
+            }
+        }
+
+        /// A client of each bitness: status and a read of a demo variable.
+        fn serves(&self, what: &str) -> Result<(), String> {
+            for arch in Arch::ALL {
+                let status = self.opcdiag(arch, &["status"])?;
+                if !status.contains("ServerCTOPC") || !status.contains("State") {
+                    return Err(format!("{what}: status ({arch:?}):\n{status}"));
+                }
+                let read = self.opcdiag(arch, &["read", "KW_A000"])?;
+                if !read.lines().any(|l| l.starts_with("KW_A000")) {
+                    return Err(format!("{what}: read ({arch:?}):\n{read}"));
+                }
+                println!("msi-test: {what}: {arch:?} opcdiag status and read: ok");
+            }
+            self.settle();
+            Ok(())
+        }
+
+        /// Nothing of ours in the registry (both views), no service, no files but the
+        /// user's.
+        fn nothing_left(&self, what: &str, user_files: &[&str]) -> Result<(), String> {
+            let reg = self.system_reg();
+            for needle in [
+                CLSID.to_ascii_lowercase().as_str(),
+                "serverctopc.app",
+                "opc_ps.dll",
+                "services\\\\serverctopc",
+                "appid\\\\serverctopc.exe",
+            ] {
+                if reg.contains(needle) {
+                    let line = reg.lines().find(|l| l.contains(needle)).unwrap_or("");
+                    return Err(format!("{what}: the registry still holds {needle}: {line}"));
+                }
+            }
+            let dir = self.install_dir();
+            let mut left = Vec::new();
+            if dir.exists() {
+                for e in walk(&dir) {
+                    let rel = e
+                        .strip_prefix(&dir)
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default();
+                    if !user_files.contains(&rel.as_str()) {
+                        left.push(rel);
+                    }
+                }
+            }
+            if !left.is_empty() {
+                return Err(format!("{what}: files left: {left:?}"));
+            }
+            println!("msi-test: {what}: no keys (both views), service or files left");
+            Ok(())
+        }
+    }
+
+    fn walk(dir: &Path) -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        if let Ok(rd) = std::fs::read_dir(dir) {
+            for e in rd.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    out.extend(walk(&p));
+                } else {
+                    out.push(p);
+                }
+            }
+        }
+        out
+    }
+
+    /// `a.b.c` with c + 1: a version Windows Installer sees as newer (it compares the
+    /// first three fields only).
+    fn newer(version: &str) -> String {
+        let mut f: Vec<u32> = version.split('.').filter_map(|x| x.parse().ok()).collect();
+        f.resize(3, 0);
+        f[2] += 1;
+        format!("{}.{}.{}", f[0], f[1], f[2])
+    }
+
+    pub fn run(_args: &[String]) -> Result<(), String> {
+        let started = Instant::now();
+        let root = util::root();
+        let a = build::run(&[])?;
+        let version = env!("CARGO_PKG_VERSION");
+        let dir = root.join("target/msi-test");
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let files: Vec<(String, PathBuf)> = FILES
+            .iter()
+            .map(|f| {
+                let src = match *f {
+                    "ServerCTOPC.exe" => a.server.clone(),
+                    "opc_ps.dll" => a.proxy.clone(),
+                    "opcdiag.exe" => a.dir.join("opcdiag.exe"),
+                    "x86/opc_ps.dll" => a.proxy32.clone(),
+                    "x86/opcdiag.exe" => a.dir32.join("opcdiag.exe"),
+                    // The example, the README, the docs and the demo database.
+                    other => root.join(other),
+                };
+                ((*f).to_owned(), src)
+            })
+            .collect();
+        let old = build(
+            &files,
+            version,
+            &dir.join("stage-old"),
+            &dir.join("old.msi"),
+        )?;
+        let new_version = newer(version);
+        let new = build(
+            &files,
+            &new_version,
+            &dir.join("stage-new"),
+            &dir.join("new.msi"),
+        )?;
+        // A broken package: its 32-bit proxy/stub is not a DLL, so its registration
+        // (RegisterPs32) fails after the files and keys are in place.
+        let broken_files: Vec<(String, PathBuf)> = files
+            .iter()
+            .map(|(n, p)| {
+                if n == "x86/opc_ps.dll" {
+                    (n.clone(), root.join("README.md"))
+                } else {
+                    (n.clone(), p.clone())
+                }
+            })
+            .collect();
+        let broken = build(
+            &broken_files,
+            version,
+            &dir.join("stage-broken"),
+            &dir.join("broken.msi"),
+        )?;
+
+        let pfx = root.join("target/wine/msi-prefix");
+        wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+        if pfx.exists() {
+            std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
+        }
+        wine::ensure_prefix(&pfx)?;
+        let ctx = Ctx { pfx, dir };
+
+        // 1. A broken install fails and leaves nothing.
+        let code = ctx.msiexec("/i", &broken, &[], "broken.log");
+        if code == 0 {
+            return Err("msi-test: the broken package installed (exit 0)".into());
+        }
+        println!("msi-test: broken package: msiexec failed (exit {code}), as it must");
+        ctx.nothing_left("after the failed install", &[])?;
+
+        // 2. Silent install, both clients.
+        let code = ctx.msiexec("/i", &old, &[], "install.log");
+        if code != 0 {
+            return Err(format!(
+                "msi-test: install of {} failed: exit {code} (log {})",
+                old.display(),
+                ctx.dir.join("install.log").display()
+            ));
+        }
+        ctx.serves("after install")?;
+
+        // 3. The user's configuration survives a major upgrade (which installs the
+        //    service too).
+        let ini = ctx.install_dir().join("ASIXConnect.ini");
+        let user_ini = "; the user's configuration (msi-test)\r\n[Server]\r\nLogLevel = info\r\n";
+        std::fs::write(&ini, user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
+        let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
+        if code != 0 {
+            return Err(format!(
+                "msi-test: upgrade to {new_version} failed: exit {code} (log {})",
+                ctx.dir.join("upgrade.log").display()
+            ));
+        }
+        let kept = std::fs::read_to_string(&ini).unwrap_or_default();
+        if kept != user_ini {
+            return Err(format!(
+                "msi-test: the upgrade changed ASIXConnect.ini: {kept:?}"
+            ));
+        }
+        println!("msi-test: upgrade to {new_version}: ASIXConnect.ini kept");
+        if !ctx.system_reg().contains("services\\\\serverctopc") {
+            return Err("msi-test: SERVICE=1 did not install the service".into());
+        }
+        println!("msi-test: SERVICE=1: the service is installed");
+        ctx.serves("after upgrade")?;
+
+        // 4. Silent uninstall of the newer product: only the user's file stays.
+        let code = ctx.msiexec("/x", &new, &[], "uninstall.log");
+        if code != 0 {
+            return Err(format!(
+                "msi-test: uninstall failed: exit {code} (log {})",
+                ctx.dir.join("uninstall.log").display()
+            ));
+        }
+        let mut user_files = vec!["ASIXConnect.ini".to_owned()];
+        user_files.extend(
+            walk(&ctx.install_dir().join("Log"))
+                .iter()
+                .filter_map(|p| p.strip_prefix(ctx.install_dir()).ok())
+                .map(|p| p.display().to_string()),
+        );
+        let uf: Vec<&str> = user_files.iter().map(String::as_str).collect();
+        ctx.nothing_left("after uninstall", &uf)?;
+        if std::fs::read_to_string(&ini).unwrap_or_default() != user_ini {
+            return Err("msi-test: the uninstall removed or changed ASIXConnect.ini".into());
+        }
+        println!("msi-test: ok ({} s)", started.elapsed().as_secs());
+        Ok(())
+    }
+}
+
+pub use wine_test::run as test;
