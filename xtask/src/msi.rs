@@ -602,6 +602,11 @@ mod wine_test {
         if pfx.exists() {
             std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
         }
+        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
+        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
+        for arch in Arch::ALL {
+            crate::setup::build_shim(arch)?;
+        }
         wine::ensure_prefix(&pfx)?;
         let ctx = Ctx { pfx, dir };
 

@@ -94,8 +94,8 @@ fn rust_targets() -> Result<(), String> {
 }
 
 /// Builds the bcryptprimitives shim for `arch` (see xtask/shim/bcryptprimitives.c) at
-/// [`wine::shim`].
-fn build_shim(arch: Arch) -> Result<(), String> {
+/// [`wine::shim`]; idempotent (msi-test calls it before making its prefix).
+pub fn build_shim(arch: Arch) -> Result<(), String> {
     let root = util::root();
     let src = root.join("xtask/shim/bcryptprimitives.c");
     let def = root.join("xtask/shim/bcryptprimitives.def");
