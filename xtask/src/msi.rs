@@ -179,6 +179,11 @@ pub fn build(
 /// such an action as an immediate one, which would run while the script is made), so
 /// the actions named `Rollback*` get the bit here, through msitools' msibuild.
 const ROLLBACK: u32 = 0x100;
+/// `msidbCustomActionTypeInScript`: a rollback action is one of the script's (deferred
+/// with the rollback bit); with the rollback bit alone (an immediate type, as wixl
+/// writes it) Windows Installer and Wine never schedule it, and a failed install left
+/// the 64-bit proxy/stub registered (msi-test's broken package).
+const IN_SCRIPT: u32 = 0x400;
 
 fn mark_rollback_actions(msi: &Path) -> Result<(), String> {
     let text = crate::util::output(
@@ -194,7 +199,7 @@ fn mark_rollback_actions(msi: &Path) -> Result<(), String> {
             let t: u32 = cols[1]
                 .parse()
                 .map_err(|e| format!("CustomAction type {:?}: {e}", cols[1]))?;
-            cols[1] = (t | ROLLBACK).to_string();
+            cols[1] = (t | IN_SCRIPT | ROLLBACK).to_string();
         }
         out.push_str(&cols.join("\t"));
         out.push_str("\r\n");
@@ -358,7 +363,8 @@ mod tests {
         let service = actions.iter().find(|r| r[0] == "InstallService").unwrap();
         assert_eq!(service[3], "/Service");
         for a in actions.iter().filter(|r| r[0].starts_with("Rollback")) {
-            assert_ne!(a[1].parse::<u32>().unwrap() & ROLLBACK, 0, "{a:?}");
+            let t = a[1].parse::<u32>().unwrap();
+            assert_eq!(t & (IN_SCRIPT | ROLLBACK), IN_SCRIPT | ROLLBACK, "{a:?}");
         }
     }
 
