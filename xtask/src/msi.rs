@@ -638,8 +638,15 @@ mod wine_test {
         // 3. The user's configuration survives a major upgrade (which installs the
         //    service too).
         let ini = ctx.install_dir().join("ASIXConnect.ini");
-        let user_ini = "; the user's configuration (msi-test)\r\n[Server]\r\nLogLevel = info\r\n";
-        std::fs::write(&ini, user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
+        // A working configuration, the user's: the example with a changed value (an ini
+        // without the channel's ItemsDatabase serves no demo variable).
+        let example = std::fs::read_to_string(root.join("asixconnect.ini.example"))
+            .map_err(|e| format!("asixconnect.ini.example: {e}"))?;
+        let user_ini = format!(
+            "; the user's configuration (msi-test)\r\n{}",
+            example.replace("MinUpdateRate = 1000", "MinUpdateRate = 500")
+        );
+        std::fs::write(&ini, &user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
         let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
         if code != 0 {
             return Err(format!(
