@@ -16,7 +16,7 @@
 //! what widl generates from idl/ into DllRegisterServer, so the DLL itself stays the one
 //! source of them.
 //!
-//! Measured under Wine 8 (`cargo xtask msi-test`, about 200 s, most of it making the
+//! Measured under Wine 8 (`cargo xtask msi-test`, 200 to 240 s, most of it making the
 //! fresh prefix and starting the server for each client): `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
 //! Registry row's last value removes the emptied key; a failed `/qn` install exits with
