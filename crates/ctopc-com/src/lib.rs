@@ -8,6 +8,7 @@
 
 #[cfg(windows)]
 pub mod abi;
+pub mod catalog;
 #[cfg(windows)]
 pub mod client;
 #[cfg(windows)]
