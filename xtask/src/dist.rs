@@ -15,6 +15,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
     let base = format!("ServerCTOPC-{version}");
     let mut files: Vec<(String, PathBuf)> = vec![
         ("ServerCTOPC.exe".into(), a.server.clone()),
+        ("OpcServerList.exe".into(), a.server_list.clone()),
         ("opc_ps.dll".into(), a.proxy.clone()),
         ("opcdiag.exe".into(), a.dir.join("opcdiag.exe")),
         // For 32-bit OPC clients (docs/deployment.md: the 32-bit regsvr32 registers it).

@@ -94,6 +94,22 @@ impl Catalog {
     }
 }
 
+/// Parses a registry GUID spelling, `{XXXXXXXX-XXXX-XXXX-XXXX-XXXXXXXXXXXX}` (any case);
+/// `None` for anything else (a `CLSID` subkey such as `CLSID` junk is skipped).
+pub fn parse_guid(s: &str) -> Option<u128> {
+    let inner = s.strip_prefix('{')?.strip_suffix('}')?;
+    let parts: Vec<&str> = inner.split('-').collect();
+    let lens = [8, 4, 4, 4, 12];
+    if parts.len() != 5 || parts.iter().zip(lens).any(|(p, n)| p.len() != n) {
+        return None;
+    }
+    let hex: String = parts.concat();
+    if !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return None;
+    }
+    u128::from_str_radix(&hex, 16).ok()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -151,6 +167,33 @@ mod tests {
             Some("Only32.Server.1")
         );
         assert!(c.details(99).is_none());
+    }
+
+    #[test]
+    fn guids_parse_as_the_registry_spells_them() {
+        assert_eq!(
+            parse_guid("{CC603642-66D7-48F1-B69A-B625E73652D7}"),
+            Some(DA30)
+        );
+        assert_eq!(
+            parse_guid("{63d5f432-cfe4-11d1-b2c8-0060083ba1fb}"),
+            Some(DA20)
+        );
+        let g = crate::registration::guid_string(0x0123_4567_89ab_cdef_0011_2233_4455_6677);
+        assert_eq!(
+            parse_guid(&g),
+            Some(0x0123_4567_89ab_cdef_0011_2233_4455_6677)
+        );
+        for bad in [
+            "",
+            "{}",
+            "CC603642-66D7-48F1-B69A-B625E73652D7",
+            "{CC603642-66D7-48F1-B69A-B625E73652DZ}",
+            "{CC60364-266D7-48F1-B69A-B625E73652D7}",
+            "{+C603642-66D7-48F1-B69A-B625E73652D7}",
+        ] {
+            assert_eq!(parse_guid(bad), None, "{bad}");
+        }
     }
 
     #[test]

@@ -41,6 +41,8 @@ pub mod runtime;
 #[cfg(windows)]
 pub mod server;
 #[cfg(windows)]
+pub mod server_list;
+#[cfg(windows)]
 pub mod service;
 #[cfg(windows)]
 pub mod variant;
