@@ -100,6 +100,38 @@ fn write_then_read_back() {
     assert_eq!(items[0].value, Value::R4(7.0));
 }
 
+/// IOPCItemIO has no group, so its writes convert text in the server object's LCID
+/// (IOPCCommon::SetLocaleID; issue 15): "1,5" is 1.5 for a Polish client and 15 for an
+/// English one (',' groups digits in en-US), each client its own.
+#[test]
+fn write_text_in_the_clients_locale() {
+    let (_com, pl) = connect();
+    let en = e2e_tests::Server::connect(e2e_tests::PROGID).expect("a second client");
+    pl.set_locale(0x0415).expect("SetLocaleID(pl)");
+    en.set_locale(0x0409).expect("SetLocaleID(en-US)");
+    let text = |s: &str| ItemVqt::value(Value::Bstr(s.into()));
+    let read = |server: &e2e_tests::Server| {
+        server.item_read(&[("KW_A111", 0)]).unwrap().1[0]
+            .value
+            .clone()
+    };
+    let (hr, errors) = pl.item_write_vqt(&[("KW_A111", text("1,5"))]).unwrap();
+    assert_eq!((hr, errors), (S_OK, vec![S_OK]));
+    assert_eq!(read(&en), Value::R4(1.5), "Polish decimal comma");
+    let (hr, errors) = en.item_write_vqt(&[("KW_A111", text("1,5"))]).unwrap();
+    assert_eq!((hr, errors), (S_OK, vec![S_OK]));
+    assert_eq!(read(&pl), Value::R4(15.0), "English digit grouping");
+    let (hr, errors) = pl.item_write_vqt(&[("KW_A111", text("2.5"))]).unwrap();
+    assert_eq!(
+        (hr, errors),
+        (S_FALSE, vec![OPC_E_BADTYPE]),
+        "not a number in Polish"
+    );
+    let (hr, _) = en.item_write_vqt(&[("KW_A111", text(" 2.5 "))]).unwrap();
+    assert_eq!(hr, S_OK);
+    assert_eq!(read(&pl), Value::R4(2.5));
+}
+
 #[test]
 fn write_with_quality_and_timestamp() {
     let (_com, server) = connect();

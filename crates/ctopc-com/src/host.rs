@@ -20,7 +20,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use windows::core::{BOOL, GUID};
 use windows::Win32::Foundation::E_FAIL;
-use windows::Win32::Globalization::GetUserDefaultUILanguage;
+use windows::Win32::Globalization::{GetSystemDefaultLCID, GetUserDefaultUILanguage};
 use windows::Win32::System::Com::{
     CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
     CoUninitialize, CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE,
@@ -38,10 +38,10 @@ pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 pub const EXIT_LINGER: Duration = Duration::from_secs(3);
 
 /// COM initialised for the lifetime of the value (multithreaded apartment).
-struct ComInit;
+pub(crate) struct ComInit;
 
 impl ComInit {
-    fn mta() -> windows::core::Result<ComInit> {
+    pub(crate) fn mta() -> windows::core::Result<ComInit> {
         // SAFETY: paired with CoUninitialize in Drop on this thread.
         unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
         Ok(ComInit)
@@ -55,7 +55,7 @@ impl Drop for ComInit {
     }
 }
 
-fn exe_path() -> windows::core::Result<String> {
+pub(crate) fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())
@@ -118,6 +118,15 @@ fn default_lang(configured: Option<Lang>) -> Lang {
     Lang::default_for_system(u32::from(ui))
 }
 
+/// The number format of LOCALE_SYSTEM_DEFAULT (and of the neutral and user-default LCIDs):
+/// the machine's system locale, as `VariantChangeTypeEx` would use it (pl-PL on a Polish
+/// system, else en-US, the only other format the conversions know).
+fn system_locale() -> ctopc_core::convert::Locale {
+    // SAFETY: no arguments; returns the system locale's LCID.
+    let lcid = unsafe { GetSystemDefaultLCID() };
+    ctopc_core::convert::Locale::from_lcid(lcid, ctopc_core::convert::Locale::EnUs)
+}
+
 /// The folder of ServerCTOPC.exe (the install folder: ASIXConnect.ini, Log\).
 pub fn install_dir() -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
@@ -132,10 +141,13 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
     let Setup {
         namespace,
         address_space,
-        engine_config,
+        mut engine_config,
         default_language,
         no_config_reason,
     } = setup;
+    // Text written with a default LCID converts in the system's number format (a Polish
+    // system reads "12,5" as 12.5), as VariantChangeTypeEx does on Windows.
+    engine_config.default_locale = system_locale();
     if let Some(r) = &no_config_reason {
         tracing::error!("OPC_STATUS_NOCONFIG: {r}");
     }

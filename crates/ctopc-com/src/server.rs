@@ -147,9 +147,16 @@ fn error_text(code: HRESULT, lang: Lang) -> windows::core::Result<String> {
 }
 
 impl IOPCCommon_Impl for OpcServer_Impl {
+    /// The LCID is the language of GetErrorString's texts and, in the engine, the
+    /// conversion locale of this session's IOPCItemIO writes (which have no group LCID).
     unsafe fn SetLocaleID(&self, lcid: u32) -> windows::core::Result<()> {
         self.lang_for(lcid)
             .ok_or_else(|| windows::core::Error::from(E_INVALIDARG))?;
+        let handle = self.handle;
+        self.ctx
+            .runtime
+            .with_engine(|e, _| e.set_session_lcid(handle, lcid))
+            .map_err(crate::error::to_com)?;
         self.session().lcid = lcid;
         Ok(())
     }

@@ -504,6 +504,69 @@ fn item_io_write_vqt_success_and_per_item_errors() {
     assert_eq!((r, errors), (S_OK, vec![S_OK]));
 }
 
+/// One WriteVQT of the text `text` to KW_A110 through `io`; its per-item error.
+fn write_text(io: &IOPCItemIO, text: &str) -> HRESULT {
+    let id = wide("KW_A110");
+    let ids = [pcwstr(&id)];
+    let mut vqt = [OPCITEMVQT {
+        vDataValue: ctopc_com::variant::to_variant(&Value::Bstr(text.into())).unwrap(),
+        ..Default::default()
+    }];
+    let mut errors: *mut HRESULT = poison();
+    // SAFETY: valid arrays of 1.
+    let r = unsafe { io.WriteVQT(1, ids.as_ptr(), vqt.as_ptr(), &mut errors) };
+    ctopc_com::variant::clear(&mut vqt[0].vDataValue);
+    assert!(r == S_OK || r == S_FALSE, "{text}: {r:?}");
+    // SAFETY: a CoTaskMem array of 1 handed out by the call, ours.
+    let errors = unsafe { take_array(errors, 1) };
+    errors[0]
+}
+
+/// IOPCItemIO has no group: WriteVQT converts text in the LCID the client set on this
+/// server object with IOPCCommon::SetLocaleID (issue 15), per server object; a refused
+/// SetLocaleID changes nothing.
+#[test]
+fn item_io_write_vqt_converts_text_in_the_server_objects_locale() {
+    let pl = server::<IOPCItemIO>();
+    let en = server::<IOPCItemIO>();
+    let set = |io: &IOPCItemIO, lcid: u32| {
+        let c: IOPCCommon = io.cast().unwrap();
+        // SAFETY: plain value.
+        hr(unsafe { c.SetLocaleID(lcid) })
+    };
+    assert_eq!(set(&pl, 0x0415), S_OK);
+    assert_eq!(set(&en, 0x0409), S_OK);
+    let reader = client();
+    let setpoint = || {
+        reader.item_read(&[("KW_A110", 0)]).unwrap().1[0]
+            .value
+            .clone()
+    };
+
+    assert_eq!(write_text(&pl, "1,5"), S_OK);
+    assert_eq!(
+        setpoint(),
+        Value::R4(1.5),
+        "Polish: ',' is the decimal separator"
+    );
+    assert_eq!(write_text(&en, "1,5"), S_OK);
+    assert_eq!(setpoint(), Value::R4(15.0), "English: ',' groups digits");
+    assert_eq!(write_text(&en, "2.5"), S_OK);
+    assert_eq!(setpoint(), Value::R4(2.5));
+    assert_eq!(
+        write_text(&pl, "2.5"),
+        OPC_E_BADTYPE,
+        "not a number in Polish"
+    );
+    assert_eq!(set(&pl, 0x0407), E_INVALIDARG);
+    assert_eq!(
+        write_text(&pl, " 3,5 "),
+        S_OK,
+        "still Polish after a refused LCID"
+    );
+    assert_eq!(setpoint(), Value::R4(3.5));
+}
+
 #[test]
 fn item_ids_that_are_not_utf16() {
     let p = server::<IOPCItemProperties>();

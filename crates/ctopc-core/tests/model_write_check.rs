@@ -307,3 +307,107 @@ fn write_vqt_and_async_writes_apply_the_same_conversion() {
     );
     assert_eq!(written(&mut sim).1, vec![Value::R8(1.0)]);
 }
+
+/// IOPCItemIO::WriteVQT has no group: its text converts in the session's LCID, the one the
+/// client set with IOPCCommon::SetLocaleID (issue 15; before, always the server's default
+/// locale). A Polish session's "12,5" is 12.5; in an English one the comma groups digits,
+/// so "12,5" is 125 (VarR8FromStr with en-US) and "12.5" is 12.5.
+#[test]
+fn item_io_writes_convert_in_the_sessions_locale() {
+    let vqt = |v: &str| ItemVqt {
+        value: Value::Bstr(v.into()),
+        quality: None,
+        timestamp: None,
+    };
+    /// (LCID set, texts written to A1, D1, A1; values sent; per-item results)
+    type Case<'a> = (
+        Option<u32>,
+        &'a [&'a str],
+        Vec<Value>,
+        Vec<Result<(), OpcError>>,
+    );
+    let cases: [Case; 4] = [
+        (
+            Some(0x0415),
+            &["12,5", " -0,5 ", "12.5"],
+            vec![Value::R8(12.5), Value::R4(-0.5)],
+            vec![Ok(()), Ok(()), Err(OpcError::BadType)],
+        ),
+        (
+            Some(0x0409),
+            &["12,5", "12.5"],
+            vec![Value::R8(125.0), Value::R4(12.5)],
+            vec![Ok(()), Ok(())],
+        ),
+        // The sort ID (bits 16-19) is ignored.
+        (
+            Some(0x0001_0415),
+            &["12,5"],
+            vec![Value::R8(12.5)],
+            vec![Ok(())],
+        ),
+        // Never set: the server's default conversion locale (en-US here).
+        (None, &["12.5"], vec![Value::R8(12.5)], vec![Ok(())]),
+    ];
+    for (lcid, texts, want_values, want) in cases {
+        let mut sim = Sim::new();
+        sim.e.set_namespace(Arc::new(NumericOnly));
+        let s = sim.session();
+        if let Some(lcid) = lcid {
+            sim.e.set_session_lcid(s, lcid).unwrap();
+            assert_eq!(sim.e.session_lcid(s), Ok(lcid));
+        }
+        let ids = ["A1", "D1", "A1"];
+        let items: Vec<(&str, ItemVqt)> = texts
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (ids[i], vqt(t)))
+            .collect();
+        let SyncOutcome::Pending(id) = sim.e.item_io_write_vqt(sim.now, s, &items).unwrap() else {
+            panic!("{lcid:?}: nothing sent")
+        };
+        let (req, values) = written(&mut sim);
+        assert_eq!(values, want_values, "{lcid:?}");
+        let n = values.len();
+        sim.e
+            .handle_source_write_result(sim.now, req, vec![Ok(()); n]);
+        let Some(SyncResult::Write(r)) = sim.e.take_sync_result(id) else {
+            panic!("no result")
+        };
+        assert_eq!(r, want, "{lcid:?}");
+    }
+}
+
+#[test]
+fn session_lcid_is_validated_and_per_session() {
+    let mut sim = Sim::new();
+    let a = sim.session();
+    let b = sim.session();
+    assert_eq!(
+        sim.e.session_lcid(a),
+        Ok(0x0800),
+        "LOCALE_SYSTEM_DEFAULT until set"
+    );
+    sim.e.set_session_lcid(a, 0x0415).unwrap();
+    assert_eq!(
+        sim.e.set_session_lcid(a, 0xDEAD_BEEF),
+        Err(OpcError::InvalidArg)
+    );
+    assert_eq!(
+        sim.e.set_session_lcid(a, 0x0407),
+        Err(OpcError::InvalidArg),
+        "German"
+    );
+    assert_eq!(
+        sim.e.session_lcid(a),
+        Ok(0x0415),
+        "unchanged by a refused LCID"
+    );
+    assert_eq!(sim.e.session_lcid(b), Ok(0x0800), "per session");
+    for ok in [0x0000, 0x0400, 0x0800, 0x007F, 0x0809] {
+        assert_eq!(sim.e.set_session_lcid(b, ok), Ok(()), "{ok:#x}");
+    }
+    sim.e.close_session(sim.now, a).unwrap();
+    assert_eq!(sim.e.set_session_lcid(a, 0x0409), Err(OpcError::InvalidArg));
+    assert_eq!(sim.e.session_lcid(a), Err(OpcError::InvalidArg));
+}

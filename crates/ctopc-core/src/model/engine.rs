@@ -113,6 +113,9 @@ pub(crate) struct Session {
     pub groups: Vec<GroupHandle>,
     pub last_update: Timestamp,
     pub name_counter: u32,
+    /// The LCID of IOPCCommon::SetLocaleID: the conversion locale of the session's
+    /// group-less writes (IOPCItemIO::WriteVQT). LOCALE_SYSTEM_DEFAULT until set.
+    pub lcid: u32,
 }
 
 /// The OPC DA server model. See [`crate::model`].
@@ -202,9 +205,35 @@ impl Engine {
                 groups: Vec::new(),
                 last_update: Timestamp(0),
                 name_counter: 0,
+                lcid: crate::lang::LOCALE_SYSTEM_DEFAULT,
             },
         );
         SessionHandle(h)
+    }
+
+    /// IOPCCommon::SetLocaleID: the session's LCID, the locale in which its IOPCItemIO
+    /// writes convert text (as a group's LCID does for the group's writes). Accepted: the
+    /// LCIDs the server speaks (Polish, any English, the neutral/default and invariant
+    /// locales: [`crate::lang::Lang::from_lcid`]); others, and an unknown session, are
+    /// E_INVALIDARG and change nothing.
+    pub fn set_session_lcid(&mut self, session: SessionHandle, lcid: u32) -> Result<(), OpcError> {
+        if crate::lang::Lang::from_lcid(lcid, crate::lang::Lang::English).is_none() {
+            return Err(OpcError::InvalidArg);
+        }
+        let s = self
+            .sessions
+            .get_mut(&session.0)
+            .ok_or(OpcError::InvalidArg)?;
+        s.lcid = lcid;
+        Ok(())
+    }
+
+    /// The session's LCID ([`Self::set_session_lcid`]; LOCALE_SYSTEM_DEFAULT until set).
+    pub fn session_lcid(&self, session: SessionHandle) -> Result<u32, OpcError> {
+        self.sessions
+            .get(&session.0)
+            .map(|s| s.lcid)
+            .ok_or(OpcError::InvalidArg)
     }
 
     /// Releases a server object: every group is removed (as with bForce).

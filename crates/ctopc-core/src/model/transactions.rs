@@ -808,7 +808,13 @@ impl Engine {
 
     // ---- IOPCItemIO (DA 3.0: by item ID, without a group) --------------------------------
 
+    /// A group-less transaction of `session` (the caller checked that it exists); its
+    /// conversions use the session's LCID (IOPCCommon::SetLocaleID).
     fn item_io_header(&self, kind: TxnKind, session: SessionHandle) -> Txn {
+        let lcid = self
+            .sessions
+            .get(&session.0)
+            .map_or(crate::lang::LOCALE_SYSTEM_DEFAULT, |s| s.lcid);
         Txn {
             kind,
             session,
@@ -816,7 +822,7 @@ impl Engine {
             client_group: 0,
             transaction_id: 0,
             cancel_id: 0,
-            locale: self.cfg.default_locale,
+            locale: self.locale(lcid),
             slots: Vec::new(),
             remote: Vec::new(),
             req: 0,
@@ -895,7 +901,9 @@ impl Engine {
         }
     }
 
-    /// IOPCItemIO::WriteVQT: per item `(item ID, value with optional quality/timestamp)`.
+    /// IOPCItemIO::WriteVQT: per item `(item ID, value with optional quality/timestamp)`;
+    /// values convert as for a group's writes, in the session's locale
+    /// ([`Engine::set_session_lcid`]).
     pub fn item_io_write_vqt(
         &mut self,
         now: Timestamp,
