@@ -38,6 +38,7 @@ pub const CLASSES: &str = "Software\\Classes";
 /// folder); `dist` passes its list, which holds these and may hold more.
 pub const FILES: &[&str] = &[
     "ServerCTOPC.exe",
+    "OpcServerList.exe",
     "opc_ps.dll",
     "opcdiag.exe",
     "x86/opc_ps.dll",
@@ -384,7 +385,7 @@ mod tests {
         std::fs::write(&p, b"x").unwrap();
         let files = vec![("ServerCTOPC.exe".to_owned(), p)];
         let e = build(&files, "0.1.0", &dir.join("stage"), &dir.join("t.msi")).unwrap_err();
-        assert!(e.contains("lacks opc_ps.dll"), "{e}");
+        assert!(e.contains("lacks OpcServerList.exe, opc_ps.dll"), "{e}");
     }
 }
 
@@ -490,7 +491,12 @@ mod wine_test {
                 if !read.lines().any(|l| l.starts_with("KW_A000")) {
                     return Err(format!("{what}: read ({arch:?}):\n{read}"));
                 }
-                println!("msi-test: {what}: {arch:?} opcdiag status and read: ok");
+                // The packaged server browser answers (no fallback to the categories).
+                let servers = self.opcdiag(arch, &["servers"])?;
+                if !servers.contains("ServerCTOPC.App") || servers.contains("no server browser") {
+                    return Err(format!("{what}: servers ({arch:?}):\n{servers}"));
+                }
+                println!("msi-test: {what}: {arch:?} opcdiag status, read and servers: ok");
             }
             self.settle();
             Ok(())
@@ -506,6 +512,9 @@ mod wine_test {
                 "opc_ps.dll",
                 "services\\\\serverctopc",
                 "appid\\\\serverctopc.exe",
+                "13486d51-4821-11d2-a494-3cb306c10000",
+                "opc.serverlist",
+                "opcserverlist.exe",
             ] {
                 if reg.contains(needle) {
                     let line = reg.lines().find(|l| l.contains(needle)).unwrap_or("");
