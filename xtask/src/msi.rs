@@ -578,6 +578,7 @@ mod wine_test {
             .map(|f| {
                 let src = match *f {
                     "ServerCTOPC.exe" => a.server.clone(),
+                    "OpcServerList.exe" => a.server_list.clone(),
                     "opc_ps.dll" => a.proxy.clone(),
                     "opcdiag.exe" => a.dir.join("opcdiag.exe"),
                     "x86/opc_ps.dll" => a.proxy32.clone(),
