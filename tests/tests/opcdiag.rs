@@ -357,3 +357,27 @@ fn demo_shows_status_tree_and_live_values() {
         .count();
     assert!(live >= 8, "a value of every variable at least: {r:?}");
 }
+
+#[test]
+fn servers_lists_serverctopc_through_the_server_browser() {
+    let r = opcdiag(&["servers"]);
+    assert_eq!(r.code, 0, "{r:?}");
+    assert!(
+        r.stdout.contains("through OPC.ServerList.1"),
+        "the browser was used: {r:?}"
+    );
+    let line = r
+        .stdout
+        .lines()
+        .find(|l| l.starts_with("ServerCTOPC.App.1 "))
+        .unwrap_or_else(|| panic!("ServerCTOPC listed: {r:?}"));
+    assert!(line.contains("2.0, 3.0"), "{line}");
+    assert!(
+        line.contains("ServerCTOPC OPC DA Server for asix"),
+        "{line}"
+    );
+    assert!(
+        line.ends_with("{3277B556-BA68-4BDE-8687-8EE4E4B46336}"),
+        "{line}"
+    );
+}

@@ -8,6 +8,8 @@ pub struct Artifacts {
     /// target/x86_64-pc-windows-gnu/release: the server, the 64-bit proxy/stub, opcdiag.
     pub dir: PathBuf,
     pub server: PathBuf,
+    /// OpcServerList.exe, our OPC.ServerList.1 (64-bit, as the server).
+    pub server_list: PathBuf,
     pub proxy: PathBuf,
     /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
     pub dir32: PathBuf,
@@ -26,6 +28,8 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
         "-p",
         "serverctopc",
         "-p",
+        "opc-server-list",
+        "-p",
         "opc-client",
         "--bins",
     ]))?;
@@ -43,6 +47,7 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     let dir = Arch::X64.release_dir(&root);
     Ok(Artifacts {
         server: dir.join("ServerCTOPC.exe"),
+        server_list: dir.join("OpcServerList.exe"),
         proxy,
         dir,
         dir32: Arch::X86.release_dir(&root),

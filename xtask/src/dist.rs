@@ -30,6 +30,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
     let base = format!("ServerCTOPC-{version}");
     let mut files: Vec<(String, PathBuf)> = vec![
         ("ServerCTOPC.exe".into(), a.server.clone()),
+        ("OpcServerList.exe".into(), a.server_list.clone()),
         ("opc_ps.dll".into(), a.proxy.clone()),
         ("opcdiag.exe".into(), a.dir.join("opcdiag.exe")),
         // For 32-bit OPC clients (docs/deployment.md: the 32-bit regsvr32 registers it).
@@ -79,7 +80,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
         out.display(),
         debug_entries.len()
     );
-    Ok(())
+    crate::msi::dist(&files, version).map(|_| ())
 }
 
 /// The bitness of a file of the archive: `x86/...` is 32-bit, the rest 64-bit.

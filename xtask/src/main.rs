@@ -8,6 +8,7 @@ mod build;
 mod demo;
 mod dist;
 mod fuzz;
+mod msi;
 mod proxy;
 mod setup;
 mod soak;
@@ -39,9 +40,15 @@ commands:
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
           stops after SECONDS
   proxy   build only the proxy/stub DLLs from idl/ (64-bit and 32-bit)
-  dist    target/dist/ServerCTOPC-<version>.zip: server, proxy/stub, opcdiag (the last
+  dist    target/dist/ServerCTOPC-<version>.zip and ServerCTOPC-<version>-x64.msi
+          (installer/, xtask/src/msi.rs; needs wixl): server, proxy/stub, opcdiag (the last
           two also 32-bit, in x86/), example configuration, demo database, deployment
           guide and docs
+  msi-test  the MSI under Wine in a fresh prefix (target/wine/msi-prefix): a broken
+          package fails and leaves nothing; silent install, a 64-bit and a 32-bit
+          opcdiag status and read; a major upgrade with SERVICE=1 keeps a modified
+          ASIXConnect.ini and still serves; silent uninstall leaves no keys (both
+          views), service or files
   fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
           libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
           random-mutation runner; targets may be named
@@ -68,6 +75,7 @@ fn main() -> ExitCode {
         "e2e" => test::e2e(rest),
         "demo" => demo::run(rest),
         "dist" => dist::run(rest),
+        "msi-test" => msi::test(rest),
         "bench" => bench::run(rest),
         "fuzz" => fuzz::run(rest),
         "soak" => soak::run(rest),

@@ -10,7 +10,8 @@ use std::process::Command;
 /// one: a win64 prefix runs 32-bit programs only with wine32 installed), the mingw C
 /// toolchains of both bitnesses (linkers for the Rust windows-gnu targets, the shims and
 /// the proxy/stub DLLs), widl (both `x86_64-` and `i686-w64-mingw32-widl` come with
-/// mingw-w64-tools), and the system IDL files widl imports (only libwine-dev ships them).
+/// mingw-w64-tools), the system IDL files widl imports (only libwine-dev ships them), and
+/// wixl + msitools for the MSI.
 /// wine32 must be installed before a prefix is made (see [`wine::ensure_prefix`] for
 /// prefixes made earlier).
 pub const PACKAGES: &[&str] = &[
@@ -20,6 +21,10 @@ pub const PACKAGES: &[&str] = &[
     "gcc-mingw-w64-i686",
     "mingw-w64-tools",
     "libwine-dev",
+    // The MSI (`cargo xtask dist`, xtask/src/msi.rs): wixl builds it from WiX source,
+    // msiinfo (msitools) reads its tables back for the tests.
+    "wixl",
+    "msitools",
 ];
 /// The server's target (64-bit): what `cargo xtask build` builds everything for.
 pub const TARGET: &str = "x86_64-pc-windows-gnu";
@@ -89,8 +94,8 @@ fn rust_targets() -> Result<(), String> {
 }
 
 /// Builds the bcryptprimitives shim for `arch` (see xtask/shim/bcryptprimitives.c) at
-/// [`wine::shim`].
-fn build_shim(arch: Arch) -> Result<(), String> {
+/// [`wine::shim`]; idempotent (msi-test calls it before making its prefix).
+pub fn build_shim(arch: Arch) -> Result<(), String> {
     let root = util::root();
     let src = root.join("xtask/shim/bcryptprimitives.c");
     let def = root.join("xtask/shim/bcryptprimitives.def");

@@ -107,6 +107,7 @@ pub const E2E_32: &[&str] = &[
     "server_browse",
     "server_groups",
     "server_itemio",
+    "server_list",
     "server_props",
     "server_shutdown",
 ];
@@ -274,18 +275,19 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
             ));
         }
     }
-    let status = util::run_with_timeout(wine::wine(&a.server).arg("/RegServer"), limit)?;
-    if !status.success() {
-        return Err(format!(
-            "{} /RegServer failed: {status}",
-            a.server.display()
-        ));
+    // The server browser too (OPC.ServerList.1: tests/tests/server_list.rs).
+    for exe in [&a.server, &a.server_list] {
+        let status = util::run_with_timeout(wine::wine(exe).arg("/RegServer"), limit)?;
+        if !status.success() {
+            return Err(format!("{} /RegServer failed: {status}", exe.display()));
+        }
     }
     println!(
-        "test: registered {}, {} and {}",
+        "test: registered {}, {}, {} and {}",
         a.proxy.display(),
         a.proxy32.display(),
-        a.server.display()
+        a.server.display(),
+        a.server_list.display()
     );
     Ok(())
 }

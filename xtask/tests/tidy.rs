@@ -96,6 +96,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/asix-net",
         "crates/server",
         "crates/opc-client",
+        "crates/serverlist",
         "xtask",
     ];
     let own = ["crates/ctopc-com", "tests", "fuzz"];

@@ -1146,3 +1146,4 @@ pub use server_ext::{
 // ---- console clients (opcdiag): a data-change sink, Ctrl+C, local time -----------------
 
 pub mod diag;
+pub mod server_list;

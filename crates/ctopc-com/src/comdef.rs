@@ -1,6 +1,6 @@
 //! Our own definitions of the COM-defined interfaces that the server implements
 //! (IConnectionPointContainer, IConnectionPoint, IEnumString, IEnumUnknown,
-//! IEnumConnectionPoints, IEnumConnections), for the implementing side only.
+//! IEnumConnectionPoints, IEnumConnections, IEnumGUID), for the implementing side only.
 //!
 //! Why: windows-rs' generated vtable shims of these interfaces (`IConnectionPoint_Impl`
 //! and the others) turn methods with one out-parameter into `fn(..) -> Result<T>` and
@@ -21,7 +21,7 @@
 use std::ffi::c_void;
 use windows::Win32::System::Com::{
     IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints, IEnumConnections,
-    IEnumString, IEnumUnknown, CONNECTDATA,
+    IEnumGUID, IEnumString, IEnumUnknown, CONNECTDATA,
 };
 use windows_core::{interface, IUnknown, IUnknown_Vtbl, Interface, GUID, HRESULT, PWSTR};
 
@@ -118,4 +118,14 @@ same_interface! {
     RawEnumUnknown => IEnumUnknown,
     RawEnumConnectionPoints => IEnumConnectionPoints,
     RawEnumConnections => IEnumConnections,
+    RawEnumGUID => IEnumGUID,
+}
+
+/// `IEnumGUID` (`comcat.idl`): the server browser's `IOPCServerList` enumerator.
+#[interface("0002e000-0000-0000-c000-000000000046")]
+pub unsafe trait RawEnumGUID: IUnknown {
+    pub fn Next(&self, celt: u32, rgelt: *mut GUID, pceltfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, celt: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumGUID>) -> HRESULT;
 }

@@ -38,10 +38,10 @@ pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 pub const EXIT_LINGER: Duration = Duration::from_secs(3);
 
 /// COM initialised for the lifetime of the value (multithreaded apartment).
-struct ComInit;
+pub(crate) struct ComInit;
 
 impl ComInit {
-    fn mta() -> windows::core::Result<ComInit> {
+    pub(crate) fn mta() -> windows::core::Result<ComInit> {
         // SAFETY: paired with CoUninitialize in Drop on this thread.
         unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
         Ok(ComInit)
@@ -55,7 +55,7 @@ impl Drop for ComInit {
     }
 }
 
-fn exe_path() -> windows::core::Result<String> {
+pub(crate) fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())

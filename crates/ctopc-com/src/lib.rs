@@ -8,6 +8,7 @@
 
 #[cfg(windows)]
 pub mod abi;
+pub mod catalog;
 #[cfg(windows)]
 pub mod client;
 #[cfg(windows)]
@@ -39,6 +40,8 @@ pub mod registry;
 pub mod runtime;
 #[cfg(windows)]
 pub mod server;
+#[cfg(windows)]
+pub mod server_list;
 #[cfg(windows)]
 pub mod service;
 #[cfg(windows)]

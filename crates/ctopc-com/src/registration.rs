@@ -116,6 +116,112 @@ pub fn serverctopc<'a>(exe_path: &'a str, service: Option<&'a str>) -> ServerReg
     }
 }
 
+// ---------------------------------------------------------------------------------------
+// OPC.ServerList.1: our own server browser (OpcEnum-compatible), OpcServerList.exe
+
+/// CLSID of `OPC.ServerList.1`, the OPC Foundation's OpcEnum's: clients create the server
+/// browser by this CLSID, so ours has to answer to it too.
+pub const CLSID_OPC_SERVER_LIST: u128 = 0x13486d51_4821_11d2_a494_3cb306c10000;
+/// Our browser's AppID (ours, not OpcEnum's {13486D44-...}, so that removing one never
+/// removes the other's DCOM settings).
+pub const APPID_SERVER_LIST: u128 = 0x8878ae78_5f7d_47ef_8a3d_48868bb8e22b;
+pub const SERVER_LIST_PROGID: &str = "OPC.ServerList";
+pub const SERVER_LIST_PROGID_VERSIONED: &str = "OPC.ServerList.1";
+pub const SERVER_LIST_DESCRIPTION: &str = "OPC Server List (ServerCTOPC)";
+/// The browser's exe (not `OpcEnum.exe`: `AppID\OpcEnum.exe` is the OPC Foundation's).
+pub const SERVER_LIST_EXE_NAME: &str = "OpcServerList.exe";
+/// `CATID_OPCDAServer10` (opcda.idl).
+pub const CATID_OPC_DA_SERVER_10: u128 = 0x63d5f430_cfe4_11d1_b2c8_0060083ba1fb;
+
+/// The registration of our `OPC.ServerList.1` for the exe at `exe_path` (no categories, no
+/// legacy `OPC` key). Apply it with [`server_list_keys`] / [`server_list_trees`], which
+/// leave a server browser that is not ours alone.
+pub fn server_list(exe_path: &str) -> ServerRegistration<'_> {
+    ServerRegistration {
+        clsid: CLSID_OPC_SERVER_LIST,
+        appid: APPID_SERVER_LIST,
+        progid: SERVER_LIST_PROGID,
+        progid_versioned: SERVER_LIST_PROGID_VERSIONED,
+        description: SERVER_LIST_DESCRIPTION,
+        exe_path,
+        exe_name: SERVER_LIST_EXE_NAME,
+        service_name: None,
+        categories: &[],
+        opc_key_vendor: None,
+    }
+}
+
+/// `CLSID\{13486D51-...}\LocalServer32` below `HKEY_CLASSES_ROOT`: what tells whose
+/// server browser a view has.
+pub fn server_list_local_server_key() -> String {
+    format!(
+        "CLSID\\{}\\LocalServer32",
+        guid_string(CLSID_OPC_SERVER_LIST)
+    )
+}
+
+/// Whether a `LocalServer32` command line of `{13486D51-...}` names our browser (its
+/// file name is [`SERVER_LIST_EXE_NAME`], wherever it is installed; the OPC Foundation's
+/// is `OpcEnum.exe`). Quotes and arguments are ignored; case-insensitive.
+pub fn is_our_server_list(local_server32: &str) -> bool {
+    let s = local_server32.trim();
+    let path = match s.strip_prefix('"') {
+        Some(rest) => rest.split('"').next().unwrap_or(rest),
+        None => s
+            .split(" -")
+            .next()
+            .unwrap_or(s)
+            .split(" /")
+            .next()
+            .unwrap_or(s),
+    };
+    let file = path.rsplit(['\\', '/']).next().unwrap_or(path).trim();
+    file.eq_ignore_ascii_case(SERVER_LIST_EXE_NAME)
+}
+
+/// Whose server browser each view has, from its `LocalServer32` (`None`: none).
+pub fn foreign_server_list_views(local_servers: &[(View, Option<String>)]) -> Vec<View> {
+    local_servers
+        .iter()
+        .filter(|(_, ls)| ls.as_deref().is_some_and(|l| !is_our_server_list(l)))
+        .map(|(v, _)| *v)
+        .collect()
+}
+
+fn is_progid_path(r: &ServerRegistration, path: &str) -> bool {
+    [r.progid, r.progid_versioned]
+        .iter()
+        .any(|p| path == *p || path.starts_with(&format!("{p}\\")))
+}
+
+/// The keys `/RegServer` of the browser writes: every key of `r` in the views without a
+/// foreign browser (`foreign`, from [`foreign_server_list_views`]), and the ProgID keys
+/// only when no view has one (Windows shares ProgID keys between the views: they would
+/// land on the OPC Foundation's).
+pub fn server_list_keys(r: &ServerRegistration, foreign: &[View]) -> Vec<Key> {
+    r.keys()
+        .into_iter()
+        .filter(|k| !foreign.contains(&k.view))
+        .filter(|k| foreign.is_empty() || !is_progid_path(r, &k.path))
+        .collect()
+}
+
+/// The trees `/UnregServer` of the browser deletes: the CLSID in the views where the
+/// browser is ours (`ours`), the ProgIDs only when no view has a foreign one, our AppIDs
+/// always (they are ours by GUID and exe name).
+pub fn server_list_trees(
+    r: &ServerRegistration,
+    ours: &[View],
+    foreign: &[View],
+) -> Vec<(View, String)> {
+    let clsid = format!("CLSID\\{}", guid_string(r.clsid));
+    r.trees()
+        .into_iter()
+        .filter(|(v, p)| *p != clsid || ours.contains(v))
+        .filter(|(_, p)| foreign.is_empty() || !is_progid_path(r, p))
+        .collect()
+}
+
 /// `{XXXXXXXX-XXXX-XXXX-XXXX-XXXXXXXXXXXX}`, upper case, as the registry spells GUIDs.
 pub fn guid_string(g: u128) -> String {
     format!(
@@ -409,5 +515,86 @@ mod tests {
         let keys = r.keys();
         assert!(!keys.iter().any(|k| k.path.contains("Categor")));
         assert!(!keys.iter().any(|k| k.path.contains("\\OPC")));
+    }
+
+    #[test]
+    fn the_server_list_answers_to_opcenums_clsid_under_our_own_appid_and_exe() {
+        let r = server_list("C:\\Program Files\\ServerCTOPC\\OpcServerList.exe");
+        assert_eq!(
+            guid_string(r.clsid),
+            "{13486D51-4821-11D2-A494-3CB306C10000}"
+        );
+        assert_ne!(r.appid, 0x13486d44_4821_11d2_a494_3cb306c10000);
+        let keys = r.keys();
+        for v in VIEWS {
+            assert_eq!(
+                value(&keys, v, &server_list_local_server_key(), ""),
+                Some("\"C:\\Program Files\\ServerCTOPC\\OpcServerList.exe\"")
+            );
+            assert_eq!(
+                value(&keys, v, "OPC.ServerList.1\\CLSID", ""),
+                Some("{13486D51-4821-11D2-A494-3CB306C10000}")
+            );
+            assert!(!keys.iter().any(|k| k.path.contains("Categor")));
+        }
+    }
+
+    #[test]
+    fn a_browser_is_ours_by_its_exe_name() {
+        for ours in [
+            "\"C:\\Program Files\\ServerCTOPC\\OpcServerList.exe\"",
+            "C:\\x\\opcserverlist.EXE -Embedding",
+            "\"D:\\other place\\OpcServerList.exe\" /x",
+        ] {
+            assert!(is_our_server_list(ours), "{ours}");
+        }
+        for theirs in [
+            "C:\\Windows\\system32\\OpcEnum.exe",
+            "\"C:\\Windows\\SysWOW64\\OpcEnum.exe\"",
+            "",
+        ] {
+            assert!(!is_our_server_list(theirs), "{theirs}");
+        }
+    }
+
+    #[test]
+    fn registration_leaves_the_opc_foundations_browser_alone() {
+        let r = server_list("C:\\S\\OpcServerList.exe");
+        let none = server_list_keys(&r, &[]);
+        assert_eq!(none, r.keys());
+        let foreign = foreign_server_list_views(&[
+            (View::Reg64, None),
+            (
+                View::Reg32,
+                Some("C:\\Windows\\SysWOW64\\OpcEnum.exe".into()),
+            ),
+        ]);
+        assert_eq!(foreign, [View::Reg32]);
+        let keys = server_list_keys(&r, &foreign);
+        assert!(keys.iter().all(|k| k.view == View::Reg64));
+        assert!(has(&keys, View::Reg64, &server_list_local_server_key()));
+        assert!(!keys.iter().any(|k| k.path.starts_with("OPC.ServerList")));
+        let both = [View::Reg64, View::Reg32];
+        assert!(server_list_keys(&r, &both).is_empty());
+        let ours_again = foreign_server_list_views(&[
+            (View::Reg64, Some("\"C:\\Old\\OpcServerList.exe\"".into())),
+            (View::Reg32, Some("\"C:\\Old\\OpcServerList.exe\"".into())),
+        ]);
+        assert!(ours_again.is_empty(), "re-registering ours replaces it");
+    }
+
+    #[test]
+    fn unregistration_removes_only_our_browser() {
+        let r = server_list("C:\\S\\OpcServerList.exe");
+        let clsid = "CLSID\\{13486D51-4821-11D2-A494-3CB306C10000}";
+        let all = server_list_trees(&r, &VIEWS, &[]);
+        assert_eq!(all, r.trees());
+        let t = server_list_trees(&r, &[View::Reg64], &[View::Reg32]);
+        assert!(t.contains(&(View::Reg64, clsid.to_owned())));
+        assert!(!t.contains(&(View::Reg32, clsid.to_owned())));
+        assert!(!t.iter().any(|(_, p)| p.starts_with("OPC.ServerList")));
+        assert!(t.contains(&(View::Reg32, "AppID\\OpcServerList.exe".to_owned())));
+        let nothing_ours = server_list_trees(&r, &[], &[View::Reg64, View::Reg32]);
+        assert!(!nothing_ours.iter().any(|(_, p)| p.starts_with("CLSID")));
     }
 }

@@ -134,6 +134,19 @@ pub fn unregister(r: &ServerRegistration) -> windows::core::Result<()> {
         .try_for_each(|(view, path)| delete_tree(*view, path))
 }
 
+/// Writes `keys` (parents before children), e.g. the server browser's filtered
+/// `registration::server_list_keys`.
+pub fn write_keys(keys: &[Key]) -> windows::core::Result<()> {
+    keys.iter().try_for_each(set_key)
+}
+
+/// Deletes each tree of `trees` in its view (absent ones are fine).
+pub fn delete_trees(trees: &[(View, String)]) -> windows::core::Result<()> {
+    trees
+        .iter()
+        .try_for_each(|(view, path)| delete_tree(*view, path))
+}
+
 #[cfg(test)]
 mod tests {
     use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};

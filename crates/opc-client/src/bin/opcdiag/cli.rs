@@ -38,6 +38,7 @@ commands:
   subscribe ITEMID... [--rate MS] [--for SECONDS] [--path ACCESSPATH]
                             print every change the server reports, until Ctrl+C
   demo [--for SECONDS]      ServerCTOPC's demo plant: status, plant tree, live values
+  servers                   the machine's OPC servers: ProgID, DA versions, description
   help [COMMAND]            this text, or a command's
 
 global options:
@@ -122,6 +123,17 @@ tank levels, temperatures, flows, a pump - and prints their changes live, until 
 or, with --for, until SECONDS have passed.
 ";
 
+const SERVERS_HELP: &str = "\
+usage: opcdiag servers
+
+Lists the OPC DA servers of this machine (both registry views) through the server browser
+OPC.ServerList.1 (ours, OpcServerList.exe, or the OPC Foundation's OpcEnum): for each its
+ProgID, the DA versions it implements (component categories DA 1.0, 2.0, 3.0), its
+description and CLSID. Without a server browser it falls back to the component
+categories manager (ICatInformation, this process's registry view only) and says so.
+--server is not used.
+";
+
 /// The help text of a command (the general usage for `None` or an unknown name).
 pub fn help(command: Option<&str>) -> &'static str {
     match command {
@@ -132,6 +144,7 @@ pub fn help(command: Option<&str>) -> &'static str {
         Some("write") => WRITE_HELP,
         Some("subscribe") => SUBSCRIBE_HELP,
         Some("demo") => DEMO_HELP,
+        Some("servers") => SERVERS_HELP,
         _ => USAGE,
     }
 }
@@ -175,6 +188,8 @@ pub enum Command {
     Demo {
         for_secs: Option<f64>,
     },
+    /// The machine's OPC servers, through the server browser (no server connection).
+    Servers,
 }
 
 /// What the command line asks for.
@@ -382,6 +397,8 @@ enum Sub {
         #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
         for_secs: Option<f64>,
     },
+    #[command(override_help = SERVERS_HELP)]
+    Servers,
     /// `help [COMMAND]`: the general usage, or a command's help.
     #[command(override_help = USAGE)]
     Help {
@@ -462,6 +479,7 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
             path: path.unwrap_or_default(),
         },
         Some(Sub::Demo { for_secs }) => Command::Demo { for_secs },
+        Some(Sub::Servers) => Command::Servers,
     };
     Ok(Parsed::Run(global, command))
 }
@@ -822,5 +840,22 @@ mod tests {
         );
         assert!(usage_error("props --device A").contains("props does not take --device"));
         assert!(usage_error("subscribe A --for -1").contains("seconds > 0"));
+    }
+
+    #[test]
+    fn servers_takes_no_arguments() {
+        assert_eq!(
+            parse(&args("servers")),
+            Ok(Parsed::Run(
+                Global {
+                    server: DEFAULT_SERVER.into(),
+                    lcid: None
+                },
+                Command::Servers
+            ))
+        );
+        assert_eq!(parse(&args("servers -h")), Ok(Parsed::Help(SERVERS_HELP)));
+        assert_eq!(parse(&args("help servers")), Ok(Parsed::Help(SERVERS_HELP)));
+        assert!(parse(&args("servers x")).is_err());
     }
 }

@@ -285,6 +285,54 @@ pub fn pad(s: &str, width: usize) -> String {
     }
 }
 
+/// One server of `opcdiag servers`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServerRow {
+    pub progid: String,
+    /// The DA versions implemented, e.g. `["2.0", "3.0"]`.
+    pub versions: Vec<&'static str>,
+    pub description: String,
+    /// `{...}`, as the registry spells it.
+    pub clsid: String,
+}
+
+/// The table of `opcdiag servers`: a header, then one line per server (ProgID, DA
+/// versions, description, CLSID), columns padded.
+pub fn servers_table(rows: &[ServerRow]) -> String {
+    let versions: Vec<String> = rows.iter().map(|r| r.versions.join(", ")).collect();
+    let w_progid = rows
+        .iter()
+        .map(|r| r.progid.chars().count())
+        .chain([6])
+        .max()
+        .unwrap_or(6);
+    let w_da = versions
+        .iter()
+        .map(|v| v.chars().count())
+        .chain([2])
+        .max()
+        .unwrap_or(2);
+    let w_desc = rows
+        .iter()
+        .map(|r| r.description.chars().count())
+        .chain([11])
+        .max()
+        .unwrap_or(11);
+    let line = |a: &str, b: &str, c: &str, d: &str| {
+        format!(
+            "{}  {}  {}  {d}\n",
+            pad(a, w_progid),
+            pad(b, w_da),
+            pad(c, w_desc)
+        )
+    };
+    let mut out = line("ProgID", "DA", "Description", "CLSID");
+    for (r, v) in rows.iter().zip(&versions) {
+        out.push_str(&line(&r.progid, v, &r.description, &r.clsid));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -475,5 +523,34 @@ mod tests {
     fn padding_counts_characters() {
         assert_eq!(pad("łąka", 6), "łąka  ");
         assert_eq!(pad("toolong", 3), "toolong");
+    }
+
+    #[test]
+    fn the_servers_table_lines_up() {
+        let rows = [
+            ServerRow {
+                progid: "ServerCTOPC.App.1".into(),
+                versions: vec!["2.0", "3.0"],
+                description: "ServerCTOPC OPC DA Server for asix".into(),
+                clsid: "{3277B556-BA68-4BDE-8687-8EE4E4B46336}".into(),
+            },
+            ServerRow {
+                progid: "Old.1".into(),
+                versions: vec!["1.0"],
+                description: "Stara stacja".into(),
+                clsid: "{00000000-0000-0000-0000-000000000001}".into(),
+            },
+        ];
+        let t = servers_table(&rows);
+        let lines: Vec<&str> = t.lines().collect();
+        assert_eq!(lines.len(), 3);
+        assert!(lines[0].starts_with("ProgID             DA        Description"));
+        assert!(lines[1].starts_with(
+            "ServerCTOPC.App.1  2.0, 3.0  ServerCTOPC OPC DA Server for asix  {3277B556"
+        ));
+        assert!(lines[2].starts_with("Old.1              1.0       Stara stacja "));
+        let clsid_col = lines[0].find("CLSID").unwrap();
+        assert_eq!(lines[2].find('{'), Some(clsid_col));
+        assert_eq!(servers_table(&[]), "ProgID  DA  Description  CLSID\n");
     }
 }

@@ -22,6 +22,9 @@ pub struct Session {
 
 /// Runs a command; `Err` is a failure to report (exit code 1).
 pub fn run(global: &Global, command: Command) -> Result<u8, String> {
+    if command == Command::Servers {
+        return servers();
+    }
     let s = Session::connect(global)?;
     match command {
         Command::Status => s.status().map(|()| EXIT_OK),
@@ -49,7 +52,72 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
             path,
         } => s.subscribe(&items, rate_ms, for_secs, &path),
         Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
+        Command::Servers => servers(),
     }
+}
+
+/// `opcdiag servers`: the machine's OPC DA servers through OPC.ServerList.1, else the
+/// component categories manager.
+fn servers() -> Result<u8, String> {
+    use ctopc_com::client::server_list::{classes_by_category_manager, ServerBrowser};
+    use ctopc_com::registration::{guid_string, VIEWS};
+    use windows::core::GUID;
+    let _com = ComThread::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
+    let categories = [
+        (CATID_OPCDAServer10, "1.0"),
+        (CATID_OPCDAServer20, "2.0"),
+        (CATID_OPCDAServer30, "3.0"),
+    ];
+    let browser = ServerBrowser::connect();
+    let mut found: Vec<(GUID, Vec<&'static str>)> = Vec::new();
+    for (catid, version) in categories {
+        let ids = match &browser {
+            Ok(b) => b.classes(&[catid], &[]),
+            Err(_) => classes_by_category_manager(&[catid]),
+        }
+        .map_err(|e| format!("listing DA {version} servers: {e}"))?;
+        for id in ids {
+            match found.iter_mut().find(|(g, _)| *g == id) {
+                Some((_, v)) => v.push(version),
+                None => found.push((id, vec![version])),
+            }
+        }
+    }
+    let registry_text = |path: String| {
+        VIEWS
+            .iter()
+            .find_map(|&v| ctopc_com::server_list::read_default(v, &path))
+    };
+    let rows: Vec<text::ServerRow> = found
+        .into_iter()
+        .map(|(id, versions)| {
+            let clsid = guid_string(id.to_u128());
+            let (progid, description) = match browser.as_ref().map(|b| b.details(&id)) {
+                Ok(Ok(d)) => (d.progid, d.user_type),
+                _ => (
+                    registry_text(format!("CLSID\\{clsid}\\ProgID")).unwrap_or_default(),
+                    registry_text(format!("CLSID\\{clsid}")).unwrap_or_default(),
+                ),
+            };
+            text::ServerRow {
+                progid,
+                versions,
+                description,
+                clsid,
+            }
+        })
+        .collect();
+    match &browser {
+        Ok(_) => println!("OPC servers (through OPC.ServerList.1): {}", rows.len()),
+        Err(e) => println!(
+            "OPC servers (no server browser: {}; through the component categories, \
+             this process's registry view only): {}",
+            text::hresult_text(e.code().0, None),
+            rows.len()
+        ),
+    }
+    print!("{}", text::servers_table(&rows));
+    Ok(EXIT_OK)
 }
 
 /// The local time zone offset at `t` (0 when Windows cannot tell).
