@@ -127,6 +127,41 @@ fn system_locale() -> ctopc_core::convert::Locale {
     ctopc_core::convert::Locale::from_lcid(lcid, ctopc_core::convert::Locale::EnUs)
 }
 
+/// The process-wide COM security of our local servers (ServerCTOPC.exe, OpcServerList.exe,
+/// the tests' marshal probe): authentication level NONE and identify-level impersonation,
+/// the usual OPC setting, so that callbacks into clients on other machines work without a
+/// shared domain; access is governed by the AppID's DCOM settings (see the deployment
+/// guide). Call once, after COM is initialised and before any marshalling; a failure
+/// (security already set) is ignored, as every caller did.
+pub fn init_security() {
+    // SAFETY: no pointers are passed; the callers call it once, before any marshalling.
+    let _ = unsafe {
+        CoInitializeSecurity(
+            None,
+            -1,
+            None,
+            None,
+            RPC_C_AUTHN_LEVEL_NONE,
+            RPC_C_IMP_LEVEL_IDENTIFY,
+            None,
+            EOAC_NONE,
+            None,
+        )
+    };
+}
+
+/// Registers `factory` as the class object of `clsid` for out-of-process activation
+/// (CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE); the caller revokes the cookie with
+/// CoRevokeClassObject before it drops the factory.
+pub fn register_class(
+    clsid: &GUID,
+    factory: impl windows::core::Param<windows::core::IUnknown>,
+) -> windows::core::Result<u32> {
+    // SAFETY: `clsid` is a valid reference for the call; the caller keeps the factory alive
+    // until it revokes the registration.
+    unsafe { CoRegisterClassObject(clsid, factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE) }
+}
+
 /// The folder of ServerCTOPC.exe (the install folder: ASIXConnect.ini, Log\).
 pub fn install_dir() -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
@@ -234,38 +269,14 @@ pub fn serve_as(
     stop: &StopSignal,
 ) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
-    // Authentication level NONE and identify-level impersonation: the usual OPC setting,
-    // so that callbacks into clients on other machines work without a shared domain;
-    // access is governed by the AppID's DCOM settings (see the deployment guide).
-    // SAFETY: called once, before any marshalling on this process.
-    let _ = unsafe {
-        CoInitializeSecurity(
-            None,
-            -1,
-            None,
-            None,
-            RPC_C_AUTHN_LEVEL_NONE,
-            RPC_C_IMP_LEVEL_IDENTIFY,
-            None,
-            EOAC_NONE,
-            None,
-        )
-    };
+    init_security();
     let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
         crate::error::error(E_FAIL, &e)
     })?;
     ctx.lifetime.stop_on(stop);
     let factory = server::class_factory(&ctx);
-    // SAFETY: the factory outlives the registration (revoked below before it is dropped).
-    let cookie = unsafe {
-        CoRegisterClassObject(
-            &CLSID_SERVERCTOPC,
-            &factory,
-            CLSCTX_LOCAL_SERVER,
-            REGCLS_MULTIPLEUSE,
-        )?
-    };
+    let cookie = register_class(&CLSID_SERVERCTOPC, &factory)?;
     tracing::info!("serving {PROGID}");
     let reason = match mode {
         ServeMode::UntilUnused => ctx.lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),

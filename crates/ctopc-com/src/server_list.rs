@@ -19,7 +19,7 @@ use crate::catalog::{parse_guid, Catalog, ClassEntry};
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
-use crate::host::{exe_path, ComInit, EXIT_LINGER, STARTUP_GRACE};
+use crate::host::{exe_path, init_security, register_class, ComInit, EXIT_LINGER, STARTUP_GRACE};
 use crate::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
     IOPCServerList_Impl,
@@ -35,11 +35,7 @@ use windows::Win32::Foundation::{
     CO_E_CLASSSTRING, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, E_POINTER,
     REGDB_E_CLASSNOTREG, S_OK,
 };
-use windows::Win32::System::Com::{
-    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, IEnumGUID,
-    CLSCTX_LOCAL_SERVER, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
-    RPC_C_IMP_LEVEL_IDENTIFY,
-};
+use windows::Win32::System::Com::{CoRevokeClassObject, IEnumGUID};
 use windows::Win32::System::Registry::{
     RegCloseKey, RegEnumKeyExW, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ,
     KEY_WOW64_32KEY, KEY_WOW64_64KEY, REG_SAM_FLAGS, RRF_RT_REG_SZ,
@@ -559,34 +555,11 @@ pub fn unregister() -> ComResult<()> {
 /// `-Embedding`: serves `OPC.ServerList.1` until the last client has gone.
 pub fn serve() -> ComResult<()> {
     let _com = ComInit::mta()?;
-    // As the server (host::serve_as): the usual OPC security setting; access is the
-    // AppID's DCOM settings' business.
-    // SAFETY: called once, before any marshalling on this process.
-    let _ = unsafe {
-        CoInitializeSecurity(
-            None,
-            -1,
-            None,
-            None,
-            RPC_C_AUTHN_LEVEL_NONE,
-            RPC_C_IMP_LEVEL_IDENTIFY,
-            None,
-            EOAC_NONE,
-            None,
-        )
-    };
+    init_security();
     let lifetime = Lifetime::new();
     let for_factory = Arc::clone(&lifetime);
     let factory = ClassFactory::new(Arc::clone(&lifetime), move || create_instance(&for_factory));
-    // SAFETY: the factory outlives the registration (revoked below before it is dropped).
-    let cookie = unsafe {
-        CoRegisterClassObject(
-            &CLSID_OPC_SERVER_LIST,
-            &factory,
-            CLSCTX_LOCAL_SERVER,
-            REGCLS_MULTIPLEUSE,
-        )?
-    };
+    let cookie = register_class(&CLSID_OPC_SERVER_LIST, &factory)?;
     let _ = lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie) }

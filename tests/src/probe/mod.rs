@@ -35,11 +35,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 use windows::core::{implement, IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOTIMPL, E_POINTER, S_FALSE, S_OK};
-use windows::Win32::System::Com::{
-    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, IEnumString,
-    IEnumString_Impl, CLSCTX_LOCAL_SERVER, EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE,
-    RPC_C_IMP_LEVEL_IDENTIFY,
-};
+use windows::Win32::System::Com::{CoRevokeClassObject, IEnumString, IEnumString_Impl};
 use windows::Win32::System::Variant::{VARIANT, VT_BSTR, VT_I4, VT_R8};
 
 /// CLSID of `ServerCTOPC.MarshalProbe` (also its AppID).
@@ -1048,30 +1044,9 @@ pub fn unregister() -> windows::core::Result<()> {
 /// `-Embedding`: serve until the last client has gone (as ServerCTOPC.exe does).
 pub fn serve() -> windows::core::Result<()> {
     let _com = ComThread::mta()?;
-    // SAFETY: called once, before any marshalling in this process (as in host::serve_as).
-    let _ = unsafe {
-        CoInitializeSecurity(
-            None,
-            -1,
-            None,
-            None,
-            RPC_C_AUTHN_LEVEL_NONE,
-            RPC_C_IMP_LEVEL_IDENTIFY,
-            None,
-            EOAC_NONE,
-            None,
-        )
-    };
+    ctopc_com::host::init_security();
     let factory = ClassFactory::new(Arc::clone(probe_lifetime()), create_instance);
-    // SAFETY: the factory outlives the registration (revoked below before it is dropped).
-    let cookie = unsafe {
-        CoRegisterClassObject(
-            &CLSID_MARSHAL_PROBE,
-            &factory,
-            CLSCTX_LOCAL_SERVER,
-            REGCLS_MULTIPLEUSE,
-        )?
-    };
+    let cookie = ctopc_com::host::register_class(&CLSID_MARSHAL_PROBE, &factory)?;
     let reason = probe_lifetime().wait_until_unused(STARTUP_GRACE, LINGER);
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie)? };
