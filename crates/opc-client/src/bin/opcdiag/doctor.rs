@@ -80,10 +80,19 @@ impl Check {
         Check {
             name: name.into(),
             status: Status::Fail,
-            detail: detail.into(),
+            detail: one_line(&detail.into()),
             fix: fix.into(),
         }
     }
+}
+
+/// A text of several lines (an error with its hint) as one: the lines joined by `; `.
+pub fn one_line(text: &str) -> String {
+    text.lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// 0 when no check failed, else 1 (`cli::EXIT_FAILED`).
@@ -412,12 +421,11 @@ pub fn proxy_check(
     }
     let mut detail = Vec::new();
     if !missing.is_empty() {
-        let list = if missing.len() == interfaces.len() {
-            "all interfaces".to_owned()
+        detail.push(if missing.len() == interfaces.len() {
+            "no proxy/stub registered for any OPC interface".to_owned()
         } else {
-            missing.join(", ")
-        };
-        detail.push(format!("no proxy/stub registered for {list}"));
+            format!("no proxy/stub registered for {}", missing.join(", "))
+        });
     }
     detail.extend(broken.into_iter().take(3));
     Check::fail(name, detail.join("; "), proxy_fix(view))
@@ -916,7 +924,7 @@ mod tests {
         assert!(c.detail.contains("opc_ps.dll"));
         let c = proxy_check(View::Reg32, &ifs, &reg, &|_| true);
         assert_eq!(c.status, Status::Fail);
-        assert!(c.detail.contains("all interfaces"), "{c:?}");
+        assert!(c.detail.contains("for any OPC interface"), "{c:?}");
         assert!(
             c.fix.contains("SysWOW64\\regsvr32 x86\\opc_ps.dll"),
             "{c:?}"
@@ -1118,6 +1126,19 @@ mod tests {
         let c = firewall_check(Some("Rule Name: X\nLocalPort: 80\n"));
         assert_eq!(c.status, Status::Warn);
         assert!(c.detail.contains("ServerCTOPC.exe nor TCP 135"));
+    }
+
+    #[test]
+    fn failures_are_one_line() {
+        let c = Check::fail(
+            "c",
+            "cannot connect: E_NOINTERFACE\n  the proxy is missing\n",
+            "x",
+        );
+        assert_eq!(
+            c.detail,
+            "cannot connect: E_NOINTERFACE; the proxy is missing"
+        );
     }
 
     #[test]

@@ -84,7 +84,8 @@ fn checks(global: &Global, options: &DoctorOptions) -> Vec<Check> {
         || "the user of the client that starts it".to_owned(),
         |i| i.account.clone(),
     );
-    if let Some(dir) = &install_dir {
+    // (A missing exe is a FAIL of its own; its folder's Log then says nothing more.)
+    if let Some(dir) = install_dir.as_ref().filter(|_| exe_exists) {
         let configured = loaded
             .as_ref()
             .ok()
@@ -303,14 +304,16 @@ fn connection_checks(global: &Global, item: Option<String>, timeout: Duration) -
         };
         match s.read_one(&item) {
             Ok(r) => {
-                let _ = tx.send(Check::ok(
-                    "read",
-                    format!(
-                        "{item} = {} ({})",
-                        crate::text::value_text(&r.value),
-                        crate::text::quality_text(r.quality)
-                    ),
-                ));
+                let detail = format!(
+                    "{item} = {} ({})",
+                    crate::text::value_text(&r.value),
+                    crate::text::quality_text(r.quality)
+                );
+                let _ = tx.send(if r.quality & 0xC0 == 0xC0 {
+                    Check::ok("read", detail)
+                } else {
+                    Check::warn("read", format!("{detail}: the value is not GOOD"), "see the data source's checks above (database, asix link) and the server's log")
+                });
             }
             Err(e) => {
                 let _ = tx.send(Check::fail(
