@@ -881,7 +881,7 @@ mod tests {
         let find = |n: &str| ifs.iter().find(|(name, _)| name == n).map(|(_, id)| *id);
         assert_eq!(
             find("IOPCShutdown"),
-            Some(0xF31DFDE1_07B6_11d2_B2D8_0060083BA1FB)
+            Some(0xf31dfde1_07b6_11d2_b2d8_0060083ba1fb)
         );
         assert_eq!(
             find("IOPCServer"),

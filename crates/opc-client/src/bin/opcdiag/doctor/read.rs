@@ -351,7 +351,7 @@ fn connection_checks(global: &Global, item: Option<String>, timeout: Duration) -
             Err(mpsc::RecvTimeoutError::Disconnected) => break,
             Err(mpsc::RecvTimeoutError::Timeout) => {
                 out.push(Check::fail(
-                    if out.is_empty() { NAME } else { "callback" },
+                    ["connection", "read", "callback"][out.len().min(2)],
                     format!("no answer within {} s", timeout.as_secs_f64()),
                     "the server hangs while starting or serving: see its log",
                 ));
