@@ -264,7 +264,7 @@ fn link_checks(ns: Arc<AsixNamespace>) -> Vec<Check> {
                     .iter()
                     .map(|c| (c.name().to_owned(), c.addr.to_string()))
                     .collect()),
-                Ok(Err(e)) => Err(format!("{e:?}")),
+                Ok(Err(e)) => Err(e.to_string()),
                 Err(e) => Err(e.to_string()),
             };
             link_check(&opc, &asix, timeout_ms, &result)
