@@ -1083,6 +1083,21 @@ mod tests {
     }
 
     #[test]
+    fn the_asix_channels_to_discover_come_from_the_channel_attribute() {
+        let demo = asix_model::embedded_demo().unwrap();
+        let channels = asix_channels(&demo.namespace);
+        assert_eq!(channels.len(), 1, "{channels:?}");
+        let (opc, asix) = &channels[0];
+        assert_eq!(opc, "*");
+        assert!(asix.iter().any(|a| a == "SIARKA"), "{asix:?}");
+        let mut sorted = asix.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), asix.len(), "no duplicates: {asix:?}");
+        assert_eq!(first_item(&demo.namespace).as_deref(), Some("KW_A000"));
+    }
+
+    #[test]
     fn the_link_names_the_chosen_server_or_the_timeout() {
         let c = link_check(
             "*",
