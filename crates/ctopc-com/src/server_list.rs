@@ -37,8 +37,9 @@ use windows::Win32::Foundation::{
 };
 use windows::Win32::System::Com::{CoRevokeClassObject, IEnumGUID};
 use windows::Win32::System::Registry::{
-    RegCloseKey, RegEnumKeyExW, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ,
-    KEY_WOW64_32KEY, KEY_WOW64_64KEY, REG_SAM_FLAGS, RRF_RT_REG_SZ,
+    RegCloseKey, RegEnumKeyExW, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT,
+    HKEY_LOCAL_MACHINE, KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, REG_SAM_FLAGS,
+    RRF_RT_REG_DWORD, RRF_RT_REG_SZ,
 };
 
 /// `OPC.ServerList.1`'s CLSID.
@@ -111,14 +112,25 @@ impl RegKey {
 
     /// The default (`REG_SZ`) value of the subkey `sub` (`""`: of this key).
     fn default_value(&self, sub: &str) -> Option<String> {
+        self.text_value(sub, "")
+    }
+
+    /// The `REG_SZ` value `name` (`""`: the default value) of the subkey `sub`.
+    fn text_value(&self, sub: &str, name: &str) -> Option<String> {
         let wsub = HSTRING::from(sub);
+        let wname = HSTRING::from(name);
+        let name_ptr = if name.is_empty() {
+            PCWSTR::null()
+        } else {
+            PCWSTR(wname.as_ptr())
+        };
         let mut bytes = 0u32;
         // SAFETY: a size query: no data buffer, `bytes` receives the size.
         let err = unsafe {
             RegGetValueW(
                 self.0,
                 &wsub,
-                PCWSTR::null(),
+                name_ptr,
                 RRF_RT_REG_SZ,
                 None,
                 None,
@@ -135,7 +147,7 @@ impl RegKey {
             RegGetValueW(
                 self.0,
                 &wsub,
-                PCWSTR::null(),
+                name_ptr,
                 RRF_RT_REG_SZ,
                 None,
                 Some(buf.as_mut_ptr().cast()),
@@ -150,6 +162,26 @@ impl RegKey {
         let end = text.iter().position(|&c| c == 0).unwrap_or(text.len());
         Some(String::from_utf16_lossy(&text[..end]))
     }
+
+    /// The `REG_DWORD` value `name` of this key.
+    fn dword_value(&self, name: &str) -> Option<u32> {
+        let wname = HSTRING::from(name);
+        let mut data = 0u32;
+        let mut len = std::mem::size_of::<u32>() as u32;
+        // SAFETY: `data` has room for the `len` bytes of a DWORD.
+        let err = unsafe {
+            RegGetValueW(
+                self.0,
+                PCWSTR::null(),
+                &wname,
+                RRF_RT_REG_DWORD,
+                None,
+                Some((&raw mut data).cast()),
+                Some(&mut len),
+            )
+        };
+        (err == ERROR_SUCCESS).then_some(data)
+    }
 }
 
 impl Drop for RegKey {
@@ -159,6 +191,24 @@ impl Drop for RegKey {
             let _ = RegCloseKey(self.0);
         }
     }
+}
+
+/// Whether `HKCR\path` exists in `view` (and is readable).
+pub fn key_exists(view: View, path: &str) -> bool {
+    RegKey::open(HKEY_CLASSES_ROOT, path, view).is_some()
+}
+
+/// The `REG_SZ` value `name` (`""`: the default value) of `HKCR\path` in `view`.
+pub fn read_value(view: View, path: &str, name: &str) -> Option<String> {
+    RegKey::open(HKEY_CLASSES_ROOT, path, view)?.text_value("", name)
+}
+
+/// A value of `HKLM\path` in `view` as text: a `REG_SZ` as it is, a `REG_DWORD` in
+/// decimal (machine-wide settings such as `Software\Microsoft\Ole`, for `opcdiag doctor`).
+pub fn read_machine_value(view: View, path: &str, name: &str) -> Option<String> {
+    let key = RegKey::open(HKEY_LOCAL_MACHINE, path, view)?;
+    key.text_value("", name)
+        .or_else(|| key.dword_value(name).map(|d| d.to_string()))
 }
 
 /// The default value of `HKCR\path` in `view`.

@@ -39,6 +39,8 @@ commands:
                             print every change the server reports, until Ctrl+C
   demo [--for SECONDS]      ServerCTOPC's demo plant: status, plant tree, live values
   servers                   the machine's OPC servers: ProgID, DA versions, description
+  doctor [--json] [--config FILE] [--item ITEMID] [--timeout SECONDS]
+                            check ServerCTOPC's installation: OK / WARN / FAIL with fixes
   help [COMMAND]            this text, or a command's
 
 global options:
@@ -134,6 +136,27 @@ categories manager (ICatInformation, this process's registry view only) and says
 --server is not used.
 ";
 
+const DOCTOR_HELP: &str = "\
+usage: opcdiag doctor [--json] [--config FILE] [--item ITEMID] [--timeout SECONDS]
+
+Checks ServerCTOPC's installation and prints each check as OK, WARN or FAIL with the fix
+in one line: the registration in both registry views (CLSID, LocalServer32 and that the
+exe exists, ProgID and CurVer, categories DA 2.0/3.0, AppID, the OPC key), a proxy/stub
+for every OPC Common and DA interface in both views (ours or the OPC Foundation's), a
+server browser (OPC.ServerList.1), the NT service when installed, the log folder, the
+configuration file and each channel's variable database (read as the server reads
+them), each channel's asix link (discovery within FindServerTimeout, the server chosen),
+machine-wide DCOM settings and the firewall (warnings), and finally a connection that
+reads one item and receives one callback. Exit code 0 when nothing failed, else 1.
+  --json              one JSON object per check: name, status, detail, fix
+  --config FILE       the configuration to check (default: SERVERCTOPC_INI, else
+                      ASIXConnect.ini next to the registered exe, else the embedded
+                      demo); under Wine the server started by the last check uses it too
+  --item ITEMID       the item to read and subscribe (default: the first variable of
+                      the basic channel's database)
+  --timeout SECONDS   the longest wait of the connection check (default 20)
+";
+
 /// The help text of a command (the general usage for `None` or an unknown name).
 pub fn help(command: Option<&str>) -> &'static str {
     match command {
@@ -145,6 +168,7 @@ pub fn help(command: Option<&str>) -> &'static str {
         Some("subscribe") => SUBSCRIBE_HELP,
         Some("demo") => DEMO_HELP,
         Some("servers") => SERVERS_HELP,
+        Some("doctor") => DOCTOR_HELP,
         _ => USAGE,
     }
 }
@@ -190,6 +214,17 @@ pub enum Command {
     },
     /// The machine's OPC servers, through the server browser (no server connection).
     Servers,
+    /// `opcdiag doctor`: the installation's self-check.
+    Doctor(DoctorOptions),
+}
+
+/// The options of `opcdiag doctor`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DoctorOptions {
+    pub json: bool,
+    pub config: Option<String>,
+    pub item: Option<String>,
+    pub timeout_secs: Option<f64>,
 }
 
 /// What the command line asks for.
@@ -215,6 +250,7 @@ const COMMANDS: &[&str] = &[
     "write",
     "subscribe",
     "demo",
+    "doctor",
 ];
 
 /// What a command's arguments must be, for the message when they are not.
@@ -226,6 +262,7 @@ fn needs(command: &str) -> &'static str {
         "read" | "subscribe" => "at least one ITEMID",
         "write" => "ITEMID and VALUE",
         "demo" => "no arguments besides --for",
+        "doctor" => "no arguments besides its options",
         _ => "other arguments",
     }
 }
@@ -399,6 +436,17 @@ enum Sub {
     },
     #[command(override_help = SERVERS_HELP)]
     Servers,
+    #[command(override_help = DOCTOR_HELP)]
+    Doctor {
+        #[arg(long)]
+        json: bool,
+        #[arg(long, value_name = "FILE")]
+        config: Option<String>,
+        #[arg(long, value_name = "ITEMID")]
+        item: Option<String>,
+        #[arg(long = "timeout", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
+        timeout_secs: Option<f64>,
+    },
     /// `help [COMMAND]`: the general usage, or a command's help.
     #[command(override_help = USAGE)]
     Help {
@@ -480,6 +528,17 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
         },
         Some(Sub::Demo { for_secs }) => Command::Demo { for_secs },
         Some(Sub::Servers) => Command::Servers,
+        Some(Sub::Doctor {
+            json,
+            config,
+            item,
+            timeout_secs,
+        }) => Command::Doctor(DoctorOptions {
+            json,
+            config,
+            item,
+            timeout_secs,
+        }),
     };
     Ok(Parsed::Run(global, command))
 }

@@ -17,6 +17,7 @@ macro_rules! say {
 mod cli;
 #[cfg(windows)]
 mod demo;
+mod doctor;
 #[cfg(windows)]
 mod out;
 mod text;

@@ -25,6 +25,9 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
     if command == Command::Servers {
         return servers();
     }
+    if let Command::Doctor(options) = command {
+        return Ok(crate::doctor::run(global, &options));
+    }
     let s = Session::connect(global)?;
     match command {
         Command::Status => s.status().map(|()| EXIT_OK),
@@ -53,6 +56,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
         } => s.subscribe(&items, rate_ms, for_secs, &path),
         Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
         Command::Servers => servers(),
+        Command::Doctor(_) => Err("doctor runs without a session".into()),
     }
 }
 
@@ -438,6 +442,42 @@ impl Session {
         r
     }
 
+    /// Reads one item from the cache (waiting up to 3 s for its first value), printing
+    /// nothing: `opcdiag doctor`'s read.
+    pub fn read_one(&self, item: &str) -> Result<ReadItem, String> {
+        let items = [item.to_owned()];
+        let g = self.group_with(&items, "", true, 1000)?;
+        let r = self.read_one_in(&g);
+        g.remove(self);
+        r
+    }
+
+    fn read_one_in(&self, g: &TempGroup) -> Result<ReadItem, String> {
+        let outcome = g.outcomes.first().ok_or("AddItems gave no result")?;
+        if outcome.error.is_err() {
+            return Err(format!("AddItems: {}", self.error_text(outcome.error)));
+        }
+        let io: IOPCSyncIO = g
+            .unknown()?
+            .cast()
+            .map_err(|e| self.failed("the group lacks IOPCSyncIO", e))?;
+        let deadline = Instant::now() + Duration::from_secs(3);
+        loop {
+            let (_, read) = client::sync_read(&io, OPC_DS_CACHE, &[outcome.server_handle])
+                .map_err(|e| self.failed("IOPCSyncIO::Read failed", e))?;
+            let r = read.into_iter().next().ok_or("Read gave no result")?;
+            if r.error.is_err() {
+                return Err(format!("Read: {}", self.error_text(r.error)));
+            }
+            if r.quality != ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA.0
+                || Instant::now() >= deadline
+            {
+                return Ok(r);
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
     fn read_in(&self, g: &TempGroup, items: &[String], device: bool) -> Result<u8, String> {
         let mut code = EXIT_OK;
         let width = items.iter().map(|i| i.chars().count()).max().unwrap_or(0);
@@ -736,6 +776,11 @@ impl Subscription {
             }
         }
         n
+    }
+
+    /// The first OnDataChange within `timeout`, if one came.
+    pub fn first(&self, timeout: Duration) -> Option<DataChange> {
+        self.rx.recv_timeout(timeout).ok()
     }
 
     /// Disconnects the sink and removes the group.
