@@ -16,8 +16,17 @@
 //! what widl generates from idl/ into DllRegisterServer, so the DLL itself stays the one
 //! source of them.
 //!
-//! Measured under Wine 8 (`cargo xtask msi-test`, 200 to 240 s, most of it making the
-//! fresh prefix and starting the server for each client): `[SystemFolder]` is syswow64
+//! `cargo xtask msi-test` (also the last step of `cargo xtask test`): each part in a fresh
+//! prefix, a `cp -a` (about 5 s) of `target/wine/msi-template`, a prefix wineboot made
+//! and nothing ran in (made once, about 65 s, then reused: a copy of it is as fresh).
+//! Each client check starts the server once: a 64-bit and a 32-bit `opcdiag subscribe
+//! --count 3` hold it while each bitness's opcdiag runs status, write, read (back) and
+//! servers, and must see the first value and both writes. Measured on the 2-core
+//! machine, 7 builds at once, Windows build up to date: 3 MSIs 27 s, template 65 s
+//! (0 when kept), broken package 7 s, install 6 s, each client check 17 to 25 s,
+//! upgrade 9 s, uninstall 7 s: about 175 s from a clean target/wine, 110 s with it.
+//!
+//! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
 //! Registry row's last value removes the emptied key; a failed `/qn` install exits with
 //! the low byte of 1627 (91). Wine runs rollback custom actions only after its own
@@ -396,10 +405,85 @@ mod wine_test {
     use super::*;
     use crate::arch::Arch;
     use crate::{build, util, wine};
+    use std::io::BufRead as _;
+    use std::process::{Child, Stdio};
+    use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
     use std::time::{Duration, Instant};
 
     const CLSID: &str = "3277B556-BA68-4BDE-8687-8EE4E4B46336";
     const INSTALL: &str = "drive_c/Program Files/ServerCTOPC";
+    /// The writable demo set point the clients write, read back and subscribe to.
+    const SETPOINT: &str = "KW_A110";
+    /// What each client writes to it (exact in R4, unlike the demo's own values).
+    fn written(arch: Arch) -> &'static str {
+        match arch {
+            Arch::X64 => "11.25",
+            Arch::X86 => "12.75",
+        }
+    }
+
+    /// Prints each step with the seconds since the start (the figures in the module doc).
+    struct Clock(Instant);
+
+    impl Clock {
+        fn lap(&self, what: &str) {
+            println!("msi-test: [{:>4} s] {what}", self.0.elapsed().as_secs());
+        }
+    }
+
+    /// A background `opcdiag subscribe`: its stdout lines arrive on `rx`.
+    struct Subscriber {
+        arch: Arch,
+        child: Child,
+        rx: Receiver<String>,
+        lines: Vec<String>,
+    }
+
+    impl Subscriber {
+        /// Waits for a line containing `needle` (or the end of the output).
+        fn wait_for(&mut self, needle: &str, limit: Duration) -> bool {
+            let deadline = Instant::now() + limit;
+            loop {
+                if self.lines.iter().any(|l| l.contains(needle)) {
+                    return true;
+                }
+                let left = deadline.saturating_duration_since(Instant::now());
+                match self.rx.recv_timeout(left) {
+                    Ok(l) => self.lines.push(l),
+                    Err(_) => return false,
+                }
+            }
+        }
+
+        /// Its whole output once it ended by itself (`--count` or `--for`).
+        fn finish(mut self, limit: Duration) -> Result<String, String> {
+            let deadline = Instant::now() + limit;
+            loop {
+                let left = deadline.saturating_duration_since(Instant::now());
+                match self.rx.recv_timeout(left) {
+                    Ok(l) => self.lines.push(l),
+                    Err(RecvTimeoutError::Disconnected) => break,
+                    Err(RecvTimeoutError::Timeout) => {
+                        let _ = self.child.kill();
+                        break;
+                    }
+                }
+            }
+            let status = self
+                .child
+                .wait()
+                .map_err(|e| format!("opcdiag subscribe: {e}"))?;
+            let out = self.lines.join("\n");
+            if status.success() {
+                Ok(out)
+            } else {
+                Err(format!(
+                    "opcdiag subscribe ({:?}): {status}\n{out}",
+                    self.arch
+                ))
+            }
+        }
+    }
 
     struct Ctx {
         pfx: PathBuf,
@@ -468,10 +552,7 @@ mod wine_test {
         }
 
         fn opcdiag(&self, arch: Arch, args: &[&str]) -> Result<String, String> {
-            let exe = match arch {
-                Arch::X64 => "C:\\Program Files\\ServerCTOPC\\opcdiag.exe",
-                Arch::X86 => "C:\\Program Files\\ServerCTOPC\\x86\\opcdiag.exe",
-            };
+            let exe = opcdiag_exe(arch);
             let (code, out) = self.run(arch, exe, args, 120);
             if code == 0 {
                 Ok(out)
@@ -480,23 +561,125 @@ mod wine_test {
             }
         }
 
-        /// A client of each bitness: status and a read of a demo variable.
+        /// `opcdiag subscribe` in the background, once the subscription is made.
+        fn subscriber(&self, arch: Arch, args: &[&str]) -> Result<Subscriber, String> {
+            let err = self.dir.join(format!("subscribe-{arch:?}.stderr"));
+            let err = std::fs::File::create(&err).map_err(|e| format!("{}: {e}", err.display()))?;
+            let mut c = Command::new("timeout");
+            wine::env(&mut c);
+            c.env("WINEPREFIX", &self.pfx)
+                .arg("180")
+                .arg(arch.loader())
+                .arg(opcdiag_exe(arch))
+                .args(args)
+                .stdin(Stdio::null())
+                .stdout(Stdio::piped())
+                .stderr(err);
+            let mut child = c.spawn().map_err(|e| format!("cannot start wine: {e}"))?;
+            let stdout = child.stdout.take().ok_or("opcdiag subscribe: no stdout")?;
+            let (tx, rx) = mpsc::channel();
+            std::thread::spawn(move || {
+                for line in std::io::BufReader::new(stdout)
+                    .lines()
+                    .map_while(Result::ok)
+                {
+                    if tx.send(line).is_err() {
+                        break;
+                    }
+                }
+            });
+            let mut sub = Subscriber {
+                arch,
+                child,
+                rx,
+                lines: Vec::new(),
+            };
+            if sub.wait_for("Subscribed to", Duration::from_secs(120)) {
+                Ok(sub)
+            } else {
+                sub.finish(Duration::from_secs(5)).and_then(|out| {
+                    Err(format!(
+                        "opcdiag subscribe ({arch:?}) did not subscribe:\n{out}"
+                    ))
+                })
+            }
+        }
+
+        /// A client of each bitness: status, a write of the demo set point, a read of it
+        /// and of a demo variable, the server browser, and a subscription that receives
+        /// the first value and both writes. The two subscribers keep one server process
+        /// up for all of it (a value written is read back from the same process), and are
+        /// the only server start of the check.
         fn serves(&self, what: &str) -> Result<(), String> {
+            // The first value and each client's write: three changes.
+            let sub_args = [
+                "subscribe",
+                SETPOINT,
+                "--rate",
+                "200",
+                "--count",
+                "3",
+                "--for",
+                "150",
+            ];
+            let mut subs = Vec::new();
+            for arch in Arch::ALL {
+                subs.push(self.subscriber(arch, &sub_args)?);
+            }
             for arch in Arch::ALL {
                 let status = self.opcdiag(arch, &["status"])?;
                 if !status.contains("ServerCTOPC") || !status.contains("State") {
                     return Err(format!("{what}: status ({arch:?}):\n{status}"));
                 }
-                let read = self.opcdiag(arch, &["read", "KW_A000"])?;
+                let value = written(arch);
+                let w = self.opcdiag(arch, &["write", SETPOINT, value])?;
+                if !w.contains(&format!("{SETPOINT}: written {value} (R4): OK")) {
+                    return Err(format!("{what}: write ({arch:?}):\n{w}"));
+                }
+                let read = self.opcdiag(arch, &["read", "KW_A000", SETPOINT])?;
                 if !read.lines().any(|l| l.starts_with("KW_A000")) {
                     return Err(format!("{what}: read ({arch:?}):\n{read}"));
+                }
+                let back = read
+                    .lines()
+                    .find(|l| l.starts_with(SETPOINT))
+                    .map(|l| l.split_whitespace().collect::<Vec<_>>());
+                if !back.is_some_and(|f| f.len() > 3 && f[1] == value && f[3] == "GOOD") {
+                    return Err(format!(
+                        "{what}: {SETPOINT} read back ({arch:?}), expected {value} GOOD:\n{read}"
+                    ));
                 }
                 // The packaged server browser answers (no fallback to the categories).
                 let servers = self.opcdiag(arch, &["servers"])?;
                 if !servers.contains("ServerCTOPC.App") || servers.contains("no server browser") {
                     return Err(format!("{what}: servers ({arch:?}):\n{servers}"));
                 }
-                println!("msi-test: {what}: {arch:?} opcdiag status, read and servers: ok");
+                println!(
+                    "msi-test: {what}: {arch:?} opcdiag status, write {SETPOINT} = {value}, read back, read and servers: ok"
+                );
+            }
+            for sub in subs {
+                let arch = sub.arch;
+                let out = sub.finish(Duration::from_secs(60))?;
+                let values: Vec<&str> = out
+                    .lines()
+                    .filter_map(|l| {
+                        let f: Vec<&str> = l.split_whitespace().collect();
+                        (f.len() > 3 && f[1] == SETPOINT).then_some(f[2])
+                    })
+                    .collect();
+                for a in Arch::ALL {
+                    if !values.contains(&written(a)) {
+                        return Err(format!(
+                            "{what}: the {arch:?} subscriber missed the {a:?} write of {}: {values:?}\n{out}",
+                            written(a)
+                        ));
+                    }
+                }
+                println!(
+                    "msi-test: {what}: {arch:?} opcdiag subscribe: {} callback value(s) {values:?}: ok",
+                    values.len()
+                );
             }
             self.settle();
             Ok(())
@@ -542,6 +725,13 @@ mod wine_test {
         }
     }
 
+    fn opcdiag_exe(arch: Arch) -> &'static str {
+        match arch {
+            Arch::X64 => "C:\\Program Files\\ServerCTOPC\\opcdiag.exe",
+            Arch::X86 => "C:\\Program Files\\ServerCTOPC\\x86\\opcdiag.exe",
+        }
+    }
+
     fn walk(dir: &Path) -> Vec<PathBuf> {
         let mut out = Vec::new();
         if let Ok(rd) = std::fs::read_dir(dir) {
@@ -566,10 +756,78 @@ mod wine_test {
         format!("{}.{}.{}", f[0], f[1], f[2])
     }
 
+    /// A freshly made prefix, never run in: `target/wine/msi-template`, made by wineboot
+    /// when missing (or unable to run 32-bit programs), with the shims. Each test prefix
+    /// is a `cp -a` of it: a fresh prefix for a few seconds instead of a wineboot.
+    fn template(clock: &Clock) -> Result<PathBuf, String> {
+        let tpl = util::root().join("target/wine/msi-template");
+        if tpl.exists() && !(tpl.join("system.reg").is_file() && wine::has_wow64(&tpl)) {
+            std::fs::remove_dir_all(&tpl).map_err(|e| format!("{}: {e}", tpl.display()))?;
+        }
+        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
+        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
+        for arch in Arch::ALL {
+            crate::setup::build_shim(arch)?;
+        }
+        wine::ensure_prefix(&tpl)?;
+        wine::wineserver_in(&tpl, "-k", Duration::from_secs(20));
+        wine::wineserver_in(&tpl, "-w", Duration::from_secs(60));
+        clock.lap("template prefix ready");
+        Ok(tpl)
+    }
+
+    /// A fresh test prefix `name`: a copy of the template.
+    fn fresh_prefix(tpl: &Path, name: &str, clock: &Clock) -> Result<PathBuf, String> {
+        let pfx = util::root().join("target/wine").join(name);
+        wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+        if pfx.exists() {
+            std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
+        }
+        util::run(Command::new("cp").arg("-a").arg(tpl).arg(&pfx))?;
+        clock.lap(&format!("fresh prefix {}", pfx.display()));
+        Ok(pfx)
+    }
+
+    /// The service `SERVICE=1` installed: as `/Service` does (on demand, LocalService,
+    /// `-ServiceRun`), and the AppID naming it (COM starts the service).
+    fn service_installed(reg: &str) -> Result<(), String> {
+        let section = |head: &str| -> Option<String> {
+            let start = reg.find(head)?;
+            let body = &reg[start..];
+            let end = body.find("\n\n").unwrap_or(body.len());
+            Some(body[..end].to_owned())
+        };
+        let svc = section("[system\\\\currentcontrolset\\\\services\\\\serverctopc]")
+            .ok_or("msi-test: SERVICE=1 did not install the service")?;
+        for want in [
+            "\"objectname\"=\"nt authority\\\\localservice\"",
+            "\"start\"=dword:00000003",
+            "serverctopc.exe",
+            "-servicerun",
+        ] {
+            if !svc.contains(want) {
+                return Err(format!("msi-test: the service's key lacks {want}:\n{svc}"));
+            }
+        }
+        let appid = section(&format!(
+            "[software\\\\classes\\\\appid\\\\{{{}}}]",
+            CLSID.to_ascii_lowercase()
+        ))
+        .ok_or("msi-test: no AppID key")?;
+        if !appid.contains("\"localservice\"=\"serverctopc\"") {
+            return Err(format!(
+                "msi-test: the AppID does not name the service:\n{appid}"
+            ));
+        }
+        Ok(())
+    }
+
     pub fn run(_args: &[String]) -> Result<(), String> {
         let started = Instant::now();
+        let clock = Clock(started);
         let root = util::root();
         let a = build::run(&[])?;
+        clock.lap("Windows build");
         let version = env!("CARGO_PKG_VERSION");
         let dir = root.join("target/msi-test");
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -621,21 +879,15 @@ mod wine_test {
             &dir.join("broken.msi"),
         )?;
 
-        let pfx = root.join("target/wine/msi-prefix");
-        wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-        if pfx.exists() {
-            std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
-        }
-        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
-        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
-        for arch in Arch::ALL {
-            crate::setup::build_shim(arch)?;
-        }
-        wine::ensure_prefix(&pfx)?;
-        let ctx = Ctx { pfx, dir };
+        clock.lap("three MSIs built (wixl)");
 
-        // 1. A broken install fails and leaves nothing.
-        let code = ctx.msiexec("/i", &broken, &[], "broken.log");
+        let tpl = template(&clock)?;
+        // 1. A broken install, in a fresh prefix of its own, fails and leaves nothing.
+        let bctx = Ctx {
+            pfx: fresh_prefix(&tpl, "msi-prefix-broken", &clock)?,
+            dir: dir.clone(),
+        };
+        let code = bctx.msiexec("/i", &broken, &[], "broken.log");
         if code == 0 {
             return Err("msi-test: the broken package installed (exit 0)".into());
         }
@@ -644,9 +896,16 @@ mod wine_test {
         println!(
             "msi-test: broken package: msiexec failed (exit {code}, the low byte of its Windows code), as it must"
         );
-        ctx.nothing_left("after the failed install", &[])?;
+        bctx.nothing_left("after the failed install", &[])?;
+        clock.lap("broken package checked");
+        // Its 1.3 GB are not needed any more.
+        let _ = std::fs::remove_dir_all(&bctx.pfx);
 
-        // 2. Silent install, both clients.
+        // 2. Silent install in a fresh prefix, both clients.
+        let ctx = Ctx {
+            pfx: fresh_prefix(&tpl, "msi-prefix", &clock)?,
+            dir,
+        };
         let code = ctx.msiexec("/i", &old, &[], "install.log");
         if code != 0 {
             return Err(format!(
@@ -655,19 +914,29 @@ mod wine_test {
                 ctx.dir.join("install.log").display()
             ));
         }
+        clock.lap("installed");
         ctx.serves("after install")?;
+        clock.lap("both clients served after the install");
 
         // 3. The user's configuration survives a major upgrade (which installs the
         //    service too).
         let ini = ctx.install_dir().join("ASIXConnect.ini");
         // A working configuration, the user's: the example with a changed value (an ini
-        // without the channel's ItemsDatabase serves no demo variable).
+        // without the channel's ItemsDatabase serves no demo variable), simulated (no
+        // asix network here).
         let example = std::fs::read_to_string(root.join("asixconnect.ini.example"))
             .map_err(|e| format!("asixconnect.ini.example: {e}"))?;
         let user_ini = format!(
             "; the user's configuration (msi-test)\r\n{}",
-            example.replace("MinUpdateRate = 1000", "MinUpdateRate = 500")
+            example
+                .replace("MinUpdateRate = 1000", "MinUpdateRate = 500")
+                .replace("SimulateCurrentData = nie", "SimulateCurrentData = tak")
         );
+        if !user_ini.contains("SimulateCurrentData = tak") {
+            return Err(
+                "msi-test: asixconnect.ini.example has no SimulateCurrentData = nie".into(),
+            );
+        }
         std::fs::write(&ini, &user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
         let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
         if code != 0 {
@@ -682,12 +951,11 @@ mod wine_test {
                 "msi-test: the upgrade changed ASIXConnect.ini: {kept:?}"
             ));
         }
-        println!("msi-test: upgrade to {new_version}: ASIXConnect.ini kept");
-        if !ctx.system_reg().contains("services\\\\serverctopc") {
-            return Err("msi-test: SERVICE=1 did not install the service".into());
-        }
-        println!("msi-test: SERVICE=1: the service is installed");
+        clock.lap(&format!("upgraded to {new_version}: ASIXConnect.ini kept"));
+        service_installed(&ctx.system_reg())?;
+        println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
         ctx.serves("after upgrade")?;
+        clock.lap("both clients served after the upgrade (through the service)");
 
         // 4. Silent uninstall of the newer product: only the user's file stays.
         let code = ctx.msiexec("/x", &new, &[], "uninstall.log");
@@ -706,6 +974,7 @@ mod wine_test {
         );
         let uf: Vec<&str> = user_files.iter().map(String::as_str).collect();
         ctx.nothing_left("after uninstall", &uf)?;
+        clock.lap("uninstalled");
         if std::fs::read_to_string(&ini).unwrap_or_default() != user_ini {
             return Err("msi-test: the uninstall removed or changed ASIXConnect.ini".into());
         }
