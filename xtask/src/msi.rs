@@ -377,6 +377,11 @@ mod tests {
         let props = table(&msi, "Property").unwrap();
         let upgrade = props.iter().find(|r| r[0] == "UpgradeCode").unwrap();
         assert_eq!(upgrade[1], "{6F1D3B2A-7C44-4E8B-9A5D-2C0E8B7F4A11}");
+        // Per machine: wixl turns Package/@InstallScope into ALLUSERS.
+        assert!(
+            props.iter().any(|r| r[0] == "ALLUSERS" && r[1] == "1"),
+            "{props:?}"
+        );
         let actions = table(&msi, "CustomAction").unwrap();
         let service = actions.iter().find(|r| r[0] == "InstallService").unwrap();
         assert_eq!(service[3], "/Service");
@@ -412,6 +417,19 @@ mod wine_test {
 
     const CLSID: &str = "3277B556-BA68-4BDE-8687-8EE4E4B46336";
     const INSTALL: &str = "drive_c/Program Files/ServerCTOPC";
+    /// The Start-menu folder: Windows Installer puts a per-machine (ALLUSERS=1) install's
+    /// into the common one, Wine 8's msi into the installing user's (measured).
+    fn menus() -> [String; 2] {
+        let user = std::env::var("USER").unwrap_or_else(|_| "root".into());
+        [
+            "drive_c/ProgramData/Microsoft/Windows/Start Menu/Programs/ServerCTOPC".into(),
+            format!(
+                "drive_c/users/{user}/AppData/Roaming/Microsoft/Windows/Start Menu/Programs/ServerCTOPC"
+            ),
+        ]
+    }
+    /// A log of the user's, which no install, upgrade or removal may touch.
+    const USER_LOG: &str = "Log/ServerCTOPC.20260101.log";
     /// The writable demo set point the clients write, read back and subscribe to.
     const SETPOINT: &str = "KW_A110";
     /// What each client writes to it (exact in R4, unlike the demo's own values).
@@ -502,13 +520,62 @@ mod wine_test {
     }
 
     impl Ctx {
+        /// Wine's environment for the test prefix; no winemenubuilder, which would put
+        /// the package's Start-menu entries into this machine's desktop menus.
+        fn env(&self, c: &mut Command) {
+            wine::env(c);
+            c.env("WINEPREFIX", &self.pfx)
+                .env("WINEDLLOVERRIDES", "mscoree,mshtml=;winemenubuilder.exe=d");
+        }
+
+        /// What the install put in place besides the files: the Start-menu entries, and
+        /// each proxy/stub registered in its own view only (the 32-bit one, in x86\, in
+        /// Wow6432Node).
+        fn installed(&self, what: &str) -> Result<(), String> {
+            for lnk in [
+                "Deployment guide.lnk",
+                "ServerCTOPC status (opcdiag status).lnk",
+            ] {
+                if !menus().iter().any(|m| self.pfx.join(m).join(lnk).is_file()) {
+                    return Err(format!("{what}: no Start-menu entry {lnk}"));
+                }
+            }
+            let reg = self.system_reg();
+            let mut header = "";
+            let (mut ps64, mut ps32) = (false, false);
+            for line in reg.lines() {
+                if line.starts_with('[') {
+                    header = line;
+                } else if header.contains("\\\\clsid\\\\")
+                    && line.contains("serverctopc\\\\")
+                    && line.contains("opc_ps.dll")
+                {
+                    let wow = header.contains("wow6432node");
+                    let x86 = line.contains("\\\\x86\\\\opc_ps.dll");
+                    if wow != x86 {
+                        return Err(format!(
+                            "{what}: a proxy/stub in the wrong view: {header} {line}"
+                        ));
+                    }
+                    ps64 |= !x86;
+                    ps32 |= x86;
+                }
+            }
+            if !(ps64 && ps32) {
+                return Err(format!(
+                    "{what}: proxy/stubs registered: 64-bit {ps64}, 32-bit {ps32}"
+                ));
+            }
+            println!("msi-test: {what}: both Start-menu entries; each proxy/stub in its own view");
+            Ok(())
+        }
+
         /// Runs `program args` under Wine in the test prefix (`arch`'s loader), bounded
         /// by `limit`, and returns (exit code, stdout + stderr).
         fn run(&self, arch: Arch, program: &str, args: &[&str], limit: u64) -> (i32, String) {
             let mut c = Command::new("timeout");
-            wine::env(&mut c);
-            c.env("WINEPREFIX", &self.pfx)
-                .arg(limit.to_string())
+            self.env(&mut c);
+            c.arg(limit.to_string())
                 .arg(arch.loader())
                 .arg(program)
                 .args(args);
@@ -566,9 +633,8 @@ mod wine_test {
             let err = self.dir.join(format!("subscribe-{arch:?}.stderr"));
             let err = std::fs::File::create(&err).map_err(|e| format!("{}: {e}", err.display()))?;
             let mut c = Command::new("timeout");
-            wine::env(&mut c);
-            c.env("WINEPREFIX", &self.pfx)
-                .arg("180")
+            self.env(&mut c);
+            c.arg("180")
                 .arg(arch.loader())
                 .arg(opcdiag_exe(arch))
                 .args(args)
@@ -636,7 +702,9 @@ mod wine_test {
                 if !w.contains(&format!("{SETPOINT}: written {value} (R4): OK")) {
                     return Err(format!("{what}: write ({arch:?}):\n{w}"));
                 }
-                let read = self.opcdiag(arch, &["read", "KW_A000", SETPOINT])?;
+                // From the device: the cache has the written value only after the next
+                // sample (MinUpdateRate), a read from the cache right away may not.
+                let read = self.opcdiag(arch, &["read", "KW_A000", SETPOINT, "--device"])?;
                 if !read.lines().any(|l| l.starts_with("KW_A000")) {
                     return Err(format!("{what}: read ({arch:?}):\n{read}"));
                 }
@@ -715,6 +783,11 @@ mod wine_test {
                     if !user_files.contains(&rel.as_str()) {
                         left.push(rel);
                     }
+                }
+            }
+            for m in menus() {
+                if self.pfx.join(&m).exists() {
+                    left.push(m);
                 }
             }
             if !left.is_empty() {
@@ -915,6 +988,7 @@ mod wine_test {
             ));
         }
         clock.lap("installed");
+        ctx.installed("after install")?;
         ctx.serves("after install")?;
         clock.lap("both clients served after the install");
 
@@ -938,6 +1012,16 @@ mod wine_test {
             );
         }
         std::fs::write(&ini, &user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
+        let log = ctx.install_dir().join(USER_LOG);
+        let user_log = "2026-01-01 00:00:00.000 INFO the user's log (msi-test)\r\n";
+        std::fs::write(&log, user_log).map_err(|e| format!("{}: {e}", log.display()))?;
+        let log_kept = |when: &str| {
+            if std::fs::read_to_string(&log).unwrap_or_default() == user_log {
+                Ok(())
+            } else {
+                Err(format!("msi-test: {when} removed or changed {USER_LOG}"))
+            }
+        };
         let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
         if code != 0 {
             return Err(format!(
@@ -951,7 +1035,11 @@ mod wine_test {
                 "msi-test: the upgrade changed ASIXConnect.ini: {kept:?}"
             ));
         }
-        clock.lap(&format!("upgraded to {new_version}: ASIXConnect.ini kept"));
+        log_kept("the upgrade")?;
+        clock.lap(&format!(
+            "upgraded to {new_version}: ASIXConnect.ini and {USER_LOG} kept"
+        ));
+        ctx.installed("after upgrade")?;
         service_installed(&ctx.system_reg())?;
         println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
         ctx.serves("after upgrade")?;
@@ -978,6 +1066,8 @@ mod wine_test {
         if std::fs::read_to_string(&ini).unwrap_or_default() != user_ini {
             return Err("msi-test: the uninstall removed or changed ASIXConnect.ini".into());
         }
+        log_kept("the uninstall")?;
+        println!("msi-test: after uninstall: ASIXConnect.ini and {USER_LOG} kept");
         println!("msi-test: ok ({} s)", started.elapsed().as_secs());
         Ok(())
     }
