@@ -676,7 +676,28 @@ mod wine_test {
         /// the first value and both writes. The two subscribers keep one server process
         /// up for all of it (a value written is read back from the same process), and are
         /// the only server start of the check.
-        fn serves(&self, what: &str) -> Result<(), String> {
+        /// The command lines of the prefix's running ServerCTOPC.exe processes (Wine
+        /// shows a process's Windows command line in /proc; other prefixes' servers are
+        /// told apart by WINEPREFIX).
+        fn servers_running(&self) -> Vec<String> {
+            let want = format!("WINEPREFIX={}", self.pfx.display());
+            let mut out = Vec::new();
+            for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+                let p = e.path();
+                let cmd = std::fs::read(p.join("cmdline")).unwrap_or_default();
+                let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+                if !cmd.to_ascii_lowercase().contains("serverctopc.exe") {
+                    continue;
+                }
+                let env = std::fs::read(p.join("environ")).unwrap_or_default();
+                if env.split(|b| *b == 0).any(|v| v == want.as_bytes()) {
+                    out.push(cmd.trim().to_owned());
+                }
+            }
+            out
+        }
+
+        fn serves(&self, what: &str, switch: &str) -> Result<(), String> {
             // The first value and each client's write: three changes.
             let sub_args = [
                 "subscribe",
@@ -692,6 +713,15 @@ mod wine_test {
             for arch in Arch::ALL {
                 subs.push(self.subscriber(arch, &sub_args)?);
             }
+            // One server process, started by COM as asked (`-Embedding`, or by the service
+            // control manager: `-ServiceRun`).
+            let running = self.servers_running();
+            if running.len() != 1 || !running[0].contains(switch) {
+                return Err(format!(
+                    "{what}: expected one ServerCTOPC.exe {switch}, running: {running:?}"
+                ));
+            }
+            println!("msi-test: {what}: the server runs as {:?}", running[0]);
             for arch in Arch::ALL {
                 let status = self.opcdiag(arch, &["status"])?;
                 if !status.contains("ServerCTOPC") || !status.contains("State") {
@@ -989,7 +1019,7 @@ mod wine_test {
         }
         clock.lap("installed");
         ctx.installed("after install")?;
-        ctx.serves("after install")?;
+        ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
 
         // 3. The user's configuration survives a major upgrade (which installs the
@@ -1042,7 +1072,7 @@ mod wine_test {
         ctx.installed("after upgrade")?;
         service_installed(&ctx.system_reg())?;
         println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
-        ctx.serves("after upgrade")?;
+        ctx.serves("after upgrade", "-ServiceRun")?;
         clock.lap("both clients served after the upgrade (through the service)");
 
         // 4. Silent uninstall of the newer product: only the user's file stays.
