@@ -17,14 +17,17 @@
 //! source of them.
 //!
 //! `cargo xtask msi-test` (also the last step of `cargo xtask test`): each part in a fresh
-//! prefix, a `cp -a` (about 5 s) of `target/wine/msi-template`, a prefix wineboot made
-//! and nothing ran in (made once, about 65 s, then reused: a copy of it is as fresh).
-//! Each client check starts the server once: a 64-bit and a 32-bit `opcdiag subscribe
-//! --count 3` hold it while each bitness's opcdiag runs status, write, read (back) and
-//! servers, and must see the first value and both writes. Measured on the 2-core
-//! machine, 7 builds at once, Windows build up to date: 3 MSIs 27 s, template 65 s
-//! (0 when kept), broken package 7 s, install 6 s, each client check 17 to 25 s,
-//! upgrade 9 s, uninstall 7 s: about 175 s from a clean target/wine, 110 s with it.
+//! prefix, a `cp -a` of `target/wine/msi-template`, a prefix wineboot made and nothing
+//! ran in (made once, about 65 s, then kept: a copy of it is as fresh). Each client
+//! check starts the server once: a 64-bit and a 32-bit `opcdiag subscribe --count 3`
+//! hold it while each bitness's opcdiag runs status, write, read back (from the device)
+//! and servers, and must see the first value and both writes; the server's command line
+//! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
+//! Measured on the 2-core machine with 7 engineers building (five runs): the three MSIs
+//! 27 to 38 s, the template 65 s when missing, each prefix copy 4 to 37 s (1.3 GB, the
+//! disk is shared), broken package 7 to 19 s, install 6 to 12 s, each client check 17 to
+//! 28 s, upgrade 8 to 12 s, uninstall 6 to 11 s: 150 to 220 s with the Windows build up
+//! to date, 65 s more from a clean target/wine (the run before these: 250 s of Wine).
 //!
 //! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
