@@ -953,19 +953,7 @@ mod wine_test {
                 ((*f).to_owned(), src)
             })
             .collect();
-        let old = build(
-            &files,
-            version,
-            &dir.join("stage-old"),
-            &dir.join("old.msi"),
-        )?;
         let new_version = newer(version);
-        let new = build(
-            &files,
-            &new_version,
-            &dir.join("stage-new"),
-            &dir.join("new.msi"),
-        )?;
         // A broken package: its 32-bit proxy/stub is not a DLL, so its registration
         // (RegisterPs32) fails after the files and keys are in place.
         let broken_files: Vec<(String, PathBuf)> = files
@@ -978,12 +966,38 @@ mod wine_test {
                 }
             })
             .collect();
-        let broken = build(
-            &broken_files,
-            version,
-            &dir.join("stage-broken"),
-            &dir.join("broken.msi"),
-        )?;
+        // The three at once (wixl compresses on one core; each has its own folders).
+        let (old, new, broken) = std::thread::scope(|s| {
+            let old = s.spawn(|| {
+                build(
+                    &files,
+                    version,
+                    &dir.join("stage-old"),
+                    &dir.join("old.msi"),
+                )
+            });
+            let new = s.spawn(|| {
+                build(
+                    &files,
+                    &new_version,
+                    &dir.join("stage-new"),
+                    &dir.join("new.msi"),
+                )
+            });
+            let broken = s.spawn(|| {
+                build(
+                    &broken_files,
+                    version,
+                    &dir.join("stage-broken"),
+                    &dir.join("broken.msi"),
+                )
+            });
+            let join = |h: std::thread::ScopedJoinHandle<'_, Result<PathBuf, String>>| {
+                h.join()
+                    .map_err(|_| "msi-test: an MSI build panicked".to_string())?
+            };
+            Ok::<_, String>((join(old)?, join(new)?, join(broken)?))
+        })?;
 
         clock.lap("three MSIs built (wixl)");
 
