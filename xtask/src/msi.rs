@@ -23,11 +23,12 @@
 //! hold it while each bitness's opcdiag runs status, write, read back (from the device)
 //! and servers, and must see the first value and both writes; the server's command line
 //! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
-//! Measured on the 2-core machine with 7 engineers building (five runs): the three MSIs
-//! 27 to 38 s, the template 65 s when missing, each prefix copy 4 to 37 s (1.3 GB, the
-//! disk is shared), broken package 7 to 19 s, install 6 to 12 s, each client check 17 to
-//! 28 s, upgrade 8 to 12 s, uninstall 6 to 11 s: 150 to 220 s with the Windows build up
-//! to date, 65 s more from a clean target/wine (the run before these: 250 s of Wine).
+//! Measured on the 2-core machine with 7 engineers building (seven runs): the three MSIs
+//! 26 to 38 s (27 s at once, as now), the template 33 to 65 s when missing, each prefix
+//! copy 3 to 37 s (1.3 GB, the disk is shared), broken package 7 to 19 s, install 4 to
+//! 12 s, each client check 15 to 28 s, upgrade 6 to 16 s, uninstall 5 to 11 s: 110 s
+//! with the template kept and the Windows build up to date, 165 s from a clean
+//! target/wine (as in CI); before this layout, 250 s of Wine alone.
 //!
 //! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
