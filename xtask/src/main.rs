@@ -44,11 +44,12 @@ commands:
           (installer/, xtask/src/msi.rs; needs wixl): server, proxy/stub, opcdiag (the last
           two also 32-bit, in x86/), example configuration, demo database, deployment
           guide and docs
-  msi-test  the MSI under Wine in a fresh prefix (target/wine/msi-prefix): a broken
-          package fails and leaves nothing; silent install, a 64-bit and a 32-bit
-          opcdiag status and read; a major upgrade with SERVICE=1 keeps a modified
-          ASIXConnect.ini and still serves; silent uninstall leaves no keys (both
-          views), service or files
+  msi-test  the MSI under Wine, each part in a fresh prefix (a copy of
+          target/wine/msi-template): a broken package fails and leaves nothing; silent
+          install, a 64-bit and a 32-bit opcdiag status, write, read back, subscribe
+          and servers; a major upgrade with SERVICE=1 keeps a modified ASIXConnect.ini,
+          installs the service and still serves; silent uninstall leaves no keys (both
+          views), service or files (also the last step of `test`)
   fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
           libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
           random-mutation runner; targets may be named

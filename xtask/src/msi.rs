@@ -16,8 +16,21 @@
 //! what widl generates from idl/ into DllRegisterServer, so the DLL itself stays the one
 //! source of them.
 //!
-//! Measured under Wine 8 (`cargo xtask msi-test`, 200 to 240 s, most of it making the
-//! fresh prefix and starting the server for each client): `[SystemFolder]` is syswow64
+//! `cargo xtask msi-test` (also the last step of `cargo xtask test`): each part in a fresh
+//! prefix, a `cp -a` of `target/wine/msi-template`, a prefix wineboot made and nothing
+//! ran in (made once, about 65 s, then kept: a copy of it is as fresh). Each client
+//! check starts the server once: a 64-bit and a 32-bit `opcdiag subscribe --count 3`
+//! hold it while each bitness's opcdiag runs status, write, read back (from the device)
+//! and servers, and must see the first value and both writes; the server's command line
+//! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
+//! Measured on the 2-core machine with 7 engineers building (seven runs): the three MSIs
+//! 26 to 38 s (27 s at once, as now), the template 33 to 65 s when missing, each prefix
+//! copy 3 to 37 s (1.3 GB, the disk is shared), broken package 7 to 19 s, install 4 to
+//! 12 s, each client check 15 to 28 s, upgrade 6 to 16 s, uninstall 5 to 11 s: 110 s
+//! with the template kept and the Windows build up to date, 165 s from a clean
+//! target/wine (as in CI); before this layout, 250 s of Wine alone.
+//!
+//! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
 //! Registry row's last value removes the emptied key; a failed `/qn` install exits with
 //! the low byte of 1627 (91). Wine runs rollback custom actions only after its own
@@ -368,6 +381,11 @@ mod tests {
         let props = table(&msi, "Property").unwrap();
         let upgrade = props.iter().find(|r| r[0] == "UpgradeCode").unwrap();
         assert_eq!(upgrade[1], "{6F1D3B2A-7C44-4E8B-9A5D-2C0E8B7F4A11}");
+        // Per machine: wixl turns Package/@InstallScope into ALLUSERS.
+        assert!(
+            props.iter().any(|r| r[0] == "ALLUSERS" && r[1] == "1"),
+            "{props:?}"
+        );
         let actions = table(&msi, "CustomAction").unwrap();
         let service = actions.iter().find(|r| r[0] == "InstallService").unwrap();
         assert_eq!(service[3], "/Service");
@@ -396,10 +414,98 @@ mod wine_test {
     use super::*;
     use crate::arch::Arch;
     use crate::{build, util, wine};
+    use std::io::BufRead as _;
+    use std::process::{Child, Stdio};
+    use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
     use std::time::{Duration, Instant};
 
     const CLSID: &str = "3277B556-BA68-4BDE-8687-8EE4E4B46336";
     const INSTALL: &str = "drive_c/Program Files/ServerCTOPC";
+    /// The Start-menu folder: Windows Installer puts a per-machine (ALLUSERS=1) install's
+    /// into the common one, Wine 8's msi into the installing user's (measured).
+    fn menus() -> [String; 2] {
+        let user = std::env::var("USER").unwrap_or_else(|_| "root".into());
+        [
+            "drive_c/ProgramData/Microsoft/Windows/Start Menu/Programs/ServerCTOPC".into(),
+            format!(
+                "drive_c/users/{user}/AppData/Roaming/Microsoft/Windows/Start Menu/Programs/ServerCTOPC"
+            ),
+        ]
+    }
+    /// A log of the user's, which no install, upgrade or removal may touch.
+    const USER_LOG: &str = "Log/ServerCTOPC.20260101.log";
+    /// The writable demo set point the clients write, read back and subscribe to.
+    const SETPOINT: &str = "KW_A110";
+    /// What each client writes to it (exact in R4, unlike the demo's own values).
+    fn written(arch: Arch) -> &'static str {
+        match arch {
+            Arch::X64 => "11.25",
+            Arch::X86 => "12.75",
+        }
+    }
+
+    /// Prints each step with the seconds since the start (the figures in the module doc).
+    struct Clock(Instant);
+
+    impl Clock {
+        fn lap(&self, what: &str) {
+            println!("msi-test: [{:>4} s] {what}", self.0.elapsed().as_secs());
+        }
+    }
+
+    /// A background `opcdiag subscribe`: its stdout lines arrive on `rx`.
+    struct Subscriber {
+        arch: Arch,
+        child: Child,
+        rx: Receiver<String>,
+        lines: Vec<String>,
+    }
+
+    impl Subscriber {
+        /// Waits for a line containing `needle` (or the end of the output).
+        fn wait_for(&mut self, needle: &str, limit: Duration) -> bool {
+            let deadline = Instant::now() + limit;
+            loop {
+                if self.lines.iter().any(|l| l.contains(needle)) {
+                    return true;
+                }
+                let left = deadline.saturating_duration_since(Instant::now());
+                match self.rx.recv_timeout(left) {
+                    Ok(l) => self.lines.push(l),
+                    Err(_) => return false,
+                }
+            }
+        }
+
+        /// Its whole output once it ended by itself (`--count` or `--for`).
+        fn finish(mut self, limit: Duration) -> Result<String, String> {
+            let deadline = Instant::now() + limit;
+            loop {
+                let left = deadline.saturating_duration_since(Instant::now());
+                match self.rx.recv_timeout(left) {
+                    Ok(l) => self.lines.push(l),
+                    Err(RecvTimeoutError::Disconnected) => break,
+                    Err(RecvTimeoutError::Timeout) => {
+                        let _ = self.child.kill();
+                        break;
+                    }
+                }
+            }
+            let status = self
+                .child
+                .wait()
+                .map_err(|e| format!("opcdiag subscribe: {e}"))?;
+            let out = self.lines.join("\n");
+            if status.success() {
+                Ok(out)
+            } else {
+                Err(format!(
+                    "opcdiag subscribe ({:?}): {status}\n{out}",
+                    self.arch
+                ))
+            }
+        }
+    }
 
     struct Ctx {
         pfx: PathBuf,
@@ -418,13 +524,62 @@ mod wine_test {
     }
 
     impl Ctx {
+        /// Wine's environment for the test prefix; no winemenubuilder, which would put
+        /// the package's Start-menu entries into this machine's desktop menus.
+        fn env(&self, c: &mut Command) {
+            wine::env(c);
+            c.env("WINEPREFIX", &self.pfx)
+                .env("WINEDLLOVERRIDES", "mscoree,mshtml=;winemenubuilder.exe=d");
+        }
+
+        /// What the install put in place besides the files: the Start-menu entries, and
+        /// each proxy/stub registered in its own view only (the 32-bit one, in x86\, in
+        /// Wow6432Node).
+        fn installed(&self, what: &str) -> Result<(), String> {
+            for lnk in [
+                "Deployment guide.lnk",
+                "ServerCTOPC status (opcdiag status).lnk",
+            ] {
+                if !menus().iter().any(|m| self.pfx.join(m).join(lnk).is_file()) {
+                    return Err(format!("{what}: no Start-menu entry {lnk}"));
+                }
+            }
+            let reg = self.system_reg();
+            let mut header = "";
+            let (mut ps64, mut ps32) = (false, false);
+            for line in reg.lines() {
+                if line.starts_with('[') {
+                    header = line;
+                } else if header.contains("\\\\clsid\\\\")
+                    && line.contains("serverctopc\\\\")
+                    && line.contains("opc_ps.dll")
+                {
+                    let wow = header.contains("wow6432node");
+                    let x86 = line.contains("\\\\x86\\\\opc_ps.dll");
+                    if wow != x86 {
+                        return Err(format!(
+                            "{what}: a proxy/stub in the wrong view: {header} {line}"
+                        ));
+                    }
+                    ps64 |= !x86;
+                    ps32 |= x86;
+                }
+            }
+            if !(ps64 && ps32) {
+                return Err(format!(
+                    "{what}: proxy/stubs registered: 64-bit {ps64}, 32-bit {ps32}"
+                ));
+            }
+            println!("msi-test: {what}: both Start-menu entries; each proxy/stub in its own view");
+            Ok(())
+        }
+
         /// Runs `program args` under Wine in the test prefix (`arch`'s loader), bounded
         /// by `limit`, and returns (exit code, stdout + stderr).
         fn run(&self, arch: Arch, program: &str, args: &[&str], limit: u64) -> (i32, String) {
             let mut c = Command::new("timeout");
-            wine::env(&mut c);
-            c.env("WINEPREFIX", &self.pfx)
-                .arg(limit.to_string())
+            self.env(&mut c);
+            c.arg(limit.to_string())
                 .arg(arch.loader())
                 .arg(program)
                 .args(args);
@@ -468,10 +623,7 @@ mod wine_test {
         }
 
         fn opcdiag(&self, arch: Arch, args: &[&str]) -> Result<String, String> {
-            let exe = match arch {
-                Arch::X64 => "C:\\Program Files\\ServerCTOPC\\opcdiag.exe",
-                Arch::X86 => "C:\\Program Files\\ServerCTOPC\\x86\\opcdiag.exe",
-            };
+            let exe = opcdiag_exe(arch);
             let (code, out) = self.run(arch, exe, args, 120);
             if code == 0 {
                 Ok(out)
@@ -480,23 +632,156 @@ mod wine_test {
             }
         }
 
-        /// A client of each bitness: status and a read of a demo variable.
-        fn serves(&self, what: &str) -> Result<(), String> {
+        /// `opcdiag subscribe` in the background, once the subscription is made.
+        fn subscriber(&self, arch: Arch, args: &[&str]) -> Result<Subscriber, String> {
+            let err = self.dir.join(format!("subscribe-{arch:?}.stderr"));
+            let err = std::fs::File::create(&err).map_err(|e| format!("{}: {e}", err.display()))?;
+            let mut c = Command::new("timeout");
+            self.env(&mut c);
+            c.arg("180")
+                .arg(arch.loader())
+                .arg(opcdiag_exe(arch))
+                .args(args)
+                .stdin(Stdio::null())
+                .stdout(Stdio::piped())
+                .stderr(err);
+            let mut child = c.spawn().map_err(|e| format!("cannot start wine: {e}"))?;
+            let stdout = child.stdout.take().ok_or("opcdiag subscribe: no stdout")?;
+            let (tx, rx) = mpsc::channel();
+            std::thread::spawn(move || {
+                for line in std::io::BufReader::new(stdout)
+                    .lines()
+                    .map_while(Result::ok)
+                {
+                    if tx.send(line).is_err() {
+                        break;
+                    }
+                }
+            });
+            let mut sub = Subscriber {
+                arch,
+                child,
+                rx,
+                lines: Vec::new(),
+            };
+            if sub.wait_for("Subscribed to", Duration::from_secs(120)) {
+                Ok(sub)
+            } else {
+                sub.finish(Duration::from_secs(5)).and_then(|out| {
+                    Err(format!(
+                        "opcdiag subscribe ({arch:?}) did not subscribe:\n{out}"
+                    ))
+                })
+            }
+        }
+
+        /// A client of each bitness: status, a write of the demo set point, a read of it
+        /// and of a demo variable, the server browser, and a subscription that receives
+        /// the first value and both writes. The two subscribers keep one server process
+        /// up for all of it (a value written is read back from the same process), and are
+        /// the only server start of the check.
+        /// The command lines of the prefix's running ServerCTOPC.exe processes (Wine
+        /// shows a process's Windows command line in /proc; other prefixes' servers are
+        /// told apart by WINEPREFIX).
+        fn servers_running(&self) -> Vec<String> {
+            let want = format!("WINEPREFIX={}", self.pfx.display());
+            let mut out = Vec::new();
+            for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+                let p = e.path();
+                let cmd = std::fs::read(p.join("cmdline")).unwrap_or_default();
+                let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+                if !cmd.to_ascii_lowercase().contains("serverctopc.exe") {
+                    continue;
+                }
+                let env = std::fs::read(p.join("environ")).unwrap_or_default();
+                if env.split(|b| *b == 0).any(|v| v == want.as_bytes()) {
+                    out.push(cmd.trim().to_owned());
+                }
+            }
+            out
+        }
+
+        fn serves(&self, what: &str, switch: &str) -> Result<(), String> {
+            // The first value and each client's write: three changes.
+            let sub_args = [
+                "subscribe",
+                SETPOINT,
+                "--rate",
+                "200",
+                "--count",
+                "3",
+                "--for",
+                "150",
+            ];
+            let mut subs = Vec::new();
+            for arch in Arch::ALL {
+                subs.push(self.subscriber(arch, &sub_args)?);
+            }
+            // One server process, started by COM as asked (`-Embedding`, or by the service
+            // control manager: `-ServiceRun`).
+            let running = self.servers_running();
+            if running.len() != 1 || !running[0].contains(switch) {
+                return Err(format!(
+                    "{what}: expected one ServerCTOPC.exe {switch}, running: {running:?}"
+                ));
+            }
+            println!("msi-test: {what}: the server runs as {:?}", running[0]);
             for arch in Arch::ALL {
                 let status = self.opcdiag(arch, &["status"])?;
                 if !status.contains("ServerCTOPC") || !status.contains("State") {
                     return Err(format!("{what}: status ({arch:?}):\n{status}"));
                 }
-                let read = self.opcdiag(arch, &["read", "KW_A000"])?;
+                let value = written(arch);
+                let w = self.opcdiag(arch, &["write", SETPOINT, value])?;
+                if !w.contains(&format!("{SETPOINT}: written {value} (R4): OK")) {
+                    return Err(format!("{what}: write ({arch:?}):\n{w}"));
+                }
+                // From the device: the cache has the written value only after the next
+                // sample (MinUpdateRate), a read from the cache right away may not.
+                let read = self.opcdiag(arch, &["read", "KW_A000", SETPOINT, "--device"])?;
                 if !read.lines().any(|l| l.starts_with("KW_A000")) {
                     return Err(format!("{what}: read ({arch:?}):\n{read}"));
+                }
+                let back = read
+                    .lines()
+                    .find(|l| l.starts_with(SETPOINT))
+                    .map(|l| l.split_whitespace().collect::<Vec<_>>());
+                if !back.is_some_and(|f| f.len() > 3 && f[1] == value && f[3] == "GOOD") {
+                    return Err(format!(
+                        "{what}: {SETPOINT} read back ({arch:?}), expected {value} GOOD:\n{read}"
+                    ));
                 }
                 // The packaged server browser answers (no fallback to the categories).
                 let servers = self.opcdiag(arch, &["servers"])?;
                 if !servers.contains("ServerCTOPC.App") || servers.contains("no server browser") {
                     return Err(format!("{what}: servers ({arch:?}):\n{servers}"));
                 }
-                println!("msi-test: {what}: {arch:?} opcdiag status, read and servers: ok");
+                println!(
+                    "msi-test: {what}: {arch:?} opcdiag status, write {SETPOINT} = {value}, read back, read and servers: ok"
+                );
+            }
+            for sub in subs {
+                let arch = sub.arch;
+                let out = sub.finish(Duration::from_secs(60))?;
+                let values: Vec<&str> = out
+                    .lines()
+                    .filter_map(|l| {
+                        let f: Vec<&str> = l.split_whitespace().collect();
+                        (f.len() > 3 && f[1] == SETPOINT).then_some(f[2])
+                    })
+                    .collect();
+                for a in Arch::ALL {
+                    if !values.contains(&written(a)) {
+                        return Err(format!(
+                            "{what}: the {arch:?} subscriber missed the {a:?} write of {}: {values:?}\n{out}",
+                            written(a)
+                        ));
+                    }
+                }
+                println!(
+                    "msi-test: {what}: {arch:?} opcdiag subscribe: {} callback value(s) {values:?}: ok",
+                    values.len()
+                );
             }
             self.settle();
             Ok(())
@@ -534,11 +819,23 @@ mod wine_test {
                     }
                 }
             }
+            for m in menus() {
+                if self.pfx.join(&m).exists() {
+                    left.push(m);
+                }
+            }
             if !left.is_empty() {
                 return Err(format!("{what}: files left: {left:?}"));
             }
             println!("msi-test: {what}: no keys (both views), service or files left");
             Ok(())
+        }
+    }
+
+    fn opcdiag_exe(arch: Arch) -> &'static str {
+        match arch {
+            Arch::X64 => "C:\\Program Files\\ServerCTOPC\\opcdiag.exe",
+            Arch::X86 => "C:\\Program Files\\ServerCTOPC\\x86\\opcdiag.exe",
         }
     }
 
@@ -566,10 +863,78 @@ mod wine_test {
         format!("{}.{}.{}", f[0], f[1], f[2])
     }
 
+    /// A freshly made prefix, never run in: `target/wine/msi-template`, made by wineboot
+    /// when missing (or unable to run 32-bit programs), with the shims. Each test prefix
+    /// is a `cp -a` of it: a fresh prefix for a few seconds instead of a wineboot.
+    fn template(clock: &Clock) -> Result<PathBuf, String> {
+        let tpl = util::root().join("target/wine/msi-template");
+        if tpl.exists() && !(tpl.join("system.reg").is_file() && wine::has_wow64(&tpl)) {
+            std::fs::remove_dir_all(&tpl).map_err(|e| format!("{}: {e}", tpl.display()))?;
+        }
+        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
+        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
+        for arch in Arch::ALL {
+            crate::setup::build_shim(arch)?;
+        }
+        wine::ensure_prefix(&tpl)?;
+        wine::wineserver_in(&tpl, "-k", Duration::from_secs(20));
+        wine::wineserver_in(&tpl, "-w", Duration::from_secs(60));
+        clock.lap("template prefix ready");
+        Ok(tpl)
+    }
+
+    /// A fresh test prefix `name`: a copy of the template.
+    fn fresh_prefix(tpl: &Path, name: &str, clock: &Clock) -> Result<PathBuf, String> {
+        let pfx = util::root().join("target/wine").join(name);
+        wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+        if pfx.exists() {
+            std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
+        }
+        util::run(Command::new("cp").arg("-a").arg(tpl).arg(&pfx))?;
+        clock.lap(&format!("fresh prefix {}", pfx.display()));
+        Ok(pfx)
+    }
+
+    /// The service `SERVICE=1` installed: as `/Service` does (on demand, LocalService,
+    /// `-ServiceRun`), and the AppID naming it (COM starts the service).
+    fn service_installed(reg: &str) -> Result<(), String> {
+        let section = |head: &str| -> Option<String> {
+            let start = reg.find(head)?;
+            let body = &reg[start..];
+            let end = body.find("\n\n").unwrap_or(body.len());
+            Some(body[..end].to_owned())
+        };
+        let svc = section("[system\\\\currentcontrolset\\\\services\\\\serverctopc]")
+            .ok_or("msi-test: SERVICE=1 did not install the service")?;
+        for want in [
+            "\"objectname\"=\"nt authority\\\\localservice\"",
+            "\"start\"=dword:00000003",
+            "serverctopc.exe",
+            "-servicerun",
+        ] {
+            if !svc.contains(want) {
+                return Err(format!("msi-test: the service's key lacks {want}:\n{svc}"));
+            }
+        }
+        let appid = section(&format!(
+            "[software\\\\classes\\\\appid\\\\{{{}}}]",
+            CLSID.to_ascii_lowercase()
+        ))
+        .ok_or("msi-test: no AppID key")?;
+        if !appid.contains("\"localservice\"=\"serverctopc\"") {
+            return Err(format!(
+                "msi-test: the AppID does not name the service:\n{appid}"
+            ));
+        }
+        Ok(())
+    }
+
     pub fn run(_args: &[String]) -> Result<(), String> {
         let started = Instant::now();
+        let clock = Clock(started);
         let root = util::root();
         let a = build::run(&[])?;
+        clock.lap("Windows build");
         let version = env!("CARGO_PKG_VERSION");
         let dir = root.join("target/msi-test");
         std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
@@ -589,19 +954,7 @@ mod wine_test {
                 ((*f).to_owned(), src)
             })
             .collect();
-        let old = build(
-            &files,
-            version,
-            &dir.join("stage-old"),
-            &dir.join("old.msi"),
-        )?;
         let new_version = newer(version);
-        let new = build(
-            &files,
-            &new_version,
-            &dir.join("stage-new"),
-            &dir.join("new.msi"),
-        )?;
         // A broken package: its 32-bit proxy/stub is not a DLL, so its registration
         // (RegisterPs32) fails after the files and keys are in place.
         let broken_files: Vec<(String, PathBuf)> = files
@@ -614,28 +967,48 @@ mod wine_test {
                 }
             })
             .collect();
-        let broken = build(
-            &broken_files,
-            version,
-            &dir.join("stage-broken"),
-            &dir.join("broken.msi"),
-        )?;
+        // The three at once (wixl compresses on one core; each has its own folders).
+        let (old, new, broken) = std::thread::scope(|s| {
+            let old = s.spawn(|| {
+                build(
+                    &files,
+                    version,
+                    &dir.join("stage-old"),
+                    &dir.join("old.msi"),
+                )
+            });
+            let new = s.spawn(|| {
+                build(
+                    &files,
+                    &new_version,
+                    &dir.join("stage-new"),
+                    &dir.join("new.msi"),
+                )
+            });
+            let broken = s.spawn(|| {
+                build(
+                    &broken_files,
+                    version,
+                    &dir.join("stage-broken"),
+                    &dir.join("broken.msi"),
+                )
+            });
+            let join = |h: std::thread::ScopedJoinHandle<'_, Result<PathBuf, String>>| {
+                h.join()
+                    .map_err(|_| "msi-test: an MSI build panicked".to_string())?
+            };
+            Ok::<_, String>((join(old)?, join(new)?, join(broken)?))
+        })?;
 
-        let pfx = root.join("target/wine/msi-prefix");
-        wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-        if pfx.exists() {
-            std::fs::remove_dir_all(&pfx).map_err(|e| format!("{}: {e}", pfx.display()))?;
-        }
-        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
-        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
-        for arch in Arch::ALL {
-            crate::setup::build_shim(arch)?;
-        }
-        wine::ensure_prefix(&pfx)?;
-        let ctx = Ctx { pfx, dir };
+        clock.lap("three MSIs built (wixl)");
 
-        // 1. A broken install fails and leaves nothing.
-        let code = ctx.msiexec("/i", &broken, &[], "broken.log");
+        let tpl = template(&clock)?;
+        // 1. A broken install, in a fresh prefix of its own, fails and leaves nothing.
+        let bctx = Ctx {
+            pfx: fresh_prefix(&tpl, "msi-prefix-broken", &clock)?,
+            dir: dir.clone(),
+        };
+        let code = bctx.msiexec("/i", &broken, &[], "broken.log");
         if code == 0 {
             return Err("msi-test: the broken package installed (exit 0)".into());
         }
@@ -644,9 +1017,16 @@ mod wine_test {
         println!(
             "msi-test: broken package: msiexec failed (exit {code}, the low byte of its Windows code), as it must"
         );
-        ctx.nothing_left("after the failed install", &[])?;
+        bctx.nothing_left("after the failed install", &[])?;
+        clock.lap("broken package checked");
+        // Its 1.3 GB are not needed any more.
+        let _ = std::fs::remove_dir_all(&bctx.pfx);
 
-        // 2. Silent install, both clients.
+        // 2. Silent install in a fresh prefix, both clients.
+        let ctx = Ctx {
+            pfx: fresh_prefix(&tpl, "msi-prefix", &clock)?,
+            dir,
+        };
         let code = ctx.msiexec("/i", &old, &[], "install.log");
         if code != 0 {
             return Err(format!(
@@ -655,20 +1035,41 @@ mod wine_test {
                 ctx.dir.join("install.log").display()
             ));
         }
-        ctx.serves("after install")?;
+        clock.lap("installed");
+        ctx.installed("after install")?;
+        ctx.serves("after install", "-Embedding")?;
+        clock.lap("both clients served after the install");
 
         // 3. The user's configuration survives a major upgrade (which installs the
         //    service too).
         let ini = ctx.install_dir().join("ASIXConnect.ini");
         // A working configuration, the user's: the example with a changed value (an ini
-        // without the channel's ItemsDatabase serves no demo variable).
+        // without the channel's ItemsDatabase serves no demo variable), simulated (no
+        // asix network here).
         let example = std::fs::read_to_string(root.join("asixconnect.ini.example"))
             .map_err(|e| format!("asixconnect.ini.example: {e}"))?;
         let user_ini = format!(
             "; the user's configuration (msi-test)\r\n{}",
-            example.replace("MinUpdateRate = 1000", "MinUpdateRate = 500")
+            example
+                .replace("MinUpdateRate = 1000", "MinUpdateRate = 500")
+                .replace("SimulateCurrentData = nie", "SimulateCurrentData = tak")
         );
+        if !user_ini.contains("SimulateCurrentData = tak") {
+            return Err(
+                "msi-test: asixconnect.ini.example has no SimulateCurrentData = nie".into(),
+            );
+        }
         std::fs::write(&ini, &user_ini).map_err(|e| format!("{}: {e}", ini.display()))?;
+        let log = ctx.install_dir().join(USER_LOG);
+        let user_log = "2026-01-01 00:00:00.000 INFO the user's log (msi-test)\r\n";
+        std::fs::write(&log, user_log).map_err(|e| format!("{}: {e}", log.display()))?;
+        let log_kept = |when: &str| {
+            if std::fs::read_to_string(&log).unwrap_or_default() == user_log {
+                Ok(())
+            } else {
+                Err(format!("msi-test: {when} removed or changed {USER_LOG}"))
+            }
+        };
         let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
         if code != 0 {
             return Err(format!(
@@ -682,12 +1083,15 @@ mod wine_test {
                 "msi-test: the upgrade changed ASIXConnect.ini: {kept:?}"
             ));
         }
-        println!("msi-test: upgrade to {new_version}: ASIXConnect.ini kept");
-        if !ctx.system_reg().contains("services\\\\serverctopc") {
-            return Err("msi-test: SERVICE=1 did not install the service".into());
-        }
-        println!("msi-test: SERVICE=1: the service is installed");
-        ctx.serves("after upgrade")?;
+        log_kept("the upgrade")?;
+        clock.lap(&format!(
+            "upgraded to {new_version}: ASIXConnect.ini and {USER_LOG} kept"
+        ));
+        ctx.installed("after upgrade")?;
+        service_installed(&ctx.system_reg())?;
+        println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
+        ctx.serves("after upgrade", "-ServiceRun")?;
+        clock.lap("both clients served after the upgrade (through the service)");
 
         // 4. Silent uninstall of the newer product: only the user's file stays.
         let code = ctx.msiexec("/x", &new, &[], "uninstall.log");
@@ -706,9 +1110,12 @@ mod wine_test {
         );
         let uf: Vec<&str> = user_files.iter().map(String::as_str).collect();
         ctx.nothing_left("after uninstall", &uf)?;
+        clock.lap("uninstalled");
         if std::fs::read_to_string(&ini).unwrap_or_default() != user_ini {
             return Err("msi-test: the uninstall removed or changed ASIXConnect.ini".into());
         }
+        log_kept("the uninstall")?;
+        println!("msi-test: after uninstall: ASIXConnect.ini and {USER_LOG} kept");
         println!("msi-test: ok ({} s)", started.elapsed().as_secs());
         Ok(())
     }

@@ -14,7 +14,11 @@
 //! 7. the end-to-end tests again as a **32-bit client** ([`E2E_32`]: built for
 //!    `i686-pc-windows-gnu`, run by Wine's 32-bit loader in the same prefix, through the
 //!    32-bit proxy/stub, against the same 64-bit server), then the third-party client
-//!    built for 32-bit.
+//!    built for 32-bit;
+//! 8. the MSI (`cargo xtask msi-test`, xtask/src/msi.rs, about 3 min here): a broken
+//!    package, then install, a 64-bit and a 32-bit client (status, write, read back,
+//!    subscribe, the server browser), upgrade with `SERVICE=1`, uninstall, each in a
+//!    fresh prefix of its own (copies of `target/wine/msi-template`).
 //!
 //! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
@@ -82,7 +86,9 @@ pub fn run(args: &[String]) -> Result<(), String> {
         thirdparty_client(Arch::X86)
     })();
     wine::kill_all();
-    result
+    result?;
+    println!("test: the MSI under Wine (cargo xtask msi-test)");
+    crate::msi::test(&[])
 }
 
 /// The end-to-end test files that also run from a 32-bit client: every interface and

@@ -35,7 +35,7 @@ commands:
                             read items once (from the cache, or the device)
   write ITEMID VALUE [--type VT] [--path ACCESSPATH]
                             write one value (converted to the item's type or to VT)
-  subscribe ITEMID... [--rate MS] [--for SECONDS] [--path ACCESSPATH]
+  subscribe ITEMID... [--rate MS] [--for SECONDS] [--count N] [--path ACCESSPATH]
                             print every change the server reports, until Ctrl+C
   demo [--for SECONDS]      ServerCTOPC's demo plant: status, plant tree, live values
   servers                   the machine's OPC servers: ProgID, DA versions, description
@@ -105,13 +105,16 @@ or to VT when given. Exit code 1 when the write failed.
 
 const SUBSCRIBE_HELP: &str = "\
 usage: opcdiag [--server PROGID] subscribe ITEMID... [--rate MS] [--for SECONDS]
-                                                    [--path ACCESSPATH]
+                                                    [--count N] [--path ACCESSPATH]
 
 Adds the items to an active group with an IOPCDataCallback sink and prints each change
 as it arrives: time (local), item, value, quality. Runs until Ctrl+C or, with --for,
-until SECONDS have passed.
+until SECONDS have passed, or, with --count, until N changes have arrived (whichever
+comes first; scripts use both, e.g. --count 1 --for 30). Exit code 1 when --count was
+given and fewer than N changes arrived.
   --rate MS           the group's update rate (default 1000)
   --for SECONDS       stop after SECONDS (may have decimals)
+  --count N           stop after N item changes (the first values count)
   --path ACCESSPATH   the items' access path (default: none)
 ";
 
@@ -207,6 +210,8 @@ pub enum Command {
         items: Vec<String>,
         rate_ms: u32,
         for_secs: Option<f64>,
+        /// `--count N`: stop after N item changes.
+        count: Option<usize>,
         path: String,
     },
     Demo {
@@ -352,6 +357,14 @@ fn for_arg(v: &str) -> Result<f64, String> {
     parse_secs(v).ok_or_else(|| format!("--for: expected seconds > 0, got {v:?}"))
 }
 
+/// `subscribe --count N`: a number of changes > 0.
+fn count_arg(v: &str) -> Result<usize, String> {
+    v.parse::<usize>()
+        .ok()
+        .filter(|n| *n > 0)
+        .ok_or_else(|| format!("--count: expected a number of changes > 0, got {v:?}"))
+}
+
 /// The command line as clap sees it.
 #[derive(Parser, Debug)]
 #[command(
@@ -426,6 +439,8 @@ enum Sub {
         rate_ms: Option<u32>,
         #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
         for_secs: Option<f64>,
+        #[arg(long, value_name = "N", value_parser = count_arg, allow_negative_numbers = true)]
+        count: Option<usize>,
         #[arg(long, value_name = "ACCESSPATH")]
         path: Option<String>,
     },
@@ -519,11 +534,13 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
             items,
             rate_ms,
             for_secs,
+            count,
             path,
         }) => Command::Subscribe {
             items,
             rate_ms: rate_ms.unwrap_or(1000),
             for_secs,
+            count,
             path: path.unwrap_or_default(),
         },
         Some(Sub::Demo { for_secs }) => Command::Demo { for_secs },
@@ -763,6 +780,7 @@ mod tests {
                 items: vec!["A".into(), "B".into()],
                 rate_ms: 250,
                 for_secs: Some(2.5),
+                count: None,
                 path: String::new()
             }
         );
@@ -772,6 +790,7 @@ mod tests {
                 items: vec!["A".into()],
                 rate_ms: 1000,
                 for_secs: None,
+                count: None,
                 path: String::new()
             }
         );
@@ -779,6 +798,23 @@ mod tests {
         assert!(usage_error("subscribe A --for x").contains("seconds > 0"));
         assert!(usage_error("subscribe A --rate fast").contains("milliseconds"));
         assert!(usage_error("subscribe").contains("at least one ITEMID"));
+    }
+
+    #[test]
+    fn subscribe_count_bounds_the_changes() {
+        assert_eq!(
+            run("subscribe A --count 2 --for 30").1,
+            Command::Subscribe {
+                items: vec!["A".into()],
+                rate_ms: 1000,
+                for_secs: Some(30.0),
+                count: Some(2),
+                path: String::new()
+            }
+        );
+        assert!(usage_error("subscribe A --count 0").contains("--count: expected a number"));
+        assert!(usage_error("subscribe A --count -1").contains("--count: expected a number"));
+        assert!(usage_error("subscribe A --count x").contains("--count: expected a number"));
     }
 
     #[test]
@@ -879,6 +915,7 @@ mod tests {
                 items: vec!["A".into()],
                 rate_ms: 20,
                 for_secs: None,
+                count: None,
                 path: String::new()
             },
             "the last of a repeated option counts"

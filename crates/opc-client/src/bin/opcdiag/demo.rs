@@ -70,7 +70,7 @@ pub fn run(s: &Session, for_secs: Option<f64>) -> Result<u8, String> {
         "Live values (update rate {} ms, {until}):",
         sub.revised_rate
     );
-    let n = sub.run(for_secs, |name, r| {
+    let n = sub.run(for_secs, None, |name, r| {
         let unit = items
             .iter()
             .position(|i| i == name)

@@ -52,8 +52,9 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
             items,
             rate_ms,
             for_secs,
+            count,
             path,
-        } => s.subscribe(&items, rate_ms, for_secs, &path),
+        } => s.subscribe(&items, rate_ms, for_secs, count, &path),
         Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
         Command::Servers => servers(),
         Command::Doctor(_) => Err("doctor runs without a session".into()),
@@ -614,6 +615,7 @@ impl Session {
         items: &[String],
         rate_ms: u32,
         for_secs: Option<f64>,
+        count: Option<usize>,
         path: &str,
     ) -> Result<u8, String> {
         let sub = Subscription::start(self, items, path, rate_ms)?;
@@ -623,9 +625,11 @@ impl Session {
             say!("{name}  error {}", self.error_text(*err));
         }
         let width = items.iter().map(|i| i.chars().count()).max().unwrap_or(0);
-        let until = match for_secs {
-            Some(s) => format!("for {s} s"),
-            None => "until Ctrl+C".into(),
+        let until = match (for_secs, count) {
+            (Some(s), Some(c)) => format!("for {c} change(s) or {s} s"),
+            (None, Some(c)) => format!("for {c} change(s)"),
+            (Some(s), None) => format!("for {s} s"),
+            (None, None) => "until Ctrl+C".into(),
         };
         let rate = if sub.revised_rate == rate_ms {
             format!("{rate_ms} ms")
@@ -637,7 +641,7 @@ impl Session {
             sub.names.len() - sub.failed.len()
         );
         let started = Instant::now();
-        let n = sub.run(for_secs, |name, r| {
+        let n = sub.run(for_secs, count, |name, r| {
             let value = if r.error.is_err() {
                 format!("error {}", self.error_text(r.error))
             } else {
@@ -653,7 +657,18 @@ impl Session {
         });
         sub.stop(self);
         say!("{n} change(s) in {:.1} s", started.elapsed().as_secs_f64());
-        Ok(code)
+        Ok(count_reached(code, n, count))
+    }
+}
+
+/// `subscribe --count N`: fewer than N changes (the time ran out) is a failure.
+fn count_reached(code: u8, n: usize, count: Option<usize>) -> u8 {
+    match count {
+        Some(c) if n < c => {
+            say!("opcdiag: {n} of the {c} change(s) asked for with --count arrived");
+            EXIT_FAILED
+        }
+        _ => code,
     }
 }
 
@@ -741,13 +756,18 @@ impl Subscription {
         })
     }
 
-    /// Calls `each(item, value)` for every item of every OnDataChange until Ctrl+C or
-    /// `for_secs`; returns the number of item changes.
-    pub fn run(&self, for_secs: Option<f64>, mut each: impl FnMut(&str, &ReadItem)) -> usize {
+    /// Calls `each(item, value)` for every item of every OnDataChange until Ctrl+C,
+    /// `for_secs` or `count` item changes; returns the number of item changes.
+    pub fn run(
+        &self,
+        for_secs: Option<f64>,
+        count: Option<usize>,
+        mut each: impl FnMut(&str, &ReadItem),
+    ) -> usize {
         let deadline = for_secs.map(|s| Instant::now() + Duration::from_secs_f64(s));
         let mut n = 0;
         loop {
-            if diag::ctrl_c_pressed() || crate::out::closed() {
+            if diag::ctrl_c_pressed() || crate::out::closed() || count.is_some_and(|c| n >= c) {
                 break;
             }
             let wait = match deadline {
