@@ -15,7 +15,7 @@
 //! is listed at once).
 
 use crate::abi::{self, ComResult};
-use crate::catalog::{parse_guid, Catalog, ClassEntry};
+use crate::catalog::{self, parse_guid, Catalog, ClassEntry};
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
@@ -223,11 +223,12 @@ fn class_details(clsid: u128) -> Option<ClassEntry> {
     Catalog::merge(views).entries.into_iter().next()
 }
 
-/// `HKCR\<progid>\CLSID`, 64-bit view first.
+/// `HKCR\<progid>\CLSID`, else through `HKCR\<progid>\CurVer`
+/// ([`catalog::resolve_progid`]), 64-bit view first.
 fn clsid_of_progid(progid: &str) -> Option<u128> {
     VIEWS
         .iter()
-        .find_map(|&v| parse_guid(&read_default(v, &format!("{progid}\\CLSID"))?))
+        .find_map(|&v| catalog::resolve_progid(progid, |key| read_default(v, key)))
 }
 
 // ---------------------------------------------------------------------------------------
