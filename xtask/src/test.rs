@@ -101,6 +101,7 @@ pub const E2E_32: &[&str] = &[
     "group_items",
     "group_slow_source",
     "group_state",
+    "item_buffering",
     "marshal_strings",
     "opcdiag",
     "registration",

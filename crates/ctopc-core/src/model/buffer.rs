@@ -1,10 +1,11 @@
 //! Item buffering (OPC DA 3.0 IOPCItemSamplingMgt::SetItemBufferEnable).
 //!
 //! An item with buffering enabled whose sampling rate is faster than its group's update
-//! rate keeps every sample the data source delivers between two OnDataChange callbacks
-//! that passes the item's deadband (against the previous buffered sample, else the value
-//! last sent), and the next subscription callback carries them all, oldest first: the
-//! same client handle several times. The buffer takes samples only while the item can be
+//! rate keeps every sample the data source pushes (subscription updates; device reads
+//! refresh the cache only) between two OnDataChange callbacks that passes the item's
+//! deadband (against the previous buffered sample, else the value last sent), and the
+//! next subscription callback carries them all, oldest first: the same client handle
+//! several times. The buffer takes samples only while the item can be
 //! reported (group ticking, item active and already sent once since it became active);
 //! the first report after (re)activation is the current value, as without buffering.
 //!
