@@ -481,16 +481,13 @@ fn item_sampling_rate_and_buffering() {
         (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
     );
 
-    // Buffering is not implemented: enabling is OPC_E_NOBUFFERING, disabling succeeds.
+    // Buffering (issue 14): enabling and disabling succeed per item; Get reads it back.
     let (hr, errs) = g
         .set_item_buffer_enable(&[(h[0], true), (h[1], false), (12345, false)])
         .unwrap();
-    assert_eq!(
-        (hr, errs),
-        (S_FALSE, vec![OPC_E_NOBUFFERING, S_OK, OPC_E_INVALIDHANDLE])
-    );
+    assert_eq!((hr, errs), (S_FALSE, vec![S_OK, S_OK, OPC_E_INVALIDHANDLE]));
     let (hr, v) = g.get_item_buffer_enable(&[h[0], h[1]]).unwrap();
-    assert_eq!((hr, v), (S_OK, vec![(false, S_OK), (false, S_OK)]));
+    assert_eq!((hr, v), (S_OK, vec![(true, S_OK), (false, S_OK)]));
 
     let s: IOPCItemSamplingMgt = g.unknown.cast().unwrap();
     let mut errors: *mut HRESULT = std::ptr::null_mut();

@@ -1,7 +1,7 @@
 //! OPC.ServerList.1, our server browser (OpcServerList.exe, registered by xtask), out of
 //! process through the proxy/stub: listing by category (DA 1.0, 2.0, 3.0) through
 //! IOPCServerList (IEnumGUID) and IOPCServerList2 (IOPCEnumGUID), GetClassDetails,
-//! CLSIDFromProgID, the errors for an unknown CLSID / ProgID, a server registered only in
+//! CLSIDFromProgID (also through a version-independent ProgID's `CurVer`), the errors for an unknown CLSID / ProgID, a server registered only in
 //! the 32-bit registry view, and /RegServer leaving another browser alone. Runs as a
 //! 64-bit and as a 32-bit client (`E2E_32`).
 #![cfg(windows)]
@@ -161,6 +161,31 @@ fn clsid_from_progid_finds_both_progids() {
     assert_eq!(b.clsid_from_progid("ServerCTOPC.App").unwrap(), OURS);
     assert_eq!(b.clsid_from_progid("ServerCTOPC.App.1").unwrap(), OURS);
     assert_eq!(b.clsid_from_progid("serverctopc.app").unwrap(), OURS);
+}
+
+/// A version-independent ProgID with only a `CurVer` (no `CLSID` of its own, as some
+/// vendors register theirs) resolves to the CLSID of the ProgID `CurVer` names.
+#[test]
+fn clsid_from_progid_follows_cur_ver() {
+    const FAKE: u128 = 0x5eb00c1a_0003_4e5e_9a11_0000000c0e1e;
+    let _fake = FakeServer::register(
+        View::Reg64,
+        FAKE,
+        "CtopcTest.CurVer.2",
+        &[CATID_OPC_DA_SERVER_20],
+    );
+    let vi = Key {
+        view: View::Reg64,
+        path: "CtopcTest.CurVer\\CurVer".into(),
+        values: vec![(String::new(), "CtopcTest.CurVer.2".into())],
+    };
+    registry::write_keys(&[vi]).expect("write the CurVer key");
+    let (_com, b) = browser();
+    let found = b.clsid_from_progid("CtopcTest.CurVer");
+    let versioned = b.clsid_from_progid("CtopcTest.CurVer.2");
+    let _ = registry::delete_trees(&[(View::Reg64, "CtopcTest.CurVer".to_string())]);
+    assert_eq!(found.unwrap(), GUID::from_u128(FAKE), "through CurVer");
+    assert_eq!(versioned.unwrap(), GUID::from_u128(FAKE));
 }
 
 #[test]

@@ -110,9 +110,60 @@ pub fn parse_guid(s: &str) -> Option<u128> {
     u128::from_str_radix(&hex, 16).ok()
 }
 
+/// The CLSID of a ProgID as `CLSIDFromProgID` finds it, over one registry view's reader
+/// of default values (`read("Some.ProgID\\CLSID")`): the ProgID's own `CLSID` subkey,
+/// else, for a version-independent ProgID that has none, the `CLSID` of the ProgID its
+/// `CurVer` names (one step: a `CurVer` naming a ProgID without a `CLSID` is not
+/// followed further).
+pub fn resolve_progid(progid: &str, read: impl Fn(&str) -> Option<String>) -> Option<u128> {
+    if let Some(id) = read(&format!("{progid}\\CLSID")).and_then(|s| parse_guid(&s)) {
+        return Some(id);
+    }
+    let current = read(&format!("{progid}\\CurVer"))?;
+    let current = current.trim();
+    if current.is_empty() || current.eq_ignore_ascii_case(progid) {
+        return None;
+    }
+    parse_guid(&read(&format!("{current}\\CLSID"))?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_progid_resolves_directly_or_through_cur_ver() {
+        let reg: std::collections::HashMap<&str, &str> = [
+            ("A.Server\\CLSID", "{00000000-0000-0000-0000-00000000000A}"),
+            ("A.Server\\CurVer", "A.Server.2"),
+            ("B.Server\\CurVer", "B.Server.3"),
+            (
+                "B.Server.3\\CLSID",
+                "{00000000-0000-0000-0000-00000000000B}",
+            ),
+            ("Loop\\CurVer", "Loop"),
+            ("Dangling\\CurVer", "Gone.1"),
+            ("Bad\\CLSID", "not a guid"),
+        ]
+        .into_iter()
+        .collect();
+        let read = |k: &str| reg.get(k).map(|v| v.to_string());
+        assert_eq!(
+            resolve_progid("A.Server", read),
+            Some(0xA),
+            "own CLSID first"
+        );
+        assert_eq!(
+            resolve_progid("B.Server", read),
+            Some(0xB),
+            "through CurVer"
+        );
+        assert_eq!(resolve_progid("B.Server.3", read), Some(0xB));
+        assert_eq!(resolve_progid("Loop", read), None);
+        assert_eq!(resolve_progid("Dangling", read), None);
+        assert_eq!(resolve_progid("Bad", read), None);
+        assert_eq!(resolve_progid("Unknown", read), None);
+    }
 
     const DA10: u128 = 0x63d5f430_cfe4_11d1_b2c8_0060083ba1fb;
     const DA20: u128 = 0x63d5f432_cfe4_11d1_b2c8_0060083ba1fb;

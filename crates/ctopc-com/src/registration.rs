@@ -133,10 +133,20 @@ pub const SERVER_LIST_EXE_NAME: &str = "OpcServerList.exe";
 /// `CATID_OPCDAServer10` (opcda.idl).
 pub const CATID_OPC_DA_SERVER_10: u128 = 0x63d5f430_cfe4_11d1_b2c8_0060083ba1fb;
 
+/// The NT service of the browser (`OpcServerList.exe /Service`), for remote clients: the
+/// name in `AppID\{..}\LocalService`.
+pub const SERVER_LIST_SERVICE_NAME: &str = "OpcServerList";
+
 /// The registration of our `OPC.ServerList.1` for the exe at `exe_path` (no categories, no
 /// legacy `OPC` key). Apply it with [`server_list_keys`] / [`server_list_trees`], which
 /// leave a server browser that is not ours alone.
 pub fn server_list(exe_path: &str) -> ServerRegistration<'_> {
+    server_list_as(exe_path, None)
+}
+
+/// [`server_list`], with `service` the NT service's name when installed by `/Service`
+/// (then the AppID names it in `LocalService`: COM starts the service).
+pub fn server_list_as<'a>(exe_path: &'a str, service: Option<&'a str>) -> ServerRegistration<'a> {
     ServerRegistration {
         clsid: CLSID_OPC_SERVER_LIST,
         appid: APPID_SERVER_LIST,
@@ -145,7 +155,7 @@ pub fn server_list(exe_path: &str) -> ServerRegistration<'_> {
         description: SERVER_LIST_DESCRIPTION,
         exe_path,
         exe_name: SERVER_LIST_EXE_NAME,
-        service_name: None,
+        service_name: service,
         categories: &[],
         opc_key_vendor: None,
     }
@@ -537,6 +547,27 @@ mod tests {
             );
             assert!(!keys.iter().any(|k| k.path.contains("Categor")));
         }
+    }
+
+    #[test]
+    fn the_browser_as_a_service_names_it_in_its_appid_and_keeps_local_server32() {
+        let exe = "C:\\Program Files\\ServerCTOPC\\OpcServerList.exe";
+        let appid = format!("AppID\\{}", guid_string(APPID_SERVER_LIST));
+        let plain = server_list(exe).keys();
+        let keys = server_list_as(exe, Some(SERVER_LIST_SERVICE_NAME)).keys();
+        for v in VIEWS {
+            assert_eq!(value(&plain, v, &appid, "LocalService"), None);
+            assert_eq!(
+                value(&keys, v, &appid, "LocalService"),
+                Some("OpcServerList")
+            );
+            assert!(value(&keys, v, &server_list_local_server_key(), "").is_some());
+        }
+        // /UnregServer of the plain registration removes the service's AppID too.
+        let r = server_list_as(exe, Some(SERVER_LIST_SERVICE_NAME));
+        let trees = server_list_trees(&r, &VIEWS, &[]);
+        assert!(trees.iter().any(|(_, t)| *t == appid));
+        assert_eq!(trees, server_list_trees(&server_list(exe), &VIEWS, &[]));
     }
 
     #[test]

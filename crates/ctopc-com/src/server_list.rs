@@ -15,7 +15,7 @@
 //! is listed at once).
 
 use crate::abi::{self, ComResult};
-use crate::catalog::{parse_guid, Catalog, ClassEntry};
+use crate::catalog::{self, parse_guid, Catalog, ClassEntry};
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
@@ -24,15 +24,16 @@ use crate::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
     IOPCServerList_Impl,
 };
-use crate::lifetime::{Lifetime, ObjectGuard};
+use crate::lifetime::{Lifetime, ObjectGuard, StopSignal};
 use crate::registration::{self, View, VIEWS};
 use crate::registry;
+use crate::service;
 use ctopc_core::limits::TextLimit;
 use ctopc_core::OpcError;
 use std::sync::Arc;
 use windows::core::{implement, IUnknown, Interface, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{
-    CO_E_CLASSSTRING, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, E_POINTER,
+    CO_E_CLASSSTRING, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, E_FAIL, E_POINTER,
     REGDB_E_CLASSNOTREG, S_OK,
 };
 use windows::Win32::System::Com::{CoRevokeClassObject, IEnumGUID};
@@ -273,11 +274,12 @@ fn class_details(clsid: u128) -> Option<ClassEntry> {
     Catalog::merge(views).entries.into_iter().next()
 }
 
-/// `HKCR\<progid>\CLSID`, 64-bit view first.
+/// `HKCR\<progid>\CLSID`, else through `HKCR\<progid>\CurVer`
+/// ([`catalog::resolve_progid`]), 64-bit view first.
 fn clsid_of_progid(progid: &str) -> Option<u128> {
     VIEWS
         .iter()
-        .find_map(|&v| parse_guid(&read_default(v, &format!("{progid}\\CLSID"))?))
+        .find_map(|&v| catalog::resolve_progid(progid, |key| read_default(v, key)))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -536,9 +538,12 @@ pub fn create_instance(lifetime: &Arc<Lifetime>) -> ComResult<IUnknown> {
 // ---------------------------------------------------------------------------------------
 // The exe's switches
 
-fn our_registration<R>(f: impl FnOnce(&registration::ServerRegistration) -> R) -> ComResult<R> {
+fn our_registration<R>(
+    service: Option<&str>,
+    f: impl FnOnce(&registration::ServerRegistration) -> R,
+) -> ComResult<R> {
     let exe = exe_path()?;
-    Ok(f(&registration::server_list(&exe)))
+    Ok(f(&registration::server_list_as(&exe, service)))
 }
 
 /// `LocalServer32` of `{13486D51-...}` in each view.
@@ -559,6 +564,32 @@ fn view_name(v: View) -> &'static str {
 /// message. Succeeds in both cases.
 pub fn register() -> ComResult<()> {
     let _com = ComInit::mta()?;
+    register_as(None)
+}
+
+/// `/Service`: as `/RegServer` with the AppID naming the NT service `OpcServerList`
+/// (on demand, as LocalService), which it installs: COM then starts the browser as that
+/// service, which remote clients need (as the OPC Foundation's OpcEnum, a service too).
+/// Where another browser serves both views nothing is installed.
+pub fn register_service() -> ComResult<()> {
+    let _com = ComInit::mta()?;
+    let foreign = registration::foreign_server_list_views(&local_servers());
+    if foreign.len() == VIEWS.len() {
+        println!("OpcServerList: no service installed (another server browser serves both views)");
+        return Ok(());
+    }
+    let exe = exe_path()?;
+    service::install_as(&service::SERVER_LIST, std::path::Path::new(&exe))
+        .map_err(|e| crate::error::error(E_FAIL, &e))?;
+    register_as(Some(service::SERVER_LIST.name))?;
+    println!(
+        "OpcServerList: runs as the NT service {}",
+        service::SERVER_LIST.name
+    );
+    Ok(())
+}
+
+fn register_as(service: Option<&str>) -> ComResult<()> {
     let local = local_servers();
     let foreign = registration::foreign_server_list_views(&local);
     for (v, ls) in &local {
@@ -571,7 +602,7 @@ pub fn register() -> ComResult<()> {
             );
         }
     }
-    let keys = our_registration(|r| registration::server_list_keys(r, &foreign))?;
+    let keys = our_registration(service, |r| registration::server_list_keys(r, &foreign))?;
     registry::write_keys(&keys)?;
     if foreign.len() == VIEWS.len() {
         println!("OpcServerList: not registered (another server browser serves both views)");
@@ -586,7 +617,7 @@ pub fn register() -> ComResult<()> {
 }
 
 /// `/UnregServer`: removes our browser only (a view whose `{13486D51-...}` is another
-/// one's keeps it).
+/// one's keeps it), and its NT service if `/Service` installed it.
 pub fn unregister() -> ComResult<()> {
     let _com = ComInit::mta()?;
     let local = local_servers();
@@ -596,21 +627,47 @@ pub fn unregister() -> ComResult<()> {
         .filter(|(_, ls)| ls.as_deref().is_some_and(registration::is_our_server_list))
         .map(|(v, _)| *v)
         .collect();
-    let trees = our_registration(|r| registration::server_list_trees(r, &ours, &foreign))?;
+    let trees = our_registration(None, |r| {
+        registration::server_list_trees(r, &ours, &foreign)
+    })?;
     registry::delete_trees(&trees)?;
+    service::uninstall_as(&service::SERVER_LIST).map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("OpcServerList: unregistered ours");
     Ok(())
 }
 
 /// `-Embedding`: serves `OPC.ServerList.1` until the last client has gone.
 pub fn serve() -> ComResult<()> {
+    serve_until(None)
+}
+
+/// `-ServiceRun` (the service control manager starts the exe so): serves
+/// `OPC.ServerList.1` until the service is stopped.
+pub fn serve_service() -> ComResult<()> {
+    service::run_as(
+        &service::SERVER_LIST,
+        Box::new(|stop| serve_until(Some(stop)).map_err(|e| e.message())),
+    )
+    .map_err(|e| crate::error::error(E_FAIL, &e))
+}
+
+/// Serves until the last client has gone (`None`) or `stop` is triggered.
+fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
     let _com = ComInit::mta()?;
     init_security();
     let lifetime = Lifetime::new();
     let for_factory = Arc::clone(&lifetime);
     let factory = ClassFactory::new(Arc::clone(&lifetime), move || create_instance(&for_factory));
     let cookie = register_class(&CLSID_OPC_SERVER_LIST, &factory)?;
-    let _ = lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
+    match stop {
+        Some(stop) => {
+            lifetime.stop_on(&stop);
+            lifetime.wait_for_stop();
+        }
+        None => {
+            let _ = lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
+        }
+    }
     // SAFETY: the cookie came from CoRegisterClassObject above.
     unsafe { CoRevokeClassObject(cookie) }
 }

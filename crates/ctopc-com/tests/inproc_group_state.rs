@@ -776,17 +776,14 @@ fn item_sampling_rate_and_buffering() {
         clear(&[h[0], BAD_HANDLE]),
         (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
     );
-    // Buffering is not implemented: enabling is OPC_E_NOBUFFERING, disabling succeeds.
+    // Buffering (issue 14): enabling and disabling succeed per item; Get reads it back.
     let hs = [h[0], h[1], BAD_HANDLE];
     let en = [BOOL(1), BOOL(0), BOOL(0)];
     let (r, errs) = errors_of(3, |e| {
         // SAFETY: valid arrays of the same length.
         unsafe { sm.SetItemBufferEnable(3, hs.as_ptr(), en.as_ptr(), e) }
     });
-    assert_eq!(
-        (r, errs),
-        (S_FALSE, vec![OPC_E_NOBUFFERING, S_OK, OPC_E_INVALIDHANDLE])
-    );
+    assert_eq!((r, errs), (S_FALSE, vec![S_OK, S_OK, OPC_E_INVALIDHANDLE]));
     let (mut values, mut errors) = (poison::<BOOL>(), poison::<HRESULT>());
     // SAFETY: valid pointers.
     let r = unsafe { sm.GetItemBufferEnable(3, hs.as_ptr(), &mut values, &mut errors) };
@@ -796,7 +793,7 @@ fn item_sampling_rate_and_buffering() {
         .into_iter()
         .map(|b| b.as_bool())
         .collect();
-    assert_eq!(v, vec![false, false, false]);
+    assert_eq!(v, vec![true, false, false]);
     assert_eq!(
         take_errors(r, errors, 3),
         vec![S_OK, S_OK, OPC_E_INVALIDHANDLE]

@@ -851,7 +851,7 @@ fn item_deadband_set_get_clear_follow_deadbandmgt() {
 }
 
 #[test]
-fn sampling_rate_set_get_clear_and_buffering_is_not_supported() {
+fn sampling_rate_set_get_clear_and_the_buffer_setting() {
     let mut sim = Sim::new();
     let s = sim.session();
     let g = sim.group(s, "g", 5000, 0.0);
@@ -900,14 +900,15 @@ fn sampling_rate_set_get_clear_and_buffering_is_not_supported() {
         sim.e
             .set_item_buffer_enable(g, &[(h, true), (h, false), (9, true)])
             .unwrap(),
-        vec![
-            Err(OpcError::NoBuffering),
-            Ok(()),
-            Err(OpcError::InvalidHandle)
-        ]
+        vec![Ok(()), Ok(()), Err(OpcError::InvalidHandle)]
     );
     assert_eq!(
         sim.e.get_item_buffer_enable(g, &[h]).unwrap(),
         vec![Ok(false)]
+    );
+    sim.e.set_item_buffer_enable(g, &[(h, true)]).unwrap();
+    assert_eq!(
+        sim.e.get_item_buffer_enable(g, &[h, 9]).unwrap(),
+        vec![Ok(true), Err(OpcError::InvalidHandle)]
     );
 }

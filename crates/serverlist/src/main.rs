@@ -2,22 +2,29 @@
 //! a small exe of its own so that a client listing servers never starts (or keeps up) the
 //! OPC server with its data source. Switches as Windows COM servers have them,
 //! case-insensitive, `/` or `-`: `/RegServer`, `/UnregServer`, `-Embedding` (COM starts
-//! it so). Everything else is in `ctopc_com::server_list`.
+//! it so), `/Service` (register as the NT service `OpcServerList`, for remote clients),
+//! `-ServiceRun` (the service control manager starts it so). Everything else is in
+//! `ctopc_com::server_list`.
 
 use std::process::ExitCode;
 
-const USAGE: &str = "usage: OpcServerList.exe /RegServer | /UnregServer | -Embedding
+const USAGE: &str = "usage: OpcServerList.exe /RegServer | /Service | /UnregServer | -Embedding
   /RegServer    register OPC.ServerList.1 in both registry views, where no other server
                 browser (the OPC Foundation's OpcEnum) is registered
-  /UnregServer  remove our registration (never another browser's)
+  /Service      the same, as the NT service OpcServerList (on demand, LocalService):
+                what remote OPC clients need
+  /UnregServer  remove our registration and service (never another browser's)
   -Embedding    serve (COM starts the browser so)
+  -ServiceRun   serve as the service (the service control manager starts it so)
 ";
 
 #[derive(Debug, PartialEq, Eq)]
 enum Command {
     RegServer,
     UnregServer,
+    Service,
     Embedding,
+    ServiceRun,
     Help,
 }
 
@@ -30,6 +37,8 @@ fn parse(args: impl IntoIterator<Item = String>) -> Result<Command, String> {
     let cmd = match switch.as_str() {
         "regserver" => Command::RegServer,
         "unregserver" => Command::UnregServer,
+        "service" => Command::Service,
+        "servicerun" => Command::ServiceRun,
         "embedding" | "automation" => Command::Embedding,
         "help" | "h" | "?" => Command::Help,
         _ => return Err(format!("unknown switch {first}")),
@@ -57,7 +66,9 @@ fn run(cmd: Command) -> ExitCode {
     let result = match cmd {
         Command::RegServer => server_list::register(),
         Command::UnregServer => server_list::unregister(),
+        Command::Service => server_list::register_service(),
         Command::Embedding => server_list::serve(),
+        Command::ServiceRun => server_list::serve_service(),
         Command::Help => Ok(()),
     };
     match result {
@@ -89,6 +100,8 @@ mod tests {
         assert_eq!(p(&["-regserver"]), Ok(Command::RegServer));
         assert_eq!(p(&["/UNREGSERVER"]), Ok(Command::UnregServer));
         assert_eq!(p(&["-Embedding"]), Ok(Command::Embedding));
+        assert_eq!(p(&["/Service"]), Ok(Command::Service));
+        assert_eq!(p(&["-ServiceRun"]), Ok(Command::ServiceRun));
         assert_eq!(p(&[]), Ok(Command::Help));
         assert!(p(&["/bogus"]).is_err());
     }

@@ -583,8 +583,8 @@ impl IOPCItemSamplingMgt_Impl for Group_Impl {
         })
     }
 
-    /// Buffering is not implemented (see the core's documented limits): enabling answers
-    /// OPC_E_NOBUFFERING per item, disabling succeeds.
+    /// Item buffering (`ctopc_core::model::buffer`): the buffered samples reach the client
+    /// through the group's ordinary OnDataChange, several per item.
     unsafe fn SetItemBufferEnable(
         &self,
         dwcount: u32,

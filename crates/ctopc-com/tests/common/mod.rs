@@ -127,14 +127,22 @@ pub fn start() -> Arc<Context> {
 /// Joins the MTA (this thread) and starts a new server context, not this test's: its own
 /// runtime (engine and simulated plant) over the demo.
 pub fn new_context() -> Arc<Context> {
+    new_context_with(|_| {})
+}
+
+/// [`new_context`] with the demo's engine configuration changed by `tune` (e.g. a shorter
+/// `min_update_rate_ms`, as a `MinUpdateRate` in the ini would make it).
+pub fn new_context_with(tune: impl FnOnce(&mut ctopc_core::model::EngineConfig)) -> Arc<Context> {
     join_mta();
     let Demo { ns, address_space } = demo();
     // As ServerCTOPC.exe's `setup()` (crates/server/src/main.rs) makes it.
     let server = &ns.config().server;
+    let mut engine_config = server.engine_config();
+    tune(&mut engine_config);
     let setup = context::Setup {
         namespace: Arc::clone(ns) as Arc<dyn ctopc_core::namespace::Namespace>,
         address_space: Arc::clone(address_space),
-        engine_config: server.engine_config(),
+        engine_config,
         default_language: server.default_language.fixed(),
         no_config_reason: ns.no_config_reason(),
     };

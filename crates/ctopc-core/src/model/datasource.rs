@@ -138,6 +138,9 @@ impl Engine {
                 self.change_seq += 1;
                 e.changed_seq = self.change_seq;
             }
+            if !self.buffer_refs.is_empty() {
+                self.buffer_sample(key.index());
+            }
         }
         self.wake_first_sample_waiters(now);
     }

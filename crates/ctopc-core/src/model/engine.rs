@@ -143,6 +143,9 @@ pub struct Engine {
     /// Slots of groups holding items back until their first sample (may hold stale or
     /// duplicate slots; checked when used).
     pub(crate) first_sample_waiters: Vec<u32>,
+    /// Cache entry -> (group handle, item handle) of the items with buffering on that
+    /// refer to it (may hold stale pairs; checked when used, `model/buffer.rs`).
+    pub(crate) buffer_refs: IntMap<u32, Vec<(u32, u32)>>,
 }
 
 impl Engine {
@@ -167,6 +170,7 @@ impl Engine {
             events: VecDeque::new(),
             requests: VecDeque::new(),
             first_sample_waiters: Vec::new(),
+            buffer_refs: IntMap::default(),
         }
     }
 

@@ -1,9 +1,11 @@
 //! Groups: IOPCServer (AddGroup, RemoveGroup, GetGroupByName), IOPCGroupStateMgt/2 and the
 //! connection state the COM layer reports (callback advised, COM references).
 
+use super::buffer::ItemBuffer;
 use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle, SessionHandle};
-use super::item::{GroupItem, ALIAS, REMOVED, SENT, SUBSCRIBED};
+use super::item::{GroupItem, ALIAS, BUFFERED, REMOVED, SENT, SUBSCRIBED};
+use super::util::IntMap;
 use super::Revised;
 use crate::{OpcError, Timestamp};
 
@@ -127,6 +129,11 @@ pub(crate) struct Group {
     pub first_sample_until: Option<Timestamp>,
     /// A sample arrived while items were held: report the ready ones at once.
     pub first_sample_ready: bool,
+    /// Buffered samples of items with buffering on, by server handle (`model/buffer.rs`)
+    /// ...
+    pub buffers: IntMap<u32, ItemBuffer>,
+    /// ... and how many they hold together.
+    pub buffered: usize,
 }
 
 impl Group {
@@ -278,6 +285,8 @@ impl Engine {
             update_missed: false,
             first_sample_until: None,
             first_sample_ready: false,
+            buffers: IntMap::default(),
+            buffered: 0,
         };
         self.insert_group(group);
         Ok(AddGroupResult {
@@ -593,6 +602,8 @@ impl Engine {
             update_missed: false,
             first_sample_until: None,
             first_sample_ready: false,
+            buffers: IntMap::default(),
+            buffered: 0,
         };
         let items: Vec<GroupItem> = src.items.clone();
         for mut it in items {
@@ -601,7 +612,7 @@ impl Engine {
                 &clone.items,
                 &mut clone.sorted,
             );
-            it.flags &= !(SENT | SUBSCRIBED);
+            it.flags &= !(SENT | SUBSCRIBED | BUFFERED);
             self.sources.add_ref(it.source);
             if it.flags & ALIAS != 0 {
                 self.names.add_ref(it.name);

@@ -1,4 +1,5 @@
-//! Items in groups: IOPCItemMgt, IOPCItemDeadbandMgt, IOPCItemSamplingMgt.
+//! Items in groups: IOPCItemMgt, IOPCItemDeadbandMgt, IOPCItemSamplingMgt (its buffering
+//! half is `model/buffer.rs`).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -60,6 +61,8 @@ pub(crate) const ALIAS: u8 = 8;
 pub(crate) const DEADBAND: u8 = 16;
 /// Removed during the current RemoveItems call (compacted at its end).
 pub(crate) const REMOVED: u8 = 32;
+/// Buffering is enabled (IOPCItemSamplingMgt::SetItemBufferEnable, `model/buffer.rs`).
+pub(crate) const BUFFERED: u8 = 64;
 
 /// An item in a group: 48 bytes, no strings (the item ID and access path are interned).
 /// Checked by `group_items_stay_small` below.
@@ -345,6 +348,7 @@ impl Engine {
                 let it = &mut g.items[i];
                 Self::sync_sub(sources, false, rate, it);
                 it.flags |= REMOVED;
+                g.drop_buffer(h);
                 removed.push(i);
                 out.push(Ok(()));
             }
@@ -395,6 +399,7 @@ impl Engine {
                 }
                 it.flags &= !SENT;
                 Self::sync_sub(sources, on, rate, it);
+                g.drop_buffer(h);
                 if active {
                     g.needs_scan = true;
                 }
@@ -644,38 +649,6 @@ impl Engine {
                 it.sampling = 0;
                 Ok(())
             })
-            .collect())
-    }
-
-    /// IOPCItemSamplingMgt::SetItemBufferEnable: buffering is not implemented; enabling
-    /// answers OPC_E_NOBUFFERING, disabling succeeds.
-    pub fn set_item_buffer_enable(
-        &mut self,
-        group: GroupHandle,
-        items: &[(u32, bool)],
-    ) -> Result<Vec<Result<(), OpcError>>, OpcError> {
-        per_item!(self, group, items, |_g, _i, arg| {
-            if arg.1 {
-                Err(OpcError::NoBuffering)
-            } else {
-                Ok(())
-            }
-        })
-    }
-
-    /// IOPCItemSamplingMgt::GetItemBufferEnable: always false.
-    pub fn get_item_buffer_enable(
-        &self,
-        group: GroupHandle,
-        handles: &[u32],
-    ) -> Result<Vec<Result<bool, OpcError>>, OpcError> {
-        if handles.is_empty() {
-            return Err(OpcError::InvalidArg);
-        }
-        let g = self.group(self.live_slot(group)?);
-        Ok(handles
-            .iter()
-            .map(|&h| g.find(h).map(|_| false).ok_or(OpcError::InvalidHandle))
             .collect())
     }
 }

@@ -80,8 +80,11 @@
 //! - Source requests (device read, write) that get no answer within
 //!   [`EngineConfig::source_timeout_ms`] (default [`DEFAULT_SOURCE_TIMEOUT_MS`]) complete
 //!   with ASKOM_E_NetAnswerTimeout per item; a late answer is ignored.
-//! - Item buffering (IOPCItemSamplingMgt::SetItemBufferEnable) is not implemented:
-//!   enabling answers OPC_E_NOBUFFERING per item.
+//! - Item buffering (IOPCItemSamplingMgt::SetItemBufferEnable): an item whose sampling
+//!   rate is faster than its group's update rate keeps every sample between callbacks
+//!   (deadband applied to each), at most [`ITEM_BUFFER_SAMPLES`] per item and
+//!   [`GROUP_BUFFER_SAMPLES`] per group; an overflow discards the oldest and marks the
+//!   item's next oldest sample OPC_S_DATAQUEUEOVERFLOW. See [`buffer`].
 //! - Keep-alive callbacks (an OnDataChange with no items) are sent only for an active group
 //!   whose callbacks are connected and enabled, when no OnDataChange (subscription or
 //!   refresh) was sent for the keep-alive time.
@@ -97,6 +100,7 @@
 //! item (OPC_S_UNSUPPORTEDRATE for sampling rates) are carried in the `Ok` value
 //! ([`Revised`]).
 
+pub mod buffer;
 mod cache;
 pub mod datasource;
 pub mod deadband;
@@ -108,6 +112,7 @@ mod scheduler;
 mod transactions;
 mod util;
 
+pub use buffer::{GROUP_BUFFER_SAMPLES, ITEM_BUFFER_SAMPLES};
 pub use datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription};
 pub use engine::{
     Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle, DEFAULT_FIRST_SAMPLE_WAIT_MS,

@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 use super::deadband::{band, value_changed};
 use super::engine::Engine;
 use super::events::{master_codes, DataChange, DataChangeKind, Event};
-use super::item::{ACTIVE, SENT};
+use super::item::{ACTIVE, BUFFERED, SENT};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Timestamp};
@@ -261,6 +261,21 @@ impl Engine {
             }
             if first_only && it.flags & SENT != 0 {
                 continue;
+            }
+            if it.flags & BUFFERED != 0 && !first_only {
+                // Buffered samples first, oldest first (`model/buffer.rs`); the current
+                // value follows only if it moved on since the last of them.
+                if let Some(buf) = g.buffers.remove(&it.handle) {
+                    g.buffered -= buf.len();
+                    if it.flags & SENT != 0 {
+                        if let Some((v, q)) =
+                            buf.drain_into(&mut items, it.client, it.req_type, locale)
+                        {
+                            it.last = v;
+                            it.last_quality = q;
+                        }
+                    }
+                }
             }
             if it.flags & SENT != 0
                 && (e.changed_seq <= scanned
