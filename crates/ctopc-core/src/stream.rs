@@ -224,7 +224,7 @@ fn put_value(b: &mut Vec<u8>, v: &Value) {
 }
 
 fn pad4(b: &mut Vec<u8>) {
-    while b.len() % 4 != 0 {
+    while !b.len().is_multiple_of(4) {
         b.push(0);
     }
 }
@@ -324,7 +324,7 @@ impl Reader<'_> {
     fn text(&mut self) -> Result<String, DecodeError> {
         let at = self.at;
         let n = self.u32()? as usize;
-        if n % 2 != 0 {
+        if !n.is_multiple_of(2) {
             return Err(DecodeError::Text(at));
         }
         let raw = self.take(n)?;
