@@ -50,6 +50,7 @@ extern "system" {
     fn GlobalLock(mem: *mut c_void) -> *mut c_void;
     fn GlobalUnlock(mem: *mut c_void) -> BOOL;
     fn GlobalFree(mem: *mut c_void) -> *mut c_void;
+    fn GlobalSize(mem: *mut c_void) -> usize;
 }
 #[link(name = "user32")]
 extern "system" {
@@ -70,6 +71,27 @@ pub fn clipboard_format(name: &str) -> u16 {
     // SAFETY: `wide` is a NUL-terminated UTF-16 string alive for the call.
     let f = unsafe { RegisterClipboardFormatW(PCWSTR(wide.as_ptr())) };
     f as u16
+}
+
+/// A copy of the bytes of an HGLOBAL (a client's side: what an IAdviseSink received).
+///
+/// # Safety
+/// `mem` is NULL or a live global memory handle.
+pub unsafe fn hglobal_bytes(mem: *mut c_void) -> Vec<u8> {
+    if mem.is_null() {
+        return Vec::new();
+    }
+    // SAFETY: the caller's contract; the block is locked while it is copied.
+    unsafe {
+        let n = GlobalSize(mem);
+        let p = GlobalLock(mem);
+        if p.is_null() {
+            return Vec::new();
+        }
+        let bytes = std::slice::from_raw_parts(p.cast::<u8>(), n).to_vec();
+        let _ = GlobalUnlock(mem);
+        bytes
+    }
 }
 
 /// Which stream an advise connection receives.
