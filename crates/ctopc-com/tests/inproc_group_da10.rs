@@ -319,10 +319,8 @@ fn iopcasyncio_needs_the_right_connection() {
     );
     let mut t = POISON_U32;
     // SAFETY: valid pointer.
-    assert_eq!(
-        hr(unsafe { p.a1().Refresh(1, OPC_DS_CACHE, &mut t) }),
-        CONNECT_E_NOCONNECTION
-    );
+    let r = unsafe { p.a1().Refresh(1, OPC_DS_CACHE, &mut t) };
+    assert_eq!(hr(r), CONNECT_E_NOCONNECTION);
     assert_eq!(t, 0);
     let (s, _) = sink();
     let (_, data) = dadvise(&p.d, cf_data(), TYMED_HGLOBAL, &s);
@@ -335,10 +333,8 @@ fn iopcasyncio_needs_the_right_connection() {
     let (hr_, mut t, _) = p.read(w, OPC_DS_CACHE, h);
     assert_eq!((hr_, t), (CONNECT_E_NOCONNECTION, 0));
     // SAFETY: valid pointer.
-    assert_eq!(
-        hr(unsafe { p.a1().Refresh(w, OPC_DS_CACHE, &mut t) }),
-        CONNECT_E_NOCONNECTION
-    );
+    let r = unsafe { p.a1().Refresh(w, OPC_DS_CACHE, &mut t) };
+    assert_eq!(hr(r), CONNECT_E_NOCONNECTION);
     // Unknown transaction.
     // SAFETY: a plain value.
     assert_eq!(hr(unsafe { p.a1().Cancel(0x7FFF_0001) }), E_FAIL);
@@ -456,10 +452,8 @@ fn refresh_and_subscription_come_as_data_streams() {
     assert_eq!(sub.items.len(), 3, "{sub:?}");
     let mut t = POISON_U32;
     // SAFETY: valid pointer.
-    assert_eq!(
-        hr(unsafe { p.a1().Refresh(c, OPC_DS_DEVICE, &mut t) }),
-        S_OK
-    );
+    let r = unsafe { p.a1().Refresh(c, OPC_DS_DEVICE, &mut t) };
+    assert_eq!(hr(r), S_OK);
     assert_ne!(t, 0);
     let d = data_of(&streams, cf_data(), t);
     assert_eq!(d.items.len(), 3);
@@ -485,4 +479,27 @@ fn dunadvise_stops_the_streams() {
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(streams.all().len(), n, "no stream after DUnadvise");
     assert_eq!(p.read(c, OPC_DS_CACHE, &p.h[..1]).0, CONNECT_E_NOCONNECTION);
+}
+
+#[test]
+fn iopcasyncio2_still_needs_an_iopcdatacallback() {
+    let p = plant("da10-mixed");
+    let (s, _) = sink();
+    assert_eq!(dadvise(&p.d, cf_data(), TYMED_HGLOBAL, &s).0, S_OK);
+    assert_eq!(dadvise(&p.d, cf_write(), TYMED_HGLOBAL, &s).0, S_OK);
+    let a2 = iface::<IOPCAsyncIO2>(&p.g);
+    let (mut c, mut e) = (POISON_U32, poison::<HRESULT>());
+    // SAFETY: valid pointers.
+    unsafe {
+        assert_eq!(
+            a2.Read(1, p.h.as_ptr(), 5, &mut c, &mut e),
+            CONNECT_E_NOCONNECTION
+        );
+        assert!(e.is_null());
+        assert_eq!(c, 0);
+        assert_eq!(
+            hr(a2.Refresh2(OPC_DS_CACHE, 5, &mut c)),
+            CONNECT_E_NOCONNECTION
+        );
+    }
 }

@@ -281,6 +281,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
+        self.data_callback_connected()?;
         let started = self
             .ctx
             .runtime
@@ -532,6 +533,16 @@ impl IOPCSyncIO2_Impl for Group_Impl {
 // ---- IOPCAsyncIO2 -----------------------------------------------------------------------
 
 impl Group_Impl {
+    /// IOPCAsyncIO2/3 complete through IOPCDataCallback only: CONNECT_E_NOCONNECTION
+    /// without one, also while DA 1.0a sinks keep the engine's group connected.
+    fn data_callback_connected(&self) -> ComResult<()> {
+        if self.sink.is_connected() {
+            Ok(())
+        } else {
+            Err(windows::Win32::System::Ole::CONNECT_E_NOCONNECTION.into())
+        }
+    }
+
     /// # Safety
     /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
     unsafe fn async_read_impl(
@@ -547,6 +558,7 @@ impl Group_Impl {
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
+        self.data_callback_connected()?;
         let started = self
             .ctx
             .runtime
@@ -585,6 +597,7 @@ impl Group_Impl {
         call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>,
     ) -> ComResult<()> {
         cancel_out(p_cancel)?;
+        self.data_callback_connected()?;
         let cancel_id = self.ctx.runtime.with_engine(call).map_err(error::to_com)?;
         write_out(p_cancel, cancel_id)
     }
@@ -685,6 +698,7 @@ impl Group_Impl {
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
+        self.data_callback_connected()?;
         let started = self
             .ctx
             .runtime
