@@ -22,9 +22,9 @@
 
 use std::ffi::c_void;
 use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IDataObject, IEnumConnectionPoints,
+    IAdviseSink, IConnectionPoint, IConnectionPointContainer, IDataObject, IEnumConnectionPoints,
     IEnumConnections, IEnumFORMATETC, IEnumGUID, IEnumSTATDATA, IEnumString, IEnumUnknown,
-    CONNECTDATA, FORMATETC,
+    CONNECTDATA, FORMATETC, STATDATA,
 };
 use windows_core::{interface, IUnknown, IUnknown_Vtbl, Interface, BOOL, GUID, HRESULT, PWSTR};
 
@@ -192,6 +192,17 @@ pub unsafe trait RawAdviseSink: IUnknown {
     pub fn OnClose(&self);
 }
 
+/// `IEnumSTATDATA` (`objidl.idl`): IDataObject::EnumDAdvise's enumerator.
+#[interface("00000105-0000-0000-c000-000000000046")]
+pub unsafe trait RawEnumSTATDATA: IUnknown {
+    pub fn Next(&self, celt: u32, rgelt: *mut STATDATA, pceltfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, celt: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumSTATDATA>) -> HRESULT;
+}
+
 same_interface! {
     RawDataObject => IDataObject,
+    RawAdviseSink => IAdviseSink,
+    RawEnumSTATDATA => IEnumSTATDATA,
 }

@@ -1,5 +1,5 @@
 //! DA 1.0a on the group object in process (no proxy): IDataObject (DAdvise of each OPC
-//! stream format, its failure codes, DUnadvise, the methods the specification leaves
+//! stream format, its failure codes, DUnadvise, EnumDAdvise, the methods the specification leaves
 //! E_NOTIMPL) and IOPCAsyncIO (Read from cache and device, Write, Refresh, Cancel, every
 //! argument branch), with the streams decoded by `ctopc_core::stream` from what an
 //! in-process IAdviseSink received.
@@ -11,7 +11,9 @@ mod common;
 mod inproc_group_support;
 
 use common::*;
-use ctopc_com::comdef::{RawAdviseSink, RawAdviseSink_Impl, RawDataObject, StgMedium};
+use ctopc_com::comdef::{
+    RawAdviseSink, RawAdviseSink_Impl, RawDataObject, RawEnumSTATDATA, StgMedium,
+};
 use ctopc_com::group::dataobject::{
     clipboard_format, hglobal_bytes, FORMAT_DATA, FORMAT_DATATIME, FORMAT_WRITECOMPLETE,
 };
@@ -24,7 +26,7 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use windows::core::implement;
 use windows::Win32::Foundation::{DV_E_FORMATETC, DV_E_TYMED, E_NOTIMPL, OLE_E_NOCONNECTION};
-use windows::Win32::System::Com::{IEnumFORMATETC, IEnumSTATDATA, FORMATETC};
+use windows::Win32::System::Com::{IEnumFORMATETC, IEnumSTATDATA, FORMATETC, STATDATA};
 use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_NOCONNECTION};
 use windows::Win32::System::Variant::VARIANT;
 
@@ -84,6 +86,11 @@ impl RawAdviseSink_Impl for AdviseSink_Impl {
     unsafe fn OnRename(&self, _: *mut c_void) {}
     unsafe fn OnSave(&self) {}
     unsafe fn OnClose(&self) {}
+}
+
+/// Our definition of the enumerator, for raw HRESULTs.
+fn raw_enum(e: Option<IEnumSTATDATA>) -> RawEnumSTATDATA {
+    e.expect("an enumerator").cast().unwrap()
 }
 
 fn sink() -> (RawAdviseSink, Arc<Streams>) {
@@ -261,6 +268,35 @@ fn dadvise_argument_branches_and_dunadvise() {
         );
         conns.push(c);
     }
+    // EnumDAdvise lists the three with their formats.
+    let mut e: Option<IEnumSTATDATA> = None;
+    // SAFETY: a valid out-pointer.
+    assert_eq!(unsafe { p.d.EnumDAdvise(&mut e) }, S_OK);
+    let mut got: [STATDATA; 4] = Default::default();
+    let mut n = 0u32;
+    let e = raw_enum(e);
+    // SAFETY: room for 4 elements.
+    let r = unsafe { e.Next(4, got.as_mut_ptr(), &mut n) };
+    assert_eq!(r, S_FALSE);
+    assert_eq!(n, 3);
+    let mut listed: Vec<(u32, u16)> = got[..3]
+        .iter_mut()
+        .map(|d| {
+            assert!(d.pAdvSink.is_some());
+            assert_eq!(d.formatetc.tymed, TYMED_HGLOBAL);
+            // SAFETY: the enumerator handed out a reference: released once.
+            unsafe { std::mem::ManuallyDrop::drop(&mut d.pAdvSink) };
+            (d.dwConnection, d.formatetc.cfFormat)
+        })
+        .collect();
+    listed.sort_unstable();
+    let mut want: Vec<(u32, u16)> = conns
+        .iter()
+        .copied()
+        .zip([cf_data(), cf_time(), cf_write()])
+        .collect();
+    want.sort_unstable();
+    assert_eq!(listed, want);
     conns.sort_unstable();
     conns.dedup();
     assert_eq!(conns.len(), 3, "distinct connections");
@@ -302,8 +338,13 @@ fn the_other_idataobject_methods_are_not_implemented() {
         assert_eq!(p.d.SetData(&f, &m, false.into()), E_NOTIMPL);
         assert_eq!(p.d.EnumFormatEtc(1, &mut e1), E_NOTIMPL);
         assert!(e1.is_none());
-        assert_eq!(p.d.EnumDAdvise(&mut e2), E_NOTIMPL);
-        assert!(e2.is_none());
+        // No connection: an empty enumerator.
+        assert_eq!(p.d.EnumDAdvise(&mut e2), S_OK);
+        let mut got = [STATDATA::default()];
+        let mut n = 7u32;
+        assert_eq!(raw_enum(e2).Next(1, got.as_mut_ptr(), &mut n), S_FALSE);
+        assert_eq!(n, 0);
+        assert_eq!(p.d.EnumDAdvise(std::ptr::null_mut()), E_POINTER);
         assert_eq!(p.d.GetData(&f, std::ptr::null_mut()), E_NOTIMPL);
     }
 }

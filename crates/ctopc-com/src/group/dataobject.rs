@@ -1,5 +1,5 @@
-//! DA 1.0a data transfer on the group: `IDataObject` (DAdvise, DUnadvise; the rest as the
-//! DA 2.05a specification allows, E_NOTIMPL) and the delivery of the OPC streams to the
+//! DA 1.0a data transfer on the group: `IDataObject` (DAdvise, DUnadvise, EnumDAdvise; the
+//! rest as the DA 2.05a specification allows, E_NOTIMPL) and the delivery of the OPC streams to the
 //! clients' `IAdviseSink::OnDataChange`.
 //!
 //! A client advises one sink per stream format, each registered with
@@ -27,6 +27,7 @@
 use super::Group_Impl;
 use crate::abi;
 use crate::comdef::{RawAdviseSink, RawDataObject_Impl, StgMedium};
+use crate::enums::StatDataEnum;
 use crate::error;
 use ctopc_core::model::{DataChangeKind, Event, ItemValue};
 use ctopc_core::stream::{self, DataFormat, StreamItem};
@@ -37,9 +38,11 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use windows::core::{IUnknown, Interface, BOOL, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{
-    DV_E_FORMATETC, DV_E_TYMED, E_INVALIDARG, E_NOTIMPL, OLE_E_NOCONNECTION, S_OK,
+    DV_E_FORMATETC, DV_E_TYMED, E_INVALIDARG, E_NOTIMPL, E_POINTER, OLE_E_NOCONNECTION, S_OK,
 };
-use windows::Win32::System::Com::{IEnumFORMATETC, IEnumSTATDATA, FORMATETC, TYMED_HGLOBAL};
+use windows::Win32::System::Com::{
+    IAdviseSink, IEnumFORMATETC, IEnumSTATDATA, FORMATETC, TYMED_HGLOBAL,
+};
 use windows::Win32::System::Ole::CONNECT_E_ADVISELIMIT;
 
 // Not in the windows features the workspace builds with (Win32_System_Memory,
@@ -104,6 +107,8 @@ pub enum Kind {
 struct Advise {
     connection: u32,
     kind: Kind,
+    /// DAdvise's ADVF flags, kept for EnumDAdvise (the streams always carry data).
+    advf: u32,
     sink: RawAdviseSink,
 }
 
@@ -197,7 +202,7 @@ impl Da10Sinks {
         self.lock().txns.contains_key(&transaction)
     }
 
-    fn advise(&self, kind: Kind, sink: RawAdviseSink) -> Result<u32, HRESULT> {
+    fn advise(&self, kind: Kind, advf: u32, sink: RawAdviseSink) -> Result<u32, HRESULT> {
         let mut s = self.lock();
         if s.advises.iter().any(|a| a.kind == kind) {
             return Err(CONNECT_E_ADVISELIMIT);
@@ -206,9 +211,28 @@ impl Da10Sinks {
         s.advises.push(Advise {
             connection,
             kind,
+            advf,
             sink,
         });
         Ok(connection)
+    }
+
+    /// A snapshot for EnumDAdvise: (format, advf, sink, connection).
+    fn snapshot(&self) -> Vec<(FORMATETC, u32, IAdviseSink, u32)> {
+        self.lock()
+            .advises
+            .iter()
+            .map(|a| {
+                let f = FORMATETC {
+                    cfFormat: self.format_of(a.kind),
+                    ptd: std::ptr::null_mut(),
+                    dwAspect: DVASPECT_CONTENT,
+                    lindex: -1,
+                    tymed: TYMED_HGLOBAL.0 as u32,
+                };
+                (f, a.advf, IAdviseSink::from(a.sink.clone()), a.connection)
+            })
+            .collect()
     }
 
     /// Removes a connection; the sink is released by the caller after the lock.
@@ -437,7 +461,7 @@ impl RawDataObject_Impl for Group_Impl {
     unsafe fn DAdvise(
         &self,
         pformatetc: *const FORMATETC,
-        _advf: u32,
+        advf: u32,
         padvsink: *mut c_void,
         pdwconnection: *mut u32,
     ) -> HRESULT {
@@ -462,7 +486,7 @@ impl RawDataObject_Impl for Group_Impl {
         let Ok(sink) = unk.cast::<RawAdviseSink>() else {
             return E_INVALIDARG;
         };
-        let connection = match self.da10.advise(kind, sink) {
+        let connection = match self.da10.advise(kind, advf, sink) {
             Ok(c) => c,
             Err(hr) => return hr,
         };
@@ -484,9 +508,17 @@ impl RawDataObject_Impl for Group_Impl {
         S_OK
     }
 
+    /// A snapshot of the advise connections (E_POINTER for a NULL `ppenum`, as
+    /// IEnum-returning COM methods answer).
     unsafe fn EnumDAdvise(&self, ppenum: *mut Option<IEnumSTATDATA>) -> HRESULT {
         // SAFETY: the method's [out] interface pointer.
         unsafe { abi::clear_outs((ppenum,)) };
-        E_NOTIMPL
+        if ppenum.is_null() {
+            return E_POINTER;
+        }
+        let e = StatDataEnum::create(self.da10.snapshot());
+        // SAFETY: checked non-NULL; the [out] interface pointer takes the reference.
+        unsafe { ppenum.write(Some(e)) };
+        S_OK
     }
 }

@@ -281,11 +281,10 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
-        self.data_callback_connected()?;
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_write_vqt(now, self.handle, transaction, &items)
+        });
         let started = started.map(|mut s| {
             pre.apply(&mut s.results);
             s
@@ -534,12 +533,14 @@ impl IOPCSyncIO2_Impl for Group_Impl {
 
 impl Group_Impl {
     /// IOPCAsyncIO2/3 complete through IOPCDataCallback only: CONNECT_E_NOCONNECTION
-    /// without one, also while DA 1.0a sinks keep the engine's group connected.
-    fn data_callback_connected(&self) -> ComResult<()> {
+    /// without one, also while DA 1.0a sinks keep the engine's group connected (checked
+    /// under the engine lock after the group itself: a removed group stays E_FAIL).
+    fn data_callback_connected(&self, e: &Engine) -> Result<(), OpcError> {
+        e.callback_connected(self.handle)?;
         if self.sink.is_connected() {
             Ok(())
         } else {
-            Err(windows::Win32::System::Ole::CONNECT_E_NOCONNECTION.into())
+            Err(OpcError::NoConnection)
         }
     }
 
@@ -558,11 +559,10 @@ impl Group_Impl {
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
-        self.data_callback_connected()?;
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_read(now, self.handle, transaction, handles));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_read(now, self.handle, transaction, handles)
+        });
         self.async_out(started, p_cancel, pp_errors)
     }
 
@@ -597,8 +597,14 @@ impl Group_Impl {
         call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>,
     ) -> ComResult<()> {
         cancel_out(p_cancel)?;
-        self.data_callback_connected()?;
-        let cancel_id = self.ctx.runtime.with_engine(call).map_err(error::to_com)?;
+        let cancel_id = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| {
+                self.data_callback_connected(e)?;
+                call(e, now)
+            })
+            .map_err(error::to_com)?;
         write_out(p_cancel, cancel_id)
     }
 }
@@ -698,11 +704,10 @@ impl Group_Impl {
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
-        self.data_callback_connected()?;
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_read_max_age(now, self.handle, transaction, &items));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_read_max_age(now, self.handle, transaction, &items)
+        });
         self.async_out(started, p_cancel, pp_errors)
     }
 
