@@ -8,6 +8,7 @@
 //! clippy's `undocumented_unsafe_blocks` as in the COM crate).
 #![cfg(windows)]
 
+pub mod da10;
 pub mod doctor;
 pub mod hostile;
 pub mod io_support;

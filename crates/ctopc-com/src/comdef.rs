@@ -1,6 +1,8 @@
 //! Our own definitions of the COM-defined interfaces that the server implements
 //! (IConnectionPointContainer, IConnectionPoint, IEnumString, IEnumUnknown,
-//! IEnumConnectionPoints, IEnumConnections, IEnumGUID), for the implementing side only.
+//! IEnumConnectionPoints, IEnumConnections, IEnumGUID, IDataObject), for the implementing
+//! side only; and IAdviseSink (with `STGMEDIUM`), which the group calls and the DA 1.0a
+//! test client implements.
 //!
 //! Why: windows-rs' generated vtable shims of these interfaces (`IConnectionPoint_Impl`
 //! and the others) turn methods with one out-parameter into `fn(..) -> Result<T>` and
@@ -20,10 +22,11 @@
 
 use std::ffi::c_void;
 use windows::Win32::System::Com::{
-    IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints, IEnumConnections,
-    IEnumGUID, IEnumString, IEnumUnknown, CONNECTDATA,
+    IAdviseSink, IConnectionPoint, IConnectionPointContainer, IDataObject, IEnumConnectionPoints,
+    IEnumConnections, IEnumFORMATETC, IEnumGUID, IEnumSTATDATA, IEnumString, IEnumUnknown,
+    CONNECTDATA, FORMATETC, STATDATA,
 };
-use windows_core::{interface, IUnknown, IUnknown_Vtbl, Interface, GUID, HRESULT, PWSTR};
+use windows_core::{interface, IUnknown, IUnknown_Vtbl, Interface, BOOL, GUID, HRESULT, PWSTR};
 
 /// `IConnectionPointContainer` (`ocidl.idl`).
 #[interface("b196b284-bab4-101a-b69c-00aa00341d07")]
@@ -128,4 +131,78 @@ pub unsafe trait RawEnumGUID: IUnknown {
     pub fn Skip(&self, celt: u32) -> HRESULT;
     pub fn Reset(&self) -> HRESULT;
     pub fn Clone(&self, ppenum: *mut Option<IEnumGUID>) -> HRESULT;
+}
+
+// ---- DA 1.0a: IDataObject and IAdviseSink ---------------------------------------------
+
+/// `STGMEDIUM` (`objidl.idl`) with its union as the one pointer-sized handle it is: the
+/// group only ever passes `TYMED_HGLOBAL` (windows-rs' `STGMEDIUM` needs the GDI bindings
+/// for the union's other members).
+#[repr(C)]
+#[derive(Debug)]
+pub struct StgMedium {
+    pub tymed: u32,
+    /// `hGlobal` for `TYMED_HGLOBAL`.
+    pub handle: *mut c_void,
+    /// `pUnkForRelease` (NULL: the receiver frees nothing, the caller frees the medium).
+    pub unk_for_release: *mut c_void,
+}
+
+/// `IDataObject` (`objidl.idl`): the DA 1.0a group's data transfer (`group::dataobject`).
+#[interface("0000010e-0000-0000-c000-000000000046")]
+pub unsafe trait RawDataObject: IUnknown {
+    pub fn GetData(&self, pformatetcin: *const FORMATETC, pmedium: *mut StgMedium) -> HRESULT;
+    pub fn GetDataHere(&self, pformatetc: *const FORMATETC, pmedium: *mut StgMedium) -> HRESULT;
+    pub fn QueryGetData(&self, pformatetc: *const FORMATETC) -> HRESULT;
+    pub fn GetCanonicalFormatEtc(
+        &self,
+        pformatectin: *const FORMATETC,
+        pformatetcout: *mut FORMATETC,
+    ) -> HRESULT;
+    pub fn SetData(
+        &self,
+        pformatetc: *const FORMATETC,
+        pmedium: *const StgMedium,
+        frelease: BOOL,
+    ) -> HRESULT;
+    pub fn EnumFormatEtc(
+        &self,
+        dwdirection: u32,
+        ppenumformatetc: *mut Option<IEnumFORMATETC>,
+    ) -> HRESULT;
+    pub fn DAdvise(
+        &self,
+        pformatetc: *const FORMATETC,
+        advf: u32,
+        padvsink: *mut c_void,
+        pdwconnection: *mut u32,
+    ) -> HRESULT;
+    pub fn DUnadvise(&self, dwconnection: u32) -> HRESULT;
+    pub fn EnumDAdvise(&self, ppenumadvise: *mut Option<IEnumSTATDATA>) -> HRESULT;
+}
+
+/// `IAdviseSink` (`objidl.idl`): called by the group for the DA 1.0a streams, implemented
+/// by DA 1.0a clients (the e2e tests' own). Its methods return nothing.
+#[interface("0000010f-0000-0000-c000-000000000046")]
+pub unsafe trait RawAdviseSink: IUnknown {
+    pub fn OnDataChange(&self, pformatetc: *const FORMATETC, pstgmed: *const StgMedium);
+    pub fn OnViewChange(&self, dwaspect: u32, lindex: i32);
+    pub fn OnRename(&self, pmk: *mut c_void);
+    pub fn OnSave(&self);
+    pub fn OnClose(&self);
+}
+
+/// `IEnumSTATDATA` (`objidl.idl`): IDataObject::EnumDAdvise's enumerator.
+#[interface("00000105-0000-0000-c000-000000000046")]
+pub unsafe trait RawEnumSTATDATA: IUnknown {
+    pub fn Next(&self, celt: u32, rgelt: *mut STATDATA, pceltfetched: *mut u32) -> HRESULT;
+    pub fn Skip(&self, celt: u32) -> HRESULT;
+    pub fn Reset(&self) -> HRESULT;
+    pub fn Clone(&self, ppenum: *mut Option<IEnumSTATDATA>) -> HRESULT;
+}
+
+same_interface! {
+    RawDataObject => IDataObject,
+    RawAdviseSink => IAdviseSink,
+    RawEnumSTATDATA => IEnumSTATDATA,
 }

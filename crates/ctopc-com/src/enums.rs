@@ -1,5 +1,5 @@
 //! Snapshot enumerators (IEnumString, IEnumUnknown, IEnumConnectionPoints,
-//! IEnumConnections): the list is taken when the enumerator is created; clones share it
+//! IEnumConnections, IEnumSTATDATA): the list is taken when the enumerator is created; clones share it
 //! and copy the position.
 //!
 //! They implement our own definitions of the interfaces (`crate::comdef`): `Clone` with a
@@ -9,16 +9,16 @@
 use crate::abi;
 use crate::comdef::{
     RawEnumConnectionPoints, RawEnumConnectionPoints_Impl, RawEnumConnections,
-    RawEnumConnections_Impl, RawEnumString, RawEnumString_Impl, RawEnumUnknown,
-    RawEnumUnknown_Impl,
+    RawEnumConnections_Impl, RawEnumSTATDATA, RawEnumSTATDATA_Impl, RawEnumString,
+    RawEnumString_Impl, RawEnumUnknown, RawEnumUnknown_Impl,
 };
 use crate::connpoint::out_or_e_pointer;
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{
-    IConnectionPoint, IEnumConnectionPoints, IEnumConnections, IEnumString, IEnumUnknown,
-    CONNECTDATA,
+    IAdviseSink, IConnectionPoint, IEnumConnectionPoints, IEnumConnections, IEnumSTATDATA,
+    IEnumString, IEnumUnknown, CONNECTDATA, FORMATETC, STATDATA,
 };
 
 /// A position in a shared snapshot.
@@ -301,5 +301,54 @@ impl RawEnumConnections_Impl for ConnectionEnum_Impl {
     unsafe fn Clone(&self, ppenum: *mut Option<IEnumConnections>) -> HRESULT {
         // SAFETY: `ppenum` is this method's [out] interface pointer.
         unsafe { clone_out(ppenum, || ConnectionEnum::from_cursor(self.0.fork())) }
+    }
+}
+
+/// IDataObject::EnumDAdvise: (format, advise flags, sink, connection) of each DA 1.0a
+/// advise connection.
+#[implement(RawEnumSTATDATA)]
+pub struct StatDataEnum(Cursor<(FORMATETC, u32, IAdviseSink, u32)>);
+
+// SAFETY: FORMATETC's only pointer (`ptd`) is always NULL here; the sinks are MTA
+// proxies, as in `connpoint::SinkSlot`.
+unsafe impl Send for StatDataEnum {}
+// SAFETY: as above; the cursor guards its position with a mutex.
+unsafe impl Sync for StatDataEnum {}
+
+impl StatDataEnum {
+    pub fn create(items: Vec<(FORMATETC, u32, IAdviseSink, u32)>) -> IEnumSTATDATA {
+        StatDataEnum::from_cursor(Cursor::new(items))
+    }
+
+    fn from_cursor(cursor: Cursor<(FORMATETC, u32, IAdviseSink, u32)>) -> IEnumSTATDATA {
+        let e: RawEnumSTATDATA = StatDataEnum(cursor).into();
+        e.into()
+    }
+}
+
+impl RawEnumSTATDATA_Impl for StatDataEnum_Impl {
+    unsafe fn Next(&self, celt: u32, rgelt: *mut STATDATA, fetched: *mut u32) -> HRESULT {
+        // SAFETY: this method's parameters, under the IEnum*::Next contract.
+        unsafe {
+            next_into(&self.0, celt, rgelt, fetched, |(f, advf, sink, c)| {
+                STATDATA {
+                    formatetc: *f,
+                    advf: *advf,
+                    pAdvSink: std::mem::ManuallyDrop::new(Some(sink.clone())),
+                    dwConnection: *c,
+                }
+            })
+        }
+    }
+    unsafe fn Skip(&self, celt: u32) -> HRESULT {
+        self.0.skip(celt)
+    }
+    unsafe fn Reset(&self) -> HRESULT {
+        self.0.reset();
+        S_OK
+    }
+    unsafe fn Clone(&self, ppenum: *mut Option<IEnumSTATDATA>) -> HRESULT {
+        // SAFETY: `ppenum` is this method's [out] interface pointer.
+        unsafe { clone_out(ppenum, || StatDataEnum::from_cursor(self.0.fork())) }
     }
 }

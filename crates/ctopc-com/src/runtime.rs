@@ -18,6 +18,7 @@
 //! Lock order: `driver` before `sinks` (the driver checks a lost sink under the engine
 //! lock); `sinks` and `workers` are never held while waiting for `driver`.
 
+use crate::group::dataobject::{self, Da10Sinks, Routed};
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
 use crate::{clock, connpoint::SinkSlot, error, variant};
 use ctopc_core::driver::{self, Deliver, Driver, Report};
@@ -112,7 +113,7 @@ pub struct Runtime {
     /// synchronous calls waiting on the source (each then takes its own result).
     stepped: Condvar,
     signal: Arc<Signal>,
-    sinks: Mutex<HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>>,
+    sinks: Mutex<HashMap<GroupHandle, GroupSinks>>,
     shutdown_sinks: Mutex<HashMap<SessionHandle, Arc<SinkSlot<IOPCShutdown>>>>,
     workers: Mutex<HashMap<SessionHandle, Worker>>,
     /// What the workers report (a scheduled OnDataChange ended, a sink was lost), for the
@@ -248,18 +249,30 @@ impl Runtime {
             .remove(&s);
     }
 
-    pub fn set_group_sink(&self, group: GroupHandle, slot: Arc<SinkSlot<IOPCDataCallback>>) {
-        self.sinks
+    /// Registers a group object's callback sinks: its IOPCDataCallback slot and its
+    /// DA 1.0a advise connections.
+    pub fn set_group_sink(
+        &self,
+        group: GroupHandle,
+        slot: Arc<SinkSlot<IOPCDataCallback>>,
+        da10: Arc<Da10Sinks>,
+    ) {
+        let old = self
+            .sinks
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .insert(group, slot);
+            .insert(group, (slot, da10));
+        // Released after the lock.
+        drop(old);
     }
 
     pub fn remove_group_sink(&self, group: GroupHandle) {
-        self.sinks
+        let old = self
+            .sinks
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .remove(&group);
+        drop(old);
     }
 
     pub fn set_shutdown_sink(&self, session: SessionHandle, slot: Arc<SinkSlot<IOPCShutdown>>) {
@@ -344,7 +357,7 @@ impl Runtime {
 /// The clients' callback queues, as the driver's [`Deliver`]: each event becomes a job on
 /// its session's worker, which calls the group's sink (if still connected) and reports.
 struct Queues<'a> {
-    sinks: &'a HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>,
+    sinks: &'a HashMap<GroupHandle, GroupSinks>,
     workers: &'a HashMap<SessionHandle, Worker>,
     rt: &'a Weak<Runtime>,
 }
@@ -352,7 +365,7 @@ struct Queues<'a> {
 impl Deliver for Queues<'_> {
     fn deliver(&mut self, event: Event, paced: bool) -> bool {
         let group = event.group();
-        let (Some(slot), Some(worker)) = (
+        let (Some((slot, da10)), Some(worker)) = (
             self.sinks.get(&group).cloned(),
             self.workers.get(&event.session()),
         ) else {
@@ -360,7 +373,10 @@ impl Deliver for Queues<'_> {
         };
         let rt = self.rt.clone();
         let job: Job = Box::new(move || {
-            let lost = deliver_one(group, &slot, event);
+            let lost = match dataobject::deliver(&da10, client_group(&event), &event) {
+                Routed::Mine => false,
+                Routed::Shared | Routed::NotMine => deliver_one(group, &slot, event),
+            };
             let reports = [
                 lost.then_some(Report::Disconnected(group)),
                 paced.then_some(Report::Ended(group)),
@@ -393,7 +409,9 @@ fn drive(rt: Weak<Runtime>) {
             if reports.iter().any(|r| matches!(r, Report::Disconnected(_))) {
                 let sinks = rt.sinks.lock().unwrap_or_else(|p| p.into_inner());
                 reports.retain(|r| match r {
-                    Report::Disconnected(g) => !sinks.get(g).is_some_and(|s| s.is_connected()),
+                    Report::Disconnected(g) => !sinks
+                        .get(g)
+                        .is_some_and(|(s, da10)| s.is_connected() || da10.any()),
                     Report::Ended(_) => true,
                 });
             }
@@ -427,6 +445,19 @@ pub fn is_disconnected(hr: HRESULT) -> bool {
         0x800401FD, // CO_E_OBJNOTCONNECTED
     ];
     CODES.contains(&(hr.0 as u32))
+}
+
+/// A group's callback sinks: IOPCDataCallback's slot and the DA 1.0a connections.
+type GroupSinks = (Arc<SinkSlot<IOPCDataCallback>>, Arc<Da10Sinks>);
+
+/// The group's client handle an event carries.
+fn client_group(event: &Event) -> u32 {
+    match event {
+        Event::DataChange(e) => e.client_group,
+        Event::ReadComplete(e) => e.client_group,
+        Event::WriteComplete(e) => e.client_group,
+        Event::CancelComplete(e) => e.client_group,
+    }
 }
 
 fn hr_of(e: Option<OpcError>) -> HRESULT {

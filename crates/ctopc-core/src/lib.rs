@@ -15,6 +15,7 @@ pub mod namespace;
 pub mod properties;
 pub mod quality;
 pub mod source;
+pub mod stream;
 pub mod time;
 pub mod value;
 

@@ -926,3 +926,39 @@ fn item_io_write_vqt_checks_rights_and_converts() {
         Err(OpcError::InvalidArg)
     );
 }
+
+#[test]
+fn async_read_source_cache_answers_at_once_and_device_asks_the_source() {
+    // IOPCAsyncIO::Read (DA 1.0a): OPC_DS_CACHE from the cache, an inactive item BAD Out
+    // of Service as IOPCSyncIO::Read; OPC_DS_DEVICE as IOPCAsyncIO2::Read.
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let h = sim.items(g, &["A1", "A2"]);
+    sim.push_good("A1", 3.0);
+    sim.tick();
+    sim.events();
+    sim.e.set_active_state(sim.now, g, &[h[1]], false).unwrap();
+    let started = sim
+        .e
+        .async_read_source(sim.now, g, 0, DataSource::Cache, &[h[0], 5, h[1]])
+        .unwrap();
+    assert_eq!(
+        started.results,
+        vec![Ok(()), Err(OpcError::InvalidHandle), Ok(())]
+    );
+    let ev = sim.events();
+    let [Event::ReadComplete(r)] = &ev[..] else {
+        panic!("{ev:?}")
+    };
+    assert_eq!((r.cancel_id, r.transaction_id), (started.cancel_id, 0));
+    assert_eq!(r.items[0].value, Value::R8(3.0));
+    assert_eq!(r.items[1].quality, Quality::BAD_OUT_OF_SERVICE);
+    let started = sim
+        .e
+        .async_read_source(sim.now, g, 0, DataSource::Device, &h)
+        .unwrap();
+    assert_ne!(started.cancel_id, 0);
+    let (_, items) = sim.take_read();
+    assert_eq!(items.len(), 2, "both from the device");
+}

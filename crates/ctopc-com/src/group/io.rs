@@ -1,4 +1,5 @@
-//! Sync and async I/O of the group: IOPCSyncIO, IOPCSyncIO2, IOPCAsyncIO2, IOPCAsyncIO3.
+//! Sync and async I/O of the group: IOPCSyncIO, IOPCSyncIO2, IOPCAsyncIO2, IOPCAsyncIO3
+//! (DA 1.0a's IOPCAsyncIO, over the same helpers and transactions: `async1.rs`).
 //!
 //! Every method has the same shape: check the arguments (NULL required pointers and a
 //! zero count are E_INVALIDARG; out-pointers are set to NULL first), one engine call
@@ -46,7 +47,7 @@ use windows::Win32::System::Variant::VARIANT;
 
 // ---- argument checks --------------------------------------------------------------
 
-fn data_source(s: OPCDATASOURCE) -> ComResult<DataSource> {
+pub(super) fn data_source(s: OPCDATASOURCE) -> ComResult<DataSource> {
     match s {
         OPC_DS_CACHE => Ok(DataSource::Cache),
         OPC_DS_DEVICE => Ok(DataSource::Device),
@@ -128,7 +129,7 @@ fn write_timed_out(n: usize) -> WriteResults {
 /// access rights, with OPC_E_BADTYPE, or OPC_E_NOTSUPPORTED when a quality or timestamp
 /// came with it; the handle and rights errors, more basic, win).
 #[derive(Default)]
-struct PreErrors(Vec<(usize, OpcError)>);
+pub(super) struct PreErrors(Vec<(usize, OpcError)>);
 
 impl PreErrors {
     fn value(&mut self, i: usize, v: &VARIANT) -> Value {
@@ -145,7 +146,7 @@ impl PreErrors {
             }
         }
     }
-    fn apply(&self, results: &mut WriteResults) {
+    pub(super) fn apply(&self, results: &mut WriteResults) {
         for &(i, e) in &self.0 {
             if let Some(r) = results.get_mut(i) {
                 if matches!(r, Err(OpcError::BadType | OpcError::NotSupported)) {
@@ -186,7 +187,11 @@ fn vqt_items(handles: &[u32], vqts: &[OPCITEMVQT], pre: &mut PreErrors) -> Vec<(
 }
 
 /// The items of a Write call (value only; a 3-element array is the extended write).
-fn value_items(handles: &[u32], values: &[VARIANT], pre: &mut PreErrors) -> Vec<(u32, ItemVqt)> {
+pub(super) fn value_items(
+    handles: &[u32],
+    values: &[VARIANT],
+    pre: &mut PreErrors,
+) -> Vec<(u32, ItemVqt)> {
     handles
         .iter()
         .zip(values)
@@ -196,7 +201,7 @@ fn value_items(handles: &[u32], values: &[VARIANT], pre: &mut PreErrors) -> Vec<
 }
 
 /// Fills ppErrors from per-item results; returns S_OK or S_FALSE.
-fn errors_out<R>(
+pub(super) fn errors_out<R>(
     pp_errors: OutArray<HRESULT>,
     results: &[Result<R, OpcError>],
 ) -> ComResult<HRESULT> {
@@ -276,10 +281,10 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_write_vqt(now, self.handle, transaction, &items));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_write_vqt(now, self.handle, transaction, &items)
+        });
         let started = started.map(|mut s| {
             pre.apply(&mut s.results);
             s
@@ -306,7 +311,7 @@ impl Group_Impl {
 ///
 /// # Safety
 /// As [`abi::write_out`]: `p` is the method's `[out]` parameter.
-unsafe fn cancel_out(p: *mut u32) -> ComResult<()> {
+pub(super) unsafe fn cancel_out(p: *mut u32) -> ComResult<()> {
     // SAFETY: contract of this function.
     unsafe { write_out(p, 0) }
 }
@@ -527,6 +532,18 @@ impl IOPCSyncIO2_Impl for Group_Impl {
 // ---- IOPCAsyncIO2 -----------------------------------------------------------------------
 
 impl Group_Impl {
+    /// IOPCAsyncIO2/3 complete through IOPCDataCallback only: CONNECT_E_NOCONNECTION
+    /// without one, also while DA 1.0a sinks keep the engine's group connected (checked
+    /// under the engine lock after the group itself: a removed group stays E_FAIL).
+    fn data_callback_connected(&self, e: &Engine) -> Result<(), OpcError> {
+        e.callback_connected(self.handle)?;
+        if self.sink.is_connected() {
+            Ok(())
+        } else {
+            Err(OpcError::NoConnection)
+        }
+    }
+
     /// # Safety
     /// The pointers are the COM method's parameters, valid as its IDL says (checked here).
     unsafe fn async_read_impl(
@@ -542,10 +559,10 @@ impl Group_Impl {
         let pp_errors = OutArray::new(pp_errors)?;
         cancel_out(p_cancel)?;
         let handles = in_array(ph_server, count)?;
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_read(now, self.handle, transaction, handles));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_read(now, self.handle, transaction, handles)
+        });
         self.async_out(started, p_cancel, pp_errors)
     }
 
@@ -580,7 +597,14 @@ impl Group_Impl {
         call: impl FnOnce(&mut Engine, Timestamp) -> Result<u32, OpcError>,
     ) -> ComResult<()> {
         cancel_out(p_cancel)?;
-        let cancel_id = self.ctx.runtime.with_engine(call).map_err(error::to_com)?;
+        let cancel_id = self
+            .ctx
+            .runtime
+            .with_engine(|e, now| {
+                self.data_callback_connected(e)?;
+                call(e, now)
+            })
+            .map_err(error::to_com)?;
         write_out(p_cancel, cancel_id)
     }
 }
@@ -680,10 +704,10 @@ impl Group_Impl {
         let handles = in_array(ph_server, count)?;
         let ages = in_array(p_max_age, count)?;
         let items: Vec<(u32, u32)> = handles.iter().copied().zip(ages.iter().copied()).collect();
-        let started = self
-            .ctx
-            .runtime
-            .with_engine(|e, now| e.async_read_max_age(now, self.handle, transaction, &items));
+        let started = self.ctx.runtime.with_engine(|e, now| {
+            self.data_callback_connected(e)?;
+            e.async_read_max_age(now, self.handle, transaction, &items)
+        });
         self.async_out(started, p_cancel, pp_errors)
     }
 

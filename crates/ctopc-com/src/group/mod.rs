@@ -1,6 +1,7 @@
 //! The OPC group object: IOPCItemMgt, IOPCGroupStateMgt/2, IOPCItemDeadbandMgt,
-//! IOPCItemSamplingMgt, IConnectionPointContainer (one point, IOPCDataCallback) and, in
-//! [`io`], the sync and async I/O interfaces.
+//! IOPCItemSamplingMgt, IConnectionPointContainer (one point, IOPCDataCallback), in
+//! [`io`] the sync and async I/O interfaces, and DA 1.0a's IOPCAsyncIO (`async1.rs`) and
+//! IDataObject ([`dataobject`]).
 //!
 //! **One COM identity per engine group**: the context's registry ([`Registry`], one per
 //! runtime, `Context::groups`) maps each engine group to a weak reference to its live COM
@@ -15,11 +16,13 @@
 //! Lock order: the registry, then the runtime's locks. No strong reference to a group
 //! object is ever dropped while the registry is locked (its `Drop` takes the lock).
 
+mod async1;
+pub mod dataobject;
 mod io;
 mod items;
 
 use crate::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
-use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl};
+use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl, RawDataObject};
 use crate::connpoint::{self, SinkSlot, Slot};
 use crate::context::Context;
 use crate::error;
@@ -49,7 +52,9 @@ pub use items::ItemAttributesEnum;
     IOPCAsyncIO3,
     IOPCItemDeadbandMgt,
     IOPCItemSamplingMgt,
-    RawConnectionPointContainer
+    RawConnectionPointContainer,
+    IOPCAsyncIO,
+    RawDataObject
 )]
 pub struct Group {
     pub(crate) ctx: Arc<Context>,
@@ -57,6 +62,8 @@ pub struct Group {
     pub(crate) handle: GroupHandle,
     /// The IOPCDataCallback connection (registered with the runtime while the object lives).
     pub(crate) sink: Arc<SinkSlot<IOPCDataCallback>>,
+    /// The DA 1.0a IDataObject advise connections (registered with the runtime too).
+    pub(crate) da10: Arc<dataobject::Da10Sinks>,
     /// The connection point's view of `sink`: tells the engine about Advise/Unadvise.
     point: Arc<dyn Slot>,
     _guard: ObjectGuard,
@@ -120,16 +127,19 @@ fn create_locked(
         .with_engine(|e, _| e.group_add_ref(group))
         .map_err(error::to_com)?;
     let sink = Arc::new(SinkSlot::<IOPCDataCallback>::default());
+    let da10 = Arc::new(dataobject::Da10Sinks::default());
     let point: Arc<dyn Slot> = Arc::new(DataCallbackPoint {
         ctx: Arc::clone(ctx),
         group,
         slot: Arc::clone(&sink),
+        da10: Arc::clone(&da10),
     });
     let object = Group {
         ctx: Arc::clone(ctx),
         session,
         handle: group,
         sink: Arc::clone(&sink),
+        da10: Arc::clone(&da10),
         point,
         _guard: ObjectGuard::new(&ctx.lifetime),
     };
@@ -157,7 +167,7 @@ fn create_locked(
             slot: Arc::clone(&sink),
         },
     );
-    ctx.runtime.set_group_sink(group, sink);
+    ctx.runtime.set_group_sink(group, sink, da10);
     Ok(unknown)
 }
 
@@ -184,7 +194,8 @@ impl Drop for Group {
         if let Some(c) = cookie {
             self.sink.drop_if(c);
         }
-        let disconnect = mine && cookie.is_some();
+        let da10 = self.da10.clear();
+        let disconnect = mine && (cookie.is_some() || da10);
         let _ = self.ctx.runtime.with_engine(|e, now| {
             if disconnect {
                 let _ = e.set_callback_connected(now, handle, false);
@@ -461,6 +472,8 @@ struct DataCallbackPoint {
     ctx: Arc<Context>,
     group: GroupHandle,
     slot: Arc<SinkSlot<IOPCDataCallback>>,
+    /// The group's DA 1.0a sinks: the engine stays connected while one is advised.
+    da10: Arc<dataobject::Da10Sinks>,
 }
 
 impl Slot for DataCallbackPoint {
@@ -482,10 +495,11 @@ impl Slot for DataCallbackPoint {
     fn unadvise(&self, cookie: u32) -> windows::core::Result<()> {
         Slot::unadvise(&*self.slot, cookie)?;
         let group = self.group;
+        let connected = self.da10.any();
         let _ = self
             .ctx
             .runtime
-            .with_engine(|e, now| e.set_callback_connected(now, group, false));
+            .with_engine(|e, now| e.set_callback_connected(now, group, connected));
         Ok(())
     }
 

@@ -1017,6 +1017,25 @@ impl Engine {
         self.async_read_impl(now, group, transaction_id, &items)
     }
 
+    /// IOPCAsyncIO::Read (DA 1.0a): as [`Engine::async_read`], from the cache or the
+    /// device as `source` says (a cache read of an inactive group or item is
+    /// OPC_QUALITY_OUT_OF_SERVICE, as IOPCSyncIO::Read's).
+    pub fn async_read_source(
+        &mut self,
+        now: Timestamp,
+        group: GroupHandle,
+        transaction_id: u32,
+        source: DataSource,
+        handles: &[u32],
+    ) -> Result<AsyncStarted, OpcError> {
+        let mode = match source {
+            DataSource::Cache => ReadMode::Cache,
+            DataSource::Device => ReadMode::Device,
+        };
+        let items: Vec<(u32, ReadMode)> = handles.iter().map(|&h| (h, mode)).collect();
+        self.async_read_impl(now, group, transaction_id, &items)
+    }
+
     /// IOPCAsyncIO3::ReadMaxAge: per item `(server handle, MaxAge ms)`.
     pub fn async_read_max_age(
         &mut self,
