@@ -100,6 +100,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
 /// included). Left out: `service` (it tests the server as an NT service, not the
 /// client's side of the wire). Measured: that one passes at 32-bit too.
 pub const E2E_32: &[&str] = &[
+    "da10",
     "doctor",
     "foundation",
     "generic_clients",
