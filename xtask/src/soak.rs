@@ -134,6 +134,20 @@ fn rss_mb(pid: u32) -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// (predicted MB kept so far, measured MB) per round from the second on: the slope of
+/// these is the resident growth per byte Wine's leak predicts.
+pub fn explained(after_rounds: &[(f64, f64)], predicted: &[f64]) -> Vec<(f64, f64)> {
+    let mut sum = 0.0;
+    let mut out = Vec::new();
+    for (i, ((_, mb), p)) in after_rounds.iter().zip(predicted).enumerate() {
+        sum += p / (1024.0 * 1024.0);
+        if i > 0 {
+            out.push((sum, *mb));
+        }
+    }
+    out
+}
+
 /// The least-squares slope of `points` (x, y).
 pub fn slope(points: &[(f64, f64)]) -> Option<f64> {
     let n = points.len() as f64;
@@ -321,6 +335,10 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
                 s - p,
                 per_minute(s - p)
             );
+            // Rounds differ in work: resident memory against the predicted bytes so far.
+            if let Some(r) = slope(&explained(&after_rounds, &predicted)) {
+                println!("soak: resident growth per predicted byte after warm-up: {r:.2} (1 = all Wine's leak)");
+            }
         }
         None => println!("soak: too few rounds for a slope (run longer: --minutes)"),
     }
@@ -340,6 +358,11 @@ mod tests {
         let want = 3000.0 * 48.0 + 3000.0 * 48.0 + 750.0 * 24.0 + 3000.0 * 8.0;
         assert_eq!(predicted_bytes(&c), want);
         assert_eq!(parse_counts("soak-client: held"), None);
+        let mb = 1024.0 * 1024.0;
+        let rounds = [(1.0, 50.0), (2.0, 52.0), (3.0, 56.0)];
+        let e = super::explained(&rounds, &[1.0 * mb, 2.0 * mb, 4.0 * mb]);
+        assert_eq!(e, [(3.0, 52.0), (7.0, 56.0)]);
+        assert!((slope(&e).unwrap() - 1.0).abs() < 1e-9);
         assert_eq!(parse_counts("soak-client: counts rounds=x"), None);
     }
 
