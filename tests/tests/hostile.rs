@@ -419,12 +419,20 @@ fn every_vartype_requested_and_written_gets_an_answer() {
 
 // ---- nested arrays ----------------------------------------------------------------------
 
-/// Runs `f` on a thread with a 256 MiB stack (reserved, not committed): the client's own
-/// marshalling of a deep VARIANT (oleaut32's VARIANT_UserSize/Marshal) recurses once per
-/// level, which a test thread's 2 MiB do not hold at 10,000 levels.
+/// The stack of [`on_big_stack`]: 1 GiB in a 64-bit client, 256 MiB in a 32-bit one
+/// (reserved, not committed; a 32-bit process has no room for more).
+const BIG_STACK: usize = if cfg!(target_pointer_width = "64") {
+    1 << 30
+} else {
+    256 << 20
+};
+
+/// Runs `f` on a thread with a [`BIG_STACK`] stack: the client's own marshalling of a deep
+/// VARIANT (oleaut32's VARIANT_UserSize/Marshal) recurses once per level, which a test
+/// thread's 2 MiB do not hold at 10,000 levels.
 fn on_big_stack(f: impl FnOnce() + Send + 'static) {
     let t = std::thread::Builder::new()
-        .stack_size(256 << 20)
+        .stack_size(BIG_STACK)
         .spawn(f)
         .unwrap();
     if let Err(e) = t.join() {
@@ -436,6 +444,9 @@ fn on_big_stack(f: impl FnOnce() + Send + 'static) {
 fn nested_arrays_deeper_than_the_limit_are_bad_type_and_quick() {
     on_big_stack(nested_arrays);
 }
+
+/// The deepest nested VARIANT the hostile test sends by default.
+const DEEPEST: usize = 400_000;
 
 /// 10,000, or `CTOPC_HOSTILE_LEVELS` (to measure how deep the transport carries).
 fn probe_levels() -> usize {
@@ -464,7 +475,11 @@ fn nested_arrays() {
         (limits::MAX_VARIANT_DEPTH + 1, Duration::from_secs(20)),
         (1_000, Duration::from_secs(20)),
         (10_000, Duration::from_secs(30)),
-        (probe_levels(), Duration::from_secs(60)),
+        // The deepest the transport is known to carry with the server's 256 MiB stack
+        // reserve (docs/limits.md): oleaut32 unmarshals it on the RPC thread, recursing
+        // once per level, before the server's decoding refuses it.
+        (DEEPEST, Duration::from_secs(120)),
+        (probe_levels(), Duration::from_secs(120)),
     ] {
         let inner = variant::to_variant(&Value::R4(1.0)).unwrap();
         let vars = [
@@ -620,4 +635,55 @@ fn z_a_client_that_exits_without_releasing_leaves_the_server_answering() {
     // ping): end it, so that later tests start a server of their own.
     let ended = terminate_servers();
     eprintln!("ended {ended} server process(es) kept alive by the dead client");
+}
+
+/// Opt-in (`CTOPC_HOSTILE_KILL_LEVELS=N`): a VARIANT of N levels, deep enough that
+/// oleaut32's unmarshalling overflows the server's RPC thread (docs/limits.md: past about
+/// 800,000 levels with the 256 MiB reserve; a 64-bit client only). Under Wine that RPC
+/// thread dies and the call never returns; the server must go on answering GetStatus, on
+/// the connection it had and on a new one. The deep call runs on a thread of its own that
+/// is never joined; the server is ended at the end (it holds the dead call).
+#[test]
+fn z_b_a_variant_deeper_than_the_transport_carries_leaves_the_server_answering() {
+    let Some(levels) = std::env::var("CTOPC_HOSTILE_KILL_LEVELS")
+        .ok()
+        .and_then(|s| s.parse::<usize>().ok())
+    else {
+        return;
+    };
+    let (_com, server) = connect();
+    assert_answers(&server, "connecting");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::Builder::new()
+        .stack_size(BIG_STACK)
+        .spawn(move || {
+            let (_com, server) = connect();
+            let (g, _) = group(&server, "");
+            let h = add(&g, &[SETPOINT])[0];
+            let io = sync(&g);
+            let inner = variant::to_variant(&Value::R4(1.0)).unwrap();
+            let vars = [variant::nest(inner, levels).unwrap()];
+            let _ = tx.send(());
+            let t = Instant::now();
+            let r = write_raw(&io, &[h], &vars);
+            eprintln!("{levels} levels answered after {:?}: {r:x?}", t.elapsed());
+            let [nested] = vars;
+            variant::clear_nested(nested);
+        })
+        .unwrap();
+    rx.recv_timeout(Duration::from_secs(120))
+        .expect("the deep VARIANT is built");
+    // While the deep call is sent, unmarshalled and overflows, and after: every 2 s.
+    let until = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < until {
+        assert_answers(&server, &format!("a VARIANT of {levels} levels"));
+        std::thread::sleep(Duration::from_secs(2));
+    }
+    let fresh = call("connect after the deep VARIANT", || Server::connect(PROGID))
+        .expect("a new connection after the deep VARIANT");
+    assert_answers(&fresh, "a new connection after the deep VARIANT");
+    drop(fresh);
+    drop(server);
+    let ended = terminate_servers();
+    eprintln!("ended {ended} server process(es) holding the dead call");
 }

@@ -55,8 +55,10 @@ commands:
           random-mutation runner; targets may be named
   soak    the memory soak (not in CI): one client holds the server while rounds of
           clients churn (connect, add, read, write, subscribe, disconnect); the
-          server's resident memory sampled from /proc, the slope after warm-up;
-          `--minutes M`, `--clients K`, `--items N`, `--round-seconds R`
+          server's resident memory sampled from /proc, the slope after warm-up beside
+          the slope Wine's [in]-array leak predicts (docs/wine-ndr-leak.md);
+          `--minutes M`, `--clients K`, `--items N`, `--round-seconds R`, `--calls
+          LIST` (add,validate,read,write,itemio,subscribe,remove) or `--no-in-arrays`
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run

@@ -1,10 +1,27 @@
 //! soak-client.exe: one client of the memory soak (`cargo xtask soak`, under Wine).
 //!
 //! `soak-client --hold --seconds S`: connects and holds the server for S seconds (so that
-//! it stays up between rounds). `soak-client --seconds S --items N`: churns for S
-//! seconds: connect, AddGroup, AddItems of N items, IOPCSyncIO::Read, Write of every
-//! writable item, a subscription for about a second, RemoveGroup, disconnect; again.
-//! Prints one line with the rounds done and the failures seen.
+//! it stays up between rounds). `soak-client --seconds S --items N [--calls LIST]`:
+//! churns for S seconds, each round on a new connection: connect, GetStatus, AddGroup,
+//! then the calls of LIST on N items, RemoveGroup, disconnect; again. LIST (comma
+//! separated, default `add,validate,read,write,itemio,subscribe,remove`):
+//!
+//! - `add`: IOPCItemMgt::AddItems of N items (an `[in]` array of N OPCITEMDEF);
+//! - `validate`: ValidateItems of the N (N OPCITEMDEF);
+//! - `read`: IOPCSyncIO::Read by handle (an array of DWORD handles);
+//! - `write`: IOPCSyncIO::Write of every writable item (one VARIANT each, N/4);
+//! - `itemio`: IOPCItemIO::Read of the N item IDs (N string pointers);
+//! - `subscribe`: IOPCDataCallback advised for about a second, callbacks, Unadvise;
+//! - `remove`: RemoveItems by handle.
+//!
+//! Without `add`, the items are added once, when the process starts, to a group of a
+//! connection the process keeps; `read`, `subscribe` and `remove` then use that group
+//! (`remove` with handles the server never issued, so that the items stay): the rounds
+//! make only calls that carry no array the stub allocates.
+//!
+//! At the end it prints one line `soak-client: counts rounds=R failures=F additems=A
+//! validateitems=V writes=W itemio=I` (items sent in each kind of allocated `[in]`
+//! array, summed over the process), which `cargo xtask soak` reads.
 
 #[cfg(not(windows))]
 fn main() -> std::process::ExitCode {
@@ -15,19 +32,20 @@ fn main() -> std::process::ExitCode {
 #[cfg(windows)]
 fn main() -> std::process::ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let value = |name: &str, default: u64| {
+    let arg = |name: &str| {
         args.iter()
             .position(|a| a == name)
             .and_then(|i| args.get(i + 1))
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(default)
     };
+    let value =
+        |name: &str, default: u64| arg(name).and_then(|v| v.parse().ok()).unwrap_or(default);
     let seconds = value("--seconds", 60);
     let items = value("--items", 1000) as usize;
     let r = if args.iter().any(|a| a == "--hold") {
         soak::hold(seconds)
     } else {
-        soak::churn(seconds, items)
+        let calls = arg("--calls").map_or(soak::ALL_CALLS, |s| s.as_str());
+        soak::Calls::parse(calls).and_then(|c| soak::churn(seconds, items, &c))
     };
     match r {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -41,6 +59,7 @@ fn main() -> std::process::ExitCode {
 #[cfg(windows)]
 mod soak {
     use ctopc_com::client::{self, ComThread, GroupSpec, ItemDef, OpcGroup, Server};
+    use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE};
     use ctopc_core::Value;
     use e2e_tests::io_support::{Recorder, TestSink};
     use e2e_tests::PROGID;
@@ -51,6 +70,53 @@ mod soak {
     const IDS: [&str; 4] = ["KW_A000", "KW_A001", "KW_A110", "KW_D201"];
     /// The writable R4 among them.
     const SETPOINT: &str = "KW_A110";
+    /// The default call list.
+    pub const ALL_CALLS: &str = "add,validate,read,write,itemio,subscribe,remove";
+
+    /// The calls of one round (`--calls`).
+    #[derive(Default)]
+    pub struct Calls {
+        add: bool,
+        validate: bool,
+        read: bool,
+        write: bool,
+        itemio: bool,
+        subscribe: bool,
+        remove: bool,
+    }
+
+    impl Calls {
+        pub fn parse(list: &str) -> Result<Calls, String> {
+            let mut c = Calls::default();
+            for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+                match name {
+                    "add" => c.add = true,
+                    "validate" => c.validate = true,
+                    "read" => c.read = true,
+                    "write" => c.write = true,
+                    "itemio" => c.itemio = true,
+                    "subscribe" => c.subscribe = true,
+                    "remove" => c.remove = true,
+                    _ => return Err(format!("unknown call `{name}` in --calls")),
+                }
+            }
+            if c.write && !c.add {
+                return Err("--calls: `write` needs `add` (it writes the items just added)".into());
+            }
+            Ok(c)
+        }
+    }
+
+    /// Items sent in allocated `[in]` arrays (what Wine's stub keeps, docs/wine-ndr-leak.md).
+    #[derive(Default)]
+    struct Counts {
+        rounds: u64,
+        failures: u64,
+        add_items: u64,
+        validate_items: u64,
+        writes: u64,
+        item_io: u64,
+    }
 
     pub fn hold(seconds: u64) -> Result<(), String> {
         let _com = ComThread::mta().map_err(|e| e.to_string())?;
@@ -64,60 +130,147 @@ mod soak {
         Ok(())
     }
 
-    pub fn churn(seconds: u64, items: usize) -> Result<(), String> {
+    /// A connection and group the process keeps, with the items added once.
+    struct Kept {
+        _server: Server,
+        group: OpcGroup,
+        handles: Vec<u32>,
+    }
+
+    fn defs(items: usize) -> Vec<ItemDef> {
+        (0..items)
+            .map(|i| ItemDef::new(IDS[i % IDS.len()], i as u32))
+            .collect()
+    }
+
+    fn add_group(server: &Server) -> Result<(OpcGroup, u32), String> {
+        let g = server
+            .add_group(&GroupSpec::new(""))
+            .map_err(|e| format!("AddGroup: {e}"))?;
+        let group = OpcGroup::from_unknown(g.object).map_err(|e| e.to_string())?;
+        Ok((group, g.server_handle))
+    }
+
+    pub fn churn(seconds: u64, items: usize, calls: &Calls) -> Result<(), String> {
         let _com = ComThread::mta().map_err(|e| e.to_string())?;
+        let mut counts = Counts::default();
+        let kept = if calls.add {
+            None
+        } else {
+            let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
+            let (group, _) = add_group(&server)?;
+            let (_, added) = group
+                .add_items(&defs(items))
+                .map_err(|e| format!("AddItems: {e}"))?;
+            counts.add_items += items as u64;
+            let handles = added.iter().map(|a| a.server_handle).collect();
+            Some(Kept {
+                _server: server,
+                group,
+                handles,
+            })
+        };
         let deadline = Instant::now() + Duration::from_secs(seconds);
-        let (mut rounds, mut failures) = (0u32, 0u32);
         while Instant::now() < deadline {
-            match one_round(items) {
-                Ok(()) => rounds += 1,
+            match one_round(items, calls, kept.as_ref(), &mut counts) {
+                Ok(()) => counts.rounds += 1,
                 Err(e) => {
-                    failures += 1;
+                    counts.failures += 1;
                     eprintln!("soak-client: {e}");
                     std::thread::sleep(Duration::from_millis(500));
                 }
             }
         }
-        println!("soak-client: {rounds} rounds, {failures} failures");
+        println!(
+            "soak-client: counts rounds={} failures={} additems={} validateitems={} writes={} itemio={}",
+            counts.rounds,
+            counts.failures,
+            counts.add_items,
+            counts.validate_items,
+            counts.writes,
+            counts.item_io
+        );
         Ok(())
     }
 
-    fn one_round(items: usize) -> Result<(), String> {
+    fn one_round(
+        items: usize,
+        calls: &Calls,
+        kept: Option<&Kept>,
+        counts: &mut Counts,
+    ) -> Result<(), String> {
         let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
-        let g = server
-            .add_group(&GroupSpec::new(""))
-            .map_err(|e| format!("AddGroup: {e}"))?;
-        let group = OpcGroup::from_unknown(g.object).map_err(|e| e.to_string())?;
-        let defs: Vec<ItemDef> = (0..items)
-            .map(|i| ItemDef::new(IDS[i % IDS.len()], i as u32))
-            .collect();
-        let (_, added) = group
-            .add_items(&defs)
-            .map_err(|e| format!("AddItems: {e}"))?;
-        let handles: Vec<u32> = added.iter().map(|a| a.server_handle).collect();
+        server.status().map_err(|e| format!("GetStatus: {e}"))?;
+        let (own, own_handle) = add_group(&server)?;
+        let defs = defs(items);
+        let mut handles: Vec<u32> = Vec::new();
+        if calls.add {
+            counts.add_items += items as u64;
+            let (_, added) = own.add_items(&defs).map_err(|e| format!("AddItems: {e}"))?;
+            handles = added.iter().map(|a| a.server_handle).collect();
+        }
+        let (group, handles) = match kept {
+            Some(k) => (&k.group, &k.handles),
+            None => (&own, &handles),
+        };
+        if calls.validate {
+            counts.validate_items += items as u64;
+            let _ = own
+                .validate_items(&defs)
+                .map_err(|e| format!("ValidateItems: {e}"))?;
+        }
         let io = group
             .unknown
-            .cast::<ctopc_com::interfaces::IOPCSyncIO>()
+            .cast::<IOPCSyncIO>()
             .map_err(|e| e.to_string())?;
-        let _ = client::sync_read(&io, ctopc_com::interfaces::OPC_DS_CACHE, &handles)
-            .map_err(|e| format!("Read: {e}"))?;
-        let writes: Vec<(u32, Value)> = defs
-            .iter()
-            .zip(&handles)
-            .filter(|(d, _)| d.item_id == SETPOINT)
-            .map(|(_, h)| (*h, Value::R4(5.0)))
-            .collect();
-        let _ = client::sync_write(&io, &writes).map_err(|e| format!("Write: {e}"))?;
-        let rec = Recorder::recording();
-        let sink = TestSink::create(&rec);
-        let cookie = client::advise_data_callback(&group.unknown, &sink)
-            .map_err(|e| format!("Advise: {e}"))?;
-        let _ = rec.wait_for(Duration::from_secs(2), |_| true);
-        client::unadvise_data_callback(&group.unknown, cookie)
-            .map_err(|e| format!("Unadvise: {e}"))?;
-        drop(group);
+        if calls.read {
+            let _ =
+                client::sync_read(&io, OPC_DS_CACHE, handles).map_err(|e| format!("Read: {e}"))?;
+        }
+        if calls.write {
+            let writes: Vec<(u32, Value)> = defs
+                .iter()
+                .zip(handles)
+                .filter(|(d, _)| d.item_id == SETPOINT)
+                .map(|(_, h)| (*h, Value::R4(5.0)))
+                .collect();
+            counts.writes += writes.len() as u64;
+            let _ = client::sync_write(&io, &writes).map_err(|e| format!("Write: {e}"))?;
+        }
+        if calls.itemio {
+            let ids: Vec<(&str, u32)> =
+                (0..items).map(|i| (IDS[i % IDS.len()], u32::MAX)).collect();
+            counts.item_io += items as u64;
+            let _ = server
+                .item_read(&ids)
+                .map_err(|e| format!("IOPCItemIO::Read: {e}"))?;
+        }
+        if calls.subscribe {
+            let rec = Recorder::recording();
+            let sink = TestSink::create(&rec);
+            let cookie = client::advise_data_callback(&group.unknown, &sink)
+                .map_err(|e| format!("Advise: {e}"))?;
+            let _ = rec.wait_for(Duration::from_secs(2), |_| true);
+            client::unadvise_data_callback(&group.unknown, cookie)
+                .map_err(|e| format!("Unadvise: {e}"))?;
+        }
+        if calls.remove {
+            // With kept items: handles the server never issued, so that they stay.
+            let gone: Vec<u32> = match kept {
+                Some(_) => handles
+                    .iter()
+                    .map(|h| h.wrapping_add(0x4000_0000))
+                    .collect(),
+                None => handles.clone(),
+            };
+            let _ = group
+                .remove_items(&gone)
+                .map_err(|e| format!("RemoveItems: {e}"))?;
+        }
+        drop(io);
+        drop(own);
         let _ = server
-            .remove_group(g.server_handle, true)
+            .remove_group(own_handle, true)
             .map_err(|e| format!("RemoveGroup: {e}"))?;
         Ok(())
     }
