@@ -6,7 +6,8 @@
 //! row, about 90 B, branches of 100 variables), written once to `target/vardb-bench/`, it
 //! prints the medians over the runs of:
 //! - the load time (`AsixNamespace::load`: the files read, parsed and indexed) and the time
-//!   to build the browse tree (`build_address_space`), and their sum, the start's share;
+//!   to build the browse tree (`build_address_space`), and their sum, the start's share,
+//!   with the CPU time of both (on a shared machine the wall time overstates the work);
 //! - the live heap bytes per variable (counting global allocator) of the namespace and of
 //!   the browse tree after loading;
 //! - the resident memory per variable (`/proc/self/statm`, growth over the run's start;
@@ -46,6 +47,20 @@ fn peak_resident() -> usize {
         .map_or(0, |kb| kb * 1024)
 }
 
+/// The process's CPU time (user + system, `/proc/self/stat`, 100 ticks a second): on a
+/// shared machine the wall time overstates the work.
+fn cpu_seconds() -> f64 {
+    std::fs::read_to_string("/proc/self/stat")
+        .ok()
+        .and_then(|s| {
+            let rest = &s[s.rfind(')')? + 2..];
+            let f: Vec<&str> = rest.split_whitespace().collect();
+            let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+            Some(ticks / 100.0)
+        })
+        .unwrap_or(0.0)
+}
+
 fn median<T: Copy + PartialOrd>(mut v: Vec<T>) -> T {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
     v[v.len() / 2]
@@ -59,12 +74,14 @@ struct Run {
     resident: isize,
     /// The child process's peak resident memory (VmHWM), start to end.
     peak: isize,
+    /// CPU seconds of load and tree.
+    cpu: f64,
 }
 
 fn run_once(zez: &Path) -> (Run, usize) {
     let ini = format!("[Channel:*]\nItemsDatabase = {}\n", zez.display());
     let (cfg, _) = parse_config(ini.as_bytes(), "bench.ini").expect("config");
-    let (heap0, rss0) = (live(), statm_resident());
+    let (heap0, rss0, cpu0) = (live(), statm_resident(), cpu_seconds());
     let t0 = Instant::now();
     let (ns, _warnings) = AsixNamespace::load(cfg);
     let load = t0.elapsed();
@@ -87,6 +104,7 @@ fn run_once(zez: &Path) -> (Run, usize) {
             heap_tree: heap2 - heap1,
             resident,
             peak: peak_resident() as isize,
+            cpu: cpu_seconds() - cpu0,
         },
         count,
     )
@@ -111,7 +129,7 @@ fn run_child(zez: &Path) -> (Run, usize) {
         .split_whitespace()
         .filter_map(|w| w.parse().ok())
         .collect();
-    assert_eq!(f.len(), 7, "child printed {text:?}");
+    assert_eq!(f.len(), 8, "child printed {text:?}");
     (
         Run {
             load: Duration::from_secs_f64(f[0]),
@@ -120,6 +138,7 @@ fn run_child(zez: &Path) -> (Run, usize) {
             heap_tree: f[3] as isize,
             resident: f[4] as isize,
             peak: f[6] as isize,
+            cpu: f[7],
         },
         f[5] as usize,
     )
@@ -141,9 +160,10 @@ fn report(label: &str, zez: &Path, runs: usize) {
     let heap_db = median(all.iter().map(|r| per(r.heap_db)).collect());
     let heap_tree = median(all.iter().map(|r| per(r.heap_tree)).collect());
     let resident = median(all.iter().map(|r| per(r.resident)).collect());
+    let cpu = median(all.iter().map(|r| r.cpu * 1e3).collect());
     let peak = median(all.iter().map(|r| r.peak as f64 / 1e6).collect());
     println!("{label} ({count} variables, {runs} runs, medians):");
-    println!("  load {load:9.1} ms   tree {tree:8.1} ms   start (both) {start:9.1} ms");
+    println!("  load {load:9.1} ms   tree {tree:8.1} ms   start (both) {start:9.1} ms   CPU {cpu:9.1} ms");
     println!(
         "  heap per variable: database {heap_db:7.1} B   tree {heap_tree:6.1} B   sum {:7.1} B",
         heap_db + heap_tree
@@ -170,14 +190,15 @@ fn main() {
     if let Some(i) = args.iter().position(|a| a == "--child") {
         let (r, n) = run_once(Path::new(&args[i + 1]));
         println!(
-            "{} {} {} {} {} {} {}",
+            "{} {} {} {} {} {} {} {}",
             r.load.as_secs_f64(),
             r.tree.as_secs_f64(),
             r.heap_db,
             r.heap_tree,
             r.resident,
             n,
-            r.peak
+            r.peak,
+            r.cpu
         );
         return;
     }

@@ -14,6 +14,16 @@ pub const GROUP_PATH_SEPARATOR: &str = "/";
 /// is an empty root (descriptive IDs still work; they are not browsable).
 pub fn build_address_space(ns: &AsixNamespace) -> Result<AddressSpace, BuildError> {
     let mut b = AddressSpace::builder();
+    if let Some(db) = ns.database(crate::BASIC_CHANNEL) {
+        // A leaf per variable (a branch and up to five leaves with AttributesAsItems),
+        // and about a group per hundred variables.
+        let per = if ns.config().server.attributes_as_items {
+            6
+        } else {
+            1
+        };
+        b.reserve(db.variables.len() * per + db.variables.len() / 64);
+    }
     // The node at each depth of the path being walked (pre-order: parents come first).
     let mut stack: Vec<NodeId> = Vec::new();
     ns.walk_browse_tree(|path, item_id, is_leaf| {
