@@ -4,6 +4,19 @@
 //!
 //! All logic is in the pure `parse_*` functions and [`VarDatabase::build`];
 //! [`load_database_file`] only reads the files.
+//!
+//! Layout (issue 16: large plants have up to a million variables). No `String` per cell
+//! or per map key:
+//! - every cell of the table is text in one `CellTable`, row after row, with a `u32` end
+//!   per cell (17 columns: 68 B) and a `u32` line per row; the row's text is ~90 B;
+//! - the `Name` and public-name (alias) indexes are `hashbrown::HashTable<u32>`s of row
+//!   numbers, names compared in the table (~6 B each per variable);
+//! - the tree ([`GroupNode`]) holds `u32` rows (4 B per variable);
+//! - a slot per variable (16 B) for its decoded [`Variable`], made on first use and kept.
+//!
+//! About 195 B per variable in all (210 B measured with 1,000,000 variables by
+//! `cargo bench -p asix-model --bench vardb`). [`load_database_file`] streams the CSV into
+//! the table ([`for_each_csv_record`]); [`VarView`] reads a variable's attributes in place.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -427,24 +440,82 @@ pub fn parse_var_set(bytes: &[u8], file: &str) -> Result<(VarSetFile, Vec<Warnin
         groups: Vec::new(),
     };
     let mut warnings = Vec::new();
+    for_each_var_set_line(&text, file, |line, l| {
+        match l {
+            SetLine::Group(path) => set.groups.push(VarSetGroup {
+                path: path.into_iter().map(str::to_owned).collect(),
+                line,
+                variables: Vec::new(),
+            }),
+            SetLine::Variable(name) => {
+                if let Some(group) = set.groups.last_mut() {
+                    group.variables.push((name.to_owned(), line));
+                }
+            }
+            SetLine::Setting(key, value) => {
+                apply_setting(&mut set, &mut warnings, line, key, value)
+            }
+        }
+        true
+    })?;
+    Ok((set, warnings))
+}
+
+fn apply_setting(
+    set: &mut VarSetFile,
+    warnings: &mut Vec<Warning>,
+    line: usize,
+    key: &str,
+    value: &str,
+) {
+    let value = (!value.is_empty()).then(|| value.to_owned());
+    match key.to_ascii_lowercase().as_str() {
+        "attributes" => set.attributes = value,
+        "title" => set.title = value,
+        other => warnings.push(Warning::new(
+            &set.file,
+            line,
+            format!("unknown setting `{other}` ignored"),
+        )),
+    }
+}
+
+/// A line of a variable-set file that means something.
+enum SetLine<'t> {
+    /// `[a/b]`: the path from the root (empty for `[/]`).
+    Group(Vec<&'t str>),
+    /// A variable of the last group.
+    Variable(&'t str),
+    /// `key = value` before the first group (both trimmed).
+    Setting(&'t str, &'t str),
+}
+
+/// Reads a variable-set text line by line, borrowing every name from it; `f` returns
+/// whether to go on.
+fn for_each_var_set_line<'t>(
+    text: &'t str,
+    file: &str,
+    mut f: impl FnMut(usize, SetLine<'t>) -> bool,
+) -> Result<(), DbError> {
+    let mut in_group = false;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let t = raw.trim();
         if t.is_empty() || t.starts_with(';') || t.starts_with('#') {
             continue;
         }
-        if let Some(rest) = t.strip_prefix('[') {
+        let l = if let Some(rest) = t.strip_prefix('[') {
             let inner = rest
                 .strip_suffix(']')
                 .ok_or_else(|| {
                     DbError::invalid(file, line, format!("group header `{t}` has no closing `]`"))
                 })?
                 .trim();
-            let path: Vec<String> = if inner.is_empty() || inner == "/" {
+            let path: Vec<&str> = if inner.is_empty() || inner == "/" {
                 Vec::new()
             } else {
-                let segments: Vec<String> = inner.split('/').map(|s| s.trim().to_owned()).collect();
-                if segments.iter().any(String::is_empty) {
+                let segments: Vec<&str> = inner.split('/').map(str::trim).collect();
+                if segments.iter().any(|s| s.is_empty()) {
                     return Err(DbError::invalid(
                         file,
                         line,
@@ -453,49 +524,32 @@ pub fn parse_var_set(bytes: &[u8], file: &str) -> Result<(VarSetFile, Vec<Warnin
                 }
                 segments
             };
-            set.groups.push(VarSetGroup {
-                path,
-                line,
-                variables: Vec::new(),
-            });
-            continue;
-        }
-        match set.groups.last_mut() {
-            Some(group) => {
-                if t.chars().any(char::is_control) {
-                    return Err(DbError::invalid(
-                        file,
-                        line,
-                        "variable name with a control character",
-                    ));
-                }
-                group.variables.push((t.to_owned(), line));
+            in_group = true;
+            SetLine::Group(path)
+        } else if in_group {
+            if t.chars().any(char::is_control) {
+                return Err(DbError::invalid(
+                    file,
+                    line,
+                    "variable name with a control character",
+                ));
             }
-            None => {
-                let Some((key, value)) = t.split_once('=') else {
-                    return Err(DbError::invalid(
-                        file,
-                        line,
-                        format!(
-                            "`{t}` is before the first group header (use [/] for the root group)"
-                        ),
-                    ));
-                };
-                let value = value.trim();
-                let value = (!value.is_empty()).then(|| value.to_owned());
-                match key.trim().to_ascii_lowercase().as_str() {
-                    "attributes" => set.attributes = value,
-                    "title" => set.title = value,
-                    other => warnings.push(Warning::new(
-                        file,
-                        line,
-                        format!("unknown setting `{other}` ignored"),
-                    )),
-                }
-            }
+            SetLine::Variable(t)
+        } else {
+            let Some((key, value)) = t.split_once('=') else {
+                return Err(DbError::invalid(
+                    file,
+                    line,
+                    format!("`{t}` is before the first group header (use [/] for the root group)"),
+                ));
+            };
+            SetLine::Setting(key.trim(), value.trim())
+        };
+        if !f(line, l) {
+            break;
         }
     }
-    Ok((set, warnings))
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -588,8 +642,8 @@ pub struct GroupNode {
 }
 
 impl GroupNode {
-    fn child(&mut self, name: &str) -> &mut GroupNode {
-        let pos = match self.groups.iter().position(|g| g.name == name) {
+    fn child_pos(&mut self, name: &str) -> usize {
+        match self.groups.iter().position(|g| g.name == name) {
             Some(p) => p,
             None => {
                 self.groups.push(GroupNode {
@@ -598,8 +652,7 @@ impl GroupNode {
                 });
                 self.groups.len() - 1
             }
-        };
-        &mut self.groups[pos]
+        }
     }
 }
 
@@ -1028,14 +1081,22 @@ impl VarDatabase {
                 .push_row(*line, row.iter().map(String::as_str))
                 .map_err(|(line, m)| DbError::invalid(&table.file, line, m))?;
         }
-        Self::build_cells(&table.file, table.columns.clone(), cells, set, alias)
+        Self::build_cells(
+            &table.file,
+            table.columns.clone(),
+            cells,
+            set.map(|s| (s, None)),
+            alias,
+        )
     }
 
+    /// `set`: the variable set, with the text to stream its groups from when they were
+    /// not parsed into it.
     fn build_cells(
         file: &str,
         table_columns: Vec<String>,
         mut cells: CellTable,
-        set: Option<&VarSetFile>,
+        set: Option<(&VarSetFile, Option<&str>)>,
         alias: Option<&str>,
     ) -> Result<(VarDatabase, Vec<Warning>), DbError> {
         let mut warnings = Vec::new();
@@ -1152,39 +1213,72 @@ impl VarDatabase {
         }
         let mut root = GroupNode::default();
         let visible = |i: usize| !variables.view(i).public_name().is_empty();
+        // The group being filled: child positions from the root.
+        let mut current: Vec<usize> = Vec::new();
+        let mut enter = |root: &mut GroupNode, path: &mut dyn Iterator<Item = &str>| {
+            current.clear();
+            let mut node = root;
+            for segment in path {
+                let pos = node.child_pos(segment);
+                current.push(pos);
+                node = &mut node.groups[pos];
+            }
+            current.clone()
+        };
+        let add = |root: &mut GroupNode,
+                   at: &[usize],
+                   warnings: &mut Vec<Warning>,
+                   set_file: &str,
+                   var: &str,
+                   line: usize| {
+            let mut node = root;
+            for &pos in at {
+                node = &mut node.groups[pos];
+            }
+            match by_name.find(cells, var) {
+                None => warnings.push(Warning::new(
+                    set_file,
+                    line,
+                    format!("variable `{var}` is not in the attribute table; skipped"),
+                )),
+                Some(i) if !visible(i) => {}
+                Some(i) if node.variables.contains(&(i as u32)) => warnings.push(Warning::new(
+                    set_file,
+                    line,
+                    format!("variable `{var}` listed twice in the group; skipped"),
+                )),
+                Some(i) => node.variables.push(i as u32),
+            }
+        };
         match set {
             None => {
                 root.variables = (0..n).filter(|&i| visible(i)).map(|i| i as u32).collect();
             }
-            Some(set) => {
+            Some((set, None)) => {
                 for group in &set.groups {
-                    let mut node = &mut root;
-                    for segment in &group.path {
-                        node = node.child(segment);
-                    }
+                    let at = enter(&mut root, &mut group.path.iter().map(String::as_str));
                     for (var, line) in &group.variables {
-                        match by_name.find(cells, var) {
-                            None => warnings.push(Warning::new(
-                                &set.file,
-                                *line,
-                                format!("variable `{var}` is not in the attribute table; skipped"),
-                            )),
-                            Some(i) if !visible(i) => {}
-                            Some(i) if node.variables.contains(&(i as u32)) => {
-                                warnings.push(Warning::new(
-                                    &set.file,
-                                    *line,
-                                    format!("variable `{var}` listed twice in the group; skipped"),
-                                ))
-                            }
-                            Some(i) => node.variables.push(i as u32),
-                        }
+                        add(&mut root, &at, &mut warnings, &set.file, var, *line);
                     }
                 }
             }
+            Some((set, Some(text))) => {
+                // The groups streamed from the set's text (its settings were read already).
+                let mut at = Vec::new();
+                for_each_var_set_line(text, &set.file, |line, l| {
+                    match l {
+                        SetLine::Group(path) => at = enter(&mut root, &mut path.into_iter()),
+                        SetLine::Variable(var) => {
+                            add(&mut root, &at, &mut warnings, &set.file, var, line)
+                        }
+                        SetLine::Setting(..) => {}
+                    }
+                    true
+                })?;
+            }
         }
         let db = VarDatabase {
-            title: set.and_then(|s| s.title.clone()),
+            title: set.and_then(|s| s.0.title.clone()),
             alias_column: alias_col.map(|i| table_columns[i].clone()),
             columns: table_columns,
             variables,
@@ -1281,7 +1375,24 @@ pub fn load_database_file(
         let (columns, cells) = read_cell_table(&read(path)?, &file)?;
         return VarDatabase::build_cells(&file, columns, cells, None, alias);
     }
-    let (set, mut warnings) = parse_var_set(&read(path)?, &path.display().to_string())?;
+    // The settings only (they come before the first group); the groups are streamed
+    // from the text into the tree when the table is in.
+    let (text, _) = decode_text(&read(path)?);
+    let mut set = VarSetFile {
+        file: path.display().to_string(),
+        attributes: None,
+        title: None,
+        groups: Vec::new(),
+    };
+    let mut warnings = Vec::new();
+    let set_file = set.file.clone();
+    for_each_var_set_line(&text, &set_file, |line, l| match l {
+        SetLine::Setting(key, value) => {
+            apply_setting(&mut set, &mut warnings, line, key, value);
+            true
+        }
+        SetLine::Group(_) | SetLine::Variable(_) => false,
+    })?;
     let table_path = match &set.attributes {
         Some(a) => {
             let a = if std::path::MAIN_SEPARATOR == '/' {
@@ -1295,7 +1406,8 @@ pub fn load_database_file(
     };
     let file = table_path.display().to_string();
     let (columns, cells) = read_cell_table(&read(&table_path)?, &file)?;
-    let (db, more) = VarDatabase::build_cells(&file, columns, cells, Some(&set), alias)?;
+    let (db, more) =
+        VarDatabase::build_cells(&file, columns, cells, Some((&set, Some(&text))), alias)?;
     warnings.extend(more);
     Ok((db, warnings))
 }
