@@ -68,18 +68,27 @@ struct Node {
 
 #[derive(Debug, Clone)]
 struct BuilderNode {
-    name: Box<str>,
+    /// In the builder's text.
+    name: Span,
     /// `None`: the item ID is the name (a variable's leaf, mostly).
-    item_id: Option<Box<str>>,
+    item_id: Option<Span>,
     parent: u32,
     children: Vec<u32>,
     flags: u8,
 }
 
 impl BuilderNode {
-    fn item_id(&self) -> &str {
-        self.item_id.as_deref().unwrap_or(&self.name)
+    fn name<'t>(&self, text: &'t str) -> &'t str {
+        span_str(text, self.name)
     }
+
+    fn item_id<'t>(&self, text: &'t str) -> &'t str {
+        span_str(text, self.item_id.unwrap_or(self.name))
+    }
+}
+
+fn span_str(text: &str, span: Span) -> &str {
+    &text[span.start as usize..(span.start + span.len) as usize]
 }
 
 /// Builds an [`AddressSpace`]. Adding an existing name under the same parent is idempotent
@@ -88,6 +97,8 @@ impl BuilderNode {
 #[derive(Debug, Clone)]
 pub struct AddressSpaceBuilder {
     nodes: Vec<BuilderNode>,
+    /// The names and item IDs of the nodes, back to back (no allocation per node).
+    text: String,
     /// Every node by (parent, name): indexes into `nodes`, compared through the nodes.
     by_parent_name: HashTable<u32>,
     text_len: usize,
@@ -105,12 +116,13 @@ impl AddressSpaceBuilder {
     pub fn new() -> Self {
         AddressSpaceBuilder {
             nodes: vec![BuilderNode {
-                name: "".into(),
+                name: Span { start: 0, len: 0 },
                 item_id: None,
                 parent: 0,
                 children: Vec::new(),
                 flags: BRANCH,
             }],
+            text: String::new(),
             by_parent_name: HashTable::new(),
             text_len: 0,
             flat: false,
@@ -122,10 +134,10 @@ impl AddressSpaceBuilder {
     /// tables' regrowth).
     pub fn reserve(&mut self, additional: usize) -> &mut Self {
         self.nodes.reserve(additional);
-        let nodes = &self.nodes;
+        let (nodes, text) = (&self.nodes, &self.text);
         self.by_parent_name.reserve(additional, |&i| {
             let n = &nodes[i as usize];
-            hash_child(n.parent, &n.name)
+            hash_child(n.parent, n.name(text))
         });
         self
     }
@@ -233,20 +245,20 @@ impl AddressSpaceBuilder {
         }
         let p = parent.0;
         let hash = hash_child(p, name);
-        let nodes = &self.nodes;
+        let (nodes, text) = (&self.nodes, &self.text);
         let found = self
             .by_parent_name
             .find(hash, |&i| {
                 let n = &nodes[i as usize];
-                n.parent == p && &*n.name == name
+                n.parent == p && n.name(text) == name
             })
             .copied();
         if let Some(existing) = found {
             let n = &mut self.nodes[existing as usize];
-            if n.item_id() != item_id {
+            if n.item_id(&self.text) != item_id {
                 return Err(BuildError::ConflictingItemId {
                     name: name.to_owned(),
-                    existing: n.item_id().to_owned(),
+                    existing: n.item_id(&self.text).to_owned(),
                     requested: item_id.to_owned(),
                 });
             }
@@ -261,9 +273,19 @@ impl AddressSpaceBuilder {
         }
         self.text_len += text;
         let id = self.nodes.len() as u32;
+        let mut push = |s: &str| {
+            let span = Span {
+                start: self.text.len() as u32,
+                len: s.len() as u32,
+            };
+            self.text.push_str(s);
+            span
+        };
+        let name_span = push(name);
+        let item_span = (item_id != name).then(|| push(item_id));
         self.nodes.push(BuilderNode {
-            name: name.into(),
-            item_id: (item_id != name).then(|| item_id.into()),
+            name: name_span,
+            item_id: item_span,
             parent: p,
             children: Vec::new(),
             flags: kind,
@@ -271,10 +293,10 @@ impl AddressSpaceBuilder {
         // A leaf that gets a child becomes a branch that is still an item.
         self.nodes[p as usize].flags |= BRANCH;
         self.nodes[p as usize].children.push(id);
-        let nodes = &self.nodes;
+        let (nodes, text) = (&self.nodes, &self.text);
         self.by_parent_name.insert_unique(hash, id, |&i| {
             let n = &nodes[i as usize];
-            hash_child(n.parent, &n.name)
+            hash_child(n.parent, n.name(text))
         });
         Ok(NodeId(id))
     }
@@ -283,6 +305,7 @@ impl AddressSpaceBuilder {
     pub fn build(self) -> AddressSpace {
         let AddressSpaceBuilder {
             nodes: bnodes,
+            text: btext,
             by_parent_name,
             flat,
             filter_case,
@@ -307,8 +330,8 @@ impl AddressSpaceBuilder {
         let mut nodes: Vec<Node> = Vec::with_capacity(bnodes.len());
         for (new_index, &old) in order.iter().enumerate() {
             let b = &bnodes[old as usize];
-            let name = intern_str(&b.name, &mut text, &mut interned);
-            let item_id = intern_str(b.item_id(), &mut text, &mut interned);
+            let name = intern_str(b.name(&btext), &mut text, &mut interned);
+            let item_id = intern_str(b.item_id(&btext), &mut text, &mut interned);
             let first_child = b.children.first().map_or(0, |&c| new_of_old[c as usize]);
             debug_assert!(b
                 .children
