@@ -4,37 +4,50 @@
 
 use super::namespace::AsixNamespace;
 use ctopc_core::browse::{AddressSpace, BuildError, NodeId};
-use std::collections::HashMap;
 
 /// Separator of the item IDs given to group branches (groups are not items; the ID only
 /// serves OPC_BROWSE_TO and IOPCBrowse::Browse): the group path joined with `/`.
 pub const GROUP_PATH_SEPARATOR: &str = "/";
 
-/// Builds the address space from [`AsixNamespace::browse_nodes`]. Without a database it
+/// Builds the address space from [`AsixNamespace::walk_browse_tree`] (the nodes of
+/// [`AsixNamespace::browse_nodes`], streamed: no path is copied). Without a database it
 /// is an empty root (descriptive IDs still work; they are not browsable).
 pub fn build_address_space(ns: &AsixNamespace) -> Result<AddressSpace, BuildError> {
     let mut b = AddressSpace::builder();
-    let mut ids: HashMap<Vec<String>, NodeId> = HashMap::new();
-    for node in ns.browse_nodes() {
-        let Some((name, parent_path)) = node.path.split_last() else {
-            continue;
+    if let Some(db) = ns.database(crate::BASIC_CHANNEL) {
+        // A leaf per variable (a branch and up to five leaves with AttributesAsItems),
+        // and about a group per hundred variables.
+        let per = if ns.config().server.attributes_as_items {
+            6
+        } else {
+            1
         };
-        let parent = if parent_path.is_empty() {
+        b.reserve(db.variables.len() * per + db.variables.len() / 64);
+    }
+    // The node at each depth of the path being walked (pre-order: parents come first).
+    let mut stack: Vec<NodeId> = Vec::new();
+    ns.walk_browse_tree(|path, item_id, is_leaf| {
+        let Some((name, parent_path)) = path.split_last() else {
+            return Ok(());
+        };
+        stack.truncate(parent_path.len());
+        let parent = if parent_path.is_empty() || stack.len() < parent_path.len() {
             NodeId::ROOT
         } else {
-            ids.get(parent_path).copied().unwrap_or(NodeId::ROOT)
+            stack[parent_path.len() - 1]
         };
-        let id = match (&node.item_id, node.is_leaf) {
+        let id = match (item_id, is_leaf) {
             (Some(item), true) => b.add_leaf(parent, name, item)?,
             (Some(item), false) => {
                 let id = b.add_branch(parent, name, item)?;
                 b.set_is_item(id, true)?;
                 id
             }
-            (None, _) => b.add_branch(parent, name, &node.path.join(GROUP_PATH_SEPARATOR))?,
+            (None, _) => b.add_branch(parent, name, &path.join(GROUP_PATH_SEPARATOR))?,
         };
-        ids.insert(node.path.clone(), id);
-    }
+        stack.push(id);
+        Ok(())
+    })?;
     Ok(b.build())
 }
 

@@ -20,6 +20,7 @@ pub mod itemid;
 pub mod namespace;
 pub mod quality_rules;
 pub mod startup;
+pub mod synthetic;
 pub mod text;
 pub mod vardb;
 

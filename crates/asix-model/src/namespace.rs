@@ -332,17 +332,37 @@ impl AsixNamespace {
     /// Groups without visible variables are left out. Empty without a database.
     pub fn browse_nodes(&self) -> impl Iterator<Item = BrowseNode> {
         let mut out = Vec::new();
-        if let Some(db) = self.database(BASIC_CHANNEL) {
-            let mut path = Vec::new();
-            walk(
-                db,
-                &db.root,
-                &mut path,
-                self.config.server.attributes_as_items,
-                &mut out,
-            );
-        }
+        let _ = self.walk_browse_tree(|path, item_id, is_leaf| {
+            out.push(BrowseNode {
+                path: path.iter().map(|s| (*s).to_owned()).collect(),
+                item_id: item_id.map(str::to_owned),
+                is_leaf,
+            });
+            Ok::<(), std::convert::Infallible>(())
+        });
         out.into_iter()
+    }
+
+    /// [`AsixNamespace::browse_nodes`] without copies: calls `visit(path, item_id,
+    /// is_leaf)` for each node in the same pre-order, with names borrowed from the
+    /// database. An error of `visit` ends the walk.
+    pub fn walk_browse_tree<E>(
+        &self,
+        mut visit: impl FnMut(&[&str], Option<&str>, bool) -> Result<(), E>,
+    ) -> Result<(), E> {
+        match self.database(BASIC_CHANNEL) {
+            Some(db) => {
+                let mut path = Vec::new();
+                walk(
+                    db,
+                    &db.root,
+                    &mut path,
+                    self.config.server.attributes_as_items,
+                    &mut visit,
+                )
+            }
+            None => Ok(()),
+        }
     }
 }
 
@@ -351,49 +371,38 @@ fn has_variables(g: &GroupNode) -> bool {
     !g.variables.is_empty() || g.groups.iter().any(has_variables)
 }
 
-fn walk(
-    db: &VarDatabase,
-    node: &GroupNode,
-    path: &mut Vec<String>,
+fn walk<'a, E>(
+    db: &'a VarDatabase,
+    node: &'a GroupNode,
+    path: &mut Vec<&'a str>,
     attributes_as_items: bool,
-    out: &mut Vec<BrowseNode>,
-) {
+    visit: &mut impl FnMut(&[&str], Option<&str>, bool) -> Result<(), E>,
+) -> Result<(), E> {
     for g in node.groups.iter().filter(|g| has_variables(g)) {
-        path.push(g.name.clone());
-        out.push(BrowseNode {
-            path: path.clone(),
-            item_id: None,
-            is_leaf: false,
-        });
-        walk(db, g, path, attributes_as_items, out);
+        path.push(&g.name);
+        visit(path, None, false)?;
+        walk(db, g, path, attributes_as_items, visit)?;
         path.pop();
     }
     for &i in &node.variables {
-        let var = &db.variables[i];
-        let name = var.public_name.clone();
-        path.push(name.clone());
-        out.push(BrowseNode {
-            path: path.clone(),
-            item_id: Some(name.clone()),
-            is_leaf: !attributes_as_items,
-        });
+        let var = db.variables.view(i as usize);
+        let name = var.public_name();
+        path.push(name);
+        visit(path, Some(name), !attributes_as_items)?;
         if attributes_as_items {
             let mut leaves = vec!["CV", "DESC", "EU_UNIT"];
-            if var.range.is_some() {
+            if var.range().is_some() {
                 leaves.extend(["HI_EU", "LO_EU"]);
             }
             for leaf in leaves {
-                path.push(leaf.to_owned());
-                out.push(BrowseNode {
-                    path: path.clone(),
-                    item_id: Some(format!("{name}.{leaf}")),
-                    is_leaf: true,
-                });
+                path.push(leaf);
+                visit(path, Some(&format!("{name}.{leaf}")), true)?;
                 path.pop();
             }
         }
         path.pop();
     }
+    Ok(())
 }
 
 struct Ctx<'a> {

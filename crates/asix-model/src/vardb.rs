@@ -4,10 +4,26 @@
 //!
 //! All logic is in the pure `parse_*` functions and [`VarDatabase::build`];
 //! [`load_database_file`] only reads the files.
+//!
+//! Layout (issue 16: large plants have up to a million variables). No `String` per cell
+//! or per map key:
+//! - every cell of the table is text in one `CellTable`, row after row, with a `u32` end
+//!   per cell (17 columns: 68 B) and a `u32` line per row; the row's text is ~90 B;
+//! - the `Name` and public-name (alias) indexes are `hashbrown::HashTable<u32>`s of row
+//!   numbers, names compared in the table (~6 B each per variable);
+//! - the tree ([`GroupNode`]) holds `u32` rows (4 B per variable);
+//! - a slot per variable (16 B) for its decoded [`Variable`], made on first use and kept.
+//!
+//! About 195 B per variable in all (210 B measured with 1,000,000 variables by
+//! `cargo bench -p asix-model --bench vardb`). [`load_database_file`] streams the CSV into
+//! the table ([`for_each_csv_record`]); [`VarView`] reads a variable's attributes in place.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
+use std::sync::OnceLock;
+
+use hashbrown::HashTable;
 
 use super::format::FormatSpec;
 use super::text::{decode_text, parse_bool, parse_number, Warning};
@@ -89,13 +105,83 @@ pub fn detect_separator(text: &str) -> char {
     seps[best]
 }
 
+/// The fields of one CSV record as [`for_each_csv_record`] hands them out: one text buffer
+/// and the end of each field in it (no `String` per field).
+#[derive(Debug, Default)]
+pub struct CsvFields {
+    buf: String,
+    ends: Vec<usize>,
+}
+
+impl CsvFields {
+    /// The number of fields.
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ends.is_empty()
+    }
+
+    /// Field `i` (`""` past the end).
+    pub fn get(&self, i: usize) -> &str {
+        match self.ends.get(i) {
+            Some(&end) => &self.buf[if i == 0 { 0 } else { self.ends[i - 1] }..end],
+            None => "",
+        }
+    }
+
+    /// Every field, in order.
+    pub fn iter(&self) -> impl Iterator<Item = &str> + '_ {
+        (0..self.len()).map(|i| self.get(i))
+    }
+
+    fn start(&self) -> usize {
+        self.ends.last().copied().unwrap_or(0)
+    }
+
+    /// Ends the field that started at [`CsvFields::start`]; unquoted fields are trimmed.
+    fn end_field(&mut self, quoted: bool) {
+        let start = self.start();
+        if !quoted {
+            let s = &self.buf[start..];
+            let lead = s.len() - s.trim_start().len();
+            let len = s.trim().len();
+            self.buf.drain(start..start + lead);
+            self.buf.truncate(start + len);
+        }
+        self.ends.push(self.buf.len());
+    }
+
+    fn clear(&mut self) {
+        self.buf.clear();
+        self.ends.clear();
+    }
+}
+
 /// Splits CSV text into records (RFC 4180 quoting: `"a ""b"""`, quoted fields may hold
 /// separators and line breaks). Unquoted fields are trimmed; blank lines are skipped.
 /// Errors: `(line, message)` for text after a closing quote or an unterminated quote.
 pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String)> {
     let mut records = Vec::new();
-    let mut fields: Vec<String> = Vec::new();
-    let mut field = String::new();
+    for_each_csv_record(text, sep, |line, fields| {
+        records.push(CsvRecord {
+            line,
+            fields: fields.iter().map(str::to_owned).collect(),
+        });
+        Ok(())
+    })?;
+    Ok(records)
+}
+
+/// [`parse_csv`] streaming: calls `record(line, fields)` for each record as it is read,
+/// with one reused buffer; an error of `record` stops the reading and is returned.
+pub fn for_each_csv_record(
+    text: &str,
+    sep: char,
+    mut record: impl FnMut(usize, &CsvFields) -> Result<(), (usize, String)>,
+) -> Result<(), (usize, String)> {
+    let mut fields = CsvFields::default();
     let mut line = 1usize;
     let mut record_line = 1usize;
     let mut chars = text.chars().peekable();
@@ -105,26 +191,22 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
     let mut quote_line = 0usize;
     let mut after_quote = false;
     let mut end_record =
-        |fields: &mut Vec<String>, field: &mut String, quoted: bool, record_line: usize| {
-            fields.push(if quoted {
-                std::mem::take(field)
+        |fields: &mut CsvFields, quoted: bool, record_line: usize| -> Result<(), (usize, String)> {
+            fields.end_field(quoted);
+            let r = if !(fields.len() == 1 && fields.get(0).is_empty() && !quoted) {
+                record(record_line, fields)
             } else {
-                std::mem::take(field).trim().to_owned()
-            });
-            let f = std::mem::take(fields);
-            if !(f.len() == 1 && f[0].is_empty() && !quoted) {
-                records.push(CsvRecord {
-                    line: record_line,
-                    fields: f,
-                });
-            }
+                Ok(())
+            };
+            fields.clear();
+            r
         };
     while let Some(c) = chars.next() {
         if in_quotes {
             match c {
                 '"' if chars.peek() == Some(&'"') => {
                     chars.next();
-                    field.push('"');
+                    fields.buf.push('"');
                 }
                 '"' => {
                     in_quotes = false;
@@ -135,22 +217,18 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
                         chars.next();
                     }
                     line += 1;
-                    field.push('\n');
+                    fields.buf.push('\n');
                 }
                 '\n' => {
                     line += 1;
-                    field.push('\n');
+                    fields.buf.push('\n');
                 }
-                _ => field.push(c),
+                _ => fields.buf.push(c),
             }
             continue;
         }
         if c == sep {
-            fields.push(if quoted {
-                std::mem::take(&mut field)
-            } else {
-                std::mem::take(&mut field).trim().to_owned()
-            });
+            fields.end_field(quoted);
             quoted = false;
             after_quote = false;
             continue;
@@ -160,7 +238,7 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
                 if c == '\r' && chars.peek() == Some(&'\n') {
                     chars.next();
                 }
-                end_record(&mut fields, &mut field, quoted, record_line);
+                end_record(&mut fields, quoted, record_line)?;
                 quoted = false;
                 after_quote = false;
                 line += 1;
@@ -171,22 +249,23 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
                     return Err((line, format!("text `{c}` after a closing quote")));
                 }
             }
-            '"' if field.trim().is_empty() => {
-                field.clear();
+            '"' if fields.buf[fields.start()..].trim().is_empty() => {
+                let start = fields.start();
+                fields.buf.truncate(start);
                 quoted = true;
                 in_quotes = true;
                 quote_line = line;
             }
-            _ => field.push(c),
+            _ => fields.buf.push(c),
         }
     }
     if in_quotes {
         return Err((quote_line, "quoted field is not closed".into()));
     }
-    if !fields.is_empty() || !field.is_empty() || quoted {
-        end_record(&mut fields, &mut field, quoted, record_line);
+    if !fields.is_empty() || fields.buf.len() > fields.start() || quoted {
+        end_record(&mut fields, quoted, record_line)?;
     }
-    Ok(records)
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -241,75 +320,89 @@ pub mod columns {
 
 /// Parses the attribute table (CSV bytes; encoding and separator detected).
 pub fn parse_attribute_table(bytes: &[u8], file: &str) -> Result<AttributeTable, DbError> {
+    let mut rows = Vec::new();
+    let columns = read_table(bytes, file, |line, fields, ncols| {
+        let row = (0..ncols).map(|i| fields.get(i).to_owned()).collect();
+        rows.push((line, row));
+        Ok(())
+    })?;
+    Ok(AttributeTable {
+        file: file.to_owned(),
+        columns,
+        rows,
+    })
+}
+
+/// The attribute table streamed into a [`CellTable`]: what [`load_database_file`] reads,
+/// without a `String` per cell.
+fn read_cell_table(bytes: &[u8], file: &str) -> Result<(Vec<String>, CellTable), DbError> {
+    let mut cells = CellTable::default();
+    let columns = read_table(bytes, file, |line, fields, ncols| {
+        cells.ncols = ncols;
+        cells.push_row(line, (0..ncols).map(|i| fields.get(i)))
+    })?;
+    cells.ncols = columns.len();
+    Ok((columns, cells))
+}
+
+/// Reads the header (checked) and hands each row with the number of columns to `row`
+/// (cells past the header's are empty: [`CsvFields::get`]). Returns the columns.
+fn read_table(
+    bytes: &[u8],
+    file: &str,
+    mut row: impl FnMut(usize, &CsvFields, usize) -> Result<(), (usize, String)>,
+) -> Result<Vec<String>, DbError> {
     let (text, _) = decode_text(bytes);
     let sep = detect_separator(&text);
-    let records = parse_csv(&text, sep).map_err(|(line, m)| DbError::invalid(file, line, m))?;
-    let mut records = records.into_iter();
-    let header = records
-        .next()
-        .ok_or_else(|| DbError::invalid(file, 0, "the attribute table is empty (no header row)"))?;
-    let mut columns: Vec<String> = header.fields;
+    let mut columns: Option<Vec<String>> = None;
+    for_each_csv_record(&text, sep, |line, fields| match &columns {
+        None => {
+            columns = Some(check_header(line, fields)?);
+            Ok(())
+        }
+        Some(columns) => {
+            let ncols = columns.len();
+            if fields.len() > ncols && (ncols..fields.len()).any(|i| !fields.get(i).is_empty()) {
+                return Err((
+                    line,
+                    format!(
+                        "{} cells, but the header has {} columns",
+                        fields.len(),
+                        ncols
+                    ),
+                ));
+            }
+            row(line, fields, ncols)
+        }
+    })
+    .map_err(|(line, m)| DbError::invalid(file, line, m))?;
+    columns.ok_or_else(|| DbError::invalid(file, 0, "the attribute table is empty (no header row)"))
+}
+
+fn check_header(line: usize, fields: &CsvFields) -> Result<Vec<String>, (usize, String)> {
+    let mut columns: Vec<String> = fields.iter().map(str::to_owned).collect();
     // Trailing empty header cells (a spreadsheet's trailing separators) are dropped.
     while columns.last().is_some_and(|c| c.is_empty()) && columns.len() > 1 {
         columns.pop();
     }
     for (i, c) in columns.iter().enumerate() {
         if c.is_empty() {
-            return Err(DbError::invalid(
-                file,
-                header.line,
-                format!("column {} has no name", i + 1),
-            ));
+            return Err((line, format!("column {} has no name", i + 1)));
         }
         if c.contains('.') || c.chars().any(char::is_control) {
-            return Err(DbError::invalid(
-                file,
-                header.line,
-                format!("column name `{c}` may not contain `.`"),
-            ));
+            return Err((line, format!("column name `{c}` may not contain `.`")));
         }
         if let Some(prev) = columns[..i].iter().find(|p| p.eq_ignore_ascii_case(c)) {
-            return Err(DbError::invalid(
-                file,
-                header.line,
-                format!("column `{c}` repeats column `{prev}`"),
-            ));
+            return Err((line, format!("column `{c}` repeats column `{prev}`")));
         }
     }
     if !columns
         .iter()
         .any(|c| c.eq_ignore_ascii_case(columns::NAME))
     {
-        return Err(DbError::invalid(
-            file,
-            header.line,
-            "the header has no `Name` column",
-        ));
+        return Err((line, "the header has no `Name` column".into()));
     }
-    let mut rows = Vec::new();
-    for mut r in records {
-        if r.fields.len() > columns.len() {
-            if r.fields[columns.len()..].iter().any(|f| !f.is_empty()) {
-                return Err(DbError::invalid(
-                    file,
-                    r.line,
-                    format!(
-                        "{} cells, but the header has {} columns",
-                        r.fields.len(),
-                        columns.len()
-                    ),
-                ));
-            }
-            r.fields.truncate(columns.len());
-        }
-        r.fields.resize(columns.len(), String::new());
-        rows.push((r.line, r.fields));
-    }
-    Ok(AttributeTable {
-        file: file.to_owned(),
-        columns,
-        rows,
-    })
+    Ok(columns)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -347,24 +440,82 @@ pub fn parse_var_set(bytes: &[u8], file: &str) -> Result<(VarSetFile, Vec<Warnin
         groups: Vec::new(),
     };
     let mut warnings = Vec::new();
+    for_each_var_set_line(&text, file, |line, l| {
+        match l {
+            SetLine::Group(path) => set.groups.push(VarSetGroup {
+                path: path.into_iter().map(str::to_owned).collect(),
+                line,
+                variables: Vec::new(),
+            }),
+            SetLine::Variable(name) => {
+                if let Some(group) = set.groups.last_mut() {
+                    group.variables.push((name.to_owned(), line));
+                }
+            }
+            SetLine::Setting(key, value) => {
+                apply_setting(&mut set, &mut warnings, line, key, value)
+            }
+        }
+        true
+    })?;
+    Ok((set, warnings))
+}
+
+fn apply_setting(
+    set: &mut VarSetFile,
+    warnings: &mut Vec<Warning>,
+    line: usize,
+    key: &str,
+    value: &str,
+) {
+    let value = (!value.is_empty()).then(|| value.to_owned());
+    match key.to_ascii_lowercase().as_str() {
+        "attributes" => set.attributes = value,
+        "title" => set.title = value,
+        other => warnings.push(Warning::new(
+            &set.file,
+            line,
+            format!("unknown setting `{other}` ignored"),
+        )),
+    }
+}
+
+/// A line of a variable-set file that means something.
+enum SetLine<'t> {
+    /// `[a/b]`: the path from the root (empty for `[/]`).
+    Group(Vec<&'t str>),
+    /// A variable of the last group.
+    Variable(&'t str),
+    /// `key = value` before the first group (both trimmed).
+    Setting(&'t str, &'t str),
+}
+
+/// Reads a variable-set text line by line, borrowing every name from it; `f` returns
+/// whether to go on.
+fn for_each_var_set_line<'t>(
+    text: &'t str,
+    file: &str,
+    mut f: impl FnMut(usize, SetLine<'t>) -> bool,
+) -> Result<(), DbError> {
+    let mut in_group = false;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         let t = raw.trim();
         if t.is_empty() || t.starts_with(';') || t.starts_with('#') {
             continue;
         }
-        if let Some(rest) = t.strip_prefix('[') {
+        let l = if let Some(rest) = t.strip_prefix('[') {
             let inner = rest
                 .strip_suffix(']')
                 .ok_or_else(|| {
                     DbError::invalid(file, line, format!("group header `{t}` has no closing `]`"))
                 })?
                 .trim();
-            let path: Vec<String> = if inner.is_empty() || inner == "/" {
+            let path: Vec<&str> = if inner.is_empty() || inner == "/" {
                 Vec::new()
             } else {
-                let segments: Vec<String> = inner.split('/').map(|s| s.trim().to_owned()).collect();
-                if segments.iter().any(String::is_empty) {
+                let segments: Vec<&str> = inner.split('/').map(str::trim).collect();
+                if segments.iter().any(|s| s.is_empty()) {
                     return Err(DbError::invalid(
                         file,
                         line,
@@ -373,49 +524,32 @@ pub fn parse_var_set(bytes: &[u8], file: &str) -> Result<(VarSetFile, Vec<Warnin
                 }
                 segments
             };
-            set.groups.push(VarSetGroup {
-                path,
-                line,
-                variables: Vec::new(),
-            });
-            continue;
-        }
-        match set.groups.last_mut() {
-            Some(group) => {
-                if t.chars().any(char::is_control) {
-                    return Err(DbError::invalid(
-                        file,
-                        line,
-                        "variable name with a control character",
-                    ));
-                }
-                group.variables.push((t.to_owned(), line));
+            in_group = true;
+            SetLine::Group(path)
+        } else if in_group {
+            if t.chars().any(char::is_control) {
+                return Err(DbError::invalid(
+                    file,
+                    line,
+                    "variable name with a control character",
+                ));
             }
-            None => {
-                let Some((key, value)) = t.split_once('=') else {
-                    return Err(DbError::invalid(
-                        file,
-                        line,
-                        format!(
-                            "`{t}` is before the first group header (use [/] for the root group)"
-                        ),
-                    ));
-                };
-                let value = value.trim();
-                let value = (!value.is_empty()).then(|| value.to_owned());
-                match key.trim().to_ascii_lowercase().as_str() {
-                    "attributes" => set.attributes = value,
-                    "title" => set.title = value,
-                    other => warnings.push(Warning::new(
-                        file,
-                        line,
-                        format!("unknown setting `{other}` ignored"),
-                    )),
-                }
-            }
+            SetLine::Variable(t)
+        } else {
+            let Some((key, value)) = t.split_once('=') else {
+                return Err(DbError::invalid(
+                    file,
+                    line,
+                    format!("`{t}` is before the first group header (use [/] for the root group)"),
+                ));
+            };
+            SetLine::Setting(key.trim(), value.trim())
+        };
+        if !f(line, l) {
+            break;
         }
     }
-    Ok((set, warnings))
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------
@@ -439,7 +573,24 @@ impl Limit {
     }
 }
 
-/// One variable with its well-known attributes decoded.
+/// A limit attribute as stored: a number, or the name of a variable holding the limit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LimitRef<'a> {
+    Value(f64),
+    Variable(&'a str),
+}
+
+impl LimitRef<'_> {
+    pub fn to_limit(self) -> Limit {
+        match self {
+            LimitRef::Value(v) => Limit::Value(v),
+            LimitRef::Variable(n) => Limit::Variable(n.to_owned()),
+        }
+    }
+}
+
+/// One variable with its well-known attributes decoded: a copy made from the compact
+/// table ([`Variables`]) when it is first asked for, then kept.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Variable {
     /// The asix name (column `Name`).
@@ -487,12 +638,12 @@ pub struct GroupNode {
     pub name: String,
     pub groups: Vec<GroupNode>,
     /// Indexes into [`VarDatabase::variables`].
-    pub variables: Vec<usize>,
+    pub variables: Vec<u32>,
 }
 
 impl GroupNode {
-    fn child(&mut self, name: &str) -> &mut GroupNode {
-        let pos = match self.groups.iter().position(|g| g.name == name) {
+    fn child_pos(&mut self, name: &str) -> usize {
+        match self.groups.iter().position(|g| g.name == name) {
             Some(p) => p,
             None => {
                 self.groups.push(GroupNode {
@@ -501,23 +652,393 @@ impl GroupNode {
                 });
                 self.groups.len() - 1
             }
-        };
-        &mut self.groups[pos]
+        }
+    }
+}
+
+/// Every cell of the attribute table in one text, row after row, and the end of each
+/// cell in it: cell `k` (row `k / ncols`, column `k % ncols`) is
+/// `text[ends[k - 1]..ends[k]]`. 4 bytes per cell plus the text itself.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+struct CellTable {
+    text: String,
+    ends: Vec<u32>,
+    ncols: usize,
+    /// The line of each row in the file.
+    lines: Vec<u32>,
+}
+
+impl CellTable {
+    fn rows(&self) -> usize {
+        self.lines.len()
+    }
+
+    fn push_row<'a>(
+        &mut self,
+        line: usize,
+        cells: impl Iterator<Item = &'a str>,
+    ) -> Result<(), (usize, String)> {
+        for c in cells {
+            self.text.push_str(c);
+            let end = u32::try_from(self.text.len()).map_err(|_| {
+                (
+                    line,
+                    "the attribute table holds more than 4 GB of text".into(),
+                )
+            })?;
+            self.ends.push(end);
+        }
+        self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        Ok(())
+    }
+
+    fn cell(&self, row: usize, col: usize) -> &str {
+        let k = row * self.ncols + col;
+        let start = if k == 0 { 0 } else { self.ends[k - 1] as usize };
+        &self.text[start..self.ends[k] as usize]
+    }
+
+    fn shrink_to_fit(&mut self) {
+        self.text.shrink_to_fit();
+        self.ends.shrink_to_fit();
+        self.lines.shrink_to_fit();
+    }
+}
+
+/// Every variable of the table (hidden ones included), in table order, stored compactly:
+/// the cells in one [`CellTable`] (the text of the row plus 4 bytes a cell), the line
+/// (4 bytes) and a slot (16 bytes) for the decoded [`Variable`], made when first asked for
+/// ([`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
+/// variables use [`Variables::view`], which decodes nothing it is not asked for.
+#[derive(Debug, Clone, Default)]
+pub struct Variables {
+    cells: CellTable,
+    name_col: usize,
+    /// The alias column in alias mode, else `name_col`.
+    public_col: usize,
+    /// The column of each of [`columns::ALL`].
+    known: Vec<Option<usize>>,
+    decoded: Vec<OnceLock<Box<Variable>>>,
+}
+
+impl PartialEq for Variables {
+    fn eq(&self, other: &Self) -> bool {
+        (&self.cells, self.name_col, self.public_col, &self.known)
+            == (&other.cells, other.name_col, other.public_col, &other.known)
+    }
+}
+
+impl Variables {
+    pub fn len(&self) -> usize {
+        self.cells.rows()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Variable `i`, decoded (and kept decoded).
+    pub fn get(&self, i: usize) -> Option<&Variable> {
+        let slot = self.decoded.get(i)?;
+        Some(slot.get_or_init(|| Box::new(self.view(i).decode())))
+    }
+
+    pub fn first(&self) -> Option<&Variable> {
+        self.get(0)
+    }
+
+    /// Every variable, decoded (see [`Variables::views`] for a scan that decodes nothing).
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = &Variable> + '_ {
+        self.decoded
+            .iter()
+            .enumerate()
+            .map(|(i, slot)| &**slot.get_or_init(|| Box::new(self.view(i).decode())))
+    }
+
+    /// A view of variable `i` (`i < len()`), reading its cells in place.
+    pub fn view(&self, i: usize) -> VarView<'_> {
+        VarView { vars: self, i }
+    }
+
+    /// A view of every variable, in table order.
+    pub fn views(&self) -> impl ExactSizeIterator<Item = VarView<'_>> + '_ {
+        (0..self.len()).map(|i| self.view(i))
+    }
+}
+
+impl<'a> IntoIterator for &'a Variables {
+    type Item = &'a Variable;
+    type IntoIter = Box<dyn Iterator<Item = &'a Variable> + 'a>;
+    fn into_iter(self) -> Self::IntoIter {
+        Box::new(self.iter())
+    }
+}
+
+/// One variable read in place from the compact table: its cells and, on demand, each
+/// decoded attribute. The decoders are the ones [`VarDatabase::build`] validated with, so
+/// on a built database they do not fail.
+#[derive(Debug, Clone, Copy)]
+pub struct VarView<'a> {
+    vars: &'a Variables,
+    i: usize,
+}
+
+impl<'a> VarView<'a> {
+    /// The index of the variable in [`VarDatabase::variables`].
+    pub fn index(&self) -> usize {
+        self.i
+    }
+
+    pub fn name(&self) -> &'a str {
+        self.cell(self.vars.name_col)
+    }
+
+    /// The name clients use: the alias in alias mode, else the name; empty: hidden.
+    pub fn public_name(&self) -> &'a str {
+        self.cell(self.vars.public_col)
+    }
+
+    pub fn line(&self) -> usize {
+        self.vars.cells.lines[self.i] as usize
+    }
+
+    /// The cell of column `col` (`""` past the last column).
+    pub fn cell(&self, col: usize) -> &'a str {
+        if col < self.vars.cells.ncols {
+            self.vars.cells.cell(self.i, col)
+        } else {
+            ""
+        }
+    }
+
+    /// Every cell, in column order.
+    pub fn cells(&self) -> impl Iterator<Item = &'a str> + 'a {
+        let v = *self;
+        (0..self.vars.cells.ncols).map(move |c| v.cell(c))
+    }
+
+    /// The cell of a well-known column ([`columns`]); `""` when the table has none.
+    pub fn known(&self, name: &str) -> &'a str {
+        columns::ALL
+            .iter()
+            .position(|c| *c == name)
+            .and_then(|i| self.vars.known.get(i).copied().flatten())
+            .map_or("", |c| self.cell(c))
+    }
+
+    fn number(&self, column: &str) -> Result<Option<f64>, String> {
+        let t = self.known(column);
+        if t.trim().is_empty() {
+            return Ok(None);
+        }
+        parse_number(t)
+            .map(Some)
+            .ok_or_else(|| format!("{column} of {}: `{t}` is not a number", self.name()))
+    }
+
+    /// (RangeFrom, RangeTo) when both are set and differ.
+    pub fn range(&self) -> Option<(f64, f64)> {
+        match (
+            self.number(columns::RANGE_FROM),
+            self.number(columns::RANGE_TO),
+        ) {
+            (Ok(Some(a)), Ok(Some(b))) if a != b => Some((a, b)),
+            _ => None,
+        }
+    }
+
+    fn data_type_checked(&self) -> Result<VarType, String> {
+        let dt = self.known(columns::DATA_TYPE);
+        parse_data_type(dt).ok_or_else(|| {
+            format!(
+                "DataType of {}: `{dt}` is not R4, I2, UI2, I4, UI4 or UI1",
+                self.name()
+            )
+        })
+    }
+
+    /// `DataType` (default R4).
+    pub fn data_type(&self) -> VarType {
+        self.data_type_checked().unwrap_or(VarType::R4)
+    }
+
+    /// `Format` as written (trimmed).
+    pub fn format_text(&self) -> &'a str {
+        self.known(columns::FORMAT).trim()
+    }
+
+    /// A limit column (`WarnLow` .. `AlarmHigh`).
+    pub fn limit(&self, column: &str) -> Option<LimitRef<'a>> {
+        let t = self.known(column).trim();
+        if t.is_empty() {
+            return None;
+        }
+        Some(match parse_number(t) {
+            Some(v) => LimitRef::Value(v),
+            None => LimitRef::Variable(t),
+        })
+    }
+
+    /// `ControlVariable`.
+    pub fn control_variable(&self) -> Option<&'a str> {
+        let c = self.known(columns::CONTROL_VARIABLE).trim();
+        (!c.is_empty()).then_some(c)
+    }
+
+    fn writable_checked(&self) -> Result<bool, String> {
+        let w = self.known(columns::WRITABLE);
+        if w.trim().is_empty() {
+            return Ok(true);
+        }
+        parse_bool(w).ok_or_else(|| {
+            format!(
+                "Writable of {}: `{w}` is not tak/nie/true/false/1/0",
+                self.name()
+            )
+        })
+    }
+
+    /// `Writable` (default tak).
+    pub fn writable(&self) -> bool {
+        self.writable_checked().unwrap_or(true)
+    }
+
+    /// The decoded copy of the variable.
+    pub fn decode(&self) -> Variable {
+        let limit = |c: &str| self.limit(c).map(LimitRef::to_limit);
+        let format_text = self.format_text();
+        Variable {
+            name: self.name().to_owned(),
+            public_name: self.public_name().to_owned(),
+            line: self.line(),
+            description: self.known(columns::DESCRIPTION).to_owned(),
+            description_en: self.known(columns::DESCRIPTION_EN).to_owned(),
+            unit: self.known(columns::UNIT).to_owned(),
+            range: self.range(),
+            data_type: self.data_type(),
+            format_text: format_text.to_owned(),
+            format: if format_text.is_empty() {
+                None
+            } else {
+                FormatSpec::parse(format_text).ok()
+            },
+            warn_low: limit(columns::WARN_LOW),
+            warn_high: limit(columns::WARN_HIGH),
+            alarm_low: limit(columns::ALARM_LOW),
+            alarm_high: limit(columns::ALARM_HIGH),
+            control_variable: self.control_variable().map(str::to_owned),
+            bar_base: self.number(columns::BAR_BASE).ok().flatten(),
+            writable: self.writable(),
+            cells: self.cells().map(str::to_owned).collect(),
+        }
+    }
+}
+
+/// An index from a name to the variable holding it in one column: a
+/// `hashbrown::HashTable<u32>` of variable indexes (4 bytes and a control byte a bucket);
+/// the names are compared in the [`CellTable`], so none is stored twice.
+#[derive(Clone, Default)]
+struct NameIndex {
+    col: usize,
+    table: HashTable<u32>,
+}
+
+/// A fast string hash (names come from the configuration, so no protection against
+/// chosen collisions is needed): 8 bytes a step, multiply-rotate, folded so that
+/// hashbrown's bucket (low bits) and tag (top bits) both vary.
+fn hash_name(name: &str) -> u64 {
+    const K: u64 = 0x9E37_79B9_7F4A_7C15;
+    let bytes = name.as_bytes();
+    let mut h = 0u64;
+    let mut chunks = bytes.chunks_exact(8);
+    for c in &mut chunks {
+        let mut w = [0u8; 8];
+        w.copy_from_slice(c);
+        h = (h.rotate_left(5) ^ u64::from_le_bytes(w)).wrapping_mul(K);
+    }
+    let mut tail = 0u64;
+    for (i, &b) in chunks.remainder().iter().enumerate() {
+        tail |= u64::from(b) << (8 * i);
+    }
+    h = (h.rotate_left(5) ^ tail ^ (bytes.len() as u64) << 56).wrapping_mul(K);
+    h ^ (h >> 32)
+}
+
+impl NameIndex {
+    fn new(col: usize, capacity: usize) -> Self {
+        NameIndex {
+            col,
+            table: HashTable::with_capacity(capacity),
+        }
+    }
+
+    fn find(&self, cells: &CellTable, name: &str) -> Option<usize> {
+        self.table
+            .find(hash_name(name), |&i| {
+                cells.cell(i as usize, self.col) == name
+            })
+            .map(|&i| i as usize)
+    }
+
+    /// Adds row `i` unless its name is already there; returns the row holding the name.
+    fn insert(&mut self, cells: &CellTable, i: usize) -> usize {
+        let name = cells.cell(i, self.col);
+        let col = self.col;
+        match self.table.entry(
+            hash_name(name),
+            |&j| cells.cell(j as usize, col) == name,
+            |&j| hash_name(cells.cell(j as usize, col)),
+        ) {
+            hashbrown::hash_table::Entry::Occupied(e) => *e.get() as usize,
+            hashbrown::hash_table::Entry::Vacant(e) => {
+                e.insert(i as u32);
+                i
+            }
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.table.len()
+    }
+}
+
+impl fmt::Debug for NameIndex {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "NameIndex(column {}, {} names)",
+            self.col,
+            self.table.len()
+        )
+    }
+}
+
+/// The index is a function of the table, so two indexes of equal tables are equal.
+impl PartialEq for NameIndex {
+    fn eq(&self, other: &Self) -> bool {
+        (self.col, self.table.len()) == (other.col, other.table.len())
     }
 }
 
 /// A loaded, validated variable database, with aliases applied.
+///
+/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u32` end per
+/// cell; the two name indexes (`Name`, the public name) are hash tables of `u32` row
+/// indexes that compare names in that table; the tree holds `u32` indexes. For a row of
+/// 17 cells of about 90 bytes that is about 90 + 68 (cell ends) + 4 (line) + 16 (decoded
+/// slot) + 2 × ~6 (indexes) + 4 (tree) ≈ 195 bytes per variable until a variable is
+/// decoded (its [`Variable`] copy, about 1 KB, is kept once made).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VarDatabase {
     pub title: Option<String>,
     pub columns: Vec<String>,
     /// Every variable of the table (hidden ones included), in table order.
-    pub variables: Vec<Variable>,
+    pub variables: Variables,
     /// The browse tree (only visible variables).
     pub root: GroupNode,
     pub alias_column: Option<String>,
-    by_public: HashMap<String, usize>,
-    by_name: HashMap<String, usize>,
+    by_public: NameIndex,
+    by_name: NameIndex,
 }
 
 fn check_name(kind: &str, name: &str) -> Result<(), String> {
@@ -551,11 +1072,36 @@ impl VarDatabase {
         set: Option<&VarSetFile>,
         alias: Option<&str>,
     ) -> Result<(VarDatabase, Vec<Warning>), DbError> {
-        let file = table.file.as_str();
+        let mut cells = CellTable {
+            ncols: table.columns.len(),
+            ..CellTable::default()
+        };
+        for (line, row) in &table.rows {
+            cells
+                .push_row(*line, row.iter().map(String::as_str))
+                .map_err(|(line, m)| DbError::invalid(&table.file, line, m))?;
+        }
+        Self::build_cells(
+            &table.file,
+            table.columns.clone(),
+            cells,
+            set.map(|s| (s, None)),
+            alias,
+        )
+    }
+
+    /// `set`: the variable set, with the text to stream its groups from when they were
+    /// not parsed into it.
+    fn build_cells(
+        file: &str,
+        table_columns: Vec<String>,
+        mut cells: CellTable,
+        set: Option<(&VarSetFile, Option<&str>)>,
+        alias: Option<&str>,
+    ) -> Result<(VarDatabase, Vec<Warning>), DbError> {
         let mut warnings = Vec::new();
         let col = |name: &str| {
-            table
-                .columns
+            table_columns
                 .iter()
                 .position(|c| c.eq_ignore_ascii_case(name))
         };
@@ -564,8 +1110,7 @@ impl VarDatabase {
         let alias_col = match alias {
             None => None,
             Some(a) => Some(
-                table
-                    .columns
+                table_columns
                     .iter()
                     .position(|c| c == a)
                     .or_else(|| col(a))
@@ -578,193 +1123,166 @@ impl VarDatabase {
                     })?,
             ),
         };
-        let cols: Vec<Option<usize>> = columns::ALL.iter().map(|c| col(c)).collect();
-        let cell = |row: &[String], name: &str| -> String {
-            let i = columns::ALL
-                .iter()
-                .position(|c| *c == name)
-                .and_then(|i| cols[i]);
-            i.map(|i| row[i].clone()).unwrap_or_default()
+        cells.shrink_to_fit();
+        let n = cells.rows();
+        let variables = Variables {
+            cells,
+            name_col,
+            public_col: alias_col.unwrap_or(name_col),
+            known: columns::ALL.iter().map(|c| col(c)).collect(),
+            decoded: (0..n).map(|_| OnceLock::new()).collect(),
         };
-        let names: HashMap<&str, usize> = table
-            .rows
-            .iter()
-            .enumerate()
-            .map(|(i, (_, r))| (r[name_col].as_str(), i))
-            .collect();
-        let mut variables = Vec::with_capacity(table.rows.len());
-        let mut by_name = HashMap::new();
-        let mut by_public = HashMap::new();
-        for (line, row) in &table.rows {
-            let line = *line;
+        let cells = &variables.cells;
+        // Every name first (limits and control variables may name later rows); the row a
+        // name maps to is its first.
+        let mut by_name = NameIndex::new(name_col, n);
+        for i in 0..n {
+            by_name.insert(cells, i);
+        }
+        let mut by_public = NameIndex::new(alias_col.unwrap_or(name_col), n);
+        for v in variables.views() {
+            let line = v.line();
             let err = |m: String| DbError::invalid(file, line, m);
-            let name = row[name_col].clone();
+            let name = v.name();
             if name.is_empty() {
                 return Err(err("a variable without a name".into()));
             }
-            check_name("variable name", &name).map_err(err)?;
-            let number = |column: &str| -> Result<Option<f64>, DbError> {
-                let t = cell(row, column);
-                if t.trim().is_empty() {
-                    return Ok(None);
-                }
-                parse_number(&t)
-                    .map(Some)
-                    .ok_or_else(|| err(format!("{column} of {name}: `{t}` is not a number")))
-            };
-            let (from, to) = (number(columns::RANGE_FROM)?, number(columns::RANGE_TO)?);
-            let range = match (from, to) {
-                (Some(a), Some(b)) if a != b => Some((a, b)),
-                (None, None) => None,
-                _ => {
+            check_name("variable name", name).map_err(err)?;
+            let from = v.number(columns::RANGE_FROM).map_err(err)?;
+            let to = v.number(columns::RANGE_TO).map_err(err)?;
+            match (from, to) {
+                (Some(a), Some(b)) if a != b => {}
+                (None, None) => {}
+                _ => warnings.push(Warning::new(
+                    file,
+                    line,
+                    format!("{name}: incomplete or empty range ignored"),
+                )),
+            }
+            v.data_type_checked().map_err(err)?;
+            let format_text = v.format_text();
+            if !format_text.is_empty() {
+                if let Err(m) = FormatSpec::parse(format_text) {
                     warnings.push(Warning::new(
                         file,
                         line,
-                        format!("{name}: incomplete or empty range ignored"),
+                        format!("{name}: Format {m}; the default form is used"),
                     ));
-                    None
                 }
-            };
-            let dt = cell(row, columns::DATA_TYPE);
-            let data_type = parse_data_type(&dt).ok_or_else(|| {
-                err(format!(
-                    "DataType of {name}: `{dt}` is not R4, I2, UI2, I4, UI4 or UI1"
-                ))
-            })?;
-            let format_text = cell(row, columns::FORMAT).trim().to_owned();
-            let format = if format_text.is_empty() {
-                None
-            } else {
-                match FormatSpec::parse(&format_text) {
-                    Ok(f) => Some(f),
-                    Err(m) => {
+            }
+            for column in [
+                columns::WARN_LOW,
+                columns::WARN_HIGH,
+                columns::ALARM_LOW,
+                columns::ALARM_HIGH,
+            ] {
+                if let Some(LimitRef::Variable(t)) = v.limit(column) {
+                    if by_name.find(cells, t).is_none() {
                         warnings.push(Warning::new(
                             file,
                             line,
-                            format!("{name}: Format {m}; the default form is used"),
+                            format!("{name}: {column} names unknown variable `{t}`"),
                         ));
-                        None
                     }
                 }
-            };
-            let mut limit = |column: &str| -> Option<Limit> {
-                let t = cell(row, column).trim().to_owned();
-                if t.is_empty() {
-                    return None;
-                }
-                if let Some(v) = parse_number(&t) {
-                    return Some(Limit::Value(v));
-                }
-                if !names.contains_key(t.as_str()) {
-                    warnings.push(Warning::new(
-                        file,
-                        line,
-                        format!("{name}: {column} names unknown variable `{t}`"),
-                    ));
-                }
-                Some(Limit::Variable(t))
-            };
-            let (warn_low, warn_high) = (limit(columns::WARN_LOW), limit(columns::WARN_HIGH));
-            let (alarm_low, alarm_high) = (limit(columns::ALARM_LOW), limit(columns::ALARM_HIGH));
-            let control = cell(row, columns::CONTROL_VARIABLE).trim().to_owned();
-            let control_variable = if control.is_empty() {
-                None
-            } else {
-                if !names.contains_key(control.as_str()) {
+            }
+            if let Some(control) = v.control_variable() {
+                if by_name.find(cells, control).is_none() {
                     warnings.push(Warning::new(
                         file,
                         line,
                         format!("{name}: ControlVariable `{control}` is not in the table"),
                     ));
                 }
-                Some(control)
-            };
-            let w = cell(row, columns::WRITABLE);
-            let writable = if w.trim().is_empty() {
-                true
-            } else {
-                parse_bool(&w).ok_or_else(|| {
-                    err(format!(
-                        "Writable of {name}: `{w}` is not tak/nie/true/false/1/0"
-                    ))
-                })?
-            };
-            let bar_base = number(columns::BAR_BASE)?;
-            let public_name = match alias_col {
-                None => name.clone(),
-                Some(a) => row[a].clone(),
-            };
-            let index = variables.len();
-            if by_name.insert(name.clone(), index).is_some() {
+            }
+            v.writable_checked().map_err(err)?;
+            v.number(columns::BAR_BASE).map_err(err)?;
+            let index = v.index();
+            if by_name.find(cells, name) != Some(index) {
                 return Err(err(format!("variable `{name}` is defined twice")));
             }
+            let public_name = v.public_name();
             if !public_name.is_empty() {
-                check_name("alias", &public_name).map_err(err)?;
-                if by_public.insert(public_name.clone(), index).is_some() {
+                check_name("alias", public_name).map_err(err)?;
+                if by_public.insert(cells, index) != index {
                     return Err(err(format!(
                         "alias `{public_name}` of {name} is used twice"
                     )));
                 }
             }
-            variables.push(Variable {
-                name,
-                public_name,
-                line,
-                description: cell(row, columns::DESCRIPTION),
-                description_en: cell(row, columns::DESCRIPTION_EN),
-                unit: cell(row, columns::UNIT),
-                range,
-                data_type,
-                format_text,
-                format,
-                warn_low,
-                warn_high,
-                alarm_low,
-                alarm_high,
-                control_variable,
-                bar_base,
-                writable,
-                cells: row.clone(),
-            });
         }
         let mut root = GroupNode::default();
+        let visible = |i: usize| !variables.view(i).public_name().is_empty();
+        // The group being filled: child positions from the root.
+        let mut current: Vec<usize> = Vec::new();
+        let mut enter = |root: &mut GroupNode, path: &mut dyn Iterator<Item = &str>| {
+            current.clear();
+            let mut node = root;
+            for segment in path {
+                let pos = node.child_pos(segment);
+                current.push(pos);
+                node = &mut node.groups[pos];
+            }
+            current.clone()
+        };
+        let add = |root: &mut GroupNode,
+                   at: &[usize],
+                   warnings: &mut Vec<Warning>,
+                   set_file: &str,
+                   var: &str,
+                   line: usize| {
+            let mut node = root;
+            for &pos in at {
+                node = &mut node.groups[pos];
+            }
+            match by_name.find(cells, var) {
+                None => warnings.push(Warning::new(
+                    set_file,
+                    line,
+                    format!("variable `{var}` is not in the attribute table; skipped"),
+                )),
+                Some(i) if !visible(i) => {}
+                Some(i) if node.variables.contains(&(i as u32)) => warnings.push(Warning::new(
+                    set_file,
+                    line,
+                    format!("variable `{var}` listed twice in the group; skipped"),
+                )),
+                Some(i) => node.variables.push(i as u32),
+            }
+        };
         match set {
             None => {
-                root.variables = (0..variables.len())
-                    .filter(|&i| !variables[i].public_name.is_empty())
-                    .collect();
+                root.variables = (0..n).filter(|&i| visible(i)).map(|i| i as u32).collect();
             }
-            Some(set) => {
+            Some((set, None)) => {
                 for group in &set.groups {
-                    let mut node = &mut root;
-                    for segment in &group.path {
-                        node = node.child(segment);
-                    }
+                    let at = enter(&mut root, &mut group.path.iter().map(String::as_str));
                     for (var, line) in &group.variables {
-                        match by_name.get(var) {
-                            None => warnings.push(Warning::new(
-                                &set.file,
-                                *line,
-                                format!("variable `{var}` is not in the attribute table; skipped"),
-                            )),
-                            Some(&i) if variables[i].public_name.is_empty() => {}
-                            Some(&i) if node.variables.contains(&i) => warnings.push(Warning::new(
-                                &set.file,
-                                *line,
-                                format!("variable `{var}` listed twice in the group; skipped"),
-                            )),
-                            Some(&i) => node.variables.push(i),
-                        }
+                        add(&mut root, &at, &mut warnings, &set.file, var, *line);
                     }
                 }
             }
+            Some((set, Some(text))) => {
+                // The groups streamed from the set's text (its settings were read already).
+                let mut at = Vec::new();
+                for_each_var_set_line(text, &set.file, |line, l| {
+                    match l {
+                        SetLine::Group(path) => at = enter(&mut root, &mut path.into_iter()),
+                        SetLine::Variable(var) => {
+                            add(&mut root, &at, &mut warnings, &set.file, var, line)
+                        }
+                        SetLine::Setting(..) => {}
+                    }
+                    true
+                })?;
+            }
         }
         let db = VarDatabase {
-            title: set.and_then(|s| s.title.clone()),
-            columns: table.columns.clone(),
+            title: set.and_then(|s| s.0.title.clone()),
+            alias_column: alias_col.map(|i| table_columns[i].clone()),
+            columns: table_columns,
             variables,
             root,
-            alias_column: alias_col.map(|i| table.columns[i].clone()),
             by_public,
             by_name,
         };
@@ -773,12 +1291,24 @@ impl VarDatabase {
 
     /// The visible variable a client names (alias in alias mode).
     pub fn find_public(&self, name: &str) -> Option<&Variable> {
-        self.by_public.get(name).map(|&i| &self.variables[i])
+        self.find_public_index(name)
+            .and_then(|i| self.variables.get(i))
+    }
+
+    /// The index of the visible variable a client names, decoding nothing.
+    pub fn find_public_index(&self, name: &str) -> Option<usize> {
+        self.by_public.find(&self.variables.cells, name)
     }
 
     /// The variable with this asix name (visible or not).
     pub fn find_real(&self, name: &str) -> Option<&Variable> {
-        self.by_name.get(name).map(|&i| &self.variables[i])
+        self.find_real_index(name)
+            .and_then(|i| self.variables.get(i))
+    }
+
+    /// The index of the variable with this asix name, decoding nothing.
+    pub fn find_real_index(&self, name: &str) -> Option<usize> {
+        self.by_name.find(&self.variables.cells, name)
     }
 
     /// The index of a column, by its exact (case-sensitive) spelling.
@@ -810,8 +1340,8 @@ impl VarDatabase {
     /// Variable counts per data type (a summary for logs).
     pub fn type_summary(&self) -> BTreeMap<u16, usize> {
         let mut m = BTreeMap::new();
-        for v in &self.variables {
-            *m.entry(v.data_type.0).or_insert(0) += 1;
+        for v in self.variables.views() {
+            *m.entry(v.data_type().0).or_insert(0) += 1;
         }
         m
     }
@@ -841,10 +1371,28 @@ pub fn load_database_file(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     if is_csv {
-        let table = parse_attribute_table(&read(path)?, &path.display().to_string())?;
-        return VarDatabase::build(&table, None, alias);
+        let file = path.display().to_string();
+        let (columns, cells) = read_cell_table(&read(path)?, &file)?;
+        return VarDatabase::build_cells(&file, columns, cells, None, alias);
     }
-    let (set, mut warnings) = parse_var_set(&read(path)?, &path.display().to_string())?;
+    // The settings only (they come before the first group); the groups are streamed
+    // from the text into the tree when the table is in.
+    let (text, _) = decode_text(&read(path)?);
+    let mut set = VarSetFile {
+        file: path.display().to_string(),
+        attributes: None,
+        title: None,
+        groups: Vec::new(),
+    };
+    let mut warnings = Vec::new();
+    let set_file = set.file.clone();
+    for_each_var_set_line(&text, &set_file, |line, l| match l {
+        SetLine::Setting(key, value) => {
+            apply_setting(&mut set, &mut warnings, line, key, value);
+            true
+        }
+        SetLine::Group(_) | SetLine::Variable(_) => false,
+    })?;
     let table_path = match &set.attributes {
         Some(a) => {
             let a = if std::path::MAIN_SEPARATOR == '/' {
@@ -856,8 +1404,10 @@ pub fn load_database_file(
         }
         None => path.with_extension("csv"),
     };
-    let table = parse_attribute_table(&read(&table_path)?, &table_path.display().to_string())?;
-    let (db, more) = VarDatabase::build(&table, Some(&set), alias)?;
+    let file = table_path.display().to_string();
+    let (columns, cells) = read_cell_table(&read(&table_path)?, &file)?;
+    let (db, more) =
+        VarDatabase::build_cells(&file, columns, cells, Some((&set, Some(&text))), alias)?;
     warnings.extend(more);
     Ok((db, warnings))
 }

@@ -165,28 +165,29 @@ pub fn channels_from_database(
     db: &asix_model::VarDatabase,
     default_channel: &str,
 ) -> Vec<ChannelDef> {
+    // Views of the compact table: nothing is decoded into a `Variable` copy.
     let controls: std::collections::HashSet<&str> = db
         .variables
-        .iter()
-        .filter_map(|v| v.control_variable.as_deref())
+        .views()
+        .filter_map(|v| v.control_variable())
         .collect();
+    let column = |name: &str| db.column(name).unwrap_or(usize::MAX);
+    let (channel_col, alias_col) = (column("Channel"), column("Alias"));
     let mut by_channel: Vec<ChannelDef> = Vec::new();
-    for var in &db.variables {
-        let channel = db
-            .attribute(var, "Channel")
-            .map(str::trim)
+    for var in db.variables.views() {
+        let channel = Some(var.cell(channel_col).trim())
             .filter(|c| !c.is_empty())
             .unwrap_or(default_channel);
-        let (low, high) = var.range.unwrap_or((0.0, 100.0));
+        let (low, high) = var.range().unwrap_or((0.0, 100.0));
         let spec = VarSpec::new(
-            &var.name,
-            var.data_type,
+            var.name(),
+            var.data_type(),
             low.min(high),
             high.max(low),
-            var.writable,
+            var.writable(),
         );
-        let tag = db.attribute(var, "Alias").unwrap_or("");
-        let b = if controls.contains(var.name.as_str()) {
+        let tag = var.cell(alias_col);
+        let b = if controls.contains(var.name()) {
             Behaviour::Steady { value: 0.0 }
         } else {
             Behaviour::guess_tagged(&spec, tag)

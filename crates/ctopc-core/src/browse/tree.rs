@@ -8,8 +8,7 @@
 //! (binary search for `OPC_BROWSE_TO` and `IOPCBrowse::Browse`). About 40 bytes per node plus
 //! the text.
 
-use std::collections::HashMap;
-
+use hashbrown::HashTable;
 use thiserror::Error;
 
 use super::pattern::MatchCase;
@@ -69,11 +68,27 @@ struct Node {
 
 #[derive(Debug, Clone)]
 struct BuilderNode {
-    name: Box<str>,
-    item_id: Box<str>,
+    /// In the builder's text.
+    name: Span,
+    /// `None`: the item ID is the name (a variable's leaf, mostly).
+    item_id: Option<Span>,
     parent: u32,
     children: Vec<u32>,
     flags: u8,
+}
+
+impl BuilderNode {
+    fn name<'t>(&self, text: &'t str) -> &'t str {
+        span_str(text, self.name)
+    }
+
+    fn item_id<'t>(&self, text: &'t str) -> &'t str {
+        span_str(text, self.item_id.unwrap_or(self.name))
+    }
+}
+
+fn span_str(text: &str, span: Span) -> &str {
+    &text[span.start as usize..(span.start + span.len) as usize]
 }
 
 /// Builds an [`AddressSpace`]. Adding an existing name under the same parent is idempotent
@@ -82,7 +97,10 @@ struct BuilderNode {
 #[derive(Debug, Clone)]
 pub struct AddressSpaceBuilder {
     nodes: Vec<BuilderNode>,
-    by_parent_name: HashMap<(u32, Box<str>), u32>,
+    /// The names and item IDs of the nodes, back to back (no allocation per node).
+    text: String,
+    /// Every node by (parent, name): indexes into `nodes`, compared through the nodes.
+    by_parent_name: HashTable<u32>,
     text_len: usize,
     flat: bool,
     filter_case: MatchCase,
@@ -98,17 +116,30 @@ impl AddressSpaceBuilder {
     pub fn new() -> Self {
         AddressSpaceBuilder {
             nodes: vec![BuilderNode {
-                name: "".into(),
-                item_id: "".into(),
+                name: Span { start: 0, len: 0 },
+                item_id: None,
                 parent: 0,
                 children: Vec::new(),
                 flags: BRANCH,
             }],
-            by_parent_name: HashMap::new(),
+            text: String::new(),
+            by_parent_name: HashTable::new(),
             text_len: 0,
             flat: false,
             filter_case: MatchCase::default(),
         }
+    }
+
+    /// Makes room for `additional` more nodes (a builder that knows its size skips the
+    /// tables' regrowth).
+    pub fn reserve(&mut self, additional: usize) -> &mut Self {
+        self.nodes.reserve(additional);
+        let (nodes, text) = (&self.nodes, &self.text);
+        self.by_parent_name.reserve(additional, |&i| {
+            let n = &nodes[i as usize];
+            hash_child(n.parent, n.name(text))
+        });
+        self
     }
 
     /// Presents the space as flat (`OPC_NS_FLAT`): every item listed with its item ID under
@@ -213,12 +244,21 @@ impl AddressSpaceBuilder {
             return Err(BuildError::UnknownParent(parent));
         }
         let p = parent.0;
-        if let Some(&existing) = self.by_parent_name.get(&(p, Box::<str>::from(name))) {
+        let hash = hash_child(p, name);
+        let (nodes, text) = (&self.nodes, &self.text);
+        let found = self
+            .by_parent_name
+            .find(hash, |&i| {
+                let n = &nodes[i as usize];
+                n.parent == p && n.name(text) == name
+            })
+            .copied();
+        if let Some(existing) = found {
             let n = &mut self.nodes[existing as usize];
-            if &*n.item_id != item_id {
+            if n.item_id(&self.text) != item_id {
                 return Err(BuildError::ConflictingItemId {
                     name: name.to_owned(),
-                    existing: n.item_id.to_string(),
+                    existing: n.item_id(&self.text).to_owned(),
                     requested: item_id.to_owned(),
                 });
             }
@@ -233,9 +273,19 @@ impl AddressSpaceBuilder {
         }
         self.text_len += text;
         let id = self.nodes.len() as u32;
+        let mut push = |s: &str| {
+            let span = Span {
+                start: self.text.len() as u32,
+                len: s.len() as u32,
+            };
+            self.text.push_str(s);
+            span
+        };
+        let name_span = push(name);
+        let item_span = (item_id != name).then(|| push(item_id));
         self.nodes.push(BuilderNode {
-            name: name.into(),
-            item_id: item_id.into(),
+            name: name_span,
+            item_id: item_span,
             parent: p,
             children: Vec::new(),
             flags: kind,
@@ -243,7 +293,11 @@ impl AddressSpaceBuilder {
         // A leaf that gets a child becomes a branch that is still an item.
         self.nodes[p as usize].flags |= BRANCH;
         self.nodes[p as usize].children.push(id);
-        self.by_parent_name.insert((p, name.into()), id);
+        let (nodes, text) = (&self.nodes, &self.text);
+        self.by_parent_name.insert_unique(hash, id, |&i| {
+            let n = &nodes[i as usize];
+            hash_child(n.parent, n.name(text))
+        });
         Ok(NodeId(id))
     }
 
@@ -251,6 +305,7 @@ impl AddressSpaceBuilder {
     pub fn build(self) -> AddressSpace {
         let AddressSpaceBuilder {
             nodes: bnodes,
+            text: btext,
             by_parent_name,
             flat,
             filter_case,
@@ -271,12 +326,12 @@ impl AddressSpaceBuilder {
         }
 
         let mut text = String::new();
-        let mut interned: HashMap<&str, Span> = HashMap::new();
+        let mut interned: HashTable<Span> = HashTable::with_capacity(bnodes.len());
         let mut nodes: Vec<Node> = Vec::with_capacity(bnodes.len());
         for (new_index, &old) in order.iter().enumerate() {
             let b = &bnodes[old as usize];
-            let name = intern_str(&b.name, &mut text, &mut interned);
-            let item_id = intern_str(&b.item_id, &mut text, &mut interned);
+            let name = intern_str(b.name(&btext), &mut text, &mut interned);
+            let item_id = intern_str(b.item_id(&btext), &mut text, &mut interned);
             let first_child = b.children.first().map_or(0, |&c| new_of_old[c as usize]);
             debug_assert!(b
                 .children
@@ -329,8 +384,17 @@ impl AddressSpaceBuilder {
     }
 }
 
-fn intern_str<'s>(s: &'s str, text: &mut String, interned: &mut HashMap<&'s str, Span>) -> Span {
-    if let Some(&span) = interned.get(s) {
+fn intern_str(s: &str, text: &mut String, interned: &mut HashTable<Span>) -> Span {
+    let of = |text: &String, span: &Span| -> u64 {
+        hash_str(
+            0,
+            &text[span.start as usize..(span.start + span.len) as usize],
+        )
+    };
+    let hash = hash_str(0, s);
+    if let Some(&span) = interned.find(hash, |sp| {
+        &text[sp.start as usize..(sp.start + sp.len) as usize] == s
+    }) {
         return span;
     }
     let span = Span {
@@ -338,8 +402,33 @@ fn intern_str<'s>(s: &'s str, text: &mut String, interned: &mut HashMap<&'s str,
         len: s.len() as u32,
     };
     text.push_str(s);
-    interned.insert(s, span);
+    interned.insert_unique(hash, span, |sp| of(text, sp));
     span
+}
+
+/// A fast string hash for the builder's tables (names come from the configuration, so
+/// no protection against chosen collisions is needed): 8 bytes a step, multiply-rotate,
+/// folded so that hashbrown's bucket (low bits) and tag (top bits) both vary.
+pub(crate) fn hash_str(seed: u64, s: &str) -> u64 {
+    const K: u64 = 0x9E37_79B9_7F4A_7C15;
+    let bytes = s.as_bytes();
+    let mut h = seed.wrapping_mul(K);
+    let mut chunks = bytes.chunks_exact(8);
+    for c in &mut chunks {
+        let mut w = [0u8; 8];
+        w.copy_from_slice(c);
+        h = (h.rotate_left(5) ^ u64::from_le_bytes(w)).wrapping_mul(K);
+    }
+    let mut tail = 0u64;
+    for (i, &b) in chunks.remainder().iter().enumerate() {
+        tail |= u64::from(b) << (8 * i);
+    }
+    h = (h.rotate_left(5) ^ tail ^ (bytes.len() as u64) << 56).wrapping_mul(K);
+    h ^ (h >> 32)
+}
+
+fn hash_child(parent: u32, name: &str) -> u64 {
+    hash_str(u64::from(parent) + 1, name)
 }
 
 /// The browsable address space. Immutable; share it as `Arc<AddressSpace>`.
