@@ -57,6 +57,9 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "SourceTimeout",
     "SimulationDeviceDelay",
     "FirstSampleWait",
+    "AuditWrites",
+    "CallbackTimeout",
+    "CallbackFailures",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -146,6 +149,18 @@ pub struct ServerOptions {
     /// from the data source before it is sent with what the cache holds (BAD Waiting for
     /// Initial Data). 0: no wait.
     pub first_sample_wait_ms: u32,
+    /// `AuditWrites` (default tak): every written item is logged, with the client, the
+    /// item, the value and the result, under the log target `audit`
+    /// (`ctopc_core::audit`); `nie` turns it off.
+    pub audit_writes: bool,
+    /// `CallbackTimeout`, ms (default [`ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS`],
+    /// 0..=600000, 0: no timeout): a callback to a client (OnDataChange, ...) that has not
+    /// returned by then counts as failed, and what would queue behind it is not sent.
+    pub callback_timeout_ms: u32,
+    /// `CallbackFailures` (default [`ctopc_core::ops::DEFAULT_CALLBACK_FAILURES`],
+    /// 1..=1000): after this many consecutive failed callbacks the client's callback
+    /// connections are dropped (logged as a warning).
+    pub callback_failures: u32,
 }
 
 /// Bounds of `SourceTimeout`, ms.
@@ -165,6 +180,16 @@ impl ServerOptions {
             first_sample_wait_ms: self.first_sample_wait_ms,
             max_pending_data_changes: ctopc_core::model::SERVER_PENDING_DATA_CHANGES,
             ..ctopc_core::model::EngineConfig::default()
+        }
+    }
+
+    /// The COM layer's operations settings these options imply (`AuditWrites`,
+    /// `CallbackTimeout`, `CallbackFailures`).
+    pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
+        ctopc_core::ops::OpsConfig {
+            audit_writes: self.audit_writes,
+            callback_timeout_ms: self.callback_timeout_ms,
+            callback_failures: self.callback_failures,
         }
     }
 }
@@ -198,6 +223,9 @@ impl Default for ServerOptions {
             source_timeout_ms: ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS,
             first_sample_wait_ms: ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS,
             simulation_device_delay_ms: 0,
+            audit_writes: true,
+            callback_timeout_ms: ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS,
+            callback_failures: ctopc_core::ops::DEFAULT_CALLBACK_FAILURES,
         }
     }
 }
@@ -523,6 +551,9 @@ fn apply_server_option(
             }
         }
         "simulatecurrentdata" => set_bool(&mut o.simulate_current_data, file, e)?,
+        "auditwrites" => set_bool(&mut o.audit_writes, file, e)?,
+        "callbacktimeout" => set_number(&mut o.callback_timeout_ms, file, e, 0, 600_000)?,
+        "callbackfailures" => set_number(&mut o.callback_failures, file, e, 1, 1000)?,
         "clientname" => o.client_name = text(e),
         "broadcastaddress" => o.broadcast_address = text(e),
         "discoveryport" => o.discovery_port = number(file, e, 1, 65535)?.map(|v| v as u16),
@@ -923,6 +954,13 @@ mod tests {
             ("FirstSampleWait", "", |o| {
                 o.first_sample_wait_ms == ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS
             }),
+            ("AuditWrites", "nie", |o| {
+                !o.audit_writes && !o.ops_config().audit_writes
+            }),
+            ("AuditWrites", "tak", |o| o.audit_writes),
+            ("AuditWrites", "", |o| {
+                o.audit_writes && o.ops_config().audit_writes
+            }),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();
@@ -953,6 +991,11 @@ mod tests {
             ("SimulationDeviceDelay", "1.5"),
             ("FirstSampleWait", "600001"),
             ("FirstSampleWait", "-1"),
+            ("AuditWrites", "maybe"),
+            ("CallbackTimeout", "600001"),
+            ("CallbackTimeout", "-1"),
+            ("CallbackFailures", "0"),
+            ("CallbackFailures", "1001"),
         ] {
             let err = parse(&format!("[Server]\n{key}={value}\n")).unwrap_err();
             assert_eq!((err.line, err.option.as_deref()), (2, Some(key)));

@@ -33,6 +33,8 @@ pub mod host;
 pub mod interfaces;
 #[cfg(windows)]
 pub mod lifetime;
+#[cfg(windows)]
+pub mod ops;
 pub mod registration;
 #[cfg(windows)]
 pub mod registry;

@@ -122,6 +122,8 @@ pub struct Runtime {
     /// The driver thread, joined by [`Runtime::stop_driver`].
     driver_thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     pub start_time: Timestamp,
+    /// The write audit and the client names (`crate::ops`).
+    pub ops: crate::ops::Ops,
 }
 
 /// How long a synchronous call waits for the data source at most, beyond the engine's own
@@ -150,6 +152,7 @@ impl Runtime {
             reports: Mutex::new(Vec::new()),
             driver_thread: Mutex::new(None),
             start_time: clock::now(),
+            ops: crate::ops::Ops::default(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
@@ -246,6 +249,7 @@ impl Runtime {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .remove(&s);
+        self.ops.forget(s);
     }
 
     pub fn set_group_sink(&self, group: GroupHandle, slot: Arc<SinkSlot<IOPCDataCallback>>) {
@@ -313,17 +317,82 @@ impl Runtime {
     /// delivery ended, or at once when it cannot be queued, so that a slow client gets
     /// coalesced updates instead of an unbounded queue.
     fn deliver(&self, events: Vec<Event>) {
-        let not_queued = {
+        let (not_queued, drops) = {
             let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
             let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
             let mut queues = Queues {
                 sinks: &sinks,
                 workers: &workers,
                 rt: &self.me,
+                ops: &self.ops,
+                drops: Vec::new(),
             };
-            driver::dispatch(events, &mut queues)
+            let not_queued = driver::dispatch(events, &mut queues);
+            (not_queued, queues.drops)
         };
         self.report(not_queued);
+        for s in drops {
+            self.drop_client_sinks(s);
+        }
+    }
+
+    /// Checks the clients' calls under way against `CallbackTimeout` (every driver step):
+    /// a paced call over its timeout is reported ended, a client at its failure limit loses
+    /// its sinks.
+    fn watch_callbacks(&self) {
+        let verdicts = self.ops.poll_calls(clock::now());
+        for (session, v) in verdicts {
+            self.apply_verdict(session, v);
+        }
+    }
+
+    fn apply_verdict(&self, session: SessionHandle, v: ctopc_core::ops::Verdict) {
+        if let Some(g) = v.ended {
+            self.report([Report::Ended(g)]);
+        }
+        if v.drop_sinks {
+            self.drop_client_sinks(session);
+        }
+    }
+
+    /// A client reached `CallbackFailures`: its groups' IOPCDataCallback sinks are dropped
+    /// and the engine told (`Report::Disconnected`), on a thread of its own, because
+    /// releasing a hung client's proxy may itself hang.
+    fn drop_client_sinks(&self, session: SessionHandle) {
+        let groups = self.ops.groups_of(session);
+        let slots: Vec<(GroupHandle, Arc<SinkSlot<IOPCDataCallback>>)> = {
+            let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
+            groups
+                .iter()
+                .filter_map(|g| sinks.get(g).map(|s| (*g, Arc::clone(s))))
+                .collect()
+        };
+        let (timeout, failures) = self.ops.callback_limits();
+        tracing::warn!(
+            "{}: {failures} consecutive callbacks failed or took longer than {timeout} ms \
+             (CallbackTimeout, CallbackFailures); dropping its callback connections \
+             (groups {:?})",
+            self.ops.client_label(session),
+            slots.iter().map(|(g, _)| g.0).collect::<Vec<_>>()
+        );
+        let rt = self.me.clone();
+        let spawned = std::thread::Builder::new()
+            .name(format!("drop-sinks-{}", session.0))
+            .spawn(move || {
+                let _com = crate::client::ComThread::mta();
+                let mut lost = Vec::new();
+                for (g, slot) in slots {
+                    if slot.cookie().is_some_and(|c| slot.drop_if(c)) {
+                        lost.push(Report::Disconnected(g));
+                    }
+                }
+                if let Some(rt) = rt.upgrade() {
+                    rt.report(lost);
+                }
+            });
+        if let Err(e) = spawned {
+            tracing::error!("cannot start a thread to drop a client's sinks: {e}");
+        }
     }
 
     /// Hands the workers' reports (a scheduled OnDataChange done with: delivered, failed or
@@ -347,29 +416,43 @@ struct Queues<'a> {
     sinks: &'a HashMap<GroupHandle, Arc<SinkSlot<IOPCDataCallback>>>,
     workers: &'a HashMap<SessionHandle, Worker>,
     rt: &'a Weak<Runtime>,
+    ops: &'a crate::ops::Ops,
+    /// Sessions whose sinks are to be dropped (after the tables are unlocked).
+    drops: Vec<SessionHandle>,
 }
 
 impl Deliver for Queues<'_> {
     fn deliver(&mut self, event: Event, paced: bool) -> bool {
         let group = event.group();
-        let (Some(slot), Some(worker)) = (
-            self.sinks.get(&group).cloned(),
-            self.workers.get(&event.session()),
-        ) else {
+        let session = event.session();
+        let (Some(slot), Some(worker)) =
+            (self.sinks.get(&group).cloned(), self.workers.get(&session))
+        else {
             return false;
         };
+        // Nothing is queued behind a call that is over its CallbackTimeout.
+        match self.ops.admit(session, group) {
+            ctopc_core::ops::Admit::Queue => {}
+            ctopc_core::ops::Admit::Refuse => return false,
+            ctopc_core::ops::Admit::Drop => {
+                self.drops.push(session);
+                return false;
+            }
+        }
         let rt = self.rt.clone();
         let job: Job = Box::new(move || {
-            let lost = deliver_one(group, &slot, event);
-            let reports = [
-                lost.then_some(Report::Disconnected(group)),
-                paced.then_some(Report::Ended(group)),
-            ];
-            if reports.iter().any(Option::is_some) {
-                if let Some(rt) = rt.upgrade() {
-                    rt.report(reports.into_iter().flatten());
-                }
+            // The runtime is not kept alive across the call (a client may never return).
+            match rt.upgrade() {
+                Some(rt) => rt.ops.call_started(session, clock::now(), group, paced),
+                None => return,
             }
+            let lost = deliver_one(group, &slot, event);
+            let Some(rt) = rt.upgrade() else { return };
+            let verdict = rt.ops.call_finished(session, clock::now(), group, paced);
+            if lost {
+                rt.report([Report::Disconnected(group)]);
+            }
+            rt.apply_verdict(session, verdict);
         });
         worker.tx.send(job).is_ok()
     }
@@ -403,7 +486,9 @@ fn drive(rt: Weak<Runtime>) {
             // The waiters take their own results (`Engine::take_sync_result`).
             rt.stepped.notify_all();
         }
+        rt.watch_callbacks();
         if !step.events.is_empty() {
+            audit_write_completions(&rt, &step.events);
             rt.deliver(step.events);
         }
         let wait = match step.next {
@@ -413,6 +498,35 @@ fn drive(rt: Weak<Runtime>) {
         let signal = Arc::clone(&rt.signal);
         drop(rt);
         signal.wait(wait);
+    }
+}
+
+/// The write audit's lines of the OnWriteCompletes of a step (the group names taken in a
+/// short engine section of their own; nothing when auditing is off).
+fn audit_write_completions(rt: &Runtime, events: &[Event]) {
+    if !rt.ops.auditing() {
+        return;
+    }
+    let writes: Vec<&ctopc_core::model::WriteComplete> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::WriteComplete(w) => Some(w),
+            _ => None,
+        })
+        .collect();
+    if writes.is_empty() {
+        return;
+    }
+    let names: Vec<Option<String>> = {
+        let d = rt.lock();
+        writes
+            .iter()
+            .map(|w| d.engine.audit_group_name(w.group))
+            .collect()
+    };
+    let now = clock::now();
+    for (w, name) in writes.iter().zip(&names) {
+        rt.ops.audit_complete(now, name.as_deref(), w);
     }
 }
 

@@ -209,6 +209,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
     unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
         // SAFETY: `name` is this method's [in, string] parameter.
         let name = unsafe { abi::in_string(name, limits::CLIENT_NAME) }?;
+        self.ctx.runtime.ops.set_client_name(self.handle, &name);
         self.session().client_name = Some(name);
         Ok(())
     }

@@ -4,6 +4,7 @@
 //! The COM layer (`ctopc-com`) only translates between COM and this crate.
 #![forbid(unsafe_code)]
 
+pub mod audit;
 pub mod browse;
 pub mod convert;
 pub mod driver;
@@ -12,6 +13,7 @@ pub mod lang;
 pub mod limits;
 pub mod model;
 pub mod namespace;
+pub mod ops;
 pub mod properties;
 pub mod quality;
 pub mod source;

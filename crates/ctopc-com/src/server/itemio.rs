@@ -70,7 +70,7 @@ impl OpcServer {
             .ctx
             .runtime
             .with_engine(|e, now| e.item_io_write_vqt(now, self.handle, items));
-        match started {
+        let results = match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait_sync(id) {
                 Some(SyncResult::Write(r)) => r,
@@ -78,7 +78,29 @@ impl OpcServer {
                 None => vec![Err(OpcError::NetAnswerTimeout); n],
             },
             Err(e) => vec![Err(e); n],
+        };
+        self.audit_item_io(items, &results);
+        results
+    }
+
+    /// The write audit's lines of an IOPCItemIO::WriteVQT (`crate::ops`).
+    fn audit_item_io(&self, items: &[(&str, ItemVqt)], results: &[Result<(), OpcError>]) {
+        let ops = &self.ctx.runtime.ops;
+        if !ops.auditing() {
+            return;
         }
+        let keys: Vec<(Option<&str>, Option<u32>)> =
+            items.iter().map(|(id, _)| (Some(*id), None)).collect();
+        let values: Vec<ItemVqt> = items.iter().map(|(_, v)| v.clone()).collect();
+        let call = crate::ops::WriteCall {
+            session: self.handle,
+            method: "IOPCItemIO::WriteVQT",
+            group: None,
+            items: &keys,
+            values: &values,
+            cancel_id: None,
+        };
+        ops.audit_write(crate::clock::now(), &call, results);
     }
 }
 

@@ -137,6 +137,7 @@ pub fn new_context() -> Arc<Context> {
         engine_config: server.engine_config(),
         default_language: server.default_language.fixed(),
         no_config_reason: ns.no_config_reason(),
+        ops: server.ops_config(),
     };
     let ns = Arc::clone(ns);
     let started = host::start(
