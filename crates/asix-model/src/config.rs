@@ -60,6 +60,7 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "AuditWrites",
     "CallbackTimeout",
     "CallbackFailures",
+    "MetricsAddress",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -161,6 +162,10 @@ pub struct ServerOptions {
     /// 1..=1000): after this many consecutive failed callbacks the client's callback
     /// connections are dropped (logged as a warning).
     pub callback_failures: u32,
+    /// `MetricsAddress` (default none: off): `ip:port` of the Prometheus metrics endpoint
+    /// (`GET /metrics`); only loopback addresses are served, others are refused with an
+    /// error in the log.
+    pub metrics_address: Option<String>,
 }
 
 /// Bounds of `SourceTimeout`, ms.
@@ -190,6 +195,7 @@ impl ServerOptions {
             audit_writes: self.audit_writes,
             callback_timeout_ms: self.callback_timeout_ms,
             callback_failures: self.callback_failures,
+            metrics_address: self.metrics_address.clone(),
         }
     }
 }
@@ -226,6 +232,7 @@ impl Default for ServerOptions {
             audit_writes: true,
             callback_timeout_ms: ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS,
             callback_failures: ctopc_core::ops::DEFAULT_CALLBACK_FAILURES,
+            metrics_address: None,
         }
     }
 }
@@ -554,6 +561,7 @@ fn apply_server_option(
         "auditwrites" => set_bool(&mut o.audit_writes, file, e)?,
         "callbacktimeout" => set_number(&mut o.callback_timeout_ms, file, e, 0, 600_000)?,
         "callbackfailures" => set_number(&mut o.callback_failures, file, e, 1, 1000)?,
+        "metricsaddress" => o.metrics_address = text(e),
         "clientname" => o.client_name = text(e),
         "broadcastaddress" => o.broadcast_address = text(e),
         "discoveryport" => o.discovery_port = number(file, e, 1, 65535)?.map(|v| v as u16),
@@ -961,6 +969,23 @@ mod tests {
             ("AuditWrites", "", |o| {
                 o.audit_writes && o.ops_config().audit_writes
             }),
+            ("CallbackTimeout", "500", |o| {
+                o.callback_timeout_ms == 500 && o.ops_config().callback_timeout_ms == 500
+            }),
+            ("CallbackTimeout", "0", |o| o.callback_timeout_ms == 0),
+            ("CallbackTimeout", "", |o| {
+                o.callback_timeout_ms == ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS
+            }),
+            ("CallbackFailures", "1", |o| {
+                o.ops_config().callback_failures == 1
+            }),
+            ("CallbackFailures", "", |o| {
+                o.callback_failures == ctopc_core::ops::DEFAULT_CALLBACK_FAILURES
+            }),
+            ("MetricsAddress", "127.0.0.1:9464", |o| {
+                o.ops_config().metrics_address.as_deref() == Some("127.0.0.1:9464")
+            }),
+            ("MetricsAddress", "", |o| o.metrics_address.is_none()),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();

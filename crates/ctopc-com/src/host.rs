@@ -201,6 +201,9 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
         Ok(backend)
     })?;
     rt.ops.configure(&ops);
+    if let Some(address) = &ops.metrics_address {
+        crate::metrics_http::start(&rt, address);
+    }
     if !ops.audit_writes {
         tracing::info!("write audit off (AuditWrites)");
     }

@@ -34,6 +34,8 @@ pub mod interfaces;
 #[cfg(windows)]
 pub mod lifetime;
 #[cfg(windows)]
+pub mod metrics_http;
+#[cfg(windows)]
 pub mod ops;
 pub mod registration;
 #[cfg(windows)]

@@ -129,7 +129,7 @@ impl Ops {
             Some(w) => w.watch.finish(now),
             None => Verdict {
                 ended: paced.then_some(group),
-                drop_sinks: false,
+                ..Verdict::default()
             },
         }
     }
@@ -241,5 +241,32 @@ impl Ops {
             });
             tracing::info!(target: audit::TARGET, "{line}");
         }
+    }
+}
+
+/// Records how long a COM method took when dropped: `let _t = ops::timed(&metrics, M);`
+/// as the method's first line.
+pub struct Timed<'a> {
+    metrics: &'a ctopc_core::metrics::Metrics,
+    method: ctopc_core::metrics::Method,
+    start: std::time::Instant,
+}
+
+/// See [`Timed`].
+pub fn timed(
+    metrics: &ctopc_core::metrics::Metrics,
+    method: ctopc_core::metrics::Method,
+) -> Timed<'_> {
+    Timed {
+        metrics,
+        method,
+        start: std::time::Instant::now(),
+    }
+}
+
+impl Drop for Timed<'_> {
+    fn drop(&mut self) {
+        let us = u64::try_from(self.start.elapsed().as_micros()).unwrap_or(u64::MAX);
+        self.metrics.call(self.method, us);
     }
 }

@@ -124,6 +124,8 @@ pub struct Runtime {
     pub start_time: Timestamp,
     /// The write audit and the client names (`crate::ops`).
     pub ops: crate::ops::Ops,
+    /// The counters and histograms (`ctopc_core::metrics`, served by `crate::metrics_http`).
+    pub metrics: ctopc_core::metrics::Metrics,
 }
 
 /// How long a synchronous call waits for the data source at most, beyond the engine's own
@@ -153,6 +155,7 @@ impl Runtime {
             driver_thread: Mutex::new(None),
             start_time: clock::now(),
             ops: crate::ops::Ops::default(),
+            metrics: ctopc_core::metrics::Metrics::default(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
@@ -325,6 +328,7 @@ impl Runtime {
                 workers: &workers,
                 rt: &self.me,
                 ops: &self.ops,
+                metrics: &self.metrics,
                 drops: Vec::new(),
             };
             let not_queued = driver::dispatch(events, &mut queues);
@@ -347,6 +351,9 @@ impl Runtime {
     }
 
     fn apply_verdict(&self, session: SessionHandle, v: ctopc_core::ops::Verdict) {
+        if v.failed {
+            self.metrics.callback_failed();
+        }
         if let Some(g) = v.ended {
             self.report([Report::Ended(g)]);
         }
@@ -387,6 +394,9 @@ impl Runtime {
                     }
                 }
                 if let Some(rt) = rt.upgrade() {
+                    for _ in &lost {
+                        rt.metrics.sink_dropped(false);
+                    }
                     rt.report(lost);
                 }
             });
@@ -417,6 +427,7 @@ struct Queues<'a> {
     workers: &'a HashMap<SessionHandle, Worker>,
     rt: &'a Weak<Runtime>,
     ops: &'a crate::ops::Ops,
+    metrics: &'a ctopc_core::metrics::Metrics,
     /// Sessions whose sinks are to be dropped (after the tables are unlocked).
     drops: Vec<SessionHandle>,
 }
@@ -433,8 +444,12 @@ impl Deliver for Queues<'_> {
         // Nothing is queued behind a call that is over its CallbackTimeout.
         match self.ops.admit(session, group) {
             ctopc_core::ops::Admit::Queue => {}
-            ctopc_core::ops::Admit::Refuse => return false,
+            ctopc_core::ops::Admit::Refuse => {
+                self.metrics.callback_failed();
+                return false;
+            }
             ctopc_core::ops::Admit::Drop => {
+                self.metrics.callback_failed();
                 self.drops.push(session);
                 return false;
             }
@@ -446,8 +461,17 @@ impl Deliver for Queues<'_> {
                 Some(rt) => rt.ops.call_started(session, clock::now(), group, paced),
                 None => return,
             }
-            let lost = deliver_one(group, &slot, event);
+            let (kind, values) = metric_kind(&event);
+            let started = std::time::Instant::now();
+            let (lost, called) = deliver_one(group, &slot, event);
             let Some(rt) = rt.upgrade() else { return };
+            if called {
+                let us = u64::try_from(started.elapsed().as_micros()).unwrap_or(u64::MAX);
+                rt.metrics.callback(kind, values, us);
+            }
+            if lost {
+                rt.metrics.sink_dropped(true);
+            }
             let verdict = rt.ops.call_finished(session, clock::now(), group, paced);
             if lost {
                 rt.report([Report::Disconnected(group)]);
@@ -547,11 +571,26 @@ fn hr_of(e: Option<OpcError>) -> HRESULT {
     e.map_or(HRESULT(0), error::hresult)
 }
 
-/// Delivers one event to a group's sink on the client's worker thread. True when the
-/// client is gone and its sink was dropped (the engine must hear of it).
-fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) -> bool {
+/// The metrics' kind of a callback and the values it carries.
+fn metric_kind(event: &Event) -> (ctopc_core::metrics::CallbackKind, u64) {
+    use ctopc_core::metrics::CallbackKind as K;
+    match event {
+        Event::DataChange(d) => (K::DataChange, d.items.len() as u64),
+        Event::ReadComplete(d) => (K::ReadComplete, d.items.len() as u64),
+        Event::WriteComplete(_) => (K::WriteComplete, 0),
+        Event::CancelComplete(_) => (K::CancelComplete, 0),
+    }
+}
+
+/// Delivers one event to a group's sink on the client's worker thread: (the client is
+/// gone and its sink was dropped, so the engine must hear of it; a call was made).
+fn deliver_one(
+    group: GroupHandle,
+    slot: &SinkSlot<IOPCDataCallback>,
+    event: Event,
+) -> (bool, bool) {
     let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else {
-        return false;
+        return (false, false);
     };
     let result = match &event {
         Event::DataChange(d) => call_values(
@@ -598,11 +637,11 @@ fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Eve
                 "group {}: the client's IOPCDataCallback is gone ({e}); dropping it",
                 group.0
             );
-            return slot.drop_if(cookie);
+            return (slot.drop_if(cookie), true);
         }
         tracing::debug!("group {}: callback returned {e}", group.0);
     }
-    false
+    (false, true)
 }
 
 fn call_values(

@@ -11,6 +11,7 @@ pub mod driver;
 pub mod error;
 pub mod lang;
 pub mod limits;
+pub mod metrics;
 pub mod model;
 pub mod namespace;
 pub mod ops;

@@ -22,6 +22,9 @@ pub struct OpsConfig {
     /// `CallbackFailures` (default [`DEFAULT_CALLBACK_FAILURES`]): after this many
     /// consecutive failed callbacks the client's callback sinks are dropped.
     pub callback_failures: u32,
+    /// `MetricsAddress` (default none: off): the loopback `ip:port` of the Prometheus
+    /// endpoint ([`crate::metrics`]).
+    pub metrics_address: Option<String>,
 }
 
 impl Default for OpsConfig {
@@ -30,6 +33,7 @@ impl Default for OpsConfig {
             audit_writes: true,
             callback_timeout_ms: DEFAULT_CALLBACK_TIMEOUT_MS,
             callback_failures: DEFAULT_CALLBACK_FAILURES,
+            metrics_address: None,
         }
     }
 }
@@ -64,6 +68,8 @@ pub struct Verdict {
     pub ended: Option<GroupHandle>,
     /// The failures reached `CallbackFailures`: drop the client's sinks.
     pub drop_sinks: bool,
+    /// A failure was counted (for the metrics).
+    pub failed: bool,
 }
 
 /// The callbacks of one client (its worker calls them one at a time), pure: time is an
@@ -155,6 +161,7 @@ impl CallbackWatch {
         Verdict {
             ended: f.paced.then_some(f.group),
             drop_sinks: self.fail(),
+            failed: true,
         }
     }
 
@@ -182,12 +189,13 @@ impl CallbackWatch {
             Verdict {
                 ended,
                 drop_sinks: self.fail(),
+                failed: true,
             }
         } else {
             self.failures = 0;
             Verdict {
                 ended,
-                drop_sinks: false,
+                ..Verdict::default()
             }
         }
     }
@@ -212,13 +220,19 @@ mod tests {
             w.finish(at(999)),
             Verdict {
                 ended: Some(G),
-                drop_sinks: false
+                ..Verdict::default()
             }
         );
         // Two slow calls, then a quick one: the count starts again.
         for t in [2000, 4000] {
             w.start(at(t), G, false);
-            assert_eq!(w.finish(at(t + 1500)), Verdict::default());
+            assert_eq!(
+                w.finish(at(t + 1500)),
+                Verdict {
+                    failed: true,
+                    ..Verdict::default()
+                }
+            );
         }
         assert_eq!(w.failures(), 2);
         w.start(at(6000), G, false);
@@ -249,7 +263,8 @@ mod tests {
             w.poll(at(1000)),
             Verdict {
                 ended: Some(G),
-                drop_sinks: false
+                drop_sinks: false,
+                failed: true,
             }
         );
         assert_eq!(w.poll(at(1500)), Verdict::default());
@@ -269,7 +284,7 @@ mod tests {
         let mut w = CallbackWatch::new(1000, 2);
         w.start(at(0), G, false);
         // The call's own timeout is the first failure, this refusal the second.
-        assert_eq!(w.poll(at(1200)), Verdict::default());
+        assert!(w.poll(at(1200)).failed);
         assert_eq!(w.admit(), Admit::Drop);
     }
 

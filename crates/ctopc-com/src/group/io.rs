@@ -236,6 +236,7 @@ impl Group_Impl {
             write_timed_out,
         )?;
         pre.apply(&mut results);
+        self.ctx.runtime.metrics.written(items.len() as u64);
         self.audit(method, names, &items, None, &results);
         errors_out(pp_errors, &results)
     }
@@ -333,6 +334,7 @@ impl Group_Impl {
             s
         });
         if let Ok(s) = &started {
+            self.ctx.runtime.metrics.written(items.len() as u64);
             self.audit(method, names, &items, Some(s.cancel_id), &s.results);
         }
         // SAFETY: the caller's contract.
@@ -445,6 +447,10 @@ impl IOPCSyncIO_Impl for Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::SyncRead,
+        );
         abi::hresult(self.read_impl(source, count, ph_server, pp_values, pp_errors))
     }
 
@@ -455,6 +461,10 @@ impl IOPCSyncIO_Impl for Group_Impl {
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::SyncWrite,
+        );
         abi::hresult(self.write_impl(count, ph_server, p_values, pp_errors))
     }
 }
@@ -553,6 +563,10 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ReadMaxAge,
+        );
         abi::hresult(self.read_max_age_impl(
             count,
             ph_server,
@@ -571,6 +585,10 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::WriteVqt,
+        );
         abi::hresult(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
     }
 }
@@ -654,6 +672,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncRead,
+        );
         abi::hresult(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
     }
 
@@ -666,6 +688,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncWrite,
+        );
         abi::hresult(self.async_write_impl(
             count,
             ph_server,
@@ -682,6 +708,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         transaction: u32,
         p_cancel: *mut u32,
     ) -> windows::core::Result<()> {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::Refresh2,
+        );
         // SAFETY: the method's [out] parameter.
         unsafe { abi::clear_outs((p_cancel,)) };
         let source = data_source(source)?;
@@ -790,6 +820,10 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncReadMaxAge,
+        );
         abi::hresult(self.async_read_max_age_impl(
             count,
             ph_server,
@@ -809,6 +843,10 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncWriteVqt,
+        );
         abi::hresult(self.async_write_vqt_impl(
             count,
             ph_server,

@@ -79,6 +79,7 @@ impl OpcServer {
             },
             Err(e) => vec![Err(e); n],
         };
+        self.ctx.runtime.metrics.written(items.len() as u64);
         self.audit_item_io(items, &results);
         results
     }
@@ -158,6 +159,10 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pptimes: *mut *mut FILETIME,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ItemIoRead,
+        );
         clear_outs((ppvalues, ppqualities, pptimes, pperrors));
         abi::hresult((|| {
             nonnull(ppvalues)?;
@@ -216,6 +221,10 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pvqt: *const OPCITEMVQT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ItemIoWriteVqt,
+        );
         clear(pperrors, std::ptr::null_mut());
         abi::hresult((|| {
             nonnull(pperrors)?;
