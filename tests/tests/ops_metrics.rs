@@ -4,7 +4,7 @@
 //! what a working client did: clients, groups, items, callbacks and values sent, writes,
 //! call-duration histograms per COM method; other paths are 404, what is not HTTP 400,
 //! an endless request head 431; an idle connection to the endpoint does not hold up the
-//! OPC server.
+//! OPC server. The same server has `AuditWrites = nie`: its client's write is not audited.
 //!
 //! As `group_slow_source.rs`: waits until no other ServerCTOPC.exe runs, sets
 //! `SERVERCTOPC_INI` before activating, and waits at the end until its server has exited.
@@ -126,7 +126,7 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
     let port = 19_000 + (std::process::id() % 1000) as u16;
     let (dir, ini) = write_config(
         "metrics",
-        &format!("MetricsAddress = 127.0.0.1:{port}\r\nFirstSampleWait = 0"),
+        &format!("MetricsAddress = 127.0.0.1:{port}\r\nFirstSampleWait = 0\r\nAuditWrites = nie"),
     );
     std::env::set_var("SERVERCTOPC_INI", &ini);
     let com = ComThread::mta().expect("MTA");
@@ -219,5 +219,9 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
         wait_until_no_server(Duration::from_secs(60)),
         "the test's server did not exit"
     );
+    // This server audits nothing (AuditWrites = nie), though a client wrote.
+    let log = read_log(&dir);
+    assert!(log.contains("write audit off (AuditWrites)"), "{log}");
+    assert!(!log.contains(" audit: write"), "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }
