@@ -57,6 +57,10 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "SourceTimeout",
     "SimulationDeviceDelay",
     "FirstSampleWait",
+    "AuditWrites",
+    "CallbackTimeout",
+    "CallbackFailures",
+    "MetricsAddress",
 ];
 
 /// Options of a `[Channel:<name>]` section, in file spelling.
@@ -146,6 +150,22 @@ pub struct ServerOptions {
     /// from the data source before it is sent with what the cache holds (BAD Waiting for
     /// Initial Data). 0: no wait.
     pub first_sample_wait_ms: u32,
+    /// `AuditWrites` (default tak): every written item is logged, with the client, the
+    /// item, the value and the result, under the log target `audit`
+    /// (`ctopc_core::audit`); `nie` turns it off.
+    pub audit_writes: bool,
+    /// `CallbackTimeout`, ms (default [`ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS`],
+    /// 0..=600000, 0: no timeout): a callback to a client (OnDataChange, ...) that has not
+    /// returned by then counts as failed, and what would queue behind it is not sent.
+    pub callback_timeout_ms: u32,
+    /// `CallbackFailures` (default [`ctopc_core::ops::DEFAULT_CALLBACK_FAILURES`],
+    /// 1..=1000): after this many consecutive failed callbacks the client's callback
+    /// connections are dropped (logged as a warning).
+    pub callback_failures: u32,
+    /// `MetricsAddress` (default none: off): `ip:port` of the Prometheus metrics endpoint
+    /// (`GET /metrics`); only loopback addresses are served, others are refused with an
+    /// error in the log.
+    pub metrics_address: Option<String>,
 }
 
 /// Bounds of `SourceTimeout`, ms.
@@ -165,6 +185,17 @@ impl ServerOptions {
             first_sample_wait_ms: self.first_sample_wait_ms,
             max_pending_data_changes: ctopc_core::model::SERVER_PENDING_DATA_CHANGES,
             ..ctopc_core::model::EngineConfig::default()
+        }
+    }
+
+    /// The COM layer's operations settings these options imply (`AuditWrites`,
+    /// `CallbackTimeout`, `CallbackFailures`).
+    pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
+        ctopc_core::ops::OpsConfig {
+            audit_writes: self.audit_writes,
+            callback_timeout_ms: self.callback_timeout_ms,
+            callback_failures: self.callback_failures,
+            metrics_address: self.metrics_address.clone(),
         }
     }
 }
@@ -198,6 +229,10 @@ impl Default for ServerOptions {
             source_timeout_ms: ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS,
             first_sample_wait_ms: ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS,
             simulation_device_delay_ms: 0,
+            audit_writes: true,
+            callback_timeout_ms: ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS,
+            callback_failures: ctopc_core::ops::DEFAULT_CALLBACK_FAILURES,
+            metrics_address: None,
         }
     }
 }
@@ -523,6 +558,10 @@ fn apply_server_option(
             }
         }
         "simulatecurrentdata" => set_bool(&mut o.simulate_current_data, file, e)?,
+        "auditwrites" => set_bool(&mut o.audit_writes, file, e)?,
+        "callbacktimeout" => set_number(&mut o.callback_timeout_ms, file, e, 0, 600_000)?,
+        "callbackfailures" => set_number(&mut o.callback_failures, file, e, 1, 1000)?,
+        "metricsaddress" => o.metrics_address = text(e),
         "clientname" => o.client_name = text(e),
         "broadcastaddress" => o.broadcast_address = text(e),
         "discoveryport" => o.discovery_port = number(file, e, 1, 65535)?.map(|v| v as u16),
@@ -923,6 +962,30 @@ mod tests {
             ("FirstSampleWait", "", |o| {
                 o.first_sample_wait_ms == ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS
             }),
+            ("AuditWrites", "nie", |o| {
+                !o.audit_writes && !o.ops_config().audit_writes
+            }),
+            ("AuditWrites", "tak", |o| o.audit_writes),
+            ("AuditWrites", "", |o| {
+                o.audit_writes && o.ops_config().audit_writes
+            }),
+            ("CallbackTimeout", "500", |o| {
+                o.callback_timeout_ms == 500 && o.ops_config().callback_timeout_ms == 500
+            }),
+            ("CallbackTimeout", "0", |o| o.callback_timeout_ms == 0),
+            ("CallbackTimeout", "", |o| {
+                o.callback_timeout_ms == ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS
+            }),
+            ("CallbackFailures", "1", |o| {
+                o.ops_config().callback_failures == 1
+            }),
+            ("CallbackFailures", "", |o| {
+                o.callback_failures == ctopc_core::ops::DEFAULT_CALLBACK_FAILURES
+            }),
+            ("MetricsAddress", "127.0.0.1:9464", |o| {
+                o.ops_config().metrics_address.as_deref() == Some("127.0.0.1:9464")
+            }),
+            ("MetricsAddress", "", |o| o.metrics_address.is_none()),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[server]\n{key}={value}\n")).unwrap();
@@ -953,6 +1016,11 @@ mod tests {
             ("SimulationDeviceDelay", "1.5"),
             ("FirstSampleWait", "600001"),
             ("FirstSampleWait", "-1"),
+            ("AuditWrites", "maybe"),
+            ("CallbackTimeout", "600001"),
+            ("CallbackTimeout", "-1"),
+            ("CallbackFailures", "0"),
+            ("CallbackFailures", "1001"),
         ] {
             let err = parse(&format!("[Server]\n{key}={value}\n")).unwrap_err();
             assert_eq!((err.line, err.option.as_deref()), (2, Some(key)));

@@ -35,6 +35,8 @@ pub struct Setup {
     pub default_language: Option<Lang>,
     /// Why the server has no configuration (OPC_STATUS_NOCONFIG), if it has none.
     pub no_config_reason: Option<String>,
+    /// The operations settings (write audit, ...).
+    pub ops: ctopc_core::ops::OpsConfig,
 }
 
 /// Everything the COM objects of one server share (made by `host::start`).

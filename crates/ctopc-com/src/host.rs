@@ -179,6 +179,7 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
         mut engine_config,
         default_language,
         no_config_reason,
+        ops,
     } = setup;
     // Text written with a default LCID converts in the system's number format (a Polish
     // system reads "12,5" as 12.5), as VariantChangeTypeEx does on Windows.
@@ -199,6 +200,13 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
         simulation = backend.is_simulation();
         Ok(backend)
     })?;
+    rt.ops.configure(&ops);
+    if let Some(address) = &ops.metrics_address {
+        crate::metrics_http::start(&rt, address);
+    }
+    if !ops.audit_writes {
+        tracing::info!("write audit off (AuditWrites)");
+    }
     let ctx = Context {
         runtime: rt,
         address_space,

@@ -33,6 +33,10 @@ pub mod host;
 pub mod interfaces;
 #[cfg(windows)]
 pub mod lifetime;
+#[cfg(windows)]
+pub mod metrics_http;
+#[cfg(windows)]
+pub mod ops;
 pub mod registration;
 #[cfg(windows)]
 pub mod registry;

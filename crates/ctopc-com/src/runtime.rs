@@ -123,6 +123,10 @@ pub struct Runtime {
     /// The driver thread, joined by [`Runtime::stop_driver`].
     driver_thread: Mutex<Option<std::thread::JoinHandle<()>>>,
     pub start_time: Timestamp,
+    /// The write audit and the client names (`crate::ops`).
+    pub ops: crate::ops::Ops,
+    /// The counters and histograms (`ctopc_core::metrics`, served by `crate::metrics_http`).
+    pub metrics: ctopc_core::metrics::Metrics,
 }
 
 /// How long a synchronous call waits for the data source at most, beyond the engine's own
@@ -151,6 +155,8 @@ impl Runtime {
             reports: Mutex::new(Vec::new()),
             driver_thread: Mutex::new(None),
             start_time: clock::now(),
+            ops: crate::ops::Ops::default(),
+            metrics: ctopc_core::metrics::Metrics::default(),
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
@@ -247,6 +253,7 @@ impl Runtime {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .remove(&s);
+        self.ops.forget(s);
     }
 
     /// Registers a group object's callback sinks: its IOPCDataCallback slot and its
@@ -326,17 +333,89 @@ impl Runtime {
     /// delivery ended, or at once when it cannot be queued, so that a slow client gets
     /// coalesced updates instead of an unbounded queue.
     fn deliver(&self, events: Vec<Event>) {
-        let not_queued = {
+        let (not_queued, drops) = {
             let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
             let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
             let mut queues = Queues {
                 sinks: &sinks,
                 workers: &workers,
                 rt: &self.me,
+                ops: &self.ops,
+                metrics: &self.metrics,
+                drops: Vec::new(),
             };
-            driver::dispatch(events, &mut queues)
+            let not_queued = driver::dispatch(events, &mut queues);
+            (not_queued, queues.drops)
         };
         self.report(not_queued);
+        for s in drops {
+            self.drop_client_sinks(s);
+        }
+    }
+
+    /// Checks the clients' calls under way against `CallbackTimeout` (every driver step):
+    /// a paced call over its timeout is reported ended, a client at its failure limit loses
+    /// its sinks.
+    fn watch_callbacks(&self) {
+        let verdicts = self.ops.poll_calls(clock::now());
+        for (session, v) in verdicts {
+            self.apply_verdict(session, v);
+        }
+    }
+
+    fn apply_verdict(&self, session: SessionHandle, v: ctopc_core::ops::Verdict) {
+        if v.failed {
+            self.metrics.callback_failed();
+        }
+        if let Some(g) = v.ended {
+            self.report([Report::Ended(g)]);
+        }
+        if v.drop_sinks {
+            self.drop_client_sinks(session);
+        }
+    }
+
+    /// A client reached `CallbackFailures`: its groups' IOPCDataCallback sinks are dropped
+    /// and the engine told (`Report::Disconnected`), on a thread of its own, because
+    /// releasing a hung client's proxy may itself hang.
+    fn drop_client_sinks(&self, session: SessionHandle) {
+        let groups = self.ops.groups_of(session);
+        let slots: Vec<(GroupHandle, Arc<SinkSlot<IOPCDataCallback>>)> = {
+            let sinks = self.sinks.lock().unwrap_or_else(|p| p.into_inner());
+            groups
+                .iter()
+                .filter_map(|g| sinks.get(g).map(|(s, _)| (*g, Arc::clone(s))))
+                .collect()
+        };
+        let (timeout, failures) = self.ops.callback_limits();
+        tracing::warn!(
+            "{}: {failures} consecutive callbacks failed or took longer than {timeout} ms \
+             (CallbackTimeout, CallbackFailures); dropping its callback connections \
+             (groups {:?})",
+            self.ops.client_label(session),
+            slots.iter().map(|(g, _)| g.0).collect::<Vec<_>>()
+        );
+        let rt = self.me.clone();
+        let spawned = std::thread::Builder::new()
+            .name(format!("drop-sinks-{}", session.0))
+            .spawn(move || {
+                let _com = crate::client::ComThread::mta();
+                let mut lost = Vec::new();
+                for (g, slot) in slots {
+                    if slot.cookie().is_some_and(|c| slot.drop_if(c)) {
+                        lost.push(Report::Disconnected(g));
+                    }
+                }
+                if let Some(rt) = rt.upgrade() {
+                    for _ in &lost {
+                        rt.metrics.sink_dropped(false);
+                    }
+                    rt.report(lost);
+                }
+            });
+        if let Err(e) = spawned {
+            tracing::error!("cannot start a thread to drop a client's sinks: {e}");
+        }
     }
 
     /// Hands the workers' reports (a scheduled OnDataChange done with: delivered, failed or
@@ -360,32 +439,62 @@ struct Queues<'a> {
     sinks: &'a HashMap<GroupHandle, GroupSinks>,
     workers: &'a HashMap<SessionHandle, Worker>,
     rt: &'a Weak<Runtime>,
+    ops: &'a crate::ops::Ops,
+    metrics: &'a ctopc_core::metrics::Metrics,
+    /// Sessions whose sinks are to be dropped (after the tables are unlocked).
+    drops: Vec<SessionHandle>,
 }
 
 impl Deliver for Queues<'_> {
     fn deliver(&mut self, event: Event, paced: bool) -> bool {
         let group = event.group();
-        let (Some((slot, da10)), Some(worker)) = (
-            self.sinks.get(&group).cloned(),
-            self.workers.get(&event.session()),
-        ) else {
+        let session = event.session();
+        let (Some((slot, da10)), Some(worker)) =
+            (self.sinks.get(&group).cloned(), self.workers.get(&session))
+        else {
             return false;
         };
+        // Nothing is queued behind a call that is over its CallbackTimeout.
+        match self.ops.admit(session, group) {
+            ctopc_core::ops::Admit::Queue => {}
+            ctopc_core::ops::Admit::Refuse => {
+                self.metrics.callback_failed();
+                return false;
+            }
+            ctopc_core::ops::Admit::Drop => {
+                self.metrics.callback_failed();
+                self.drops.push(session);
+                return false;
+            }
+        }
         let rt = self.rt.clone();
         let job: Job = Box::new(move || {
-            let lost = match dataobject::deliver(&da10, client_group(&event), &event) {
-                Routed::Mine => false,
+            // The runtime is not kept alive across the call (a client may never return).
+            match rt.upgrade() {
+                Some(rt) => rt.ops.call_started(session, clock::now(), group, paced),
+                None => return,
+            }
+            let (kind, values) = metric_kind(&event);
+            let started = std::time::Instant::now();
+            let (lost, called) = match dataobject::deliver(&da10, client_group(&event), &event) {
+                // An IOPCAsyncIO completion went to the DA 1.0a sink (IAdviseSink returns
+                // nothing: it cannot be lost).
+                Routed::Mine => (false, true),
                 Routed::Shared | Routed::NotMine => deliver_one(group, &slot, event),
             };
-            let reports = [
-                lost.then_some(Report::Disconnected(group)),
-                paced.then_some(Report::Ended(group)),
-            ];
-            if reports.iter().any(Option::is_some) {
-                if let Some(rt) = rt.upgrade() {
-                    rt.report(reports.into_iter().flatten());
-                }
+            let Some(rt) = rt.upgrade() else { return };
+            if called {
+                let us = u64::try_from(started.elapsed().as_micros()).unwrap_or(u64::MAX);
+                rt.metrics.callback(kind, values, us);
             }
+            if lost {
+                rt.metrics.sink_dropped(true);
+            }
+            let verdict = rt.ops.call_finished(session, clock::now(), group, paced);
+            if lost {
+                rt.report([Report::Disconnected(group)]);
+            }
+            rt.apply_verdict(session, verdict);
         });
         worker.tx.send(job).is_ok()
     }
@@ -421,7 +530,9 @@ fn drive(rt: Weak<Runtime>) {
             // The waiters take their own results (`Engine::take_sync_result`).
             rt.stepped.notify_all();
         }
+        rt.watch_callbacks();
         if !step.events.is_empty() {
+            audit_write_completions(&rt, &step.events);
             rt.deliver(step.events);
         }
         let wait = match step.next {
@@ -431,6 +542,35 @@ fn drive(rt: Weak<Runtime>) {
         let signal = Arc::clone(&rt.signal);
         drop(rt);
         signal.wait(wait);
+    }
+}
+
+/// The write audit's lines of the OnWriteCompletes of a step (the group names taken in a
+/// short engine section of their own; nothing when auditing is off).
+fn audit_write_completions(rt: &Runtime, events: &[Event]) {
+    if !rt.ops.auditing() {
+        return;
+    }
+    let writes: Vec<&ctopc_core::model::WriteComplete> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::WriteComplete(w) => Some(w),
+            _ => None,
+        })
+        .collect();
+    if writes.is_empty() {
+        return;
+    }
+    let names: Vec<Option<String>> = {
+        let d = rt.lock();
+        writes
+            .iter()
+            .map(|w| d.engine.audit_group_name(w.group))
+            .collect()
+    };
+    let now = clock::now();
+    for (w, name) in writes.iter().zip(&names) {
+        rt.ops.audit_complete(now, name.as_deref(), w);
     }
 }
 
@@ -464,11 +604,26 @@ fn hr_of(e: Option<OpcError>) -> HRESULT {
     e.map_or(HRESULT(0), error::hresult)
 }
 
-/// Delivers one event to a group's sink on the client's worker thread. True when the
-/// client is gone and its sink was dropped (the engine must hear of it).
-fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) -> bool {
+/// The metrics' kind of a callback and the values it carries.
+fn metric_kind(event: &Event) -> (ctopc_core::metrics::CallbackKind, u64) {
+    use ctopc_core::metrics::CallbackKind as K;
+    match event {
+        Event::DataChange(d) => (K::DataChange, d.items.len() as u64),
+        Event::ReadComplete(d) => (K::ReadComplete, d.items.len() as u64),
+        Event::WriteComplete(_) => (K::WriteComplete, 0),
+        Event::CancelComplete(_) => (K::CancelComplete, 0),
+    }
+}
+
+/// Delivers one event to a group's sink on the client's worker thread: (the client is
+/// gone and its sink was dropped, so the engine must hear of it; a call was made).
+fn deliver_one(
+    group: GroupHandle,
+    slot: &SinkSlot<IOPCDataCallback>,
+    event: Event,
+) -> (bool, bool) {
     let (Some(sink), Some(cookie)) = (slot.get(), slot.cookie()) else {
-        return false;
+        return (false, false);
     };
     let result = match &event {
         Event::DataChange(d) => call_values(
@@ -515,11 +670,11 @@ fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Eve
                 "group {}: the client's IOPCDataCallback is gone ({e}); dropping it",
                 group.0
             );
-            return slot.drop_if(cookie);
+            return (slot.drop_if(cookie), true);
         }
         tracing::debug!("group {}: callback returned {e}", group.0);
     }
-    false
+    (false, true)
 }
 
 fn call_values(

@@ -209,6 +209,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
     unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
         // SAFETY: `name` is this method's [in, string] parameter.
         let name = unsafe { abi::in_string(name, limits::CLIENT_NAME) }?;
+        self.ctx.runtime.ops.set_client_name(self.handle, &name);
         self.session().client_name = Some(name);
         Ok(())
     }
@@ -229,6 +230,10 @@ impl IOPCServer_Impl for OpcServer_Impl {
         riid: *const GUID,
         unk: *mut Option<IUnknown>,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AddGroup,
+        );
         let args = groups::AddGroupArgs {
             name,
             active,
@@ -270,6 +275,10 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::GetStatus,
+        );
         // Cleared first (NULL), before any allocation can fail.
         // SAFETY: `pstatus` is this method's [out] parameter.
         let out = unsafe { OutArray::new(pstatus) }?;
@@ -314,6 +323,10 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn RemoveGroup(&self, server_group: u32, force: BOOL) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::RemoveGroup,
+        );
         abi::hresult(self.remove_group(server_group, force))
     }
 

@@ -4,14 +4,17 @@
 //! The COM layer (`ctopc-com`) only translates between COM and this crate.
 #![forbid(unsafe_code)]
 
+pub mod audit;
 pub mod browse;
 pub mod convert;
 pub mod driver;
 pub mod error;
 pub mod lang;
 pub mod limits;
+pub mod metrics;
 pub mod model;
 pub mod namespace;
+pub mod ops;
 pub mod properties;
 pub mod quality;
 pub mod source;

@@ -219,18 +219,19 @@ impl Group_Impl {
     /// A synchronous write (Write, WriteVQT): one engine call, then the wait.
     fn sync_write(
         &self,
+        method: &str,
         items: Vec<(u32, ItemVqt)>,
         pre: PreErrors,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
         let n = items.len();
-        let (outcome, timeout) = self.ctx.runtime.with_engine(|e, now| {
+        let (outcome, timeout, names) = self.ctx.runtime.with_engine(|e, now| {
             (
                 e.write_vqt(now, self.handle, &items),
                 e.config().source_timeout_ms,
+                self.audit_names(e, &items),
             )
         });
-        drop(items);
         let mut results = complete(
             self,
             outcome.map_err(error::to_com)?,
@@ -240,7 +241,52 @@ impl Group_Impl {
             write_timed_out,
         )?;
         pre.apply(&mut results);
+        self.ctx.runtime.metrics.written(items.len() as u64);
+        self.audit(method, names, &items, None, &results);
         errors_out(pp_errors, &results)
+    }
+
+    /// What the write audit needs of the engine (`None` when auditing is off).
+    fn audit_names(
+        &self,
+        e: &Engine,
+        items: &[(u32, ItemVqt)],
+    ) -> Option<(String, Vec<Option<String>>)> {
+        if !self.ctx.runtime.ops.auditing() {
+            return None;
+        }
+        let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
+        e.audit_names(self.handle, &handles).ok()
+    }
+
+    /// The write audit's lines for a write of this group (`crate::ops`).
+    fn audit(
+        &self,
+        method: &str,
+        names: Option<(String, Vec<Option<String>>)>,
+        items: &[(u32, ItemVqt)],
+        cancel_id: Option<u32>,
+        results: &[Result<(), OpcError>],
+    ) {
+        let Some((group, ids)) = names else { return };
+        let keys: Vec<(Option<&str>, Option<u32>)> = items
+            .iter()
+            .zip(&ids)
+            .map(|((h, _), id)| (id.as_deref(), Some(*h)))
+            .collect();
+        let values: Vec<ItemVqt> = items.iter().map(|(_, v)| v.clone()).collect();
+        let call = crate::ops::WriteCall {
+            session: self.session,
+            method,
+            group: Some(&group),
+            items: &keys,
+            values: &values,
+            cancel_id,
+        };
+        self.ctx
+            .runtime
+            .ops
+            .audit_write(clock::now(), &call, results);
     }
 
     /// A synchronous read (Read, ReadMaxAge): one engine call, then the wait.
@@ -275,20 +321,27 @@ impl Group_Impl {
     /// `p_cancel` is the method's non-null `[out]` cancel ID (checked by the caller).
     unsafe fn async_write(
         &self,
+        method: &str,
         transaction: u32,
         items: Vec<(u32, ItemVqt)>,
         pre: PreErrors,
         p_cancel: *mut u32,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
-        let started = self.ctx.runtime.with_engine(|e, now| {
-            self.data_callback_connected(e)?;
-            e.async_write_vqt(now, self.handle, transaction, &items)
+        let (started, names) = self.ctx.runtime.with_engine(|e, now| {
+            let started = self
+                .data_callback_connected(e)
+                .and_then(|()| e.async_write_vqt(now, self.handle, transaction, &items));
+            (started, self.audit_names(e, &items))
         });
         let started = started.map(|mut s| {
             pre.apply(&mut s.results);
             s
         });
+        if let Ok(s) = &started {
+            self.ctx.runtime.metrics.written(items.len() as u64);
+            self.audit(method, names, &items, Some(s.cancel_id), &s.results);
+        }
         // SAFETY: the caller's contract.
         unsafe { self.async_out(started, p_cancel, pp_errors) }
     }
@@ -386,7 +439,7 @@ impl Group_Impl {
         let values = in_array(p_values, count)?;
         let mut pre = PreErrors::default();
         let items = value_items(handles, values, &mut pre);
-        self.sync_write(items, pre, pp_errors)
+        self.sync_write("IOPCSyncIO::Write", items, pre, pp_errors)
     }
 }
 
@@ -399,6 +452,10 @@ impl IOPCSyncIO_Impl for Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::SyncRead,
+        );
         abi::hresult(self.read_impl(source, count, ph_server, pp_values, pp_errors))
     }
 
@@ -409,6 +466,10 @@ impl IOPCSyncIO_Impl for Group_Impl {
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::SyncWrite,
+        );
         abi::hresult(self.write_impl(count, ph_server, p_values, pp_errors))
     }
 }
@@ -492,7 +553,7 @@ impl Group_Impl {
         let vqts = in_array(p_vqt, count)?;
         let mut pre = PreErrors::default();
         let items = vqt_items(handles, vqts, &mut pre);
-        self.sync_write(items, pre, pp_errors)
+        self.sync_write("IOPCSyncIO2::WriteVQT", items, pre, pp_errors)
     }
 }
 
@@ -507,6 +568,10 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ReadMaxAge,
+        );
         abi::hresult(self.read_max_age_impl(
             count,
             ph_server,
@@ -525,6 +590,10 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::WriteVqt,
+        );
         abi::hresult(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
     }
 }
@@ -586,7 +655,16 @@ impl Group_Impl {
         let mut pre = PreErrors::default();
         let items = value_items(handles, values, &mut pre);
         // SAFETY: p_cancel was checked non-null by cancel_out above.
-        unsafe { self.async_write(transaction, items, pre, p_cancel, pp_errors) }
+        unsafe {
+            self.async_write(
+                "IOPCAsyncIO2::Write",
+                transaction,
+                items,
+                pre,
+                p_cancel,
+                pp_errors,
+            )
+        }
     }
 
     /// # Safety
@@ -618,6 +696,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncRead,
+        );
         abi::hresult(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
     }
 
@@ -630,6 +712,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncWrite,
+        );
         abi::hresult(self.async_write_impl(
             count,
             ph_server,
@@ -646,6 +732,10 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         transaction: u32,
         p_cancel: *mut u32,
     ) -> windows::core::Result<()> {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::Refresh2,
+        );
         // SAFETY: the method's [out] parameter.
         unsafe { abi::clear_outs((p_cancel,)) };
         let source = data_source(source)?;
@@ -731,7 +821,16 @@ impl Group_Impl {
         let mut pre = PreErrors::default();
         let items = vqt_items(handles, vqts, &mut pre);
         // SAFETY: p_cancel was checked non-null by cancel_out above.
-        unsafe { self.async_write(transaction, items, pre, p_cancel, pp_errors) }
+        unsafe {
+            self.async_write(
+                "IOPCAsyncIO3::WriteVQT",
+                transaction,
+                items,
+                pre,
+                p_cancel,
+                pp_errors,
+            )
+        }
     }
 }
 
@@ -745,6 +844,10 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncReadMaxAge,
+        );
         abi::hresult(self.async_read_max_age_impl(
             count,
             ph_server,
@@ -764,6 +867,10 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AsyncWriteVqt,
+        );
         abi::hresult(self.async_write_vqt_impl(
             count,
             ph_server,

@@ -171,6 +171,10 @@ impl IOPCItemMgt_Impl for Group_Impl {
         ppaddresults: *mut *mut OPCITEMRESULT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::AddItems,
+        );
         // SAFETY: this method's [out] parameters.
         unsafe { abi::clear_outs((ppaddresults, pperrors)) };
         let results = check!(OutArray::new(ppaddresults));
@@ -232,6 +236,10 @@ impl IOPCItemMgt_Impl for Group_Impl {
         phserver: *const OPCHANDLE,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::RemoveItems,
+        );
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));
         self.per_item(handles.len(), errors, |e, now, g| {

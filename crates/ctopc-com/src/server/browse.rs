@@ -67,6 +67,10 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         access_rights_filter: u32,
         ppenum: *mut Option<IEnumString>,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::BrowseOpcItemIds,
+        );
         clear(ppenum, None);
         abi::hresult((|| {
             nonnull(ppenum)?;
@@ -197,6 +201,10 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         pcount: *mut u32,
         ppelements: *mut *mut OPCBROWSEELEMENT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::Browse,
+        );
         clear_outs((pmore, pcount, ppelements));
         abi::hresult((|| {
             nonnull(pcontinuation_point)?;

@@ -70,7 +70,7 @@ impl OpcServer {
             .ctx
             .runtime
             .with_engine(|e, now| e.item_io_write_vqt(now, self.handle, items));
-        match started {
+        let results = match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait_sync(id) {
                 Some(SyncResult::Write(r)) => r,
@@ -78,7 +78,30 @@ impl OpcServer {
                 None => vec![Err(OpcError::NetAnswerTimeout); n],
             },
             Err(e) => vec![Err(e); n],
+        };
+        self.ctx.runtime.metrics.written(items.len() as u64);
+        self.audit_item_io(items, &results);
+        results
+    }
+
+    /// The write audit's lines of an IOPCItemIO::WriteVQT (`crate::ops`).
+    fn audit_item_io(&self, items: &[(&str, ItemVqt)], results: &[Result<(), OpcError>]) {
+        let ops = &self.ctx.runtime.ops;
+        if !ops.auditing() {
+            return;
         }
+        let keys: Vec<(Option<&str>, Option<u32>)> =
+            items.iter().map(|(id, _)| (Some(*id), None)).collect();
+        let values: Vec<ItemVqt> = items.iter().map(|(_, v)| v.clone()).collect();
+        let call = crate::ops::WriteCall {
+            session: self.handle,
+            method: "IOPCItemIO::WriteVQT",
+            group: None,
+            items: &keys,
+            values: &values,
+            cancel_id: None,
+        };
+        ops.audit_write(crate::clock::now(), &call, results);
     }
 }
 
@@ -136,6 +159,10 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pptimes: *mut *mut FILETIME,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ItemIoRead,
+        );
         clear_outs((ppvalues, ppqualities, pptimes, pperrors));
         abi::hresult((|| {
             nonnull(ppvalues)?;
@@ -194,6 +221,10 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pvqt: *const OPCITEMVQT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
+        let _t = crate::ops::timed(
+            &self.ctx.runtime.metrics,
+            ctopc_core::metrics::Method::ItemIoWriteVqt,
+        );
         clear(pperrors, std::ptr::null_mut());
         abi::hresult((|| {
             nonnull(pperrors)?;

@@ -145,6 +145,7 @@ pub fn new_context_with(tune: impl FnOnce(&mut ctopc_core::model::EngineConfig))
         engine_config,
         default_language: server.default_language.fixed(),
         no_config_reason: ns.no_config_reason(),
+        ops: server.ops_config(),
     };
     let ns = Arc::clone(ns);
     let started = host::start(

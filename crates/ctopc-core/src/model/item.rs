@@ -477,6 +477,36 @@ impl Engine {
             .collect())
     }
 
+    /// For the write audit (`crate::audit`): the group's name and the item ID of each
+    /// server handle (`None` for a handle that is not the group's).
+    pub fn audit_names(
+        &self,
+        group: GroupHandle,
+        handles: &[u32],
+    ) -> Result<(String, Vec<Option<String>>), OpcError> {
+        let g = self.group(self.live_slot(group)?);
+        let ids = handles
+            .iter()
+            .map(|&h| {
+                g.find(h).map(|i| {
+                    let it = &g.items[i];
+                    if it.flags & ALIAS != 0 {
+                        self.names.get(it.name).0.to_string()
+                    } else {
+                        self.sources.entries[it.source as usize].key.to_string()
+                    }
+                })
+            })
+            .collect();
+        Ok((g.name.clone(), ids))
+    }
+
+    /// The group's name, for the write audit of its OnWriteComplete.
+    pub fn audit_group_name(&self, group: GroupHandle) -> Option<String> {
+        let g = self.group(self.live_slot(group).ok()?);
+        Some(g.name.clone())
+    }
+
     // ---- IOPCItemDeadbandMgt ---------------------------------------------------------
 
     /// IOPCItemDeadbandMgt::SetItemDeadband: E_INVALIDARG outside 0..100,
