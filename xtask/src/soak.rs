@@ -30,6 +30,7 @@
 //! after 10 s as a hung call would (`soak-client --stall-after 10`).
 
 use crate::{build, setup, util, wine};
+use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
@@ -278,13 +279,15 @@ fn is_ours(name: &str) -> bool {
 pub fn backtrace_script(procs: &[WineProcess]) -> String {
     let mut s = String::new();
     for p in procs {
-        s += &format!("attach 0x{:x}\n", p.pid);
+        // winedbg's first backtrace after an attach faults (c0000005) here, whatever the
+        // thread: a warm-up one of the debugger's own thread in the process first.
+        s += &format!("attach 0x{:x}\necho (warm-up)\nbt\n", p.pid);
         for t in &p.threads {
             s += &format!(
                 "echo ==== {} (process 0x{:x}) thread 0x{t:x}\n",
                 p.name, p.pid
             );
-            s += &format!("bt 0x{t:x}\n");
+            s += &format!("thread 0x{t:x}\nbt\n");
         }
         s += "detach\n";
     }
@@ -339,10 +342,82 @@ fn linux_threads(pid: u32) -> String {
     s
 }
 
+/// The module and return address of a winedbg frame line of a module without symbols:
+/// `  5 0x0000014034af0e in serverctopc (+0x34af0e) (...)` is ("serverctopc", 0x14034af0e).
+pub fn frame_address(line: &str) -> Option<(String, u64)> {
+    let mut w = line.split_whitespace();
+    let (_, addr, in_, module, offset) = (w.next()?, w.next()?, w.next()?, w.next()?, w.next()?);
+    if in_ != "in" || !offset.starts_with("(+0x") {
+        return None;
+    }
+    let addr = u64::from_str_radix(addr.strip_prefix("0x")?, 16).ok()?;
+    Some((module.to_ascii_lowercase(), addr))
+}
+
+/// `bt` with each frame of our executables followed by its functions and lines, from the
+/// executables' DWARF (`addr2line`, one run per executable; the address looked up is the
+/// return address - 1, inside the call). `exes`: (winedbg's module name, path).
+fn symbolize(bt: &str, exes: &[(&str, &Path)]) -> String {
+    let mut found: std::collections::BTreeMap<String, Vec<u64>> = Default::default();
+    for (module, addr) in bt.lines().filter_map(frame_address) {
+        found
+            .entry(module)
+            .or_default()
+            .push(addr.saturating_sub(1));
+    }
+    let mut names: HashMap<(String, u64), Vec<String>> = HashMap::new();
+    for (module, addrs) in &found {
+        let Some((_, exe)) = exes.iter().find(|(m, _)| m == module) else {
+            continue;
+        };
+        let mut c = std::process::Command::new("addr2line");
+        c.args(["-a", "-f", "-C", "-i", "-e"]).arg(exe);
+        c.args(addrs.iter().map(|a| format!("0x{a:x}")));
+        let Ok(out) = c.stderr(Stdio::null()).output() else {
+            continue;
+        };
+        let text = String::from_utf8_lossy(&out.stdout);
+        let mut cur: Option<u64> = None;
+        let mut lines = text.lines();
+        while let Some(l) = lines.next() {
+            if let Some(a) = l
+                .strip_prefix("0x")
+                .and_then(|h| u64::from_str_radix(h, 16).ok())
+            {
+                cur = Some(a);
+                continue;
+            }
+            let place = lines.next().unwrap_or("");
+            if let Some(a) = cur {
+                names
+                    .entry((module.clone(), a))
+                    .or_default()
+                    .push(format!("{l} ({place})"));
+            }
+        }
+    }
+    let mut out = String::new();
+    for line in bt.lines() {
+        out += line;
+        out.push('\n');
+        if let Some((m, a)) = frame_address(line) {
+            for n in names.get(&(m, a.saturating_sub(1))).into_iter().flatten() {
+                out += &format!("        {n}\n");
+            }
+        }
+    }
+    out
+}
+
 /// Writes a stall report to `target/soak/stall-<unix time>.txt`: `what`, the Linux threads
 /// of `linux_pids` and winedbg backtraces of every thread of the server and of the soak
 /// clients (the prefix still runs). Its path.
-pub fn capture_backtraces(pfx: &Path, linux_pids: &[u32], what: &str) -> Result<PathBuf, String> {
+pub fn capture_backtraces(
+    pfx: &Path,
+    linux_pids: &[u32],
+    exes: &[(&str, &Path)],
+    what: &str,
+) -> Result<PathBuf, String> {
     let dir = util::root().join("target/soak");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let secs = std::time::SystemTime::now()
@@ -360,8 +435,8 @@ pub fn capture_backtraces(pfx: &Path, linux_pids: &[u32], what: &str) -> Result<
         .into_iter()
         .filter(|p| is_ours(&p.name))
         .collect();
-    report += "\n== winedbg: backtraces (a thread whose `bt` faults shows `Exception c0000005`)\n";
-    report += &winedbg(pfx, &dir, &backtrace_script(&ours))?;
+    report += "\n== winedbg: backtraces, our frames resolved by addr2line\n";
+    report += &symbolize(&winedbg(pfx, &dir, &backtrace_script(&ours))?, exes);
     std::fs::write(&path, report).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(path)
 }
@@ -496,7 +571,8 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
                 println!("soak: {what}: a stall; taking backtraces before stopping anything");
                 let mut pids = vec![pid, holder.id()];
                 pids.extend(kids.iter().map(|k| k.child.id()));
-                let captured = capture_backtraces(pfx, &pids, &what);
+                let exes = [("serverctopc", server), ("soak-client", client)];
+                let captured = capture_backtraces(pfx, &pids, &exes, &what);
                 kids.iter_mut().for_each(|k| {
                     let _ = k.child.kill();
                 });
@@ -620,8 +696,8 @@ mod tests {
         let script = super::backtrace_script(&p[1..2]);
         assert_eq!(
             script,
-            "attach 0x11c\necho ==== ServerCTOPC.exe (process 0x11c) thread 0x120\nbt 0x120\n\
-             echo ==== ServerCTOPC.exe (process 0x11c) thread 0x150\nbt 0x150\ndetach\nquit\n"
+            "attach 0x11c\necho (warm-up)\nbt\necho ==== ServerCTOPC.exe (process 0x11c) thread 0x120\nthread 0x120\nbt\n\
+             echo ==== ServerCTOPC.exe (process 0x11c) thread 0x150\nthread 0x150\nbt\ndetach\nquit\n"
         );
         let o = super::options(&[
             "--simulate-stall".into(),
