@@ -287,7 +287,9 @@ pub fn backtrace_script(procs: &[WineProcess]) -> String {
                 "echo ==== {} (process 0x{:x}) thread 0x{t:x}\n",
                 p.name, p.pid
             );
-            s += &format!("thread 0x{t:x}\nbt\n");
+            // `bt` faults (c0000005) on the main threads here: a stack dump too,
+            // whose words into our code [`symbolize`] resolves.
+            s += &format!("thread 0x{t:x}\nbt\ninfo stack 1024\n");
         }
         s += "detach\n";
     }
@@ -354,22 +356,70 @@ pub fn frame_address(line: &str) -> Option<(String, u64)> {
     Some((module.to_ascii_lowercase(), addr))
 }
 
-/// `bt` with each frame of our executables followed by its functions and lines, from the
-/// executables' DWARF (`addr2line`, one run per executable; the address looked up is the
-/// return address - 1, inside the call). `exes`: (winedbg's module name, path).
+/// The module name winedbg gives the executable of a `==== <exe> (process ...)` header.
+fn header_module(line: &str) -> Option<String> {
+    let exe = line.strip_prefix("==== ")?.split_whitespace().next()?;
+    let stem = exe.rsplit('\\').next()?.to_ascii_lowercase();
+    Some(stem.trim_end_matches(".exe").to_owned())
+}
+
+/// The words of an `info stack` line (`0x0000000021f548:  000000007b075550 0000000000000003`).
+pub fn stack_words(line: &str) -> Option<Vec<u64>> {
+    let (at, words) = line.split_once(":  ")?;
+    u64::from_str_radix(at.strip_prefix("0x")?, 16).ok()?;
+    words
+        .split_whitespace()
+        .map(|w| u64::from_str_radix(w, 16).ok())
+        .collect()
+}
+
+/// Our executables load at their preferred base (no relocation under Wine here).
+const IMAGE_BASE: u64 = 0x1_4000_0000;
+
+/// `winedbg` output with each frame of our executables followed by its functions and lines
+/// (from the executables' DWARF, `addr2line`, one run per executable; a return address
+/// minus 1, inside the call). A thread whose `bt` faults has an `info stack` dump instead:
+/// it becomes the list of its words that resolve to our code (a scan, not a walk).
+/// `exes`: (winedbg's module name, path).
 fn symbolize(bt: &str, exes: &[(&str, &Path)]) -> String {
+    let image_end = |m: &str| {
+        exes.iter()
+            .find(|(n, _)| *n == m)
+            .and_then(|(_, p)| std::fs::metadata(p).ok())
+            .map_or(IMAGE_BASE, |md| IMAGE_BASE + md.len())
+    };
+    // Per line: the (module, address) pairs to resolve.
+    let mut module = String::new();
+    let mut wanted: Vec<Vec<(String, u64)>> = Vec::new();
+    for line in bt.lines() {
+        if let Some(m) = header_module(line) {
+            module = m;
+        }
+        let mut w = Vec::new();
+        if let Some((m, a)) = frame_address(line) {
+            w.push((m, a.saturating_sub(1)));
+        } else if let Some(words) = stack_words(line) {
+            let end = image_end(&module);
+            w.extend(
+                words
+                    .into_iter()
+                    .filter(|a| (IMAGE_BASE + 0x1000..end).contains(a))
+                    .map(|a| (module.clone(), a - 1)),
+            );
+        }
+        wanted.push(w);
+    }
     let mut found: std::collections::BTreeMap<String, Vec<u64>> = Default::default();
-    for (module, addr) in bt.lines().filter_map(frame_address) {
-        found
-            .entry(module)
-            .or_default()
-            .push(addr.saturating_sub(1));
+    for (m, a) in wanted.iter().flatten() {
+        found.entry(m.clone()).or_default().push(*a);
     }
     let mut names: HashMap<(String, u64), Vec<String>> = HashMap::new();
-    for (module, addrs) in &found {
+    for (module, addrs) in &mut found {
         let Some((_, exe)) = exes.iter().find(|(m, _)| m == module) else {
             continue;
         };
+        addrs.sort_unstable();
+        addrs.dedup();
         let mut c = std::process::Command::new("addr2line");
         c.args(["-a", "-f", "-C", "-i", "-e"]).arg(exe);
         c.args(addrs.iter().map(|a| format!("0x{a:x}")));
@@ -388,7 +438,8 @@ fn symbolize(bt: &str, exes: &[(&str, &Path)]) -> String {
                 continue;
             }
             let place = lines.next().unwrap_or("");
-            if let Some(a) = cur {
+            // A word that is data, or code without a function name, says nothing.
+            if let (Some(a), false) = (cur, l == "??") {
                 names
                     .entry((module.clone(), a))
                     .or_default()
@@ -397,11 +448,20 @@ fn symbolize(bt: &str, exes: &[(&str, &Path)]) -> String {
         }
     }
     let mut out = String::new();
-    for line in bt.lines() {
-        out += line;
-        out.push('\n');
-        if let Some((m, a)) = frame_address(line) {
-            for n in names.get(&(m, a.saturating_sub(1))).into_iter().flatten() {
+    for (line, w) in bt.lines().zip(&wanted) {
+        let dump = stack_words(line).is_some();
+        if !dump {
+            out += line;
+            out.push('\n');
+        }
+        for (m, a) in w {
+            let Some(ns) = names.get(&(m.clone(), *a)) else {
+                continue;
+            };
+            if dump {
+                out += &format!("  stack word 0x{:x} in {m}:\n", a + 1);
+            }
+            for n in ns {
                 out += &format!("        {n}\n");
             }
         }
@@ -696,8 +756,8 @@ mod tests {
         let script = super::backtrace_script(&p[1..2]);
         assert_eq!(
             script,
-            "attach 0x11c\necho (warm-up)\nbt\necho ==== ServerCTOPC.exe (process 0x11c) thread 0x120\nthread 0x120\nbt\n\
-             echo ==== ServerCTOPC.exe (process 0x11c) thread 0x150\nthread 0x150\nbt\ndetach\nquit\n"
+            "attach 0x11c\necho (warm-up)\nbt\necho ==== ServerCTOPC.exe (process 0x11c) thread 0x120\nthread 0x120\nbt\ninfo stack 1024\n\
+             echo ==== ServerCTOPC.exe (process 0x11c) thread 0x150\nthread 0x150\nbt\ninfo stack 1024\ndetach\nquit\n"
         );
         let o = super::options(&[
             "--simulate-stall".into(),
