@@ -1,5 +1,6 @@
 //! `cargo xtask soak [--minutes M] [--clients K] [--items N] [--round-seconds R]
-//! [--calls LIST | --no-in-arrays]`: the memory soak of issue 19 (not in CI).
+//! [--calls LIST | --no-in-arrays] [--stall-seconds S] [--simulate-stall]`: the memory soak
+//! of issue 19 (not in CI).
 //!
 //! Builds the server and `soak-client.exe`, registers them in a Wine prefix of the soak's
 //! own (`target/wine/soak-prefix`), starts one client that holds the server for the whole
