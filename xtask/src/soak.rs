@@ -1,5 +1,6 @@
 //! `cargo xtask soak [--minutes M] [--clients K] [--items N] [--round-seconds R]
-//! [--calls LIST | --no-in-arrays]`: the memory soak of issue 19 (not in CI).
+//! [--calls LIST | --no-in-arrays] [--stall-seconds S] [--simulate-stall]`: the memory soak
+//! of issue 19 (not in CI).
 //!
 //! Builds the server and `soak-client.exe`, registers them in a Wine prefix of the soak's
 //! own (`target/wine/soak-prefix`), starts one client that holds the server for the whole
@@ -20,10 +21,21 @@
 //! allocated `[in]` arrays; the soak prints beside the measured slope the one Wine's
 //! stub predicts (it keeps the top-level block of such an array: [`KEPT_PER_ITEM`],
 //! docs/wine-ndr-leak.md) and the residual, the growth Wine's leak does not explain.
+//!
+//! **Stalls** (issue 19: no call may hang): each churning client prints a line per round;
+//! when a running client has printed nothing for `--stall-seconds S` (default 60), the
+//! soak, before it stops anything, takes `winedbg` backtraces of every thread of the
+//! server and of every soak client ([`capture_backtraces`]), writes them with the Linux
+//! threads' states to `target/soak/stall-<unix time>.txt`, prints the path and fails.
+//! `--simulate-stall` (to see that capture work) makes the first client of round 1 stop
+//! after 10 s as a hung call would (`soak-client --stall-after 10`).
 
 use crate::{build, setup, util, wine};
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 fn prefix() -> PathBuf {
@@ -36,6 +48,8 @@ struct Options {
     items: u32,
     round_seconds: u32,
     calls: Option<String>,
+    stall_seconds: u64,
+    simulate_stall: bool,
 }
 
 /// The calls of `--no-in-arrays`: none carries an `[in]` array the stub allocates.
@@ -86,11 +100,17 @@ fn options(args: &[String]) -> Result<Options, String> {
         items: 1000,
         round_seconds: 60,
         calls: None,
+        stall_seconds: 60,
+        simulate_stall: false,
     };
     let mut it = args.iter();
     while let Some(a) = it.next() {
         if a == "--no-in-arrays" {
             o.calls = Some(NO_IN_ARRAYS.into());
+            continue;
+        }
+        if a == "--simulate-stall" {
+            o.simulate_stall = true;
             continue;
         }
         let v = it.next().ok_or(format!("soak: {a} needs a value"))?;
@@ -101,6 +121,7 @@ fn options(args: &[String]) -> Result<Options, String> {
             "--items" => o.items = v.parse().map_err(|_| bad())?,
             "--round-seconds" => o.round_seconds = v.parse().map_err(|_| bad())?,
             "--calls" => o.calls = Some(v.clone()),
+            "--stall-seconds" => o.stall_seconds = v.parse().map_err(|_| bad())?,
             _ => return Err(format!("soak: unknown option {a}")),
         }
     }
@@ -168,6 +189,317 @@ fn spawn(pfx: &Path, exe: &Path, args: &[String], out: Stdio) -> Result<Child, S
         .stdout(out)
         .spawn()
         .map_err(|e| format!("start {}: {e}", exe.display()))
+}
+
+/// A churning client and what it printed: its lines and when it last printed one (its
+/// progress: a line per round).
+struct Watched {
+    child: Child,
+    log: Arc<Mutex<(String, Instant)>>,
+    reader: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Watched {
+    fn since_progress(&self) -> Duration {
+        self.log.lock().map_or(Duration::ZERO, |l| l.1.elapsed())
+    }
+
+    /// Waits for the client (it has ended): whether it succeeded, and its output.
+    fn finish(mut self) -> (bool, String) {
+        let ok = self.child.wait().is_ok_and(|s| s.success());
+        if let Some(r) = self.reader.take() {
+            let _ = r.join();
+        }
+        let text = self.log.lock().map_or(String::new(), |l| l.0.clone());
+        (ok, text)
+    }
+}
+
+fn watch(mut child: Child) -> Watched {
+    let log = Arc::new(Mutex::new((String::new(), Instant::now())));
+    let reader = child.stdout.take().map(|out| {
+        let log = Arc::clone(&log);
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines().map_while(Result::ok) {
+                if let Ok(mut l) = log.lock() {
+                    l.0.push_str(&line);
+                    l.0.push('\n');
+                    l.1 = Instant::now();
+                }
+            }
+        })
+    });
+    Watched { child, log, reader }
+}
+
+/// A process of winedbg's `info thread`: Windows pid, image name, thread ids.
+#[derive(Debug, PartialEq)]
+pub struct WineProcess {
+    pub pid: u32,
+    pub name: String,
+    pub threads: Vec<u32>,
+}
+
+/// Parses winedbg's `info thread`: a process line `0000011c ServerCTOPC.exe` (the
+/// debugger's own marked `(D)`), then its threads, each `\t00000120    0     main`.
+pub fn parse_info_thread(text: &str) -> Vec<WineProcess> {
+    let hex8 = |t: &str| {
+        (t.len() == 8)
+            .then(|| u32::from_str_radix(t, 16).ok())
+            .flatten()
+    };
+    let mut out: Vec<WineProcess> = Vec::new();
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        let Some(id) = words.next().and_then(hex8) else {
+            continue;
+        };
+        if line.starts_with('\t') {
+            if let Some(p) = out.last_mut() {
+                p.threads.push(id);
+            }
+        } else {
+            let rest: Vec<&str> = words.filter(|w| *w != "(D)").collect();
+            out.push(WineProcess {
+                pid: id,
+                name: rest.join(" "),
+                threads: Vec::new(),
+            });
+        }
+    }
+    out
+}
+
+/// The processes of a stall report: the server and the soak clients.
+fn is_ours(name: &str) -> bool {
+    let n = name.to_ascii_lowercase();
+    n.ends_with("serverctopc.exe") || n.ends_with("soak-client.exe")
+}
+
+/// A winedbg script that attaches to each of `procs` in turn and backtraces every thread.
+pub fn backtrace_script(procs: &[WineProcess]) -> String {
+    let mut s = String::new();
+    for p in procs {
+        // winedbg's first backtrace after an attach faults (c0000005) here, whatever the
+        // thread: a warm-up one of the debugger's own thread in the process first.
+        s += &format!("attach 0x{:x}\necho (warm-up)\nbt\n", p.pid);
+        for t in &p.threads {
+            s += &format!(
+                "echo ==== {} (process 0x{:x}) thread 0x{t:x}\n",
+                p.name, p.pid
+            );
+            // `bt` faults (c0000005) on the main threads here: a stack dump too,
+            // whose words into our code [`symbolize`] resolves.
+            s += &format!("thread 0x{t:x}\nbt\ninfo stack 1024\n");
+        }
+        s += "detach\n";
+    }
+    s += "quit\n";
+    s
+}
+
+/// Runs winedbg in `pfx` on `script` (a file in `dir`), bounded: its output.
+fn winedbg(pfx: &Path, dir: &Path, script: &str) -> Result<String, String> {
+    let file = dir.join("winedbg-script.txt");
+    let out = dir.join("winedbg-out.txt");
+    std::fs::write(&file, script).map_err(|e| format!("{}: {e}", file.display()))?;
+    let f = std::fs::File::create(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let f2 = f.try_clone().map_err(|e| e.to_string())?;
+    let mut c = wine::wine_in(pfx, "winedbg");
+    c.arg("--file")
+        .arg(&file)
+        .stdin(Stdio::null())
+        .stdout(f)
+        .stderr(f2);
+    let status = util::run_with_timeout(&mut c, Duration::from_secs(180));
+    let text = std::fs::read_to_string(&out).unwrap_or_default();
+    match status {
+        Ok(_) => Ok(text),
+        Err(e) => Ok(format!("{text}\n(winedbg: {e})\n")),
+    }
+}
+
+/// The Linux view of `pid`'s threads: name, state and kernel wait channel of each.
+fn linux_threads(pid: u32) -> String {
+    let mut s = format!("== Linux pid {pid}: {}\n", {
+        let c = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        String::from_utf8_lossy(&c).replace('\0', " ")
+    });
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return s + "   (gone)\n";
+    };
+    for t in tasks.flatten() {
+        let read = |f: &str| std::fs::read_to_string(t.path().join(f)).unwrap_or_default();
+        let stat = read("stat");
+        // The state is the first field after the parenthesised name.
+        let state = stat
+            .rsplit_once(") ")
+            .map_or("?", |(_, r)| &r[..1.min(r.len())]);
+        s += &format!(
+            "   tid {} {:<20} state {state} wchan {}\n",
+            t.file_name().to_string_lossy(),
+            read("comm").trim(),
+            read("wchan").trim()
+        );
+    }
+    s
+}
+
+/// The module and return address of a winedbg frame line of a module without symbols:
+/// `  5 0x0000014034af0e in serverctopc (+0x34af0e) (...)` is ("serverctopc", 0x14034af0e).
+pub fn frame_address(line: &str) -> Option<(String, u64)> {
+    let mut w = line.split_whitespace();
+    let (_, addr, in_, module, offset) = (w.next()?, w.next()?, w.next()?, w.next()?, w.next()?);
+    if in_ != "in" || !offset.starts_with("(+0x") {
+        return None;
+    }
+    let addr = u64::from_str_radix(addr.strip_prefix("0x")?, 16).ok()?;
+    Some((module.to_ascii_lowercase(), addr))
+}
+
+/// The module name winedbg gives the executable of a `==== <exe> (process ...)` header.
+fn header_module(line: &str) -> Option<String> {
+    let exe = line.strip_prefix("==== ")?.split_whitespace().next()?;
+    let stem = exe.rsplit('\\').next()?.to_ascii_lowercase();
+    Some(stem.trim_end_matches(".exe").to_owned())
+}
+
+/// The words of an `info stack` line (`0x0000000021f548:  000000007b075550 0000000000000003`).
+pub fn stack_words(line: &str) -> Option<Vec<u64>> {
+    let (at, words) = line.split_once(":  ")?;
+    u64::from_str_radix(at.strip_prefix("0x")?, 16).ok()?;
+    words
+        .split_whitespace()
+        .map(|w| u64::from_str_radix(w, 16).ok())
+        .collect()
+}
+
+/// Our executables load at their preferred base (no relocation under Wine here).
+const IMAGE_BASE: u64 = 0x1_4000_0000;
+
+/// `winedbg` output with each frame of our executables followed by its functions and lines
+/// (from the executables' DWARF, `addr2line`, one run per executable; a return address
+/// minus 1, inside the call). A thread whose `bt` faults has an `info stack` dump instead:
+/// it becomes the list of its words that resolve to our code (a scan, not a walk).
+/// `exes`: (winedbg's module name, path).
+fn symbolize(bt: &str, exes: &[(&str, &Path)]) -> String {
+    let image_end = |m: &str| {
+        exes.iter()
+            .find(|(n, _)| *n == m)
+            .and_then(|(_, p)| std::fs::metadata(p).ok())
+            .map_or(IMAGE_BASE, |md| IMAGE_BASE + md.len())
+    };
+    // Per line: the (module, address) pairs to resolve.
+    let mut module = String::new();
+    let mut wanted: Vec<Vec<(String, u64)>> = Vec::new();
+    for line in bt.lines() {
+        if let Some(m) = header_module(line) {
+            module = m;
+        }
+        let mut w = Vec::new();
+        if let Some((m, a)) = frame_address(line) {
+            w.push((m, a.saturating_sub(1)));
+        } else if let Some(words) = stack_words(line) {
+            let end = image_end(&module);
+            w.extend(
+                words
+                    .into_iter()
+                    .filter(|a| (IMAGE_BASE + 0x1000..end).contains(a))
+                    .map(|a| (module.clone(), a - 1)),
+            );
+        }
+        wanted.push(w);
+    }
+    let mut found: std::collections::BTreeMap<String, Vec<u64>> = Default::default();
+    for (m, a) in wanted.iter().flatten() {
+        found.entry(m.clone()).or_default().push(*a);
+    }
+    let mut names: HashMap<(String, u64), Vec<String>> = HashMap::new();
+    for (module, addrs) in &mut found {
+        let Some((_, exe)) = exes.iter().find(|(m, _)| m == module) else {
+            continue;
+        };
+        addrs.sort_unstable();
+        addrs.dedup();
+        let mut c = std::process::Command::new("addr2line");
+        c.args(["-a", "-f", "-C", "-i", "-e"]).arg(exe);
+        c.args(addrs.iter().map(|a| format!("0x{a:x}")));
+        let Ok(out) = c.stderr(Stdio::null()).output() else {
+            continue;
+        };
+        let text = String::from_utf8_lossy(&out.stdout);
+        let mut cur: Option<u64> = None;
+        let mut lines = text.lines();
+        while let Some(l) = lines.next() {
+            if let Some(a) = l
+                .strip_prefix("0x")
+                .and_then(|h| u64::from_str_radix(h, 16).ok())
+            {
+                cur = Some(a);
+                continue;
+            }
+            let place = lines.next().unwrap_or("");
+            // A word that is data, or code without a function name, says nothing.
+            if let (Some(a), false) = (cur, l == "??") {
+                names
+                    .entry((module.clone(), a))
+                    .or_default()
+                    .push(format!("{l} ({place})"));
+            }
+        }
+    }
+    let mut out = String::new();
+    for (line, w) in bt.lines().zip(&wanted) {
+        let dump = stack_words(line).is_some();
+        if !dump {
+            out += line;
+            out.push('\n');
+        }
+        for (m, a) in w {
+            let Some(ns) = names.get(&(m.clone(), *a)) else {
+                continue;
+            };
+            if dump {
+                out += &format!("  stack word 0x{:x} in {m}:\n", a + 1);
+            }
+            for n in ns {
+                out += &format!("        {n}\n");
+            }
+        }
+    }
+    out
+}
+
+/// Writes a stall report to `target/soak/stall-<unix time>.txt`: `what`, the Linux threads
+/// of `linux_pids` and winedbg backtraces of every thread of the server and of the soak
+/// clients (the prefix still runs). Its path.
+pub fn capture_backtraces(
+    pfx: &Path,
+    linux_pids: &[u32],
+    exes: &[(&str, &Path)],
+    what: &str,
+) -> Result<PathBuf, String> {
+    let dir = util::root().join("target/soak");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let path = dir.join(format!("stall-{secs}.txt"));
+    let mut report = format!("soak stall: {what}\n\n");
+    for pid in linux_pids {
+        report += &linux_threads(*pid);
+    }
+    let listing = winedbg(pfx, &dir, "info thread\nquit\n")?;
+    report += "\n== winedbg: info thread\n";
+    report += &listing;
+    let ours: Vec<WineProcess> = parse_info_thread(&listing)
+        .into_iter()
+        .filter(|p| is_ours(&p.name))
+        .collect();
+    report += "\n== winedbg: backtraces, our frames resolved by addr2line\n";
+    report += &symbolize(&winedbg(pfx, &dir, &backtrace_script(&ours))?, exes);
+    std::fs::write(&path, report).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(path)
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
@@ -262,22 +594,61 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
             churn.extend(["--calls".to_owned(), c.clone()]);
         }
         let mut kids = Vec::new();
-        for _ in 0..o.clients {
-            kids.push(spawn(pfx, client, &churn, Stdio::piped())?);
+        for i in 0..o.clients {
+            let mut args = churn.clone();
+            if o.simulate_stall && round == 1 && i == 0 {
+                args.extend(["--stall-after".to_owned(), "10".to_owned()]);
+            }
+            kids.push(watch(spawn(pfx, client, &args, Stdio::piped())?));
         }
         let deadline = Instant::now() + Duration::from_secs(u64::from(o.round_seconds) + 120);
+        let stall = Duration::from_secs(o.stall_seconds);
         loop {
-            let running = kids
-                .iter_mut()
-                .map(|k| k.try_wait())
-                .filter(|w| matches!(w, Ok(None)))
-                .count();
+            let mut running = 0;
+            let mut quiet: Option<(usize, Duration)> = None;
+            for (i, k) in kids.iter_mut().enumerate() {
+                if matches!(k.child.try_wait(), Ok(None)) {
+                    running += 1;
+                    let since = k.since_progress();
+                    if since >= stall && quiet.is_none_or(|(_, q)| since > q) {
+                        quiet = Some((i, since));
+                    }
+                }
+            }
             if running == 0 {
                 break;
             }
+            if let Some((i, since)) = quiet {
+                let what = format!(
+                    "round {round}: client {i} (of {}) made no progress for {} s{}",
+                    kids.len(),
+                    since.as_secs(),
+                    if o.simulate_stall {
+                        " (--simulate-stall)"
+                    } else {
+                        ""
+                    }
+                );
+                println!("soak: {what}: a stall; taking backtraces before stopping anything");
+                let mut pids = vec![pid, holder.id()];
+                pids.extend(kids.iter().map(|k| k.child.id()));
+                let exes = [("serverctopc", server), ("soak-client", client)];
+                let captured = capture_backtraces(pfx, &pids, &exes, &what);
+                kids.iter_mut().for_each(|k| {
+                    let _ = k.child.kill();
+                });
+                let _ = holder.kill();
+                return Err(match captured {
+                    Ok(path) => format!(
+                        "soak: {what}: a stall; backtraces of the server and the clients in {}",
+                        path.display()
+                    ),
+                    Err(e) => format!("soak: {what}: a stall; the backtraces failed: {e}"),
+                });
+            }
             if Instant::now() > deadline {
                 kids.iter_mut().for_each(|k| {
-                    let _ = k.kill();
+                    let _ = k.child.kill();
                 });
                 return Err(format!(
                     "soak: round {round}: clients still run after the deadline"
@@ -289,18 +660,15 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
         let mut failed = 0;
         let mut bytes = 0.0;
         for k in kids {
-            match k.wait_with_output() {
-                Ok(out) if out.status.success() => {
-                    let text = String::from_utf8_lossy(&out.stdout);
-                    match parse_counts(&text) {
-                        Some(c) => {
-                            println!("soak:   client: {}", text.trim());
-                            bytes += predicted_bytes(&c);
-                        }
-                        None => failed += 1,
+            let (ok, text) = k.finish();
+            match parse_counts(&text).filter(|_| ok) {
+                Some(c) => {
+                    if let Some(line) = text.lines().rev().find(|l| l.contains(" counts ")) {
+                        println!("soak:   client: {line}");
                     }
+                    bytes += predicted_bytes(&c);
                 }
-                _ => failed += 1,
+                None => failed += 1,
             }
         }
         predicted.push(bytes);
@@ -364,6 +732,42 @@ mod tests {
         assert_eq!(e, [(3.0, 52.0), (7.0, 56.0)]);
         assert!((slope(&e).unwrap() - 1.0).abs() < 1e-9);
         assert_eq!(parse_counts("soak-client: counts rounds=x"), None);
+    }
+
+    #[test]
+    fn winedbg_threads_and_the_backtrace_script() {
+        let listing = "0x000001700555f5 ntdll+0x555f5: ret\n\
+            process  tid      prio    name (all IDs are in hex)\n\
+            00000020 (D) Z:\\t\\soak-client.exe\n\
+            \t00000024    0     main\n\
+            \t0000016c    0 <== \n\
+            0000011c ServerCTOPC.exe\n\
+            \t00000120    0     main\n\
+            \t00000150    0     wine_rpcrt4_server\n\
+            00000198 start.exe\n";
+        let p = super::parse_info_thread(listing);
+        assert_eq!(p.len(), 3);
+        assert_eq!(p[0].pid, 0x20);
+        assert_eq!(p[0].name, "Z:\\t\\soak-client.exe");
+        assert_eq!(p[0].threads, [0x24, 0x16c]);
+        assert_eq!(p[1].threads, [0x120, 0x150]);
+        assert!(p[2].threads.is_empty());
+        assert!(super::is_ours(&p[0].name) && super::is_ours(&p[1].name));
+        assert!(!super::is_ours(&p[2].name));
+        let script = super::backtrace_script(&p[1..2]);
+        assert_eq!(
+            script,
+            "attach 0x11c\necho (warm-up)\nbt\necho ==== ServerCTOPC.exe (process 0x11c) thread 0x120\nthread 0x120\nbt\ninfo stack 1024\n\
+             echo ==== ServerCTOPC.exe (process 0x11c) thread 0x150\nthread 0x150\nbt\ninfo stack 1024\ndetach\nquit\n"
+        );
+        let o = super::options(&[
+            "--simulate-stall".into(),
+            "--stall-seconds".into(),
+            "30".into(),
+        ]);
+        let o = o.unwrap();
+        assert!(o.simulate_stall);
+        assert_eq!(o.stall_seconds, 30);
     }
 
     #[test]

@@ -93,9 +93,11 @@ impl<I: Interface + Clone> SinkSlot<I> {
         }
     }
     fn connections(&self) -> Vec<(u32, IUnknown)> {
-        self.lock()
-            .as_ref()
-            .and_then(|(c, s)| s.cast::<IUnknown>().ok().map(|u| (*c, u)))
+        // The QueryInterface is a call on the client's proxy: made after the lock, which
+        // the callback workers and the driver thread take (no lock held across a call out).
+        let current = self.lock().clone();
+        current
+            .and_then(|(c, s)| s.cast::<IUnknown>().ok().map(|u| (c, u)))
             .into_iter()
             .collect()
     }

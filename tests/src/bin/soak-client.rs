@@ -19,6 +19,10 @@
 //! (`remove` with handles the server never issued, so that the items stay): the rounds
 //! make only calls that carry no array the stub allocates.
 //!
+//! After each round it prints `soak-client: round N` (or `soak-client: failure N`): the
+//! soak's sign of progress. `--stall-after S` (the soak's `--simulate-stall`) stops after
+//! S seconds without a word, as a hung call would.
+//!
 //! At the end it prints one line `soak-client: counts rounds=R failures=F additems=A
 //! validateitems=V writes=W itemio=I` (items sent in each kind of allocated `[in]`
 //! array, summed over the process), which `cargo xtask soak` reads.
@@ -45,7 +49,8 @@ fn main() -> std::process::ExitCode {
         soak::hold(seconds)
     } else {
         let calls = arg("--calls").map_or(soak::ALL_CALLS, |s| s.as_str());
-        soak::Calls::parse(calls).and_then(|c| soak::churn(seconds, items, &c))
+        let stall_after = arg("--stall-after").and_then(|v| v.parse().ok());
+        soak::Calls::parse(calls).and_then(|c| soak::churn(seconds, items, &c, stall_after))
     };
     match r {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -151,7 +156,16 @@ mod soak {
         Ok((group, g.server_handle))
     }
 
-    pub fn churn(seconds: u64, items: usize, calls: &Calls) -> Result<(), String> {
+    /// Churns for `seconds`, printing `soak-client: round N` after each round (the soak's
+    /// progress signal). `stall_after`: the soak's `--simulate-stall`: after that many
+    /// seconds stop making progress (sleep, printing nothing) so the soak's stall capture
+    /// can be seen to work.
+    pub fn churn(
+        seconds: u64,
+        items: usize,
+        calls: &Calls,
+        stall_after: Option<u64>,
+    ) -> Result<(), String> {
         let _com = ComThread::mta().map_err(|e| e.to_string())?;
         let mut counts = Counts::default();
         let kept = if calls.add {
@@ -170,13 +184,25 @@ mod soak {
                 handles,
             })
         };
-        let deadline = Instant::now() + Duration::from_secs(seconds);
+        let start = Instant::now();
+        let deadline = start + Duration::from_secs(seconds);
         while Instant::now() < deadline {
+            if stall_after.is_some_and(|s| start.elapsed() >= Duration::from_secs(s)) {
+                eprintln!("soak-client: --stall-after: a simulated stall (sleeping)");
+                loop {
+                    std::thread::sleep(Duration::from_secs(3600));
+                }
+            }
             match one_round(items, calls, kept.as_ref(), &mut counts) {
-                Ok(()) => counts.rounds += 1,
+                Ok(()) => {
+                    counts.rounds += 1;
+                    println!("soak-client: round {}", counts.rounds);
+                }
                 Err(e) => {
                     counts.failures += 1;
                     eprintln!("soak-client: {e}");
+                    // A failed call returned: progress too.
+                    println!("soak-client: failure {}", counts.failures);
                     std::thread::sleep(Duration::from_millis(500));
                 }
             }
