@@ -28,9 +28,15 @@ impl std::fmt::Debug for Run {
 /// Runs opcdiag.exe with `args` (English texts unless `args` says otherwise), killed after
 /// `limit`.
 fn opcdiag_for(args: &[&str], limit: Duration) -> Run {
+    opcdiag_with(args, &[], limit)
+}
+
+/// [`opcdiag_for`] with extra environment variables.
+fn opcdiag_with(args: &[&str], env: &[(&str, &str)], limit: Duration) -> Run {
     let exe = own_artifact("opcdiag.exe");
     let mut child = Command::new(&exe)
         .args(args)
+        .envs(env.iter().copied())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -134,6 +140,35 @@ fn browse_shows_the_plant_tree_indented() {
         ["KW_A000", "KW_A001", "KW_A002"],
         "{branch:?}"
     );
+}
+
+/// The tree through IOPCBrowse::Browse (one call per branch, the item IDs in the reply)
+/// is the listing the DA 2.05a path gives (ChangeBrowsePosition, BrowseOPCItemIDs and
+/// GetItemID per leaf; `OPCDIAG_BROWSE_DA2=1` forces it), whole, from a branch and to a
+/// depth; and the demo is too short for progress lines on stderr.
+#[test]
+fn browse_through_iopcbrowse_lists_what_da2_lists() {
+    let da2 = [("OPCDIAG_BROWSE_DA2", "1")];
+    for args in [
+        &["browse"][..],
+        &["browse", "--depth", "2"],
+        &["browse", "--branch", "Magazyn siarki"],
+        &["browse", "--flat"],
+    ] {
+        let new = opcdiag(args);
+        assert_eq!(new.code, 0, "{args:?}: {new:?}");
+        assert_eq!(
+            new.stderr, "",
+            "{args:?}: no progress for the demo: {new:?}"
+        );
+        let old = opcdiag_with(args, &da2, Duration::from_secs(60));
+        assert_eq!(old.code, 0, "{args:?}: {old:?}");
+        assert_eq!(new.stdout, old.stdout, "{args:?}");
+        assert!(new.stdout.lines().count() > 3, "{args:?}: {new:?}");
+    }
+    // Leaves whose item ID is not their name show it.
+    let r = opcdiag(&["browse"]);
+    assert!(r.stdout.contains("KW_A000"), "{r:?}");
 }
 
 #[test]

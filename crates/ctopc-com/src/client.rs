@@ -1139,8 +1139,8 @@ impl OpcGroup {
 
 mod server_ext;
 pub use server_ext::{
-    enum_strings, enum_unknowns, AddedGroup, BrowseArgs, BrowseElement, BrowsePage, GroupSpec,
-    ItemProperties, NewItemId, Property,
+    enum_strings, enum_strings_each, enum_unknowns, AddedGroup, BrowseArgs, BrowseElement,
+    BrowsePage, GroupSpec, ItemProperties, NewItemId, Property, STRING_BATCH,
 };
 
 // ---- console clients (opcdiag): a data-change sink, Ctrl+C, local time -----------------

@@ -146,17 +146,66 @@ pub(crate) unsafe fn clone_out<I>(ppenum: *mut Option<I>, make: impl FnOnce() ->
     unsafe { out_or_e_pointer(ppenum, Some(make())) }
 }
 
+/// The strings an [`StringEnum`] hands out: a snapshot shared by its clones.
+pub trait StringList: Send + Sync {
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The `i`-th string (`None` past the end).
+    fn get(&self, i: usize) -> Option<&str>;
+}
+
+impl StringList for Vec<String> {
+    fn len(&self) -> usize {
+        Vec::len(self)
+    }
+    fn get(&self, i: usize) -> Option<&str> {
+        self.as_slice().get(i).map(String::as_str)
+    }
+}
+
+/// A `BrowseOPCItemIDs` listing: indexes into the address space, the names never copied
+/// until `Next` hands them out.
+impl StringList for ctopc_core::browse::NameList {
+    fn len(&self) -> usize {
+        ctopc_core::browse::NameList::len(self)
+    }
+    fn get(&self, i: usize) -> Option<&str> {
+        ctopc_core::browse::NameList::get(self, i)
+    }
+}
+
+/// IEnumString over a shared [`StringList`]: `Next(celt)` allocates the `celt` strings
+/// straight into the caller's array (one pass, no copy of the listing), `Clone` shares the
+/// list.
 #[implement(RawEnumString)]
-pub struct StringEnum(Cursor<String>);
+pub struct StringEnum {
+    list: Arc<dyn StringList>,
+    pos: Mutex<usize>,
+}
 
 impl StringEnum {
     pub fn create(items: Vec<String>) -> IEnumString {
-        StringEnum::from_cursor(Cursor::new(items))
+        StringEnum::of(Arc::new(items))
     }
 
-    fn from_cursor(cursor: Cursor<String>) -> IEnumString {
-        let e: RawEnumString = StringEnum(cursor).into();
+    /// An enumerator over `list` from its start.
+    pub fn of(list: Arc<dyn StringList>) -> IEnumString {
+        StringEnum::at(list, 0)
+    }
+
+    fn at(list: Arc<dyn StringList>, pos: usize) -> IEnumString {
+        let e: RawEnumString = StringEnum {
+            list,
+            pos: Mutex::new(pos),
+        }
+        .into();
         e.into()
+    }
+
+    fn pos(&self) -> std::sync::MutexGuard<'_, usize> {
+        self.pos.lock().unwrap_or_else(|p| p.into_inner())
     }
 }
 
@@ -165,35 +214,50 @@ impl RawEnumString_Impl for StringEnum_Impl {
         if let Err(hr) = check_next(celt, rgelt, fetched) {
             return hr;
         }
-        let (pos, end) = self.0.peek(celt);
-        let mut out: Vec<PWSTR> = Vec::with_capacity(end - pos);
-        for s in &self.0.items()[pos..end] {
-            match abi::alloc_wstr(s) {
-                Ok(p) => out.push(p),
+        let mut pos = self.pos();
+        let end = pos.saturating_add(celt as usize).min(self.list.len());
+        for (i, k) in (*pos..end).enumerate() {
+            match abi::alloc_wstr(self.list.get(k).unwrap_or_default()) {
+                // SAFETY: rgelt has room for `celt` >= end - pos elements (COM contract).
+                Ok(p) => unsafe { *rgelt.add(i) = p },
                 Err(e) => {
-                    out.into_iter().for_each(abi::free_wstr);
+                    for j in 0..i {
+                        // SAFETY: elements 0..i were written above with strings of ours;
+                        // each is freed once and the slot cleared (nothing handed out).
+                        unsafe {
+                            abi::free_wstr(*rgelt.add(j));
+                            *rgelt.add(j) = PWSTR::null();
+                        }
+                    }
                     return e.code();
                 }
             }
         }
-        for (i, p) in out.iter().enumerate() {
-            // SAFETY: rgelt has room for `celt` >= end - pos elements (COM contract).
-            unsafe { *rgelt.add(i) = *p };
-        }
-        self.0.commit(end);
+        let got = end - *pos;
+        *pos = end;
+        drop(pos);
         // SAFETY: `fetched` is this method's pceltFetched.
-        unsafe { finish(fetched, end - pos, celt) }
+        unsafe { finish(fetched, got, celt) }
     }
     unsafe fn Skip(&self, celt: u32) -> HRESULT {
-        self.0.skip(celt)
+        let mut pos = self.pos();
+        let end = pos.saturating_add(celt as usize).min(self.list.len());
+        let skipped = end - *pos;
+        *pos = end;
+        if skipped == celt as usize {
+            S_OK
+        } else {
+            S_FALSE
+        }
     }
     unsafe fn Reset(&self) -> HRESULT {
-        self.0.reset();
+        *self.pos() = 0;
         S_OK
     }
     unsafe fn Clone(&self, ppenum: *mut Option<IEnumString>) -> HRESULT {
+        let pos = *self.pos();
         // SAFETY: `ppenum` is this method's [out] interface pointer.
-        unsafe { clone_out(ppenum, || StringEnum::from_cursor(self.0.fork())) }
+        unsafe { clone_out(ppenum, || StringEnum::at(Arc::clone(&self.list), pos)) }
     }
 }
 

@@ -182,6 +182,64 @@ fn browse_opc_item_ids_argument_branches() {
     }
 }
 
+/// The enumerator of BrowseOPCItemIDs hands out thousands of strings in one `Next`
+/// (S_FALSE with the rest when fewer remain), the same strings as one at a time; a clone
+/// shares the listing at its position; Skip and Reset move through it.
+#[test]
+fn browse_opc_item_ids_enumerator_hands_out_large_batches() {
+    let a = space();
+    let f = wide("");
+    let (r, mut out) = browse_ids(&a, OPC_FLAT, pcwstr(&f), 0);
+    assert_eq!(r, S_OK);
+    let e = out.take().unwrap().cast::<IEnumString>().unwrap();
+    let next = |e: &IEnumString, celt: usize| {
+        let mut batch = vec![PWSTR::null(); celt];
+        let mut fetched = U32_POISON;
+        // SAFETY: `batch` has room for `celt` strings; a valid pceltFetched.
+        let r = unsafe { e.Next(&mut batch, Some(&mut fetched)) };
+        let got: Vec<String> = batch[..fetched as usize]
+            .iter()
+            // SAFETY: CoTaskMem strings handed out by the call, each taken once.
+            .map(|p| unsafe { take_wstr(*p) }.unwrap())
+            .collect();
+        (r, got)
+    };
+    let mut one_by_one = Vec::new();
+    loop {
+        let (r, got) = next(&e, 1);
+        one_by_one.extend(got);
+        if r != S_OK {
+            break;
+        }
+    }
+    assert!(one_by_one.len() > 200, "{}", one_by_one.len());
+    // SAFETY: no arguments.
+    assert_eq!(hr(unsafe { e.Reset() }), S_OK);
+    let (r, all) = next(&e, 4096);
+    assert_eq!(r, S_FALSE, "fewer than 4096 remained");
+    assert_eq!(all, one_by_one);
+    assert_eq!(next(&e, 4096), (S_FALSE, vec![]));
+
+    // SAFETY: no arguments.
+    assert_eq!(hr(unsafe { e.Reset() }), S_OK);
+    let (r, first) = next(&e, 10);
+    assert_eq!(r, S_OK);
+    assert_eq!(first, all[..10]);
+    // SAFETY: no arguments.
+    let c = unsafe { e.Clone() }.unwrap();
+    let (_, rest) = next(&c, 4096);
+    assert_eq!(rest, all[10..], "the clone starts where the original was");
+    let (_, rest) = next(&e, 4096);
+    assert_eq!(rest, all[10..], "the original kept its own position");
+    // SAFETY: no arguments.
+    unsafe {
+        assert_eq!(hr(c.Reset()), S_OK);
+        assert_eq!(c.Skip(5), S_OK);
+        assert_eq!(c.Skip(100_000), S_FALSE);
+    }
+    assert_eq!(next(&c, 1), (S_FALSE, vec![]));
+}
+
 #[test]
 fn browse_opc_item_ids_success() {
     let a = space();

@@ -176,20 +176,36 @@ fn take_item_properties(p: &mut OPCITEMPROPERTIES) -> ItemProperties {
     out
 }
 
+/// Strings asked for per `IEnumString::Next` by [`enum_strings`]: thousands per round trip,
+/// so that a listing of 1,000,000 item IDs takes a few hundred calls, not 60,000.
+pub const STRING_BATCH: usize = 4096;
+
 /// Takes the strings of an enumerator to the end.
 pub fn enum_strings(e: &IEnumString) -> windows::core::Result<Vec<String>> {
     let mut out = Vec::new();
+    enum_strings_each(e, |batch| out.extend(batch))?;
+    Ok(out)
+}
+
+/// Takes the strings of an enumerator to the end, [`STRING_BATCH`] per `Next`, handing
+/// each batch to `each` as it arrives (for listings too long to hold, or to show progress).
+pub fn enum_strings_each(
+    e: &IEnumString,
+    mut each: impl FnMut(Vec<String>),
+) -> windows::core::Result<()> {
+    let mut batch = vec![PWSTR::null(); STRING_BATCH];
     loop {
-        let mut batch = [PWSTR::null(); 16];
         let mut fetched = 0u32;
-        // SAFETY: `batch` has room for 16 elements; `fetched` is a valid out-pointer.
+        // SAFETY: `batch` has room for STRING_BATCH elements (the slice length is the
+        // celt passed); `fetched` is a valid out-pointer.
         let hr = unsafe { e.Next(&mut batch, Some(&mut fetched)) };
-        for p in batch.iter().take(fetched as usize) {
-            out.extend(take_wstr(*p));
-        }
+        let got = (fetched as usize).min(batch.len());
+        let strings: Vec<String> = batch[..got].iter().filter_map(|p| take_wstr(*p)).collect();
+        batch[..got].fill(PWSTR::null());
+        each(strings);
         hr.ok()?;
-        if hr != windows::Win32::Foundation::S_OK || fetched == 0 {
-            return Ok(out);
+        if hr != windows::Win32::Foundation::S_OK || got == 0 {
+            return Ok(());
         }
     }
 }
@@ -353,6 +369,21 @@ impl Server {
         vt: u16,
         rights: u32,
     ) -> windows::core::Result<(HRESULT, Vec<String>)> {
+        let mut out = Vec::new();
+        let hr = self.browse_item_ids_each(browse_type, filter, vt, rights, |b| out.extend(b))?;
+        Ok((hr, out))
+    }
+
+    /// BrowseOPCItemIDs, the strings handed to `each` a batch ([`STRING_BATCH`]) at a time
+    /// as they arrive: S_OK or S_FALSE.
+    pub fn browse_item_ids_each(
+        &self,
+        browse_type: OPCBROWSETYPE,
+        filter: &str,
+        vt: u16,
+        rights: u32,
+        each: impl FnMut(Vec<String>),
+    ) -> windows::core::Result<HRESULT> {
         let filter = HSTRING::from(filter);
         let mut e: Option<IEnumString> = None;
         // SAFETY: valid pointers for the call.
@@ -367,7 +398,8 @@ impl Server {
         })?;
         let e =
             e.ok_or_else(|| windows::core::Error::from(windows::Win32::Foundation::E_POINTER))?;
-        Ok((hr, enum_strings(&e)?))
+        enum_strings_each(&e, each)?;
+        Ok(hr)
     }
 
     pub fn get_item_id(&self, item_data_id: &str) -> windows::core::Result<Option<String>> {

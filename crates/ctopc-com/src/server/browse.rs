@@ -27,6 +27,7 @@ use ctopc_core::browse::{
 };
 use ctopc_core::limits;
 use ctopc_core::{OpcError, OpcResult};
+use std::sync::Arc;
 use windows::core::{BOOL, HRESULT, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_NOTIMPL, S_FALSE, S_OK};
 use windows::Win32::System::Com::IEnumString;
@@ -81,7 +82,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
             let filter = in_string(pfilter, limits::FILTER)?;
             let names = self
                 .cursor()
-                .browse_opc_item_ids(
+                .browse_opc_item_id_list(
                     browse_type,
                     &filter,
                     data_type_filter.0,
@@ -91,7 +92,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                 .map_err(crate::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
             // SAFETY: checked non-null.
-            unsafe { put(ppenum, Some(StringEnum::create(names))) };
+            unsafe { put(ppenum, Some(StringEnum::of(Arc::new(names)))) };
             Ok(hr)
         })())
     }

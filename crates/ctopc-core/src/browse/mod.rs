@@ -47,7 +47,7 @@ pub mod tree;
 
 pub use browse3::{BrowseElement, BrowseRequest, BrowseResult, PropertySelection};
 pub use pattern::{escape, match_pattern, MatchCase, Pattern, PatternError};
-pub use server_browse::{BrowseCursor, ItemFilter};
+pub use server_browse::{BrowseCursor, ItemFilter, NameList};
 pub use tree::{AddressSpace, AddressSpaceBuilder, BuildError, NodeId, NodeRef};
 
 use crate::OpcError;

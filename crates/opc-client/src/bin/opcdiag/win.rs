@@ -12,6 +12,57 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 use windows::core::{Interface, HRESULT};
 
+/// Elements asked for per IOPCBrowse::Browse call (`dwMaxElementsReturned`): large pages,
+/// bounded so that one reply stays a few megabytes.
+const BROWSE_BATCH: u32 = 10_000;
+
+/// Names between two progress lines on stderr.
+const PROGRESS_EVERY: usize = 10_000;
+
+/// Progress of a long listing on stderr: a line every PROGRESS_EVERY names, and a last
+/// one when at least one was printed. Short listings (the demo's) print nothing.
+struct Progress {
+    what: &'static str,
+    n: usize,
+    next: usize,
+    start: Instant,
+}
+
+impl Progress {
+    fn new(what: &'static str) -> Progress {
+        Progress {
+            what,
+            n: 0,
+            next: PROGRESS_EVERY,
+            start: Instant::now(),
+        }
+    }
+
+    fn add(&mut self, k: usize) {
+        self.n += k;
+        if self.n >= self.next {
+            self.line();
+            self.next = (self.n / PROGRESS_EVERY + 1) * PROGRESS_EVERY;
+        }
+    }
+
+    fn line(&self) {
+        eprintln!(
+            "opcdiag: browse: {} {} ({:.1} s)",
+            self.n,
+            self.what,
+            self.start.elapsed().as_secs_f64()
+        );
+    }
+
+    /// The final count, when progress lines were printed.
+    fn done(&self) {
+        if self.n >= PROGRESS_EVERY {
+            self.line();
+        }
+    }
+}
+
 /// A connection to one server object, with COM initialised for it.
 pub struct Session {
     // Declared before `_com`: released before COM is uninitialised.
@@ -261,14 +312,123 @@ impl Session {
         Ok(())
     }
 
-    /// The tree below the current browse position, `max_depth` levels deep.
+    /// The tree below the current browse position, `max_depth` levels deep: through
+    /// IOPCBrowse::Browse (one call per branch, continuation points) when the server
+    /// offers it, else IOPCBrowseServerAddressSpace.
     pub fn tree(
         &self,
         depth: usize,
         max_depth: Option<usize>,
         out: &mut Vec<TreeLine>,
     ) -> Result<(), String> {
-        for b in self.browse_names(OPC_BRANCH)? {
+        let mut progress = Progress::new("elements");
+        if self.use_iopcbrowse() {
+            let here = self
+                .server
+                .get_item_id("")
+                .map_err(|e| self.failed("GetItemID(\"\") failed", e))?
+                .unwrap_or_default();
+            self.tree3(&here, depth, max_depth, out, &mut progress)?;
+        } else {
+            self.tree2(depth, max_depth, out, &mut progress)?;
+        }
+        progress.done();
+        Ok(())
+    }
+
+    /// Whether to browse the tree with IOPCBrowse: the server has it, and the environment
+    /// variable `OPCDIAG_BROWSE_DA2` (a test hook: the DA 2.05a path on a DA 3.0 server)
+    /// is not `1`.
+    fn use_iopcbrowse(&self) -> bool {
+        std::env::var("OPCDIAG_BROWSE_DA2").as_deref() != Ok("1")
+            && self.server.browse_itf().is_ok()
+    }
+
+    /// Every element of `item_id` through IOPCBrowse::Browse, BROWSE_BATCH a call,
+    /// following continuation points.
+    fn browse_all(
+        &self,
+        item_id: &str,
+        progress: &mut Progress,
+    ) -> Result<Vec<client::BrowseElement>, String> {
+        let mut out = Vec::new();
+        let mut cp: Option<String> = None;
+        loop {
+            let page = self
+                .server
+                .browse(&client::BrowseArgs {
+                    item_id: item_id.into(),
+                    continuation_point: cp.take(),
+                    max_elements: BROWSE_BATCH,
+                    filter: OPC_BROWSE_FILTER_ALL.0,
+                    ..Default::default()
+                })
+                .map_err(|e| self.failed(&format!("IOPCBrowse::Browse({item_id:?}) failed"), e))?;
+            progress.add(page.elements.len());
+            out.extend(page.elements);
+            match page.continuation_point {
+                Some(c) if !c.is_empty() => cp = Some(c),
+                _ => {
+                    if page.more_elements {
+                        eprintln!(
+                            "opcdiag: {item_id:?}: the server has more elements than it \
+                             returned and no continuation point: the listing is incomplete"
+                        );
+                    }
+                    return Ok(out);
+                }
+            }
+        }
+    }
+
+    /// [`Session::tree`] through IOPCBrowse, below the branch `item_id`.
+    fn tree3(
+        &self,
+        item_id: &str,
+        depth: usize,
+        max_depth: Option<usize>,
+        out: &mut Vec<TreeLine>,
+        progress: &mut Progress,
+    ) -> Result<(), String> {
+        let elements = self.browse_all(item_id, progress)?;
+        let (branches, leaves): (Vec<_>, Vec<_>) = elements
+            .into_iter()
+            .partition(|e| e.flags & OPC_BROWSE_HASCHILDREN != 0);
+        for b in branches {
+            out.push(TreeLine {
+                depth,
+                name: b.name.unwrap_or_default(),
+                item_id: None,
+                branch: true,
+            });
+            // A branch without an item ID cannot be browsed into ("" is the root).
+            let id = b.item_id.filter(|id| !id.is_empty());
+            if let Some(id) = id.filter(|_| !matches!(max_depth, Some(m) if depth + 1 >= m)) {
+                self.tree3(&id, depth + 1, max_depth, out, progress)?;
+            }
+        }
+        for leaf in leaves {
+            out.push(TreeLine {
+                depth,
+                name: leaf.name.unwrap_or_default(),
+                item_id: leaf.item_id,
+                branch: false,
+            });
+        }
+        Ok(())
+    }
+
+    /// [`Session::tree`] through IOPCBrowseServerAddressSpace, below the current position.
+    fn tree2(
+        &self,
+        depth: usize,
+        max_depth: Option<usize>,
+        out: &mut Vec<TreeLine>,
+        progress: &mut Progress,
+    ) -> Result<(), String> {
+        let branches = self.browse_names(OPC_BRANCH)?;
+        progress.add(branches.len());
+        for b in branches {
             out.push(TreeLine {
                 depth,
                 name: b.clone(),
@@ -281,14 +441,17 @@ impl Session {
                     .map_err(|e| {
                         self.failed(&format!("ChangeBrowsePosition(DOWN {b:?}) failed"), e)
                     })?;
-                let r = self.tree(depth + 1, max_depth, out);
+                let r = self.tree2(depth + 1, max_depth, out, progress);
                 self.server
                     .change_browse_position(OPC_BROWSE_UP, "")
                     .map_err(|e| self.failed("ChangeBrowsePosition(UP) failed", e))?;
                 r?;
             }
         }
-        for leaf in self.browse_names(OPC_LEAF)? {
+        let leaves = self.browse_names(OPC_LEAF)?;
+        progress.add(leaves.len());
+        for leaf in leaves {
+            // DA 2.05a has no other way to a leaf's item ID (one call per leaf).
             let item_id = self.server.get_item_id(&leaf).ok().flatten();
             out.push(TreeLine {
                 depth,
@@ -320,9 +483,22 @@ impl Session {
             self.go_to_branch(path)?;
         }
         if flat || !hierarchical {
-            for id in self.browse_names(OPC_FLAT)? {
-                say!("{id}");
-            }
+            // Printed as the batches arrive: a long listing needs no memory of its own.
+            let mut progress = Progress::new("item IDs");
+            let _s_ok_or_s_false = self
+                .server
+                .browse_item_ids_each(OPC_FLAT, "", 0, 0, |batch| {
+                    progress.add(batch.len());
+                    let size = batch.iter().map(|s| s.len() + 1).sum();
+                    let mut block = String::with_capacity(size);
+                    for id in &batch {
+                        block.push_str(id);
+                        block.push('\n');
+                    }
+                    crate::out::text(&block);
+                })
+                .map_err(|e| self.failed("BrowseOPCItemIDs failed", e))?;
+            progress.done();
             return Ok(EXIT_OK);
         }
         let mut lines = Vec::new();
@@ -330,9 +506,7 @@ impl Session {
         if lines.is_empty() {
             say!("(empty)");
         }
-        for l in text::render_tree(&lines).lines() {
-            say!("{l}");
-        }
+        crate::out::text(&text::render_tree(&lines));
         Ok(EXIT_OK)
     }
 
