@@ -290,6 +290,24 @@ pub fn add_group(
     })
 }
 
+/// An active group (1000 ms) with active items `ids`, client handles 1, 2, … in order,
+/// each added with its canonical type.
+pub fn group_with_items(server: &Server, name: &str, ids: &[&str]) -> TestGroup {
+    let group = add_group(server, name, true, 1000, 1).expect("AddGroup");
+    let specs: Vec<ItemSpec> = ids
+        .iter()
+        .enumerate()
+        .map(|(i, id)| ItemSpec {
+            id,
+            client: i as u32 + 1,
+            vt: 0,
+            active: true,
+        })
+        .collect();
+    add_ok(&group, &specs);
+    group
+}
+
 /// An item to add: (item ID, client handle, requested type (VT_EMPTY for canonical), active).
 pub struct ItemSpec<'a> {
     pub id: &'a str,

@@ -13,6 +13,7 @@ pub mod doctor;
 pub mod hostile;
 pub mod io_support;
 pub mod probe;
+pub mod server_config;
 
 pub use ctopc_com::client::{ComThread, Server};
 pub use ctopc_com::interfaces;

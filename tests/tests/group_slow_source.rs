@@ -25,6 +25,7 @@ use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{OpcError, Value};
 use e2e_tests::io_support::*;
+use e2e_tests::server_config::{wait_until_no_server, write_demo_config};
 use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, ComThread,
     Server,
@@ -42,9 +43,6 @@ const SETPOINT: &str = "KW_A110";
 const NET_ANSWER_TIMEOUT: HRESULT = HRESULT(OpcError::NetAnswerTimeout.hresult());
 const GOOD: u16 = 0xC0;
 const WAIT: Duration = Duration::from_secs(10);
-
-const DEMO_TABLE: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/atrybuty.csv");
-const DEMO_SET: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
 
 /// The tests of this file each start a server with their own configuration: one at a time
 /// even when the test harness runs threads.
@@ -65,42 +63,6 @@ struct SlowServer {
     _serial: MutexGuard<'static, ()>,
 }
 
-/// Waits until no ServerCTOPC.exe runs; false after `limit`.
-fn wait_until_no_server(limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    while !other_servers(0).is_empty() {
-        if Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    true
-}
-
-/// Writes the configuration (the embedded demo's, plus `server_options`) with a copy of
-/// the demo database into a fresh folder: relative paths in it resolve against it.
-fn write_config(name: &str, server_options: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("ServerCTOPC-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(dir.join("demo")).expect("temp config folder");
-    std::fs::write(dir.join("demo").join("atrybuty.csv"), DEMO_TABLE).unwrap();
-    std::fs::write(dir.join("demo").join("wytwornia_kwasu.zez"), DEMO_SET).unwrap();
-    let ini = format!(
-        "; {name}: written by tests/tests/group_slow_source.rs\r\n\
-         [Server]\r\n\
-         SimulateCurrentData = tak\r\n\
-         LogDirectory = Log\r\n\
-         {server_options}\r\n\
-         [Channel:*]\r\n\
-         ItemsDatabase = demo\\wytwornia_kwasu.zez\r\n\
-         CheckLimits = tak\r\n\
-         CheckControlVariables = tak\r\n"
-    );
-    let path = dir.join("ASIXConnect-slow.ini");
-    std::fs::write(&path, ini).unwrap();
-    (dir, path)
-}
-
 impl SlowServer {
     /// Starts a server of its own with `server_options` and makes the group.
     fn start(name: &str, server_options: &str) -> SlowServer {
@@ -108,7 +70,12 @@ impl SlowServer {
             .lock()
             .unwrap_or_else(|p| p.into_inner());
         wait_for_no_other_server();
-        let (dir, ini) = write_config(name, server_options);
+        let (dir, ini) = write_demo_config(
+            name,
+            "ASIXConnect-slow.ini",
+            server_options,
+            "CheckLimits = tak\r\nCheckControlVariables = tak\r\n",
+        );
         std::env::set_var("SERVERCTOPC_INI", &ini);
         let since = now();
         let (com, server) = connect();

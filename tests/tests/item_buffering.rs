@@ -13,48 +13,24 @@
 
 use ctopc_com::client::{self, OpcGroup};
 use e2e_tests::io_support::*;
+use e2e_tests::server_config::{wait_until_no_server, write_demo_config};
 use e2e_tests::{connect, other_servers, wait_for_no_other_server};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use windows::Win32::Foundation::S_OK;
 
 /// Read-only tank level and a second, independent level of the demo plant.
 const LEVEL: &str = "KW_A000";
 const OTHER: &str = "KW_A001";
 
-const DEMO_TABLE: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/atrybuty.csv");
-const DEMO_SET: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
-
-fn wait_until_no_server(limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    while !other_servers(0).is_empty() {
-        if Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    true
-}
-
 #[test]
 fn a_buffered_item_carries_several_samples_oldest_first() {
     wait_for_no_other_server();
-    let dir = std::env::temp_dir().join(format!("ServerCTOPC-buffering-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(dir.join("demo")).unwrap();
-    std::fs::write(dir.join("demo").join("atrybuty.csv"), DEMO_TABLE).unwrap();
-    std::fs::write(dir.join("demo").join("wytwornia_kwasu.zez"), DEMO_SET).unwrap();
-    let ini = dir.join("ASIXConnect-buffering.ini");
-    std::fs::write(
-        &ini,
-        "; written by tests/tests/item_buffering.rs\r\n\
-         [Server]\r\n\
-         SimulateCurrentData = tak\r\n\
-         MinUpdateRate = 100\r\n\
-         LogDirectory = Log\r\n\
-         [Channel:*]\r\n\
-         ItemsDatabase = demo\\wytwornia_kwasu.zez\r\n",
-    )
-    .unwrap();
+    let (dir, ini) = write_demo_config(
+        "buffering",
+        "ASIXConnect-buffering.ini",
+        "MinUpdateRate = 100",
+        "",
+    );
     std::env::set_var("SERVERCTOPC_INI", &ini);
     let (com, server) = connect();
     std::env::remove_var("SERVERCTOPC_INI");

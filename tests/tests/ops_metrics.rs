@@ -14,79 +14,18 @@
 use ctopc_com::client::{self, Server};
 use ctopc_core::Value;
 use e2e_tests::io_support::*;
+use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
 use e2e_tests::{other_servers, wait_for_no_other_server, ComThread, PROGID};
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use windows::Win32::Foundation::S_OK;
-
-const DEMO_TABLE: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/atrybuty.csv");
-const DEMO_SET: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
 
 /// Items of the demo plant whose simulated values change all the time.
 const CHANGING: &[&str] = &["KW_A000", "KW_A001"];
 /// A writable setpoint.
 const SETPOINT: &str = "KW_A110";
-
-/// Writes the configuration (the demo's, plus `server_options`) into a fresh folder.
-fn write_config(name: &str, server_options: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("ServerCTOPC-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(dir.join("demo")).expect("temp config folder");
-    std::fs::write(dir.join("demo").join("atrybuty.csv"), DEMO_TABLE).unwrap();
-    std::fs::write(dir.join("demo").join("wytwornia_kwasu.zez"), DEMO_SET).unwrap();
-    let ini = format!(
-        "; {name}: written by tests/tests/ops_metrics.rs\r\n\
-         [Server]\r\n\
-         SimulateCurrentData = tak\r\n\
-         LogDirectory = Log\r\n\
-         {server_options}\r\n\
-         [Channel:*]\r\n\
-         ItemsDatabase = demo\\wytwornia_kwasu.zez\r\n"
-    );
-    let path = dir.join("ASIXConnect-ops.ini");
-    std::fs::write(&path, ini).unwrap();
-    (dir, path)
-}
-
-fn wait_until_no_server(limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    while !other_servers(0).is_empty() {
-        if Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    true
-}
-
-fn read_log(dir: &std::path::Path) -> String {
-    let mut log = String::new();
-    if let Ok(entries) = std::fs::read_dir(dir.join("Log")) {
-        for e in entries.flatten() {
-            log.push_str(&std::fs::read_to_string(e.path()).unwrap_or_default());
-        }
-    }
-    log
-}
-
-fn group_with_changing_items(server: &Server, name: &str) -> TestGroup {
-    let group = add_group(server, name, true, 1000, 1).expect("AddGroup");
-    let specs: Vec<ItemSpec> = CHANGING
-        .iter()
-        .enumerate()
-        .map(|(i, id)| ItemSpec {
-            id,
-            client: i as u32 + 1,
-            vt: 0,
-            active: true,
-        })
-        .collect();
-    add_ok(&group, &specs);
-    group
-}
 
 /// Sends `request` to the endpoint and returns the whole answer (the server closes).
 fn http(port: u16, request: &[u8]) -> String {
@@ -124,9 +63,11 @@ fn sample(text: &str, name: &str) -> u64 {
 fn the_metrics_endpoint_shows_what_a_client_does() {
     wait_for_no_other_server();
     let port = 19_000 + (std::process::id() % 1000) as u16;
-    let (dir, ini) = write_config(
+    let (dir, ini) = write_demo_config(
         "metrics",
+        "ASIXConnect-ops.ini",
         &format!("MetricsAddress = 127.0.0.1:{port}\r\nFirstSampleWait = 0\r\nAuditWrites = nie"),
+        "",
     );
     std::env::set_var("SERVERCTOPC_INI", &ini);
     let com = ComThread::mta().expect("MTA");
@@ -134,7 +75,7 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
     std::env::remove_var("SERVERCTOPC_INI");
     assert_eq!(other_servers(0).len(), 1, "only the test's server runs");
 
-    let group = group_with_changing_items(&server, "metrics");
+    let group = group_with_items(&server, "metrics", CHANGING);
     let rec = Recorder::counting();
     client::advise_data_callback(&group.unknown, &TestSink::create(&rec)).expect("Advise");
     let deadline = Instant::now() + Duration::from_secs(10);

@@ -12,10 +12,10 @@
 
 use ctopc_com::client::{self, Server};
 use e2e_tests::io_support::*;
+use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
 use e2e_tests::{
     connections, interfaces::*, other_servers, wait_for_no_other_server, ComThread, PROGID,
 };
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -23,9 +23,6 @@ use windows::core::{implement, Interface, HRESULT};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
 use windows::Win32::System::Variant::VARIANT;
-
-const DEMO_TABLE: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/atrybuty.csv");
-const DEMO_SET: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
 
 /// Items of the demo plant whose simulated values change all the time.
 const CHANGING: &[&str] = &["KW_A000", "KW_A001", "KW_A002", "KW_A003"];
@@ -92,64 +89,6 @@ impl IOPCDataCallback_Impl for SlowSink_Impl {
     }
 }
 
-/// Writes the configuration (the demo's, plus `server_options`) into a fresh folder.
-fn write_config(name: &str, server_options: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("ServerCTOPC-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(dir.join("demo")).expect("temp config folder");
-    std::fs::write(dir.join("demo").join("atrybuty.csv"), DEMO_TABLE).unwrap();
-    std::fs::write(dir.join("demo").join("wytwornia_kwasu.zez"), DEMO_SET).unwrap();
-    let ini = format!(
-        "; {name}: written by tests/tests/ops_slow_clients.rs\r\n\
-         [Server]\r\n\
-         SimulateCurrentData = tak\r\n\
-         LogDirectory = Log\r\n\
-         {server_options}\r\n\
-         [Channel:*]\r\n\
-         ItemsDatabase = demo\\wytwornia_kwasu.zez\r\n"
-    );
-    let path = dir.join("ASIXConnect-ops.ini");
-    std::fs::write(&path, ini).unwrap();
-    (dir, path)
-}
-
-fn wait_until_no_server(limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    while !other_servers(0).is_empty() {
-        if Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    true
-}
-
-fn read_log(dir: &std::path::Path) -> String {
-    let mut log = String::new();
-    if let Ok(entries) = std::fs::read_dir(dir.join("Log")) {
-        for e in entries.flatten() {
-            log.push_str(&std::fs::read_to_string(e.path()).unwrap_or_default());
-        }
-    }
-    log
-}
-
-fn group_with_changing_items(server: &Server, name: &str) -> TestGroup {
-    let group = add_group(server, name, true, 1000, 1).expect("AddGroup");
-    let specs: Vec<ItemSpec> = CHANGING
-        .iter()
-        .enumerate()
-        .map(|(i, id)| ItemSpec {
-            id,
-            client: i as u32 + 1,
-            vt: 0,
-            active: true,
-        })
-        .collect();
-    add_ok(&group, &specs);
-    group
-}
-
 fn data_point(g: &TestGroup) -> IConnectionPoint {
     let cpc: IConnectionPointContainer = g.unknown.cast().expect("IConnectionPointContainer");
     // SAFETY: valid IID.
@@ -159,9 +98,11 @@ fn data_point(g: &TestGroup) -> IConnectionPoint {
 #[test]
 fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
     wait_for_no_other_server();
-    let (dir, ini) = write_config(
+    let (dir, ini) = write_demo_config(
         "slow-clients",
+        "ASIXConnect-ops.ini",
         "CallbackTimeout = 500\r\nCallbackFailures = 2\r\nFirstSampleWait = 0",
+        "",
     );
     std::env::set_var("SERVERCTOPC_INI", &ini);
     let com = ComThread::mta().expect("MTA");
@@ -172,14 +113,14 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
     let fast = Server::connect(PROGID).expect("the other client");
 
     // The other client: a normal sink.
-    let fast_group = group_with_changing_items(&fast, "fast");
+    let fast_group = group_with_items(&fast, "fast", CHANGING);
     let rec = Recorder::counting();
     client::advise_data_callback(&fast_group.unknown, &TestSink::create(&rec)).expect("Advise");
 
     // The hung client: every call sleeps 5 s (ten times the timeout).
     let delay = Arc::new(AtomicU64::new(5_000));
     let calls = Arc::new(AtomicU64::new(0));
-    let slow_group = group_with_changing_items(&slow, "slow");
+    let slow_group = group_with_items(&slow, "slow", CHANGING);
     let sink: IOPCDataCallback = SlowSink {
         delay_ms: Arc::clone(&delay),
         calls: Arc::clone(&calls),
