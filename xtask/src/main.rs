@@ -8,6 +8,7 @@ mod build;
 mod demo;
 mod dist;
 mod fuzz;
+mod guard;
 mod msi;
 mod proxy;
 mod setup;

@@ -480,24 +480,46 @@ pub fn capture_backtraces(
     what: &str,
 ) -> Result<PathBuf, String> {
     let dir = util::root().join("target/soak");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    capture(
+        &dir,
+        pfx,
+        linux_pids,
+        exes,
+        &is_ours,
+        &format!("soak stall: {what}"),
+    )
+}
+
+/// Writes a stall report to `dir/stall-<unix time>.txt`: `what`, the Linux threads of
+/// `linux_pids` and winedbg backtraces of every thread of the processes of `pfx` whose
+/// name `ours` accepts, the frames of `exes` resolved (the prefix still runs). Its path.
+/// Also the e2e runs' stall guard (`guard.rs`).
+pub fn capture(
+    dir: &Path,
+    pfx: &Path,
+    linux_pids: &[u32],
+    exes: &[(&str, &Path)],
+    ours: &dyn Fn(&str) -> bool,
+    what: &str,
+) -> Result<PathBuf, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let secs = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs());
     let path = dir.join(format!("stall-{secs}.txt"));
-    let mut report = format!("soak stall: {what}\n\n");
+    let mut report = format!("{what}\n\n");
     for pid in linux_pids {
         report += &linux_threads(*pid);
     }
-    let listing = winedbg(pfx, &dir, "info thread\nquit\n")?;
+    let listing = winedbg(pfx, dir, "info thread\nquit\n")?;
     report += "\n== winedbg: info thread\n";
     report += &listing;
     let ours: Vec<WineProcess> = parse_info_thread(&listing)
         .into_iter()
-        .filter(|p| is_ours(&p.name))
+        .filter(|p| ours(&p.name))
         .collect();
     report += "\n== winedbg: backtraces, our frames resolved by addr2line\n";
-    report += &symbolize(&winedbg(pfx, &dir, &backtrace_script(&ours))?, exes);
+    report += &symbolize(&winedbg(pfx, dir, &backtrace_script(&ours))?, exes);
     std::fs::write(&path, report).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(path)
 }

@@ -20,11 +20,13 @@
 //!    subscribe, the server browser), upgrade with `SERVICE=1`, uninstall, each in a
 //!    fresh prefix of its own (copies of `target/wine/msi-template`).
 //!
+//! Steps 6 and 7 run one test binary at a time under the stall guard (`guard.rs`): a
+//! binary silent for 4 minutes gets a backtrace report, then runs once more.
 //! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::arch::Arch;
-use crate::{build, fuzz, setup, util, wine};
+use crate::{build, fuzz, guard, setup, util, wine};
 use std::time::Duration;
 
 /// The whole end-to-end run may not take longer than this.
@@ -54,34 +56,32 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
-        println!("test: end-to-end tests under Wine");
-        let mut c = util::cargo();
-        // The COM crate's own unit tests only build for Windows: they run here too.
-        c.args([
-            "test",
-            "--release",
-            "--target",
-            setup::TARGET,
-            "-p",
-            "e2e-tests",
-            "-p",
-            "ctopc-com",
-            "--",
-            "--test-threads=1",
-        ]);
-        c.env("CTOPC_BIN_DIR", &artifacts.dir);
-        let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
-        if !status.success() {
-            return Err(format!("end-to-end tests failed: {status}"));
-        }
+        println!("test: end-to-end tests under Wine (one binary at a time, guard.rs)");
+        let units = units_64()?;
+        let bin_dir = [("CTOPC_BIN_DIR", artifacts.dir.as_path())];
+        let plan = guard::Plan {
+            target: setup::TARGET,
+            env: &bin_dir,
+            test_args: &[],
+            limit: E2E_LIMIT,
+            retries: 1,
+        };
+        let mut stalls = guard::run_units(&plan, &units)?.stalls;
         thirdparty_client(Arch::X64)?;
         println!(
             "test: end-to-end tests as a 32-bit client ({})",
             Arch::X86.target()
         );
-        let status = util::run_with_timeout(&mut e2e_32(&[], &[]), E2E_LIMIT)?;
-        if !status.success() {
-            return Err(format!("end-to-end tests (32-bit client) failed: {status}"));
+        build_marshal_probe()?;
+        let units = units_32();
+        let plan = guard::Plan {
+            target: Arch::X86.target(),
+            env: &[],
+            ..plan
+        };
+        stalls.extend(guard::run_units(&plan, &units)?.stalls);
+        for s in &stalls {
+            println!("test: STALL retried once (see its report): {s}");
         }
         thirdparty_client(Arch::X86)
     })();
@@ -125,22 +125,28 @@ pub const E2E_32: &[&str] = &[
     "server_shutdown",
 ];
 
-/// `cargo test --release --target i686-pc-windows-gnu -p e2e-tests` of `cargo_args` (none:
-/// the [`E2E_32`] test files) `-- --test-threads=1 test_args`. The 32-bit runner
-/// (xtask/wine-runner32.sh) runs the binaries with Wine's 32-bit loader.
-fn e2e_32(cargo_args: &[String], test_args: &[String]) -> std::process::Command {
-    let mut c = util::cargo();
-    c.args(["test", "--release", "--target", Arch::X86.target()]);
-    if cargo_args.is_empty() {
-        c.args(["-p", "e2e-tests"]);
-        for t in E2E_32 {
-            c.args(["--test", t]);
-        }
-    } else {
-        c.args(cargo_args);
+/// The 64-bit end-to-end units: the COM crate's unit and in-process tests (they only build
+/// for Windows), then the crate `tests/` (its unit tests, then each test file).
+fn units_64() -> Result<Vec<guard::Unit>, String> {
+    let root = util::root();
+    let mut units = vec![guard::Unit::lib("ctopc-com")];
+    for t in guard::integration_tests(&root.join("crates/ctopc-com/tests"))? {
+        units.push(guard::Unit::test("ctopc-com", &t));
     }
-    c.arg("--").arg("--test-threads=1").args(test_args);
-    c
+    units.push(guard::Unit::lib("e2e-tests"));
+    for t in guard::integration_tests(&root.join("tests/tests"))? {
+        units.push(guard::Unit::test("e2e-tests", &t));
+    }
+    Ok(units)
+}
+
+/// The 32-bit client's units: the [`E2E_32`] test files (the 32-bit runner,
+/// xtask/wine-runner32.sh, runs them with Wine's 32-bit loader).
+fn units_32() -> Vec<guard::Unit> {
+    E2E_32
+        .iter()
+        .map(|t| guard::Unit::test("e2e-tests", t))
+        .collect()
 }
 
 /// Formatting and clippy, before anything is built for testing: each fails the run with
@@ -215,7 +221,8 @@ fn static_checks(native_only: bool) -> Result<(), String> {
 
 /// `cargo xtask e2e [ARGS...]`: the Windows build, registration in the project's prefix,
 /// then `cargo test --release --target x86_64-pc-windows-gnu ARGS -- --test-threads=1`
-/// under Wine (default ARGS: `-p e2e-tests -p ctopc-com`), e.g.
+/// under Wine and the stall guard (`guard.rs`; a stall is reported, not run again)
+/// (default ARGS: each test binary of `-p ctopc-com` and `-p e2e-tests` in turn), e.g.
 /// `cargo xtask e2e -p e2e-tests --test group_io` or `cargo xtask e2e -p ctopc-com`.
 /// Arguments after a `--` go to the test binaries (a name filter, say). For working on
 /// one part; `cargo xtask test` stays the one command that runs everything.
@@ -233,43 +240,50 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
-        if x86 {
-            // marshal_strings talks to the 64-bit marshal probe: build it first.
-            util::run(util::cargo().args([
-                "build",
-                "--release",
-                "--target",
-                setup::TARGET,
-                "-p",
-                "e2e-tests",
-                "--bin",
-                "marshal-probe",
-            ]))?;
-            let status = util::run_with_timeout(&mut e2e_32(cargo_args, test_args), E2E_LIMIT)?;
-            return if status.success() {
-                Ok(())
+        let units = if !cargo_args.is_empty() {
+            vec![guard::Unit {
+                label: cargo_args.join(" "),
+                cargo_args: cargo_args.to_vec(),
+            }]
+        } else if x86 {
+            units_32()
+        } else {
+            units_64()?
+        };
+        let bin_dir = [("CTOPC_BIN_DIR", artifacts.dir.as_path())];
+        let plan = guard::Plan {
+            target: if x86 {
+                Arch::X86.target()
             } else {
-                Err(format!("end-to-end tests (32-bit client) failed: {status}"))
-            };
+                setup::TARGET
+            },
+            env: &bin_dir,
+            test_args,
+            limit: E2E_LIMIT,
+            retries: 0,
+        };
+        if x86 {
+            build_marshal_probe()?;
         }
-        let mut c = util::cargo();
-        c.args(["test", "--release", "--target", setup::TARGET]);
-        if cargo_args.is_empty() {
-            c.args(["-p", "e2e-tests", "-p", "ctopc-com"]);
-        } else {
-            c.args(cargo_args);
-        }
-        c.arg("--").arg("--test-threads=1").args(test_args);
-        c.env("CTOPC_BIN_DIR", &artifacts.dir);
-        let status = util::run_with_timeout(&mut c, E2E_LIMIT)?;
-        if status.success() {
-            Ok(())
-        } else {
-            Err(format!("end-to-end tests failed: {status}"))
-        }
+        guard::run_units(&plan, &units).map(|_| ())
     })();
     wine::kill_all();
     result
+}
+
+/// marshal_strings (32-bit client) talks to the 64-bit marshal probe: built before the
+/// 32-bit run.
+fn build_marshal_probe() -> Result<(), String> {
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        setup::TARGET,
+        "-p",
+        "e2e-tests",
+        "--bin",
+        "marshal-probe",
+    ]))
 }
 
 /// Registers the proxy/stub DLLs (their own DllRegisterServer, through regsvr32: the
