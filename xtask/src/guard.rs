@@ -121,8 +121,11 @@ pub fn run_watched(
     loop {
         match child.try_wait() {
             Ok(Some(status)) => {
-                for r in readers {
-                    let _ = r.join();
+                // The rest of its output, but no waiting on a pipe that a process it
+                // started (a wineserver) may hold open.
+                let until = Instant::now() + Duration::from_secs(2);
+                while readers.iter().any(|r| !r.is_finished()) && Instant::now() < until {
+                    std::thread::sleep(Duration::from_millis(20));
                 }
                 return Ok((Outcome::Exited(status), child));
             }
