@@ -78,6 +78,37 @@ pub fn integration_tests(dir: &Path) -> Result<Vec<String>, String> {
     Ok(names)
 }
 
+/// The cargo arguments that select every unit at once (for the one `--no-run` build):
+/// each `-p`, `--lib` and `--bins` once, every other argument (`--test NAME`) as it comes.
+pub fn build_args(units: &[Unit]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    let mut seen: Vec<(String, String)> = Vec::new();
+    for u in units {
+        let mut args = u.cargo_args.iter();
+        while let Some(a) = args.next() {
+            match a.as_str() {
+                "-p" | "--package" | "--test" => {
+                    let Some(v) = args.next() else { break };
+                    let key = (a.replace("--package", "-p"), v.clone());
+                    if !seen.contains(&key) {
+                        out.push(key.0.clone());
+                        out.push(v.clone());
+                        seen.push(key);
+                    }
+                }
+                flag => {
+                    let key = (flag.to_owned(), String::new());
+                    if !seen.contains(&key) {
+                        out.push(flag.to_owned());
+                        seen.push(key);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
 /// How one run of a unit ended.
 #[derive(Debug)]
 pub enum Outcome {
@@ -303,9 +334,7 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
                 c.args(&u.cargo_args);
             }
             None => {
-                for u in units {
-                    c.args(&u.cargo_args);
-                }
+                c.args(build_args(units));
             }
         }
         c.args(extra);
@@ -441,6 +470,20 @@ mod tests {
         assert_eq!(
             Unit::lib("ctopc-com").cargo_args,
             ["-p", "ctopc-com", "--lib", "--bins"]
+        );
+    }
+
+    #[test]
+    fn one_build_selects_each_package_and_flag_once() {
+        let units = [
+            Unit::lib("ctopc-com"),
+            Unit::test("ctopc-com", "inproc_server"),
+            Unit::lib("e2e-tests"),
+            Unit::test("e2e-tests", "da10"),
+        ];
+        assert_eq!(
+            build_args(&units).join(" "),
+            "-p ctopc-com --lib --bins --test inproc_server -p e2e-tests --test da10"
         );
     }
 
