@@ -42,16 +42,7 @@ fn wineserver(pfx: &Path, arg: &str, limit: Duration) {
 pub fn run(args: &[String]) -> Result<(), String> {
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
-    util::run(util::cargo().args([
-        "build",
-        "--release",
-        "--target",
-        setup::TARGET,
-        "-p",
-        "e2e-tests",
-        "--bin",
-        "bench-com",
-    ]))?;
+    build::e2e_bin("bench-com")?;
     let exe = artifacts.dir.join("bench-com.exe");
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;

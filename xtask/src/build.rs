@@ -1,7 +1,7 @@
 //! `cargo xtask build`: the Windows artifacts of both bitnesses.
 
 use crate::arch::Arch;
-use crate::{proxy, util};
+use crate::{proxy, setup, util};
 use std::path::PathBuf;
 
 pub struct Artifacts {
@@ -14,6 +14,21 @@ pub struct Artifacts {
     /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
     pub dir32: PathBuf,
     pub proxy32: PathBuf,
+}
+
+/// Builds the binary `name` of the crate `tests/` (e2e-tests) for the server's target: the
+/// marshal probe, the COM benchmark, the soak client.
+pub fn e2e_bin(name: &str) -> Result<(), String> {
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        setup::TARGET,
+        "-p",
+        "e2e-tests",
+        "--bin",
+        name,
+    ]))
 }
 
 pub fn run(_args: &[String]) -> Result<Artifacts, String> {

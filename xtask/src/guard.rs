@@ -243,8 +243,8 @@ fn prefix_processes() -> (Vec<u32>, Vec<PathBuf>) {
     (pids, exes)
 }
 
-/// `Z:\work\x\y.exe` (Wine's Unix drive) or `/work/x/y.exe` as a Unix path, for an
-/// `.exe` of ours (a path under the worktree).
+/// `Z:\work\x\y.exe` (Wine's Unix drive) or `/work/x/y.exe` as a Unix path; `None` for
+/// anything else (a switch, a `C:` path of Wine's own programs).
 pub fn windows_exe_path(arg: &str) -> Option<PathBuf> {
     let unix = match arg.strip_prefix("Z:").or_else(|| arg.strip_prefix("z:")) {
         Some(rest) => rest.replace('\\', "/"),
@@ -256,11 +256,9 @@ pub fn windows_exe_path(arg: &str) -> Option<PathBuf> {
 
 /// The module name winedbg gives an exe: its file stem, lower case, without cargo's hash.
 pub fn module_name(exe: &Path) -> String {
-    let stem = exe
-        .file_stem()
+    exe.file_stem()
         .map(|s| s.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    stem
+        .unwrap_or_default()
 }
 
 /// A stall of `unit`: the report, then every process of the prefix ended.
@@ -304,7 +302,6 @@ pub struct Summary {
 /// How [`run_units`] runs its units.
 pub struct Plan<'a> {
     pub target: &'a str,
-    pub env: &'a [(&'a str, &'a Path)],
     /// Arguments for the test binaries (after `--test-threads=1`): a name filter, say.
     pub test_args: &'a [String],
     /// The whole run may not take longer.
@@ -314,13 +311,12 @@ pub struct Plan<'a> {
 }
 
 /// Runs each of `units` (`cargo test --release --target TARGET <unit> -- --test-threads=1
-/// TEST_ARGS`, `env` set) in turn, running a stalled one again up to `retries` times.
+/// TEST_ARGS`) in turn, running a stalled one again up to `retries` times.
 /// Fails at the first failure, a stall beyond the retries, or when the whole run passes
 /// `limit`.
 pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
     let Plan {
         target,
-        env,
         test_args,
         limit,
         retries,
@@ -338,9 +334,6 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
             }
         }
         c.args(extra);
-        for (k, v) in env {
-            c.env(k, v);
-        }
         c
     };
     // One build of every binary first, so that no build counts as a test's silence.
@@ -389,9 +382,6 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
                 }
             }
         }
-    }
-    for s in &summary.stalls {
-        println!("guard: STALL (run again, then passed): {s}");
     }
     Ok(summary)
 }

@@ -528,16 +528,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let o = options(args)?;
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
-    util::run(util::cargo().args([
-        "build",
-        "--release",
-        "--target",
-        setup::TARGET,
-        "-p",
-        "e2e-tests",
-        "--bin",
-        "soak-client",
-    ]))?;
+    build::e2e_bin("soak-client")?;
     let client = artifacts.dir.join("soak-client.exe");
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;

@@ -58,10 +58,8 @@ pub fn run(args: &[String]) -> Result<(), String> {
         register(&artifacts)?;
         println!("test: end-to-end tests under Wine (one binary at a time, guard.rs)");
         let units = units_64()?;
-        let bin_dir = [("CTOPC_BIN_DIR", artifacts.dir.as_path())];
         let plan = guard::Plan {
             target: setup::TARGET,
-            env: &bin_dir,
             test_args: &[],
             limit: E2E_LIMIT,
             retries: 1,
@@ -72,11 +70,11 @@ pub fn run(args: &[String]) -> Result<(), String> {
             "test: end-to-end tests as a 32-bit client ({})",
             Arch::X86.target()
         );
-        build_marshal_probe()?;
+        // marshal_strings (32-bit client) talks to the 64-bit marshal probe.
+        build::e2e_bin("marshal-probe")?;
         let units = units_32();
         let plan = guard::Plan {
             target: Arch::X86.target(),
-            env: &[],
             ..plan
         };
         stalls.extend(guard::run_units(&plan, &units)?.stalls);
@@ -250,40 +248,24 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
         } else {
             units_64()?
         };
-        let bin_dir = [("CTOPC_BIN_DIR", artifacts.dir.as_path())];
         let plan = guard::Plan {
             target: if x86 {
                 Arch::X86.target()
             } else {
                 setup::TARGET
             },
-            env: &bin_dir,
             test_args,
             limit: E2E_LIMIT,
             retries: 0,
         };
         if x86 {
-            build_marshal_probe()?;
+            // marshal_strings (32-bit client) talks to the 64-bit marshal probe.
+            build::e2e_bin("marshal-probe")?;
         }
         guard::run_units(&plan, &units).map(|_| ())
     })();
     wine::kill_all();
     result
-}
-
-/// marshal_strings (32-bit client) talks to the 64-bit marshal probe: built before the
-/// 32-bit run.
-fn build_marshal_probe() -> Result<(), String> {
-    util::run(util::cargo().args([
-        "build",
-        "--release",
-        "--target",
-        setup::TARGET,
-        "-p",
-        "e2e-tests",
-        "--bin",
-        "marshal-probe",
-    ]))
 }
 
 /// Registers the proxy/stub DLLs (their own DllRegisterServer, through regsvr32: the
