@@ -57,15 +57,22 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
         "opc-client",
         "--bins",
     ]))?;
-    let proxy = proxy::build_proxy(&root, Arch::X64)?;
-    let proxy32 = proxy::build_proxy(&root, Arch::X86)?;
+    proxy::build_proxy(&root, Arch::X64)?;
+    proxy::build_proxy(&root, Arch::X86)?;
+    Ok(built())
+}
+
+/// Where [`run`] puts the artifacts (without building anything: for a step that runs
+/// while another holds cargo's build lock, e.g. the background msi-test of `test`).
+pub fn built() -> Artifacts {
+    let root = util::root();
     let dir = Arch::X64.release_dir(&root);
-    Ok(Artifacts {
+    Artifacts {
         server: dir.join("ServerCTOPC.exe"),
         server_list: dir.join("OpcServerList.exe"),
-        proxy,
+        proxy: proxy::dll_path(&root, Arch::X64),
         dir,
         dir32: Arch::X86.release_dir(&root),
-        proxy32,
-    })
+        proxy32: proxy::dll_path(&root, Arch::X86),
+    }
 }

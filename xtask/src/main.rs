@@ -50,7 +50,8 @@ commands:
           install, a 64-bit and a 32-bit opcdiag status, write, read back, subscribe
           and servers; a major upgrade with SERVICE=1 keeps a modified ASIXConnect.ini,
           installs the service and still serves; silent uninstall leaves no keys (both
-          views), service or files (also the last step of `test`)
+          views), service or files (also part of `test`, beside its e2e tests);
+          `--built`: use the Windows build as it is (no cargo build)
   fuzz    every fuzz target of fuzz/ for `--seconds N` each (default 10): under
           libFuzzer with cargo-fuzz and a nightly, else (or with `--stable`) the stable
           random-mutation runner; targets may be named

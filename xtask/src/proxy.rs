@@ -98,6 +98,11 @@ const DEF_FILE: &str = "idl/ps/opc_ps.def";
 const FIX_HEADER: &str = "idl/ps/opc_ps_fix.h";
 const INSTALL_HINT: &str = "cargo xtask setup (or apt-get install -y --no-install-recommends gcc-mingw-w64-x86-64 gcc-mingw-w64-i686 mingw-w64-tools libwine-dev)";
 
+/// Where [`build_proxy`] puts `opc_ps.dll` for `arch`.
+pub fn dll_path(root: &Path, arch: Arch) -> PathBuf {
+    arch.release_dir(root).join(DLL_NAME)
+}
+
 /// Builds both `opc_ps.dll`s (64-bit, then 32-bit) and returns their paths in that order.
 pub fn build_both(root: &Path) -> Result<Vec<PathBuf>, String> {
     Arch::ALL.iter().map(|&a| build_proxy(root, a)).collect()
