@@ -207,6 +207,17 @@ impl AsixNamespace {
         }
     }
 
+    /// Every loaded database once (channels may share one), in the order of the
+    /// configuration's channels.
+    pub fn databases(&self) -> impl Iterator<Item = &Arc<VarDatabase>> + '_ {
+        let mut seen = std::collections::HashSet::new();
+        self.config
+            .channels
+            .keys()
+            .filter_map(|name| self.database(name))
+            .filter(move |db| seen.insert(Arc::as_ptr(db)))
+    }
+
     /// Why the server runs without configuration (`OPC_STATUS_NOCONFIG`): `None` when
     /// channel `*` has its database, else the reason for the log.
     pub fn no_config_reason(&self) -> Option<String> {

@@ -946,7 +946,7 @@ struct NameIndex {
 /// A fast string hash (names come from the configuration, so no protection against
 /// chosen collisions is needed): 8 bytes a step, multiply-rotate, folded so that
 /// hashbrown's bucket (low bits) and tag (top bits) both vary.
-fn hash_name(name: &str) -> u64 {
+pub fn hash_name(name: &str) -> u64 {
     const K: u64 = 0x9E37_79B9_7F4A_7C15;
     let bytes = name.as_bytes();
     let mut h = 0u64;

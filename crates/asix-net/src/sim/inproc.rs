@@ -16,7 +16,7 @@
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
 use crate::client::ItemKey;
-use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
+use crate::sim::plant::{numeric, Plant};
 use asix_model::AsixNamespace;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::{OpcError, Timestamp, Vqt};
@@ -74,16 +74,14 @@ impl PlantSource {
     /// A plant with every variable of every loaded database of `ns` (channels from the
     /// `Channel` attribute, else `*`), seeded deterministically, starting at `now`.
     pub fn new(ns: &AsixNamespace, seed: u64, now: Timestamp) -> PlantSource {
-        let mut channels: Vec<ChannelDef> = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        for name in ns.config().channels.keys() {
-            if let Some(db) = ns.database(name) {
-                if seen.insert(Arc::as_ptr(db)) {
-                    channels.extend(channels_from_database(db, DEFAULT_PLANT_CHANNEL));
-                }
-            }
-        }
-        let plant = Plant::new(&channels, seed, TICK_MS, now);
+        let dbs: Vec<&asix_model::VarDatabase> = ns.databases().map(|db| &**db).collect();
+        let plant = Plant::from_databases(
+            dbs.iter().copied(),
+            DEFAULT_PLANT_CHANNEL,
+            seed,
+            TICK_MS,
+            now,
+        );
         PlantSource {
             sampling: vec![(0, Timestamp(0)); plant.vars().len()],
             plant,
