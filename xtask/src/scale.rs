@@ -336,6 +336,24 @@ struct Server {
     child: Child,
     pid: u32,
     startup: Startup,
+    /// CPU seconds (user + system) the process had used when its `serving` line was seen
+    /// (polled every 100 ms): on a shared machine the wall time overstates the work.
+    cpu_at_serving: Option<f64>,
+}
+
+/// User + system CPU seconds of `/proc/<pid>/stat`'s text (fields 14 and 15, counted
+/// after the command name's closing parenthesis; USER_HZ is 100 on Linux).
+pub fn stat_cpu_seconds(stat: &str) -> Option<f64> {
+    let rest = &stat[stat.rfind(')')? + 1..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // `rest` starts at field 3 (state): utime is field 14, stime 15.
+    let utime: u64 = f.get(11)?.parse().ok()?;
+    let stime: u64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) as f64 / 100.0)
+}
+
+fn cpu_seconds(pid: u32) -> Option<f64> {
+    stat_cpu_seconds(&std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?)
 }
 
 const START_LIMIT: Duration = Duration::from_secs(180);
@@ -372,17 +390,26 @@ fn start_server(pfx: &Path, p: &Programs, c: &Config) -> Result<Server, String> 
         .spawn()
         .map_err(|e| format!("start {}: {e}", p.server.display()))?;
     let t = Instant::now();
+    let (mut pid, mut cpu_at_serving) = (None, None);
     loop {
+        if pid.is_none() {
+            pid = soak::server_pid(&p.server);
+        }
         let startup = parse_startup(&log_text());
+        if cpu_at_serving.is_none() && startup.is_some_and(|s| s.serving_ms.is_some()) {
+            cpu_at_serving = pid.and_then(cpu_seconds);
+        }
         if let Some(s) =
             startup.filter(|s| s.serving_ms.is_some() && s.simulation_ready_ms.is_some())
         {
-            let pid = soak::server_pid(&p.server)
+            let pid = pid
+                .or_else(|| soak::server_pid(&p.server))
                 .ok_or("scale: the server serves but its process is not found")?;
             return Ok(Server {
                 child,
                 pid,
                 startup: s,
+                cpu_at_serving,
             });
         }
         if let Ok(Some(status)) = child.try_wait() {
@@ -420,6 +447,7 @@ impl Server {
 #[derive(Debug, Clone, Copy)]
 struct Run {
     start_ms: f64,
+    start_cpu_ms: f64,
     simulation_ms: f64,
     rss_mb: f64,
     flat_s: f64,
@@ -433,6 +461,7 @@ impl Default for Run {
     fn default() -> Self {
         Run {
             start_ms: f64::NAN,
+            start_cpu_ms: f64::NAN,
             simulation_ms: f64::NAN,
             rss_mb: f64::NAN,
             flat_s: f64::NAN,
@@ -690,6 +719,7 @@ fn one_run(
     let mut run = Run::default();
     let s = start_server(pfx, p, c)?;
     run.start_ms = s.startup.serving_ms.unwrap_or(f64::NAN);
+    run.start_cpu_ms = s.cpu_at_serving.map_or(f64::NAN, |c| c * 1000.0);
     run.simulation_ms = s.startup.simulation_ready_ms.unwrap_or(f64::NAN);
     let mut holder = command(pfx, &p.holder, &c.ini)
         .args(["--hold", "--seconds", "3600"])
@@ -700,14 +730,20 @@ fn one_run(
     std::thread::sleep(Duration::from_secs(3));
     run.rss_mb = s.rss()?;
     println!(
-        "scale: {} run {i}: configuration {:.0} ms ({} variables), tree at {:.0} ms, serving at {:.0} ms, simulation ready at {:.0} ms; RSS {:.1} MB",
+        "scale: {} run {i}: configuration {:.0} ms ({} variables), tree at {:.0} ms, serving at {:.0} ms (CPU {:.0} ms), simulation ready at {:.0} ms; RSS {:.1} MB; load average {}",
         c.label,
         s.startup.config_ms,
         s.startup.variables,
         s.startup.tree_ms.unwrap_or(f64::NAN),
         run.start_ms,
+        run.start_cpu_ms,
         run.simulation_ms,
-        run.rss_mb
+        run.rss_mb,
+        std::fs::read_to_string("/proc/loadavg")
+            .unwrap_or_default()
+            .split_whitespace()
+            .next()
+            .unwrap_or("?")
     );
     let result = (|| {
         if c.size > 0 && o.phase("browse") {
@@ -795,6 +831,11 @@ fn summary(o: &Options, results: &[(Config, Vec<Run>)]) {
                 )
             }),
             "1,000,000 in ≤ 3 s",
+        ),
+        (
+            "… CPU time of the process until serving (Wine's own start included)",
+            Box::new(move |_, r| fmt(med(r, |r| r.start_cpu_ms), "ms", 0)),
+            "—",
         ),
         (
             "simulation ready (deferred, after serving)",
@@ -956,6 +997,15 @@ mod tests {
         assert_eq!(parse_startup(&early).unwrap().serving_ms, None);
         assert_eq!(parse_startup("nothing here\n"), None);
         assert_eq!(line_seconds("2026-12-02T01:02:03.5Z x"), Some(3723.5));
+    }
+
+    #[test]
+    fn cpu_seconds_of_a_proc_stat_line() {
+        // A command name with a space and a parenthesis, as Wine's can have.
+        let stat =
+            "4242 (Server CTOPC.ex)) S 1 4242 4242 0 -1 4194560 100 0 0 0 250 37 0 0 20 0 9 0";
+        assert_eq!(stat_cpu_seconds(stat), Some(2.87));
+        assert_eq!(stat_cpu_seconds("garbage"), None);
     }
 
     #[test]
