@@ -626,16 +626,26 @@ fn deliver_one(
         return (false, false);
     };
     let result = match &event {
-        Event::DataChange(d) => call_values(
-            &sink,
-            true,
-            d.transaction_id,
-            d.client_group,
-            d.master_quality,
-            d.master_error,
-            &d.items,
-        ),
-        Event::ReadComplete(d) => call_values(
+        // A large subscription update goes in calls of at most MAX_ITEMS_PER_CALLBACK
+        // items (`DataChange::calls`), one after the other, with the same buffers; a
+        // failed call ends it (the client is gone, or refuses).
+        Event::DataChange(d) => {
+            let mut buffers = CallBuffers::default();
+            d.calls()
+                .into_iter()
+                .try_for_each(|(quality, error, items)| {
+                    buffers.call(
+                        &sink,
+                        true,
+                        d.transaction_id,
+                        d.client_group,
+                        quality,
+                        error,
+                        items,
+                    )
+                })
+        }
+        Event::ReadComplete(d) => CallBuffers::default().call(
             &sink,
             false,
             d.transaction_id,
@@ -677,57 +687,86 @@ fn deliver_one(
     (false, true)
 }
 
-fn call_values(
-    sink: &IOPCDataCallback,
-    data_change: bool,
-    transaction: u32,
-    client_group: u32,
-    master_quality: Option<OpcError>,
-    master_error: Option<OpcError>,
-    items: &[ctopc_core::model::ItemValue],
-) -> windows::core::Result<()> {
-    let handles: Vec<u32> = items.iter().map(|i| i.client_handle).collect();
-    let qualities: Vec<u16> = items.iter().map(|i| i.quality.0).collect();
-    let times: Vec<FILETIME> = items.iter().map(|i| clock::filetime(i.timestamp)).collect();
-    let errors: Vec<HRESULT> = items.iter().map(|i| hr_of(i.error)).collect();
-    let mut values: Vec<VARIANT> = Vec::with_capacity(items.len());
-    for i in items {
-        values.push(variant::to_variant(&i.value).unwrap_or_default());
-    }
-    let n = items.len() as u32;
-    // SAFETY: every array holds `n` elements and lives for the call; the VARIANTs are
-    // cleared below.
-    let r = unsafe {
-        if data_change {
-            sink.OnDataChange(
-                transaction,
-                client_group,
-                hr_of(master_quality),
-                hr_of(master_error),
-                n,
-                handles.as_ptr(),
-                values.as_ptr(),
-                qualities.as_ptr(),
-                times.as_ptr(),
-                errors.as_ptr(),
-            )
-        } else {
-            sink.OnReadComplete(
-                transaction,
-                client_group,
-                hr_of(master_quality),
-                hr_of(master_error),
-                n,
-                handles.as_ptr(),
-                values.as_ptr(),
-                qualities.as_ptr(),
-                times.as_ptr(),
-                errors.as_ptr(),
-            )
+/// The arrays of one OnDataChange / OnReadComplete call, kept from call to call of a split
+/// update so that each call of it reuses them instead of allocating its own.
+#[derive(Default)]
+struct CallBuffers {
+    handles: Vec<u32>,
+    qualities: Vec<u16>,
+    times: Vec<FILETIME>,
+    errors: Vec<HRESULT>,
+    values: Vec<VARIANT>,
+}
+
+impl CallBuffers {
+    #[allow(clippy::too_many_arguments)]
+    fn call(
+        &mut self,
+        sink: &IOPCDataCallback,
+        data_change: bool,
+        transaction: u32,
+        client_group: u32,
+        master_quality: Option<OpcError>,
+        master_error: Option<OpcError>,
+        items: &[ctopc_core::model::ItemValue],
+    ) -> windows::core::Result<()> {
+        self.handles.clear();
+        self.handles.extend(items.iter().map(|i| i.client_handle));
+        self.qualities.clear();
+        self.qualities.extend(items.iter().map(|i| i.quality.0));
+        self.times.clear();
+        self.times
+            .extend(items.iter().map(|i| clock::filetime(i.timestamp)));
+        self.errors.clear();
+        self.errors.extend(items.iter().map(|i| hr_of(i.error)));
+        self.values.clear();
+        self.values.extend(
+            items
+                .iter()
+                .map(|i| variant::to_variant(&i.value).unwrap_or_default()),
+        );
+        let n = items.len() as u32;
+        let (handles, values, qualities, times, errors) = (
+            self.handles.as_ptr(),
+            self.values.as_ptr(),
+            self.qualities.as_ptr(),
+            self.times.as_ptr(),
+            self.errors.as_ptr(),
+        );
+        // SAFETY: every array holds `n` elements and lives for the call; the VARIANTs are
+        // cleared below.
+        let r = unsafe {
+            if data_change {
+                sink.OnDataChange(
+                    transaction,
+                    client_group,
+                    hr_of(master_quality),
+                    hr_of(master_error),
+                    n,
+                    handles,
+                    values,
+                    qualities,
+                    times,
+                    errors,
+                )
+            } else {
+                sink.OnReadComplete(
+                    transaction,
+                    client_group,
+                    hr_of(master_quality),
+                    hr_of(master_error),
+                    n,
+                    handles,
+                    values,
+                    qualities,
+                    times,
+                    errors,
+                )
+            }
+        };
+        for v in self.values.iter_mut() {
+            variant::clear(v);
         }
-    };
-    for v in values.iter_mut() {
-        variant::clear(v);
+        r
     }
-    r
 }
