@@ -25,6 +25,7 @@ use ctopc_core::browse::{
     BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
     PropertySelection,
 };
+use ctopc_core::diagnostics::browse::browse;
 use ctopc_core::limits;
 use ctopc_core::{OpcError, OpcResult};
 use std::sync::Arc;
@@ -55,8 +56,9 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
     ) -> windows::core::Result<()> {
         let direction: BrowseDirection = enum_arg(direction.0)?;
         let name = in_string(pname, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
+        let diag = self.ctx.runtime.diagnostics.space();
         self.cursor()
-            .change_browse_position(direction, &name)
+            .change_browse_position(direction, &name, &diag)
             .map_err(crate::error::to_com)
     }
 
@@ -80,6 +82,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                 return Err(abi::invalid_arg());
             }
             let filter = in_string(pfilter, limits::FILTER)?;
+            let diag = self.ctx.runtime.diagnostics.space();
             let names = self
                 .cursor()
                 .browse_opc_item_id_list(
@@ -88,6 +91,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                     data_type_filter.0,
                     access_rights_filter,
                     &*self.ctx.namespace,
+                    &diag,
                 )
                 .map_err(crate::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
@@ -105,9 +109,10 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         clear(pitem_id, PWSTR::null());
         nonnull(pitem_id)?;
         let data_id = in_string(pdata_id, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
+        let diag = self.ctx.runtime.diagnostics.space();
         let id = self
             .cursor()
-            .get_item_id(&data_id)
+            .get_item_id(&data_id, &diag)
             .map_err(crate::error::to_com)?;
         let id = OwnedWstr::new(&id)?;
         // SAFETY: checked non-null; the only allocation has succeeded.
@@ -240,10 +245,13 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                 vendor_filter: &vendor_filter,
             };
             let space = &self.ctx.address_space;
+            let diag = self.ctx.runtime.diagnostics.space();
             let with_values = return_values.as_bool();
             let cx = self.props_ctx();
             let mut result = match selection {
-                None => space.browse(&req).map(|r| BrowseResult::<ElementProps> {
+                None => browse(space, &diag, &req, |s, q| s.browse(q)).map(|r| BrowseResult::<
+                    ElementProps,
+                > {
                     elements: r
                         .elements
                         .into_iter()
@@ -263,8 +271,10 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                         PropertySelection::All => None,
                         PropertySelection::Ids(ids) => Some(ids),
                     };
-                    space.browse_with_properties(&req, |id| {
-                        props::static_properties(&cx, id, ids, with_values)
+                    browse(space, &diag, &req, |s, q| {
+                        s.browse_with_properties(q, |id| {
+                            props::static_properties(&cx, id, ids, with_values)
+                        })
                     })
                 }
             }
