@@ -159,8 +159,8 @@ pub struct NetSource<R: Resolver> {
     parts: HashMap<(Arc<str>, RequestId), RawId>,
     /// Answers made without a client (it could not start).
     ready: RawOutput<NetVar>,
-    /// Each channel's link as its client reported it, and whether it was ever linked
-    /// (the next link is then a failover), for the `_Diagnostics` branch.
+    /// Each asix channel's link as its client reported it, and whether it was ever
+    /// linked (the next link is then a failover), for the `_Diagnostics` branch.
     links: HashMap<Arc<str>, (ChannelStatus, bool)>,
 }
 
@@ -243,7 +243,7 @@ impl<R: Resolver> NetSource<R> {
             }
             ClientEvent::ChannelUp { channel: c, server } => {
                 info!(%channel, asix_channel = %c, %server, "linked");
-                let (s, ever) = self.link(&channel);
+                let (s, ever) = self.link(&c);
                 s.failovers += u64::from(*ever);
                 *ever = true;
                 s.link = LinkState::Up;
@@ -251,7 +251,7 @@ impl<R: Resolver> NetSource<R> {
             }
             ClientEvent::ChannelDown { channel: c, error } => {
                 warn!(%channel, asix_channel = %c, %error, "no link");
-                let (s, _) = self.link(&channel);
+                let (s, _) = self.link(&c);
                 s.link = LinkState::Down;
                 s.server.clear();
                 s.last_error = error.to_string();
@@ -308,31 +308,32 @@ impl<R: Resolver> VariableSource for NetSource<R> {
         var.0.clone()
     }
 
-    /// Every channel whose client was started: its link as last reported (no link until
-    /// the first report), its subscribed variables.
+    /// Every asix channel (the channel a server serves, of the item IDs) that a client
+    /// reported on or that has subscribed variables: its link as last reported (no link
+    /// until the first report), its subscribed variables.
     fn channels(&self, subscribed: &mut dyn Iterator<Item = &NetVar>) -> Vec<ChannelStatus> {
-        let mut counts: HashMap<&str, u64> = HashMap::new();
-        for (channel, _) in subscribed {
-            *counts.entry(channel).or_default() += 1;
+        let mut counts: BTreeMap<&str, u64> = BTreeMap::new();
+        for (_, key) in subscribed {
+            *counts.entry(&key.channel).or_default() += 1;
         }
-        let mut out: Vec<ChannelStatus> = self
-            .clients
-            .keys()
-            .map(|c| {
+        for c in self.links.keys() {
+            counts.entry(c).or_default();
+        }
+        counts
+            .into_iter()
+            .map(|(c, n)| {
                 let mut s =
                     self.links
                         .get(c)
                         .map(|l| l.0.clone())
                         .unwrap_or_else(|| ChannelStatus {
-                            name: c.to_string(),
+                            name: c.to_owned(),
                             ..ChannelStatus::default()
                         });
-                s.subscriptions = counts.get(&**c).copied().unwrap_or(0);
+                s.subscriptions = n;
                 s
             })
-            .collect();
-        out.sort_by(|a, b| a.name.cmp(&b.name));
-        out
+            .collect()
     }
 
     fn subscribe(&mut self, _now: Timestamp, vars: Vec<(NetVar, u32)>) {

@@ -8,6 +8,9 @@
 //!   data-type filters apply as DA 2.05a defines them (the asix original ignored them:
 //!   `ctopc_core::browse::BrowseCursor::browse_opc_item_ids`, items resolved through the
 //!   context's namespace), and so to the strings of the returned enumerator.
+//! - Every browse path includes the `_Diagnostics` branch beside the real address space
+//!   (`ctopc_core::diagnostics::browse`: the session's cursor and `browse`), over the
+//!   branch's tree of the current snapshot (`Runtime::diagnostics`).
 //! - BrowseAccessPaths: E_NOTIMPL, as the original (asix channels are not browsable).
 //! - Browse: the `[in, out]` continuation point is replaced only when the call succeeds
 //!   (the client's string is freed then); when the browse is complete the server writes an

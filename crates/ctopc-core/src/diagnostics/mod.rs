@@ -31,8 +31,8 @@
 //! Names: a client's branch is the name it gave with `IOPCCommon::SetClientName`, with `.`
 //! and control characters replaced by `_` (a branch name is one segment of the item ID);
 //! a client without a name is `Client<session>`; names that two connected clients share
-//! get `#<session>` appended, each of them. A channel's branch is its AsixConnect name
-//! made safe the same way (`*`, the basic channel, stays `*`).
+//! get `#<session>` appended, each of them. A channel's branch is its asix channel name
+//! made safe the same way.
 
 pub mod backend;
 pub mod browse;
@@ -261,7 +261,7 @@ pub enum LinkState {
 /// What a data source says of one channel ([`crate::source::Backend::channels`]).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ChannelStatus {
-    /// The AsixConnect channel (`*`: the basic one).
+    /// The asix channel (of the item IDs a data server serves, e.g. `SIARKA`).
     pub name: String,
     pub link: LinkState,
     /// The asix server the channel is linked to (empty: none).
