@@ -114,6 +114,15 @@ pub trait VariableSource: Send {
     fn is_simulation(&self) -> bool {
         false
     }
+    /// The state of the source's channels for the `_Diagnostics` branch
+    /// ([`Backend::channels`]); `subscribed`: every variable subscribed now (counted per
+    /// channel). Default: none.
+    fn channels(
+        &self,
+        _subscribed: &mut dyn Iterator<Item = &Self::Var>,
+    ) -> Vec<ctopc_core::diagnostics::ChannelStatus> {
+        Vec::new()
+    }
 }
 
 /// A source item's resolution with the source's handles.
@@ -851,6 +860,10 @@ impl<S: VariableSource> Backend for AsixBackend<S> {
 
     fn is_simulation(&self) -> bool {
         self.source.is_simulation()
+    }
+
+    fn channels(&self) -> Vec<ctopc_core::diagnostics::ChannelStatus> {
+        self.source.channels(&mut self.vars.keys())
     }
 }
 

@@ -161,6 +161,20 @@ impl VariableSource for PlantSource {
 
     fn part(&self, _var: &u32) {}
 
+    /// The simulation is one "channel" that answers for all: `Simulation`, LinkState 2.
+    fn channels(
+        &self,
+        subscribed: &mut dyn Iterator<Item = &u32>,
+    ) -> Vec<ctopc_core::diagnostics::ChannelStatus> {
+        vec![ctopc_core::diagnostics::ChannelStatus {
+            name: "Simulation".to_owned(),
+            link: ctopc_core::diagnostics::LinkState::Simulation,
+            server: "in-process simulation".to_owned(),
+            subscriptions: subscribed.count() as u64,
+            ..Default::default()
+        }]
+    }
+
     /// The plant's current value (the quality rules read their control and limit variables
     /// as they are now, also right after a write).
     fn peek(&self, var: &u32) -> Option<Vqt> {
