@@ -124,6 +124,14 @@ impl Backend for Deferred {
     fn is_simulation(&self) -> bool {
         self.simulation
     }
+
+    /// The built source's channels (the `_Diagnostics` branch); none while it builds.
+    fn channels(&self) -> Vec<ctopc_core::diagnostics::ChannelStatus> {
+        match &self.state {
+            State::Ready(b) => b.channels(),
+            State::Building(_) | State::Failed => Vec::new(),
+        }
+    }
 }
 
 #[cfg(test)]
