@@ -9,10 +9,11 @@
 //! bench-com.exe points the server at a configuration of its own (the demo plant with
 //! `MinUpdateRate = 250`, written as `bench-ServerCTOPC.ini` beside it, handed over in
 //! `SERVERCTOPC_INI`), so the registered server's own ini is not involved.
+//!
+//! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`).
 
 use crate::{build, setup, util, wine};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Duration;
 
 const LIMIT: Duration = Duration::from_secs(20 * 60);
@@ -21,64 +22,59 @@ fn prefix() -> PathBuf {
     util::root().join("target/wine/bench-prefix")
 }
 
-/// A command in the benchmark prefix.
-fn wine_in(pfx: &Path, program: impl AsRef<std::ffi::OsStr>) -> Command {
-    let mut c = wine::wine(program);
-    c.env("WINEPREFIX", pfx);
-    c
-}
-
-fn wineserver(pfx: &Path, arg: &str, limit: Duration) {
-    let mut c = Command::new(wine::WINESERVER);
-    wine::env(&mut c);
-    c.env("WINEPREFIX", pfx).arg(arg);
-    let _ = util::run_with_timeout(
-        c.stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null()),
+/// Registers the proxy/stub DLL and the server in the prefix `pfx` (the benchmarks' own).
+pub fn register(pfx: &Path, artifacts: &build::Artifacts) -> Result<(), String> {
+    let limit = Duration::from_secs(120);
+    let status = util::run_with_timeout(
+        wine::wine_in(pfx, "regsvr32")
+            .arg("/s")
+            .arg(&artifacts.proxy),
         limit,
-    );
+    )?;
+    if !status.success() {
+        return Err(format!(
+            "regsvr32 {} failed: {status}",
+            artifacts.proxy.display()
+        ));
+    }
+    let status = util::run_with_timeout(
+        wine::wine_in(pfx, &artifacts.server).arg("/RegServer"),
+        limit,
+    )?;
+    if !status.success() {
+        return Err(format!(
+            "{} /RegServer failed: {status}",
+            artifacts.server.display()
+        ));
+    }
+    Ok(())
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
+    if let Some(rest) = args.strip_prefix(&["--scale".to_owned()]) {
+        return crate::scale::run(rest);
+    }
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
     build::e2e_bin("bench-com")?;
     let exe = artifacts.dir.join("bench-com.exe");
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;
-    wineserver(&pfx, "-k", Duration::from_secs(20));
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     let result = (|| {
-        let limit = Duration::from_secs(120);
-        let status = util::run_with_timeout(
-            wine_in(&pfx, "regsvr32").arg("/s").arg(&artifacts.proxy),
-            limit,
-        )?;
-        if !status.success() {
-            return Err(format!(
-                "regsvr32 {} failed: {status}",
-                artifacts.proxy.display()
-            ));
-        }
-        let status =
-            util::run_with_timeout(wine_in(&pfx, &artifacts.server).arg("/RegServer"), limit)?;
-        if !status.success() {
-            return Err(format!(
-                "{} /RegServer failed: {status}",
-                artifacts.server.display()
-            ));
-        }
+        register(&pfx, &artifacts)?;
         println!(
             "bench: running {} under Wine (prefix {})",
             exe.display(),
             pfx.display()
         );
-        let status = util::run_with_timeout(wine_in(&pfx, &exe).args(args), LIMIT)?;
+        let status = util::run_with_timeout(wine::wine_in(&pfx, &exe).args(args), LIMIT)?;
         if status.success() {
             Ok(())
         } else {
             Err(format!("bench-com.exe failed: {status}"))
         }
     })();
-    wineserver(&pfx, "-k", Duration::from_secs(20));
+    wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     result
 }

@@ -11,6 +11,7 @@ mod fuzz;
 mod guard;
 mod msi;
 mod proxy;
+mod scale;
 mod setup;
 mod soak;
 mod test;
@@ -63,7 +64,12 @@ commands:
           LIST` (add,validate,read,write,itemio,subscribe,remove) or `--no-in-arrays`
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
-          goals) and never fails on speed; `--quick` for a short run
+          goals) and never fails on speed; `--quick` for a short run.
+          `bench --scale`: the server with synthetic databases of many variables
+          (xtask/src/scale.rs): start time, resident memory per variable, flat and
+          tree browse, AddItems, memory per group item and of an active subscription,
+          a soak; medians beside the demo's; `--sizes 100000,1000000`, `--runs 3`,
+          `--items 100000`, `--soak-minutes 10`, `--only load|browse|items|soak`
 ";
 
 fn main() -> ExitCode {

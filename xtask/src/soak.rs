@@ -128,10 +128,12 @@ fn options(args: &[String]) -> Result<Options, String> {
     Ok(o)
 }
 
-/// The Linux PID of the Wine process running the soak's ServerCTOPC.exe: its command line
-/// names the exe by its Windows path under this worktree.
-fn server_pid(exe: &Path) -> Option<u32> {
-    let want = format!("Z:{}", exe.display()).replace('/', "\\");
+/// The Linux PID of the Wine process running ServerCTOPC.exe `-Embedding` from `exe`: its
+/// command line holds the exe's Windows path under this worktree (started by COM)
+/// or starts with its Unix path (started by the scale benchmark through the loader).
+pub fn server_pid(exe: &Path) -> Option<u32> {
+    let windows = wine::windows_path(exe);
+    let unix = exe.display().to_string();
     for e in std::fs::read_dir("/proc").ok()?.flatten() {
         let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
             continue;
@@ -140,7 +142,8 @@ fn server_pid(exe: &Path) -> Option<u32> {
             continue;
         };
         let cmd = String::from_utf8_lossy(&cmd);
-        if cmd.contains(&want) && cmd.contains("-Embedding") {
+        let ours = cmd.contains(&windows) || cmd.starts_with(&unix);
+        if ours && cmd.contains("-Embedding") {
             return Some(pid);
         }
     }
@@ -148,7 +151,7 @@ fn server_pid(exe: &Path) -> Option<u32> {
 }
 
 /// VmRSS of `pid` in MB.
-fn rss_mb(pid: u32) -> Option<f64> {
+pub fn rss_mb(pid: u32) -> Option<f64> {
     let s = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let line = s.lines().find(|l| l.starts_with("VmRSS:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;

@@ -183,6 +183,7 @@ impl Background {
 /// client's side of the wire). Measured: that one passes at 32-bit too.
 pub const E2E_32: &[&str] = &[
     "da10",
+    "diagnostics",
     "doctor",
     "foundation",
     "generic_clients",

@@ -50,6 +50,11 @@ pub fn kill_all() {
     );
 }
 
+/// The Windows path of a Unix path under Wine (`Z:` and backslashes).
+pub fn windows_path(p: &Path) -> String {
+    format!("Z:{}", p.display()).replace('/', "\\")
+}
+
 /// A command that runs `program` under Wine in the prefix `pfx` (not the project's).
 pub fn wine_in(pfx: &Path, program: impl AsRef<std::ffi::OsStr>) -> Command {
     let mut c = wine(program);

@@ -34,7 +34,7 @@ pub use namespace::{
     AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
 };
 pub use quality_rules::{
-    apply_quality_rules, apply_quality_rules_with, check_write_value, RuleOptions,
+    apply_quality_rules, apply_quality_rules_with, check_write_value, RuleDef, RuleOptions,
 };
 pub use startup::{embedded_demo, Loaded};
 pub use text::Warning;

@@ -75,7 +75,9 @@ pub enum Derivation {
     /// The value itself.
     Value,
     /// `FormatedCV`: formatted by the variable's `Format` (default form when `None`).
-    Formatted(Option<FormatSpec>),
+    /// Boxed: a data source keeps a derivation per subscribed item, and the format is
+    /// rare and large (80 bytes a derivation unboxed, 32 boxed).
+    Formatted(Option<Box<FormatSpec>>),
     /// `PercentageCV`.
     Percentage { low: f64, high: f64 },
     /// `BarCVs`.
@@ -88,7 +90,7 @@ impl Derivation {
     pub fn apply(&self, v: &Value) -> Option<Value> {
         match self {
             Derivation::Value => Some(v.clone()),
-            Derivation::Formatted(spec) => format_value(spec.as_ref(), v).map(Value::Bstr),
+            Derivation::Formatted(spec) => format_value(spec.as_deref(), v).map(Value::Bstr),
             Derivation::Percentage { low, high } => {
                 percentage(value_as_f64(v)?, *low, *high).map(Value::R8)
             }
@@ -207,6 +209,17 @@ impl AsixNamespace {
         }
     }
 
+    /// Every loaded database once (channels may share one), in the order of the
+    /// configuration's channels.
+    pub fn databases(&self) -> impl Iterator<Item = &Arc<VarDatabase>> + '_ {
+        let mut seen = std::collections::HashSet::new();
+        self.config
+            .channels
+            .keys()
+            .filter_map(|name| self.database(name))
+            .filter(move |db| seen.insert(Arc::as_ptr(db)))
+    }
+
     /// Why the server runs without configuration (`OPC_STATUS_NOCONFIG`): `None` when
     /// channel `*` has its database, else the reason for the log.
     pub fn no_config_reason(&self) -> Option<String> {
@@ -228,7 +241,7 @@ impl AsixNamespace {
         let channel = self.config.resolve_channel(access_path)?;
         let db = self.database(channel.name).map(Arc::as_ref);
         let id = parse_item_id(item_id, |n| {
-            db.is_some_and(|db| db.find_public(n).is_some())
+            db.is_some_and(|db| db.find_public_index(n).is_some())
         })?;
         let ctx = Ctx {
             channel: channel.name,
@@ -246,22 +259,28 @@ impl AsixNamespace {
                 Ok((def, ItemAttributes::default()))
             }
             (ItemId::Variable { variable, item }, Some(db)) => {
-                let var = db.find_public(&variable).ok_or(OpcError::UnknownItemId)?;
+                let var = db
+                    .find_public_index(&variable)
+                    .map(|i| decoded(db, i))
+                    .ok_or(OpcError::UnknownItemId)?;
                 match item {
-                    VarItem::Direct(s) => ctx.suffix_item(db, var, &s),
+                    VarItem::Direct(s) => ctx.suffix_item(db, &var, &s),
                     VarItem::ViaAttribute { attribute, then } => {
                         let cell = db
-                            .attribute(var, &attribute)
+                            .attribute(&var, &attribute)
                             .ok_or(OpcError::UnknownItemId)?
                             .trim();
                         if cell.is_empty() {
                             return Err(OpcError::UnknownItemId);
                         }
                         if let Some(n) = parse_number(cell) {
-                            return ctx.numeric_attribute_item(var, &attribute, n, then.as_ref());
+                            return ctx.numeric_attribute_item(&var, &attribute, n, then.as_ref());
                         }
-                        let target = db.find_real(cell).ok_or(OpcError::UnknownItemId)?;
-                        ctx.suffix_item(db, target, then.as_ref().unwrap_or(&Suffix::Value))
+                        let target = db
+                            .find_real_index(cell)
+                            .map(|i| decoded(db, i))
+                            .ok_or(OpcError::UnknownItemId)?;
+                        ctx.suffix_item(db, &target, then.as_ref().unwrap_or(&Suffix::Value))
                     }
                 }
             }
@@ -281,7 +300,7 @@ impl AsixNamespace {
     pub fn live_item(&self, channel: &str, source_key: &str) -> Option<LiveItem> {
         let db = self.database(channel).map(Arc::as_ref);
         let id = parse_item_id(source_key, |n| {
-            db.is_some_and(|db| db.find_real(n).is_some())
+            db.is_some_and(|db| db.find_real_index(n).is_some())
         })
         .ok()?;
         match id {
@@ -296,10 +315,11 @@ impl AsixNamespace {
                 variable,
                 item: VarItem::Direct(s),
             } => {
-                let var = db?.find_real(&variable)?;
+                let db = db?;
+                let var = decoded(db, db.find_real_index(&variable)?);
                 let derivation = match s {
                     Suffix::Value => Derivation::Value,
-                    Suffix::Formatted => Derivation::Formatted(var.format.clone()),
+                    Suffix::Formatted => Derivation::Formatted(var.format.clone().map(Box::new)),
                     Suffix::Percentage => {
                         let (low, high) = var.range?;
                         Derivation::Percentage { low, high }
@@ -319,7 +339,7 @@ impl AsixNamespace {
                     asmen_channel: None,
                     var_type: var.data_type,
                     derivation,
-                    definition: Some(var.clone()),
+                    definition: Some(var),
                 })
             }
             ItemId::Variable { .. } => None,
@@ -403,6 +423,13 @@ fn walk<'a, E>(
         path.pop();
     }
     Ok(())
+}
+
+/// Variable `i` of `db`, decoded for one resolution and not kept: [`VarDatabase::find_public`]
+/// keeps every variable it decodes (about 1.2 KB each), so resolving through it made every
+/// item a client ever added cost that much for the life of the server (issue 16).
+fn decoded(db: &VarDatabase, i: usize) -> Variable {
+    db.variables.view(i).decode()
 }
 
 struct Ctx<'a> {

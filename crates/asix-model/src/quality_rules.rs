@@ -77,10 +77,89 @@ pub fn apply_quality_rules_with(
     options: RuleOptions,
     limit_of: &dyn Fn(&str) -> Option<f64>,
 ) -> Quality {
+    let limits = [
+        &var.warn_low,
+        &var.warn_high,
+        &var.alarm_low,
+        &var.alarm_high,
+    ];
+    let has_control = var.control_variable.is_some();
+    rules(
+        limits,
+        has_control,
+        value,
+        quality,
+        control_value,
+        options,
+        limit_of,
+    )
+}
+
+/// What the rules read of a variable's definition, and no more: its four limits and
+/// whether it names a control variable. A data source keeps this per subscribed item
+/// instead of the whole [`Variable`] (its cells, names and texts: about 2 KB).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RuleDef {
+    /// `WarnLow`, `WarnHigh`, `AlarmLow`, `AlarmHigh`.
+    pub limits: [Option<super::vardb::Limit>; 4],
+    /// `ControlVariable` is set.
+    pub has_control: bool,
+}
+
+impl RuleDef {
+    pub fn of(var: &Variable) -> RuleDef {
+        RuleDef {
+            limits: [
+                var.warn_low.clone(),
+                var.warn_high.clone(),
+                var.alarm_low.clone(),
+                var.alarm_high.clone(),
+            ],
+            has_control: var.control_variable.is_some(),
+        }
+    }
+
+    /// Nothing for the rules to check: no limit, no control variable.
+    pub fn is_empty(&self) -> bool {
+        !self.has_control && self.limits.iter().all(Option::is_none)
+    }
+
+    /// [`apply_quality_rules_with`] over this definition.
+    pub fn apply(
+        &self,
+        value: &Value,
+        quality: Quality,
+        control_value: Option<&Value>,
+        options: RuleOptions,
+        limit_of: &dyn Fn(&str) -> Option<f64>,
+    ) -> Quality {
+        let [wl, wh, al, ah] = &self.limits;
+        rules(
+            [wl, wh, al, ah],
+            self.has_control,
+            value,
+            quality,
+            control_value,
+            options,
+            limit_of,
+        )
+    }
+}
+
+/// The rules over a definition's limits (`[WarnLow, WarnHigh, AlarmLow, AlarmHigh]`).
+fn rules(
+    limits: [&Option<super::vardb::Limit>; 4],
+    has_control: bool,
+    value: &Value,
+    quality: Quality,
+    control_value: Option<&Value>,
+    options: RuleOptions,
+    limit_of: &dyn Fn(&str) -> Option<f64>,
+) -> Quality {
     if quality.is_bad() {
         return quality;
     }
-    if options.check_control_variables && var.control_variable.is_some() {
+    if options.check_control_variables && has_control {
         if let Some(true) = control_value.and_then(control_failure) {
             return Quality::BAD_SENSOR_FAILURE;
         }
@@ -103,10 +182,10 @@ pub fn apply_quality_rules_with(
             .map(|x| if is_r4 { x as f32 as f64 } else { x })
     };
     let (wl, wh, al, ah) = (
-        limit(&var.warn_low),
-        limit(&var.warn_high),
-        limit(&var.alarm_low),
-        limit(&var.alarm_high),
+        limit(limits[0]),
+        limit(limits[1]),
+        limit(limits[2]),
+        limit(limits[3]),
     );
     if wl.is_none() && wh.is_none() && al.is_none() && ah.is_none() {
         return quality;

@@ -7,14 +7,15 @@
 //!
 //! Layout (issue 16: large plants have up to a million variables). No `String` per cell
 //! or per map key:
-//! - every cell of the table is text in one `CellTable`, row after row, with a `u32` end
-//!   per cell (17 columns: 68 B) and a `u32` line per row; the row's text is ~90 B;
+//! - every cell of the table is text in one `CellTable`, row after row, with a `u16` end
+//!   per cell relative to its row (17 columns: 34 B), a `u32` start and a `u32` line per
+//!   row; the row's text is ~90 B (at most 65,535 B, [`MAX_ROW_BYTES`]);
 //! - the `Name` and public-name (alias) indexes are `hashbrown::HashTable<u32>`s of row
 //!   numbers, names compared in the table (~6 B each per variable);
 //! - the tree ([`GroupNode`]) holds `u32` rows (4 B per variable);
 //! - a slot per variable (16 B) for its decoded [`Variable`], made on first use and kept.
 //!
-//! About 195 B per variable in all (210 B measured with 1,000,000 variables by
+//! About 165 B per variable in all (181 B measured with 1,000,000 variables by
 //! `cargo bench -p asix-model --bench vardb`). [`load_database_file`] streams the CSV into
 //! the table ([`for_each_csv_record`]); [`VarView`] reads a variable's attributes in place.
 
@@ -656,17 +657,24 @@ impl GroupNode {
     }
 }
 
-/// Every cell of the attribute table in one text, row after row, and the end of each
-/// cell in it: cell `k` (row `k / ncols`, column `k % ncols`) is
-/// `text[ends[k - 1]..ends[k]]`. 4 bytes per cell plus the text itself.
+/// Every cell of the attribute table in one text, row after row: the start of each row
+/// in it (`u32`) and the end of each cell relative to its row's start (`u16`): cell `k`
+/// (row `r = k / ncols`, column `c = k % ncols`) is
+/// `text[starts[r] + ends[k - 1]..starts[r] + ends[k]]` (from the row's start when `c` is
+/// 0). 2 bytes per cell and 4 per row plus the text itself; a row holds at most 65,535
+/// bytes of text.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 struct CellTable {
     text: String,
-    ends: Vec<u32>,
+    starts: Vec<u32>,
+    ends: Vec<u16>,
     ncols: usize,
     /// The line of each row in the file.
     lines: Vec<u32>,
 }
+
+/// The most text a row of the attribute table may hold ([`CellTable`]'s `u16` ends).
+pub const MAX_ROW_BYTES: usize = u16::MAX as usize;
 
 impl CellTable {
     fn rows(&self) -> usize {
@@ -678,35 +686,48 @@ impl CellTable {
         line: usize,
         cells: impl Iterator<Item = &'a str>,
     ) -> Result<(), (usize, String)> {
+        let start = self.text.len();
+        let too_long = |m: &str| (line, m.to_owned());
+        let start32 = u32::try_from(start)
+            .map_err(|_| too_long("the attribute table holds more than 4 GB of text"))?;
+        let cells_before = self.ends.len();
         for c in cells {
             self.text.push_str(c);
-            let end = u32::try_from(self.text.len()).map_err(|_| {
-                (
-                    line,
-                    "the attribute table holds more than 4 GB of text".into(),
-                )
-            })?;
+            let Ok(end) = u16::try_from(self.text.len() - start) else {
+                self.text.truncate(start);
+                self.ends.truncate(cells_before);
+                return Err(too_long(&format!(
+                    "the row holds more than {MAX_ROW_BYTES} bytes of text"
+                )));
+            };
             self.ends.push(end);
         }
+        self.starts.push(start32);
         self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
         Ok(())
     }
 
     fn cell(&self, row: usize, col: usize) -> &str {
         let k = row * self.ncols + col;
-        let start = if k == 0 { 0 } else { self.ends[k - 1] as usize };
-        &self.text[start..self.ends[k] as usize]
+        let base = self.starts[row] as usize;
+        let start = if col == 0 {
+            0
+        } else {
+            self.ends[k - 1] as usize
+        };
+        &self.text[base + start..base + self.ends[k] as usize]
     }
 
     fn shrink_to_fit(&mut self) {
         self.text.shrink_to_fit();
+        self.starts.shrink_to_fit();
         self.ends.shrink_to_fit();
         self.lines.shrink_to_fit();
     }
 }
 
 /// Every variable of the table (hidden ones included), in table order, stored compactly:
-/// the cells in one [`CellTable`] (the text of the row plus 4 bytes a cell), the line
+/// the cells in one [`CellTable`] (the text of the row, 2 bytes a cell, 4 a row), the line
 /// (4 bytes) and a slot (16 bytes) for the decoded [`Variable`], made when first asked for
 /// ([`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
 /// variables use [`Variables::view`], which decodes nothing it is not asked for.
@@ -946,7 +967,7 @@ struct NameIndex {
 /// A fast string hash (names come from the configuration, so no protection against
 /// chosen collisions is needed): 8 bytes a step, multiply-rotate, folded so that
 /// hashbrown's bucket (low bits) and tag (top bits) both vary.
-fn hash_name(name: &str) -> u64 {
+pub fn hash_name(name: &str) -> u64 {
     const K: u64 = 0x9E37_79B9_7F4A_7C15;
     let bytes = name.as_bytes();
     let mut h = 0u64;
@@ -1022,11 +1043,11 @@ impl PartialEq for NameIndex {
 
 /// A loaded, validated variable database, with aliases applied.
 ///
-/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u32` end per
-/// cell; the two name indexes (`Name`, the public name) are hash tables of `u32` row
+/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u16` end per
+/// cell and a `u32` start per row; the two name indexes (`Name`, the public name) are hash tables of `u32` row
 /// indexes that compare names in that table; the tree holds `u32` indexes. For a row of
-/// 17 cells of about 90 bytes that is about 90 + 68 (cell ends) + 4 (line) + 16 (decoded
-/// slot) + 2 × ~6 (indexes) + 4 (tree) ≈ 195 bytes per variable until a variable is
+/// 17 cells of about 90 bytes that is about 90 + 34 (cell ends) + 4 (row start) + 4
+/// (line) + 16 (decoded slot) + 2 × ~6 (indexes) + 4 (tree) ≈ 165 bytes per variable until a variable is
 /// decoded (its [`Variable`] copy, about 1 KB, is kept once made).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VarDatabase {
@@ -1416,6 +1437,24 @@ pub fn load_database_file(
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn a_row_of_more_than_64_kb_of_text_is_refused_with_its_line() {
+        let mut t = CellTable {
+            ncols: 2,
+            ..CellTable::default()
+        };
+        t.push_row(2, ["A", "bb"].into_iter()).unwrap();
+        let long = "x".repeat(MAX_ROW_BYTES);
+        let e = t.push_row(3, ["y", long.as_str()].into_iter()).unwrap_err();
+        assert_eq!(e.0, 3);
+        assert!(e.1.contains("65535 bytes"), "{e:?}");
+        // The refused row left nothing behind; the next one is whole.
+        t.push_row(4, ["", long.as_str()].into_iter()).unwrap();
+        assert_eq!(t.rows(), 2);
+        assert_eq!((t.cell(0, 0), t.cell(0, 1)), ("A", "bb"));
+        assert_eq!((t.cell(1, 0), t.cell(1, 1).len()), ("", MAX_ROW_BYTES));
+    }
 
     #[test]
     fn csv_quoting_separators_and_lines() {

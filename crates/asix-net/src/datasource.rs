@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use asix_model::namespace::AsixNamespace;
 use asix_model::{ServerOptions, ServerSelection};
+use ctopc_core::diagnostics::{ChannelStatus, LinkState};
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::{OpcError, Quality, Timestamp};
@@ -158,6 +159,9 @@ pub struct NetSource<R: Resolver> {
     parts: HashMap<(Arc<str>, RequestId), RawId>,
     /// Answers made without a client (it could not start).
     ready: RawOutput<NetVar>,
+    /// Each asix channel's link as its client reported it, and whether it was ever
+    /// linked (the next link is then a failover), for the `_Diagnostics` branch.
+    links: HashMap<Arc<str>, (ChannelStatus, bool)>,
 }
 
 /// At most this many client events are taken in one `poll` (the rest wake it again).
@@ -177,6 +181,7 @@ impl<R: Resolver> NetSource<R> {
             rx,
             parts: HashMap::new(),
             ready: RawOutput::default(),
+            links: HashMap::new(),
         }
     }
 
@@ -237,10 +242,19 @@ impl<R: Resolver> NetSource<R> {
                 }
             }
             ClientEvent::ChannelUp { channel: c, server } => {
-                info!(%channel, asix_channel = %c, %server, "linked")
+                info!(%channel, asix_channel = %c, %server, "linked");
+                let (s, ever) = self.link(&c);
+                s.failovers += u64::from(*ever);
+                *ever = true;
+                s.link = LinkState::Up;
+                s.server = server;
             }
             ClientEvent::ChannelDown { channel: c, error } => {
-                warn!(%channel, asix_channel = %c, %error, "no link")
+                warn!(%channel, asix_channel = %c, %error, "no link");
+                let (s, _) = self.link(&c);
+                s.link = LinkState::Down;
+                s.server.clear();
+                s.last_error = error.to_string();
             }
             ClientEvent::ItemFailed { key, error } => {
                 warn!(%channel, item = %key, %error, "item refused")
@@ -253,6 +267,20 @@ impl<R: Resolver> NetSource<R> {
                 info!(%channel, %server, flags = flags.0, clients, "server status")
             }
         }
+    }
+}
+
+impl<R: Resolver> NetSource<R> {
+    fn link(&mut self, channel: &Arc<str>) -> &mut (ChannelStatus, bool) {
+        self.links.entry(channel.clone()).or_insert_with(|| {
+            (
+                ChannelStatus {
+                    name: channel.to_string(),
+                    ..ChannelStatus::default()
+                },
+                false,
+            )
+        })
     }
 }
 
@@ -278,6 +306,34 @@ impl<R: Resolver> VariableSource for NetSource<R> {
 
     fn part(&self, var: &NetVar) -> Arc<str> {
         var.0.clone()
+    }
+
+    /// Every asix channel (the channel a server serves, of the item IDs) that a client
+    /// reported on or that has subscribed variables: its link as last reported (no link
+    /// until the first report), its subscribed variables.
+    fn channels(&self, subscribed: &mut dyn Iterator<Item = &NetVar>) -> Vec<ChannelStatus> {
+        let mut counts: BTreeMap<&str, u64> = BTreeMap::new();
+        for (_, key) in subscribed {
+            *counts.entry(&key.channel).or_default() += 1;
+        }
+        for c in self.links.keys() {
+            counts.entry(c).or_default();
+        }
+        counts
+            .into_iter()
+            .map(|(c, n)| {
+                let mut s =
+                    self.links
+                        .get(c)
+                        .map(|l| l.0.clone())
+                        .unwrap_or_else(|| ChannelStatus {
+                            name: c.to_owned(),
+                            ..ChannelStatus::default()
+                        });
+                s.subscriptions = n;
+                s
+            })
+            .collect()
     }
 
     fn subscribe(&mut self, _now: Timestamp, vars: Vec<(NetVar, u32)>) {

@@ -24,7 +24,7 @@
 //!   the same way from both sources (ASKOM_E_WriteErrorDeviceRequestIllegal).
 
 use asix_model::namespace::{AsixNamespace, Derivation};
-use asix_model::{apply_quality_rules_with, check_write_value, Limit, RuleOptions, Variable};
+use asix_model::{check_write_value, Limit, RuleDef, RuleOptions, Variable};
 use ctopc_core::model::datasource::SourceItem;
 use ctopc_core::{OpcError, Quality, Value, Vqt};
 
@@ -41,9 +41,13 @@ pub struct Resolved<V> {
     pub key: V,
     /// How the item's value derives from the variable's.
     pub derivation: Derivation,
-    /// The variable's database definition (limits, control variable); `None` for
-    /// descriptive IDs.
-    pub definition: Option<Variable>,
+    /// What the quality rules read of the variable's database definition (limits,
+    /// control variable), only when the channel checks them and there is something to
+    /// check; `None` otherwise (descriptive IDs always). Not the whole [`Variable`]: an
+    /// item of a 100,000-item subscription must not carry its variable's every cell.
+    pub rule_def: Option<Box<RuleDef>>,
+    /// The database does not mark the variable `Writable` (never for descriptive IDs).
+    pub read_only: bool,
     /// CheckLimits / CheckControlVariables of the item's channel.
     pub rules: RuleOptions,
     /// The control variable, when the rules check it (and the source knows it).
@@ -134,10 +138,14 @@ pub fn resolve_id<V>(
         .map(|r| RuleOptions::from(r.options))
         .unwrap_or_default();
     let mut rule_var = |name: &str| {
+        // Read in place: decoding the variable would keep it decoded in the database.
         let ch = ns
             .database(channel)
-            .and_then(|db| db.find_real(name))
-            .map(|v| db_channel(ns, channel, v))
+            .and_then(|db| {
+                let i = db.find_real_index(name)?;
+                let col = db.column(CHANNEL_ATTRIBUTE)?;
+                Some(db.variables.view(i).cell(col).trim().to_owned())
+            })
             .unwrap_or_default();
         lookup(&ItemKey::new(&ch, name))
     };
@@ -155,7 +163,14 @@ pub fn resolve_id<V>(
     Resolution::Resolved(Resolved {
         key,
         derivation: live.derivation,
-        definition: live.definition,
+        rule_def: live
+            .definition
+            .as_ref()
+            .filter(|_| rules.check_limits || rules.check_control_variables)
+            .map(RuleDef::of)
+            .filter(|d| !d.is_empty())
+            .map(Box::new),
+        read_only: live.definition.as_ref().is_some_and(|d| !d.writable),
         rules,
         control,
         limits,
@@ -187,8 +202,8 @@ impl<V> Resolved<V> {
     /// known). A limit variable without a usable value (unknown, BAD quality, not numeric)
     /// is an unknown limit: the rules skip that limit.
     pub fn sample(&self, raw: Vqt, current: impl Fn(&V) -> Option<Vqt>) -> Vqt {
-        let quality = match &self.definition {
-            Some(def) if self.rules.check_limits || self.rules.check_control_variables => {
+        let quality = match &self.rule_def {
+            Some(def) => {
                 let control = self.control.as_ref().and_then(&current).map(|c| c.value);
                 let limit_of = |name: &str| {
                     let (_, k) = self.limits.iter().find(|(n, _)| &**n == name)?;
@@ -198,8 +213,7 @@ impl<V> Resolved<V> {
                     }
                     l.value.as_f64()
                 };
-                apply_quality_rules_with(
-                    def,
+                def.apply(
                     &raw.value,
                     raw.quality,
                     control.as_ref(),
@@ -217,7 +231,7 @@ impl<V> Resolved<V> {
 
     /// May `value` be written to the item? See [`check_write`].
     pub fn check_write(&self, value: &Value) -> Result<(), OpcError> {
-        check_write(&self.derivation, self.definition.as_ref(), value)
+        check_write(&self.derivation, self.read_only, value)
     }
 }
 
@@ -229,14 +243,14 @@ impl<V> Resolved<V> {
 /// a second guard behind the engine's access rights).
 pub fn check_write(
     derivation: &Derivation,
-    definition: Option<&Variable>,
+    read_only: bool,
     value: &Value,
 ) -> Result<(), OpcError> {
     if *derivation != Derivation::Value {
         return Err(OpcError::BadRights);
     }
     check_write_value(value)?;
-    if definition.is_some_and(|d| !d.writable) {
+    if read_only {
         return Err(OpcError::WriteErrorDeviceRequestIllegal);
     }
     Ok(())

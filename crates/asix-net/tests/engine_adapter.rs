@@ -178,6 +178,18 @@ async fn engine_items_get_values_reads_and_writes_through_the_asix_network() {
                 all.iter().all(|s| s.quality.is_good()).then_some(all)
             })
             .await;
+        // What the `_Diagnostics` branch shows of the asix channels of these items (SIARKA,
+        // PIEC): linked to the simulator's server, their subscribed variables, no
+        // failover, no error.
+        let channels = d.src.channels();
+        assert!(channels.len() >= 2, "{channels:?}");
+        for c in &channels {
+            assert_eq!(c.link, ctopc_core::diagnostics::LinkState::Up, "{c:?}");
+            assert_eq!(c.server, "DEMO", "{c:?}");
+            assert_eq!((c.failovers, c.last_error.as_str()), (0, ""), "{c:?}");
+        }
+        let subscribed: u64 = channels.iter().map(|c| c.subscriptions).sum();
+        assert!(subscribed >= 3, "{channels:?}");
         assert!(
             matches!(states[0].value, Value::R4(x) if (0.0..=8.0).contains(&x)),
             "{:?}",

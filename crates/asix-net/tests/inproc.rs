@@ -625,3 +625,23 @@ fn an_item_without_a_plant_variable_is_config_error_once() {
         assert!(out.is_empty(), "{out:?}");
     }
 }
+
+#[test]
+fn the_simulation_reports_itself_as_one_channel_with_its_subscriptions() {
+    let (mut e, mut s, t0, _, _) = setup();
+    let before = s.channels();
+    assert_eq!(before.len(), 1);
+    assert_eq!(before[0].name, "Simulation");
+    assert_eq!(
+        before[0].link,
+        ctopc_core::diagnostics::LinkState::Simulation
+    );
+    assert_eq!(before[0].subscriptions, 0);
+    step(&mut e, &mut s, t0);
+    // KW_A000 (its value and PercentageCV) and KW_A110, and the rule variables with them;
+    // the DESC constant is never subscribed.
+    let after = s.channels();
+    assert!(after[0].subscriptions >= 2, "{after:?}");
+    assert_eq!(after[0].failovers, 0);
+    assert!(after[0].last_error.is_empty());
+}

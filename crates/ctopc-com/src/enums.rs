@@ -176,6 +176,17 @@ impl StringList for ctopc_core::browse::NameList {
     }
 }
 
+/// A `BrowseOPCItemIDs` listing with the `_Diagnostics` branch: the parts of both
+/// address spaces, as indexes.
+impl StringList for ctopc_core::diagnostics::browse::Listing {
+    fn len(&self) -> usize {
+        ctopc_core::diagnostics::browse::Listing::len(self)
+    }
+    fn get(&self, i: usize) -> Option<&str> {
+        ctopc_core::diagnostics::browse::Listing::get(self, i)
+    }
+}
+
 /// IEnumString over a shared [`StringList`]: `Next(celt)` allocates the `celt` strings
 /// straight into the caller's array (one pass, no copy of the listing), `Clone` shares the
 /// list.

@@ -12,7 +12,10 @@ use crate::registration;
 use crate::registry::{self, ServerRegistration};
 use crate::runtime::Runtime;
 use crate::server;
+use ctopc_core::diagnostics::backend::DiagBackend;
+use ctopc_core::diagnostics::{Board, DiagNamespace, Sampler};
 use ctopc_core::model::Engine;
+use ctopc_core::namespace::Namespace;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
 use std::path::PathBuf;
@@ -204,12 +207,18 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
             engine_config.source_timeout_ms
         );
     }
+    // The `_Diagnostics` branch beside the real namespace and backend
+    // (`ctopc_core::diagnostics`): both read the board the runtime publishes on.
+    let board = Arc::new(Board::new());
+    let sampler = Sampler::new(address_space.filter_case());
+    let namespace: Arc<dyn Namespace> = Arc::new(DiagNamespace::new(namespace, Arc::clone(&board)));
     let engine = Engine::new(engine_config, Arc::clone(&namespace));
     let mut simulation = false;
-    let rt = Runtime::start(engine, |wake| {
+    let for_backend = Arc::clone(&board);
+    let rt = Runtime::start(engine, (board, sampler), |wake| {
         let backend = make_backend(wake)?;
         simulation = backend.is_simulation();
-        Ok(backend)
+        Ok(Box::new(DiagBackend::new(backend, for_backend)))
     })?;
     rt.ops.configure(&ops);
     if let Some(address) = &ops.metrics_address {

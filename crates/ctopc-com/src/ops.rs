@@ -8,6 +8,7 @@
 //! anything or taking another lock.
 
 use ctopc_core::audit::{self, Client, CompleteRecord, WriteRecord};
+use ctopc_core::diagnostics::ClientCounters;
 use ctopc_core::model::{GroupHandle, ItemVqt, SessionHandle, WriteComplete};
 use ctopc_core::ops::{Admit, CallbackWatch, OpsConfig, Verdict};
 use ctopc_core::{OpcError, Timestamp};
@@ -147,6 +148,37 @@ impl Ops {
     /// The groups whose sinks a drop of `session`'s callbacks removes.
     pub fn groups_of(&self, session: SessionHandle) -> Vec<GroupHandle> {
         self.existing(session, |w| w.groups.iter().copied().collect())
+    }
+
+    /// The `_Diagnostics` counters of each session (`sessions`: the engine's
+    /// `session_stats`): name, groups, items, and from its callback watch the last call's
+    /// duration, the callbacks queued and the failures. Each mutex is taken once, alone.
+    pub fn client_counters(
+        &self,
+        sessions: &[(SessionHandle, usize, usize)],
+    ) -> Vec<ClientCounters> {
+        let mut out: Vec<ClientCounters> = {
+            let names = self.lock();
+            sessions
+                .iter()
+                .map(|(s, groups, items)| ClientCounters {
+                    session: s.0,
+                    name: names.get(s).cloned(),
+                    groups: *groups as u64,
+                    items: *items as u64,
+                    ..ClientCounters::default()
+                })
+                .collect()
+        };
+        let watches = self.watches.lock().unwrap_or_else(|p| p.into_inner());
+        for c in &mut out {
+            if let Some(w) = watches.get(&SessionHandle(c.session)) {
+                c.last_latency_ms = w.watch.last_latency_ms();
+                c.pending = w.watch.queued();
+                c.failures = w.watch.total_failures();
+            }
+        }
+        out
     }
 
     /// How the log names a client: its name, else its session.

@@ -21,6 +21,7 @@
 use crate::group::dataobject::{self, Da10Sinks, Routed};
 use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
 use crate::{clock, connpoint::SinkSlot, error, variant};
+use ctopc_core::diagnostics::{self, Board, ChannelStatus, Sampler, ServerCounters};
 use ctopc_core::driver::{self, Deliver, Driver, Report};
 use ctopc_core::model::{Engine, Event, GroupHandle, SessionHandle};
 use ctopc_core::source::{Backend, Wake};
@@ -127,7 +128,19 @@ pub struct Runtime {
     pub ops: crate::ops::Ops,
     /// The counters and histograms (`ctopc_core::metrics`, served by `crate::metrics_http`).
     pub metrics: ctopc_core::metrics::Metrics,
+    /// Where the driver thread publishes the `_Diagnostics` snapshot, at most once per
+    /// second ([`Runtime::publish_diagnostics`]; read by the namespace, the backend and
+    /// browsing: `ctopc_core::diagnostics`).
+    pub diagnostics: Arc<Board>,
 }
+
+/// What a step section reads for the diagnostics snapshot: the engine's statistics, per
+/// session its groups and items, the backend's channels.
+type DiagRead = (
+    ctopc_core::model::EngineStats,
+    Vec<(SessionHandle, usize, usize)>,
+    Vec<ChannelStatus>,
+);
 
 /// How long a synchronous call waits for the data source at most, beyond the engine's own
 /// source timeout (which completes such requests with ASKOM_E_NetAnswerTimeout).
@@ -136,10 +149,14 @@ pub const SYNC_WAIT_MARGIN: Duration = Duration::from_secs(2);
 impl Runtime {
     /// Starts the runtime and its driver thread. `make_source` gets the waker to call
     /// when data arrives from another thread.
+    /// `diagnostics`: the board the namespace and the backend of `engine` read (an unused
+    /// one when they do not); `sampler` takes its snapshots.
     pub fn start(
         engine: Engine,
+        diagnostics: (Arc<Board>, Sampler),
         make_source: impl FnOnce(Arc<dyn Wake>) -> Result<Box<dyn Backend>, String>,
     ) -> Result<Arc<Runtime>, String> {
+        let (board, sampler) = diagnostics;
         let signal = Arc::new(Signal::default());
         let waker: Arc<dyn Wake> = Arc::new(SourceWaker(Arc::downgrade(&signal)));
         let source = make_source(waker)?;
@@ -157,11 +174,12 @@ impl Runtime {
             start_time: clock::now(),
             ops: crate::ops::Ops::default(),
             metrics: ctopc_core::metrics::Metrics::default(),
+            diagnostics: board,
         });
         let weak = Arc::downgrade(&rt);
         let spawned = std::thread::Builder::new()
             .name("driver".into())
-            .spawn(move || drive(weak));
+            .spawn(move || drive(weak, sampler));
         let handle = spawned.map_err(|e| format!("cannot start the driver thread: {e}"))?;
         *rt.driver_thread.lock().unwrap_or_else(|p| p.into_inner()) = Some(handle);
         Ok(rt)
@@ -418,6 +436,36 @@ impl Runtime {
         }
     }
 
+    /// Takes the `_Diagnostics` snapshot from what the driver's step section read
+    /// (`engine`) and the counters kept outside the lock (metrics, callback watches,
+    /// client names), publishes it and wakes the driver, whose backend then sends the
+    /// subscribed diagnostic items their samples.
+    fn publish_diagnostics(&self, sampler: &mut Sampler, now: Timestamp, engine: DiagRead) {
+        let (stats, sessions, channels) = engine;
+        let m = self
+            .metrics
+            .snapshot(ctopc_core::metrics::Gauges::default());
+        let server = ServerCounters {
+            uptime_s: now.millis_since(self.start_time) / 1000,
+            clients: stats.sessions as u64,
+            groups: stats.groups as u64,
+            items: stats.group_items as u64,
+            callbacks_total: m.callbacks.iter().sum(),
+            values_total: m.values_sent,
+            failed_callbacks: m.callback_failures,
+            dropped_sinks: m.dropped_disconnected + m.dropped_failures,
+            pending_transactions: stats.pending_transactions as u64,
+        };
+        let clients = self.ops.client_counters(&sessions);
+        let input = diagnostics::Input {
+            server,
+            clients,
+            channels,
+        };
+        self.diagnostics.publish(sampler.sample(now, input));
+        self.signal.wake();
+    }
+
     /// Hands the workers' reports (a scheduled OnDataChange done with: delivered, failed or
     /// never queued; a sink lost) to the driver, which tells the engine at its next step.
     fn report(&self, reports: impl IntoIterator<Item = Report>) {
@@ -501,7 +549,7 @@ impl Deliver for Queues<'_> {
 }
 
 /// The driver thread: a step whenever woken or due, then the events to the workers.
-fn drive(rt: Weak<Runtime>) {
+fn drive(rt: Weak<Runtime>, mut sampler: Sampler) {
     let _com = crate::client::ComThread::mta();
     loop {
         let Some(rt) = rt.upgrade() else { return };
@@ -524,8 +572,21 @@ fn drive(rt: Weak<Runtime>) {
                     Report::Ended(_) => true,
                 });
             }
-            d.step(clock::now(), reports)
+            let now = clock::now();
+            let step = d.step(now, reports);
+            // At most once per second, in the section the step holds anyway.
+            let diag = sampler.due(now).then(|| {
+                (
+                    now,
+                    (d.engine.stats(), d.engine.session_stats(), d.channels()),
+                )
+            });
+            (step, diag)
         };
+        let (step, diag) = step;
+        if let Some((now, read)) = diag {
+            rt.publish_diagnostics(&mut sampler, now, read);
+        }
         if !step.sync_completed.is_empty() {
             // The waiters take their own results (`Engine::take_sync_result`).
             rt.stepped.notify_all();
@@ -626,16 +687,26 @@ fn deliver_one(
         return (false, false);
     };
     let result = match &event {
-        Event::DataChange(d) => call_values(
-            &sink,
-            true,
-            d.transaction_id,
-            d.client_group,
-            d.master_quality,
-            d.master_error,
-            &d.items,
-        ),
-        Event::ReadComplete(d) => call_values(
+        // A large subscription update goes in calls of at most MAX_ITEMS_PER_CALLBACK
+        // items (`DataChange::calls`), one after the other, with the same buffers; a
+        // failed call ends it (the client is gone, or refuses).
+        Event::DataChange(d) => {
+            let mut buffers = CallBuffers::default();
+            d.calls()
+                .into_iter()
+                .try_for_each(|(quality, error, items)| {
+                    buffers.call(
+                        &sink,
+                        true,
+                        d.transaction_id,
+                        d.client_group,
+                        quality,
+                        error,
+                        items,
+                    )
+                })
+        }
+        Event::ReadComplete(d) => CallBuffers::default().call(
             &sink,
             false,
             d.transaction_id,
@@ -677,57 +748,86 @@ fn deliver_one(
     (false, true)
 }
 
-fn call_values(
-    sink: &IOPCDataCallback,
-    data_change: bool,
-    transaction: u32,
-    client_group: u32,
-    master_quality: Option<OpcError>,
-    master_error: Option<OpcError>,
-    items: &[ctopc_core::model::ItemValue],
-) -> windows::core::Result<()> {
-    let handles: Vec<u32> = items.iter().map(|i| i.client_handle).collect();
-    let qualities: Vec<u16> = items.iter().map(|i| i.quality.0).collect();
-    let times: Vec<FILETIME> = items.iter().map(|i| clock::filetime(i.timestamp)).collect();
-    let errors: Vec<HRESULT> = items.iter().map(|i| hr_of(i.error)).collect();
-    let mut values: Vec<VARIANT> = Vec::with_capacity(items.len());
-    for i in items {
-        values.push(variant::to_variant(&i.value).unwrap_or_default());
-    }
-    let n = items.len() as u32;
-    // SAFETY: every array holds `n` elements and lives for the call; the VARIANTs are
-    // cleared below.
-    let r = unsafe {
-        if data_change {
-            sink.OnDataChange(
-                transaction,
-                client_group,
-                hr_of(master_quality),
-                hr_of(master_error),
-                n,
-                handles.as_ptr(),
-                values.as_ptr(),
-                qualities.as_ptr(),
-                times.as_ptr(),
-                errors.as_ptr(),
-            )
-        } else {
-            sink.OnReadComplete(
-                transaction,
-                client_group,
-                hr_of(master_quality),
-                hr_of(master_error),
-                n,
-                handles.as_ptr(),
-                values.as_ptr(),
-                qualities.as_ptr(),
-                times.as_ptr(),
-                errors.as_ptr(),
-            )
+/// The arrays of one OnDataChange / OnReadComplete call, kept from call to call of a split
+/// update so that each call of it reuses them instead of allocating its own.
+#[derive(Default)]
+struct CallBuffers {
+    handles: Vec<u32>,
+    qualities: Vec<u16>,
+    times: Vec<FILETIME>,
+    errors: Vec<HRESULT>,
+    values: Vec<VARIANT>,
+}
+
+impl CallBuffers {
+    #[allow(clippy::too_many_arguments)]
+    fn call(
+        &mut self,
+        sink: &IOPCDataCallback,
+        data_change: bool,
+        transaction: u32,
+        client_group: u32,
+        master_quality: Option<OpcError>,
+        master_error: Option<OpcError>,
+        items: &[ctopc_core::model::ItemValue],
+    ) -> windows::core::Result<()> {
+        self.handles.clear();
+        self.handles.extend(items.iter().map(|i| i.client_handle));
+        self.qualities.clear();
+        self.qualities.extend(items.iter().map(|i| i.quality.0));
+        self.times.clear();
+        self.times
+            .extend(items.iter().map(|i| clock::filetime(i.timestamp)));
+        self.errors.clear();
+        self.errors.extend(items.iter().map(|i| hr_of(i.error)));
+        self.values.clear();
+        self.values.extend(
+            items
+                .iter()
+                .map(|i| variant::to_variant(&i.value).unwrap_or_default()),
+        );
+        let n = items.len() as u32;
+        let (handles, values, qualities, times, errors) = (
+            self.handles.as_ptr(),
+            self.values.as_ptr(),
+            self.qualities.as_ptr(),
+            self.times.as_ptr(),
+            self.errors.as_ptr(),
+        );
+        // SAFETY: every array holds `n` elements and lives for the call; the VARIANTs are
+        // cleared below.
+        let r = unsafe {
+            if data_change {
+                sink.OnDataChange(
+                    transaction,
+                    client_group,
+                    hr_of(master_quality),
+                    hr_of(master_error),
+                    n,
+                    handles,
+                    values,
+                    qualities,
+                    times,
+                    errors,
+                )
+            } else {
+                sink.OnReadComplete(
+                    transaction,
+                    client_group,
+                    hr_of(master_quality),
+                    hr_of(master_error),
+                    n,
+                    handles,
+                    values,
+                    qualities,
+                    times,
+                    errors,
+                )
+            }
+        };
+        for v in self.values.iter_mut() {
+            variant::clear(v);
         }
-    };
-    for v in values.iter_mut() {
-        variant::clear(v);
+        r
     }
-    r
 }

@@ -43,7 +43,7 @@ use crate::connpoint::SinkSlot;
 use crate::context::Context;
 use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
-use ctopc_core::browse::BrowseCursor;
+use ctopc_core::diagnostics::browse::Cursor;
 use ctopc_core::lang::Lang;
 use ctopc_core::limits;
 use ctopc_core::model::SessionHandle;
@@ -75,7 +75,7 @@ pub struct OpcServer {
     handle: SessionHandle,
     session: Mutex<Session>,
     /// IOPCBrowseServerAddressSpace's position (per client, as the spec requires).
-    browse: Mutex<BrowseCursor>,
+    browse: Mutex<Cursor>,
     /// The IOPCShutdown connection (registered with the runtime, which calls it on a stop).
     shutdown: Arc<SinkSlot<IOPCShutdown>>,
     _guard: ObjectGuard,
@@ -103,7 +103,7 @@ pub fn create_instance(ctx: &Arc<Context>) -> windows::core::Result<IUnknown> {
             lcid: ctx.default_lang.lcid(),
             client_name: None,
         }),
-        browse: Mutex::new(BrowseCursor::new(Arc::clone(&ctx.address_space))),
+        browse: Mutex::new(Cursor::new(Arc::clone(&ctx.address_space))),
         shutdown,
         _guard: ObjectGuard::new(&ctx.lifetime),
     };
@@ -121,7 +121,7 @@ impl OpcServer {
         self.session.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn cursor(&self) -> MutexGuard<'_, BrowseCursor> {
+    fn cursor(&self) -> MutexGuard<'_, Cursor> {
         self.browse.lock().unwrap_or_else(|p| p.into_inner())
     }
 

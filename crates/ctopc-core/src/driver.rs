@@ -133,6 +133,11 @@ impl Driver {
         }
     }
 
+    /// What the data source says of its channels ([`Backend::channels`]).
+    pub fn channels(&self) -> Vec<crate::diagnostics::ChannelStatus> {
+        self.source.channels()
+    }
+
     /// Moves everything the source has ready into the engine.
     fn pull_source(&mut self, now: Timestamp) {
         let mut out = SourceOutput::default();

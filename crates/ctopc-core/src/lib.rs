@@ -7,6 +7,7 @@
 pub mod audit;
 pub mod browse;
 pub mod convert;
+pub mod diagnostics;
 pub mod driver;
 pub mod error;
 pub mod lang;

@@ -94,6 +94,11 @@ pub struct CallbackWatch {
     max_failures: u32,
     in_flight: Option<InFlight>,
     failures: u32,
+    /// For the `_Diagnostics` branch: every failure counted, admitted callbacks not yet
+    /// started, the duration of the last call that returned.
+    total_failures: u64,
+    queued: u64,
+    last_latency_ms: Option<f64>,
 }
 
 impl CallbackWatch {
@@ -104,7 +109,25 @@ impl CallbackWatch {
             max_failures: max_failures.max(1),
             in_flight: None,
             failures: 0,
+            total_failures: 0,
+            queued: 0,
+            last_latency_ms: None,
         }
+    }
+
+    /// Every failure counted since the watch was made (timeouts and refusals).
+    pub fn total_failures(&self) -> u64 {
+        self.total_failures
+    }
+
+    /// Callbacks admitted ([`Admit::Queue`]) whose call has not started yet.
+    pub fn queued(&self) -> u64 {
+        self.queued
+    }
+
+    /// How long the last call that returned took, ms (`None`: none yet).
+    pub fn last_latency_ms(&self) -> Option<f64> {
+        self.last_latency_ms
     }
 
     /// Consecutive failures so far.
@@ -124,6 +147,7 @@ impl CallbackWatch {
     /// One more failure; true when that reaches the limit (then the count starts again).
     fn fail(&mut self) -> bool {
         self.failures += 1;
+        self.total_failures += 1;
         if self.failures >= self.max_failures {
             self.failures = 0;
             true
@@ -136,6 +160,7 @@ impl CallbackWatch {
     /// first: a call under way is over its timeout once `poll` said so).
     pub fn admit(&mut self) -> Admit {
         if !self.hung() {
+            self.queued += 1;
             return Admit::Queue;
         }
         if self.fail() {
@@ -167,6 +192,7 @@ impl CallbackWatch {
 
     /// The worker starts a call to `group`'s sink (`paced`: a scheduled OnDataChange).
     pub fn start(&mut self, now: Timestamp, group: GroupHandle, paced: bool) {
+        self.queued = self.queued.saturating_sub(1);
         self.in_flight = Some(InFlight {
             since: now,
             group,
@@ -180,6 +206,8 @@ impl CallbackWatch {
         let Some(f) = self.in_flight.take() else {
             return Verdict::default();
         };
+        let ticks = now.filetime().saturating_sub(f.since.filetime()).max(0);
+        self.last_latency_ms = Some(ticks as f64 / Timestamp::TICKS_PER_MS as f64);
         if f.timed_out {
             // Counted (and reported ended) when its timeout passed.
             return Verdict::default();
@@ -286,6 +314,30 @@ mod tests {
         // The call's own timeout is the first failure, this refusal the second.
         assert!(w.poll(at(1200)).failed);
         assert_eq!(w.admit(), Admit::Drop);
+    }
+
+    #[test]
+    fn the_counts_for_diagnostics_follow_the_calls() {
+        let mut w = CallbackWatch::new(1000, 5);
+        assert_eq!(
+            (w.queued(), w.total_failures(), w.last_latency_ms()),
+            (0, 0, None)
+        );
+        assert_eq!(w.admit(), Admit::Queue);
+        assert_eq!(w.admit(), Admit::Queue);
+        assert_eq!(w.queued(), 2);
+        w.start(at(0), G, true);
+        assert_eq!(w.queued(), 1);
+        w.finish(at(3));
+        assert_eq!(w.last_latency_ms(), Some(3.0));
+        w.start(at(10), G, true);
+        assert!(w.poll(at(1100)).failed);
+        assert_eq!(w.admit(), Admit::Refuse);
+        assert_eq!(w.total_failures(), 2);
+        w.finish(at(2010));
+        assert_eq!(w.last_latency_ms(), Some(2000.0));
+        assert_eq!(w.failures(), 2, "consecutive, not reset by the late return");
+        assert_eq!(w.queued(), 0);
     }
 
     #[test]

@@ -44,4 +44,9 @@ pub trait Backend: Send {
     fn is_simulation(&self) -> bool {
         false
     }
+    /// The state of each channel to the data servers, for the `_Diagnostics` branch
+    /// ([`crate::diagnostics`]); called at most once per snapshot. Default: none.
+    fn channels(&self) -> Vec<crate::diagnostics::ChannelStatus> {
+        Vec::new()
+    }
 }

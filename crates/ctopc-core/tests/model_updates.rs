@@ -1149,3 +1149,24 @@ fn held_items_wait_for_the_pacing_slot() {
     sim.tick();
     assert_eq!(values(&sim.data_changes()[0]), vec![(101, Value::R8(2.0))]);
 }
+
+#[test]
+fn session_stats_count_each_clients_groups_and_items() {
+    let mut sim = Sim::new();
+    let a = sim.session();
+    let b = sim.session();
+    let _idle = sim.session();
+    let g1 = sim.group(a, "g1", 1000, 0.0);
+    let g2 = sim.group(a, "g2", 1000, 0.0);
+    sim.items(g1, &["A1", "A2"]);
+    sim.items(g2, &["A1"]);
+    let g3 = sim.group(b, "g3", 1000, 0.0);
+    sim.items(g3, &["A3"]);
+    let stats = sim.e.session_stats();
+    let counts: Vec<(usize, usize)> = stats.iter().map(|s| (s.1, s.2)).collect();
+    assert_eq!(counts, [(2, 3), (1, 1), (0, 0)]);
+    assert_eq!(stats[0].0, a);
+    let total = sim.e.stats();
+    assert_eq!(total.groups, 3);
+    assert_eq!(total.group_items, 4);
+}

@@ -16,10 +16,11 @@
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
 use crate::client::ItemKey;
-use crate::sim::plant::{channels_from_database, numeric, ChannelDef, Plant};
+use crate::sim::plant::{numeric, Plant};
 use asix_model::AsixNamespace;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::{OpcError, Timestamp, Vqt};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 /// Plant tick of the in-process simulation.
@@ -58,9 +59,11 @@ enum Held {
 pub struct PlantSource {
     plant: Plant,
     epoch: Timestamp,
-    /// Per plant variable: its sampling rate in ms (0: not subscribed) and when it is next
-    /// due. Each variable keeps its phase; missed periods are skipped, not burst.
-    sampling: Vec<(u32, Timestamp)>,
+    /// Per subscribed plant variable, in variable order: its sampling rate in ms and when
+    /// it is next due. Each variable keeps its phase; missed periods are skipped, not
+    /// burst. Only subscribed variables have an entry (a million-variable plant costs
+    /// nothing here until subscribed).
+    sampling: BTreeMap<u32, (u32, Timestamp)>,
     /// No variable is due before this (the scan is skipped until then).
     next_due: Option<Timestamp>,
     /// How long device reads and writes take to answer, ms (0: at once).
@@ -74,18 +77,16 @@ impl PlantSource {
     /// A plant with every variable of every loaded database of `ns` (channels from the
     /// `Channel` attribute, else `*`), seeded deterministically, starting at `now`.
     pub fn new(ns: &AsixNamespace, seed: u64, now: Timestamp) -> PlantSource {
-        let mut channels: Vec<ChannelDef> = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        for name in ns.config().channels.keys() {
-            if let Some(db) = ns.database(name) {
-                if seen.insert(Arc::as_ptr(db)) {
-                    channels.extend(channels_from_database(db, DEFAULT_PLANT_CHANNEL));
-                }
-            }
-        }
-        let plant = Plant::new(&channels, seed, TICK_MS, now);
+        let dbs: Vec<&asix_model::VarDatabase> = ns.databases().map(|db| &**db).collect();
+        let plant = Plant::from_databases(
+            dbs.iter().copied(),
+            DEFAULT_PLANT_CHANNEL,
+            seed,
+            TICK_MS,
+            now,
+        );
         PlantSource {
-            sampling: vec![(0, Timestamp(0)); plant.vars().len()],
+            sampling: BTreeMap::new(),
             plant,
             epoch: now,
             next_due: None,
@@ -160,6 +161,20 @@ impl VariableSource for PlantSource {
 
     fn part(&self, _var: &u32) {}
 
+    /// The simulation is one "channel" that answers for all: `Simulation`, LinkState 2.
+    fn channels(
+        &self,
+        subscribed: &mut dyn Iterator<Item = &u32>,
+    ) -> Vec<ctopc_core::diagnostics::ChannelStatus> {
+        vec![ctopc_core::diagnostics::ChannelStatus {
+            name: "Simulation".to_owned(),
+            link: ctopc_core::diagnostics::LinkState::Simulation,
+            server: "in-process simulation".to_owned(),
+            subscriptions: subscribed.count() as u64,
+            ..Default::default()
+        }]
+    }
+
     /// The plant's current value (the quality rules read their control and limit variables
     /// as they are now, also right after a write).
     fn peek(&self, var: &u32) -> Option<Vqt> {
@@ -169,9 +184,10 @@ impl VariableSource for PlantSource {
     fn subscribe(&mut self, now: Timestamp, vars: Vec<(u32, u32)>) {
         self.advance(now);
         for (v, rate) in vars {
-            let Some(s) = self.sampling.get_mut(v as usize) else {
+            if v as usize >= self.plant.vars().len() {
                 continue;
-            };
+            }
+            let s = self.sampling.entry(v).or_insert((0, Timestamp(0)));
             let rate = rate.max(1);
             // A new variable is sampled at once; a faster rate comes into effect within
             // one new period.
@@ -187,9 +203,7 @@ impl VariableSource for PlantSource {
 
     fn unsubscribe(&mut self, _now: Timestamp, vars: Vec<u32>) {
         for v in vars {
-            if let Some(s) = self.sampling.get_mut(v as usize) {
-                s.0 = 0;
-            }
+            self.sampling.remove(&v);
         }
     }
 
@@ -215,16 +229,13 @@ impl VariableSource for PlantSource {
         self.advance(now);
         if self.next_due.is_some_and(|t| t <= now) {
             let mut next: Option<Timestamp> = None;
-            for (v, s) in self.sampling.iter_mut().enumerate() {
-                if s.0 == 0 {
-                    continue;
-                }
+            for (&v, s) in self.sampling.iter_mut() {
                 if s.1 <= now {
                     // Keep the phase; skip missed periods instead of bursting.
                     while s.1 <= now {
                         s.1 = s.1.add_millis(u64::from(s.0));
                     }
-                    out.samples.push((v as u32, self.plant.vqt(v)));
+                    out.samples.push((v, self.plant.vqt(v as usize)));
                 }
                 next = Some(next.map_or(s.1, |t| t.min(s.1)));
             }

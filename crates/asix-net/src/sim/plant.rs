@@ -3,7 +3,8 @@
 //! The state after `n` ticks depends only on the seed, the variable list and the writes
 //! applied (and the ticks they were applied at), never on wall-clock timing.
 
-use std::collections::HashMap;
+use asix_model::vardb::hash_name;
+use hashbrown::HashTable;
 
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 
@@ -20,7 +21,27 @@ pub struct VarSpec {
     pub writable: bool,
 }
 
+/// What the plant keeps of a [`VarSpec`] per variable: everything but the name (the names
+/// are in one arena of the plant, [`Plant::name`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VarRange {
+    pub var_type: VarType,
+    pub low: f64,
+    pub high: f64,
+    pub writable: bool,
+}
+
 impl VarSpec {
+    /// The spec without its name.
+    pub fn range(&self) -> VarRange {
+        VarRange {
+            var_type: self.var_type,
+            low: self.low,
+            high: self.high,
+            writable: self.writable,
+        }
+    }
+
     pub fn new(name: &str, var_type: VarType, low: f64, high: f64, writable: bool) -> Self {
         VarSpec {
             name: name.to_owned(),
@@ -72,12 +93,16 @@ pub enum Behaviour {
 impl Behaviour {
     /// A plausible behaviour for a variable known only by its spec.
     pub fn guess(spec: &VarSpec) -> Behaviour {
-        let n = spec.name.to_ascii_uppercase();
-        let integral = !matches!(spec.var_type, VarType::R4 | VarType::R8);
-        if spec.writable {
+        Behaviour::guess_range(&spec.name, &spec.range())
+    }
+
+    /// [`Behaviour::guess`] of a variable named `name` with `range`.
+    fn guess_range(name: &str, r: &VarRange) -> Behaviour {
+        let integral = !matches!(r.var_type, VarType::R4 | VarType::R8);
+        if r.writable {
             return Behaviour::Constant;
         }
-        if integral && spec.low == 0.0 && spec.high == 1.0 {
+        if integral && r.low == 0.0 && r.high == 1.0 {
             return Behaviour::Pump {
                 tank: None,
                 inlet: true,
@@ -85,7 +110,8 @@ impl Behaviour {
                 high_mark: 0.0,
             };
         }
-        if n.contains("POZIOM") || n.contains("LEVEL") || n.contains("LVL") {
+        let has = |w: &str| contains_ignore_case(name, w);
+        if has("POZIOM") || has("LEVEL") || has("LVL") {
             return Behaviour::Tank {
                 fill: 0.004,
                 drain: 0.003,
@@ -93,36 +119,39 @@ impl Behaviour {
                 outlet: None,
             };
         }
-        if n.contains("LICZNIK") || n.contains("COUNT") || n.contains("TOTAL") {
+        if has("LICZNIK") || has("COUNT") || has("TOTAL") {
             return Behaviour::Ramp { period: 6000 };
         }
-        match fnv(&n) % 3 {
+        let h = fnv_upper(name);
+        match h % 3 {
             0 => Behaviour::Noise { step: 0.01 },
             1 => Behaviour::Wave {
-                period: 300 + (fnv(&n) % 900) as u32,
+                period: 300 + (h % 900) as u32,
                 noise: 0.005,
             },
             _ => Behaviour::Noise { step: 0.02 },
         }
     }
-}
 
-impl Behaviour {
     /// A plausible behaviour from an ISA-style instrument tag (`LI101`, `MS105A`, `TI201`,
     /// `FQ106`...) when there is one, else from the spec ([`Behaviour::guess`]).
     pub fn guess_tagged(spec: &VarSpec, tag: &str) -> Behaviour {
-        let t = tag.trim().to_ascii_uppercase();
-        let binary = !matches!(spec.var_type, VarType::R4 | VarType::R8)
-            && spec.low == 0.0
-            && spec.high == 1.0;
-        if spec.writable {
+        Behaviour::guess_tagged_range(&spec.name, &spec.range(), tag)
+    }
+
+    /// [`Behaviour::guess_tagged`] of a variable named `name` with `range` (no copy of
+    /// the name or the tag is made: the database's plant is built from views).
+    fn guess_tagged_range(name: &str, r: &VarRange, tag: &str) -> Behaviour {
+        let t = tag.trim();
+        let starts = |p: &str| {
+            t.len() >= p.len() && t.as_bytes()[..p.len()].eq_ignore_ascii_case(p.as_bytes())
+        };
+        let binary =
+            !matches!(r.var_type, VarType::R4 | VarType::R8) && r.low == 0.0 && r.high == 1.0;
+        if r.writable {
             return Behaviour::Constant;
         }
-        if binary
-            || ["MS", "XS", "BS", "LS", "ZS"]
-                .iter()
-                .any(|p| t.starts_with(p))
-        {
+        if binary || ["MS", "XS", "BS", "LS", "ZS"].iter().any(|p| starts(p)) {
             return Behaviour::Pump {
                 tank: None,
                 inlet: true,
@@ -131,9 +160,9 @@ impl Behaviour {
             };
         }
         if t.is_empty() {
-            return Behaviour::guess(spec);
+            return Behaviour::guess_range(name, r);
         }
-        if t.starts_with('L') {
+        if starts("L") {
             return Behaviour::Tank {
                 fill: 0.002,
                 drain: 0.0015,
@@ -141,20 +170,27 @@ impl Behaviour {
                 outlet: None,
             };
         }
-        if t.starts_with("FQ") || t.starts_with("JQ") {
+        if starts("FQ") || starts("JQ") {
             return Behaviour::Ramp { period: 36_000 };
         }
-        if t.starts_with('T') {
+        if starts("T") {
             return Behaviour::Wave {
-                period: 600 + (fnv(&t) % 1800) as u32,
+                period: 600 + (fnv_upper(t) % 1800) as u32,
                 noise: 0.003,
             };
         }
-        if t.starts_with('S') || t.starts_with('Z') {
+        if starts("S") || starts("Z") {
             return Behaviour::Noise { step: 0.003 };
         }
         Behaviour::Noise { step: 0.01 }
     }
+}
+
+/// Whether `hay` contains `needle` (upper-case ASCII), ignoring ASCII case.
+fn contains_ignore_case(hay: &str, needle: &str) -> bool {
+    hay.as_bytes()
+        .windows(needle.len())
+        .any(|w| w.eq_ignore_ascii_case(needle.as_bytes()))
 }
 
 /// The channels of an asix variable database (such as the demo database `demo/`): variables
@@ -165,33 +201,9 @@ pub fn channels_from_database(
     db: &asix_model::VarDatabase,
     default_channel: &str,
 ) -> Vec<ChannelDef> {
-    // Views of the compact table: nothing is decoded into a `Variable` copy.
-    let controls: std::collections::HashSet<&str> = db
-        .variables
-        .views()
-        .filter_map(|v| v.control_variable())
-        .collect();
-    let column = |name: &str| db.column(name).unwrap_or(usize::MAX);
-    let (channel_col, alias_col) = (column("Channel"), column("Alias"));
     let mut by_channel: Vec<ChannelDef> = Vec::new();
-    for var in db.variables.views() {
-        let channel = Some(var.cell(channel_col).trim())
-            .filter(|c| !c.is_empty())
-            .unwrap_or(default_channel);
-        let (low, high) = var.range().unwrap_or((0.0, 100.0));
-        let spec = VarSpec::new(
-            var.name(),
-            var.data_type(),
-            low.min(high),
-            high.max(low),
-            var.writable(),
-        );
-        let tag = var.cell(alias_col);
-        let b = if controls.contains(var.name()) {
-            Behaviour::Steady { value: 0.0 }
-        } else {
-            Behaviour::guess_tagged(&spec, tag)
-        };
+    for_each_database_var(db, default_channel, |channel, name, range, b| {
+        let spec = VarSpec::new(name, range.var_type, range.low, range.high, range.writable);
         match by_channel.iter_mut().find(|c| c.name == channel) {
             Some(c) => c.vars.push((spec, b)),
             None => by_channel.push(ChannelDef {
@@ -199,8 +211,43 @@ pub fn channels_from_database(
                 vars: vec![(spec, b)],
             }),
         }
-    }
+    });
     by_channel
+}
+
+/// Each variable of `db` in table order as [`channels_from_database`] describes it:
+/// channel, name, range and behaviour, from views of the compact table (nothing is decoded
+/// or copied per variable).
+fn for_each_database_var(
+    db: &asix_model::VarDatabase,
+    default_channel: &str,
+    mut f: impl FnMut(&str, &str, VarRange, Behaviour),
+) {
+    let controls: std::collections::HashSet<&str> = db
+        .variables
+        .views()
+        .filter_map(|v| v.control_variable())
+        .collect();
+    let column = |name: &str| db.column(name).unwrap_or(usize::MAX);
+    let (channel_col, alias_col) = (column("Channel"), column("Alias"));
+    for var in db.variables.views() {
+        let channel = Some(var.cell(channel_col).trim())
+            .filter(|c| !c.is_empty())
+            .unwrap_or(default_channel);
+        let (low, high) = var.range().unwrap_or((0.0, 100.0));
+        let range = VarRange {
+            var_type: var.data_type(),
+            low: low.min(high),
+            high: high.max(low),
+            writable: var.writable(),
+        };
+        let b = if controls.contains(var.name()) {
+            Behaviour::Steady { value: 0.0 }
+        } else {
+            Behaviour::guess_tagged_range(var.name(), &range, var.cell(alias_col))
+        };
+        f(channel, var.name(), range, b);
+    }
 }
 
 /// A channel: its name and variables with their behaviours.
@@ -265,10 +312,11 @@ impl Rng {
     }
 }
 
-fn fnv(s: &str) -> u64 {
+/// FNV-1a of `s` upper-cased (ASCII), without making the upper-case copy.
+fn fnv_upper(s: &str) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in s.bytes() {
-        h ^= b as u64;
+        h ^= b.to_ascii_uppercase() as u64;
         h = h.wrapping_mul(0x100_0000_01b3);
     }
     h
@@ -291,32 +339,32 @@ enum Kind {
     Tank {
         fill: f64,
         drain: f64,
-        inlet: Option<usize>,
-        outlet: Option<usize>,
+        inlet: Option<u32>,
+        outlet: Option<u32>,
         rising: bool,
     },
     Pump {
-        tank: Option<usize>,
+        tank: Option<u32>,
         inlet: bool,
         low: f64,
         high: f64,
         next_toggle: u64,
     },
     Flow {
-        pump: usize,
+        pump: u32,
         nominal: f64,
     },
     Counter {
-        source: usize,
+        source: u32,
         scale: f64,
     },
 }
 
-/// One variable's state.
+/// One variable's state (about 100 bytes; its name is in the plant's arena).
 #[derive(Debug, Clone)]
 pub struct PlantVar {
-    pub channel: usize,
-    pub spec: VarSpec,
+    pub channel: u32,
+    pub spec: VarRange,
     kind: Kind,
     /// Engineering value.
     pub value: f64,
@@ -326,13 +374,19 @@ pub struct PlantVar {
     pub version: u64,
 }
 
-/// The plant.
+/// The plant. Compact for large databases: the variables' names are one arena string
+/// (`names`, `name_ends`), the indexes `HashTable<u32>`s of variable numbers that compare
+/// the names in it (no key strings).
 #[derive(Debug, Clone)]
 pub struct Plant {
     channels: Vec<String>,
     vars: Vec<PlantVar>,
-    index: HashMap<(String, String), usize>,
-    by_name: HashMap<String, usize>,
+    names: String,
+    name_ends: Vec<u32>,
+    /// (channel, name) → the last variable of that name in the channel.
+    index: HashTable<u32>,
+    /// name → the first variable of that name in any channel.
+    by_name: HashTable<u32>,
     rng: Rng,
     tick: u64,
     tick_ms: u64,
@@ -343,108 +397,246 @@ pub struct Plant {
 /// ahead (time moves on, the simulation resumes from its state).
 pub const MAX_CATCH_UP_TICKS: u64 = 10_000;
 
+/// A reference of a behaviour to another variable of its channel, by name, resolved when
+/// every variable is known ([`Plant::finish`]).
+enum Ref {
+    TankInlet,
+    TankOutlet,
+    PumpTank,
+    FlowPump,
+    CounterSource,
+}
+
+fn channel_hash(channel: u32, name: &str) -> u64 {
+    hash_name(name) ^ u64::from(channel).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
 impl Plant {
     /// Builds the plant; `epoch` is the timestamp of tick 0.
     pub fn new(channels: &[ChannelDef], seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
-        let mut rng = Rng::new(seed);
-        let mut vars = Vec::new();
-        let mut index = HashMap::new();
-        let mut by_name = HashMap::new();
-        let mut names = Vec::new();
-        for (ci, ch) in channels.iter().enumerate() {
-            names.push(ch.name.clone());
-            let base = vars.len();
-            let local: HashMap<&str, usize> = ch
-                .vars
-                .iter()
-                .enumerate()
-                .map(|(i, (s, _))| (s.name.as_str(), base + i))
-                .collect();
-            let find = |n: &Option<String>| n.as_deref().and_then(|n| local.get(n).copied());
+        let n = channels.iter().map(|c| c.vars.len()).sum();
+        let mut p = Plant::empty(n, seed, tick_ms, epoch);
+        let mut refs = Vec::new();
+        for ch in channels {
             for (spec, b) in &ch.vars {
-                let (lo, hi) = (spec.low, spec.high.max(spec.low));
-                let kind = match b {
-                    Behaviour::Constant | Behaviour::Steady { .. } => Kind::Constant,
-                    Behaviour::Noise { step } => Kind::Noise { step: *step },
-                    Behaviour::Wave { period, noise } => Kind::Wave {
-                        period: (*period).max(2),
-                        noise: *noise,
-                        phase: rng.unit(),
-                    },
-                    Behaviour::Ramp { period } => Kind::Ramp {
-                        period: (*period).max(2),
-                    },
-                    Behaviour::Tank {
-                        fill,
-                        drain,
-                        inlet,
-                        outlet,
-                    } => Kind::Tank {
-                        fill: *fill,
-                        drain: *drain,
-                        inlet: find(inlet),
-                        outlet: find(outlet),
-                        rising: rng.unit() < 0.5,
-                    },
-                    Behaviour::Pump {
-                        tank,
-                        inlet,
-                        low_mark,
-                        high_mark,
-                    } => Kind::Pump {
-                        tank: find(tank),
-                        inlet: *inlet,
-                        low: *low_mark,
-                        high: *high_mark,
-                        next_toggle: 50 + rng.next_u64() % 200,
-                    },
-                    Behaviour::Flow { pump, nominal } => match local.get(pump.as_str()) {
-                        Some(&p) => Kind::Flow {
-                            pump: p,
-                            nominal: *nominal,
-                        },
-                        None => Kind::Noise { step: 0.01 },
-                    },
-                    Behaviour::Counter { source, scale } => match local.get(source.as_str()) {
-                        Some(&s) => Kind::Counter {
-                            source: s,
-                            scale: *scale,
-                        },
-                        None => Kind::Ramp { period: 6000 },
-                    },
-                };
-                let value = match (b, &kind) {
-                    (Behaviour::Steady { value }, _) => value.clamp(lo, hi),
-                    (_, kind) => match kind {
-                        Kind::Pump { .. } => f64::from(rng.unit() < 0.5),
-                        Kind::Counter { .. } | Kind::Ramp { .. } => lo,
-                        Kind::Tank { .. } => lo + (hi - lo) * (0.3 + 0.4 * rng.unit()),
-                        _ => lo + (hi - lo) * (0.4 + 0.2 * rng.unit()),
-                    },
-                };
-                index.insert((ch.name.clone(), spec.name.clone()), vars.len());
-                by_name.entry(spec.name.clone()).or_insert(vars.len());
-                vars.push(PlantVar {
-                    channel: ci,
-                    spec: spec.clone(),
-                    kind,
-                    value,
-                    quality: Quality::GOOD,
-                    timestamp: epoch,
-                    version: 1,
-                });
+                p.push(&ch.name, &spec.name, spec.range(), b, &mut refs);
             }
         }
+        p.finish(refs);
+        p
+    }
+
+    /// The plant of every variable of `dbs` (as [`channels_from_database`] makes them),
+    /// built straight from the databases' compact tables: no list of specs in between, so
+    /// that a database of a million variables costs the plant only its own state.
+    pub fn from_databases<'a>(
+        dbs: impl IntoIterator<Item = &'a asix_model::VarDatabase> + Clone,
+        default_channel: &str,
+        seed: u64,
+        tick_ms: u64,
+        epoch: Timestamp,
+    ) -> Plant {
+        let n = dbs.clone().into_iter().map(|d| d.variables.len()).sum();
+        let mut p = Plant::empty(n, seed, tick_ms, epoch);
+        let mut refs = Vec::new();
+        for db in dbs {
+            for_each_database_var(db, default_channel, |channel, name, range, b| {
+                p.push(channel, name, range, &b, &mut refs);
+            });
+        }
+        p.finish(refs);
+        p
+    }
+
+    fn empty(n: usize, seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
         Plant {
-            channels: names,
-            vars,
-            index,
-            by_name,
-            rng,
+            channels: Vec::new(),
+            vars: Vec::with_capacity(n),
+            names: String::new(),
+            name_ends: Vec::with_capacity(n),
+            index: HashTable::with_capacity(n),
+            by_name: HashTable::with_capacity(n),
+            rng: Rng::new(seed),
             tick: 0,
             tick_ms: tick_ms.max(1),
             epoch,
         }
+    }
+
+    /// The name of variable `i`.
+    pub fn name(&self, i: usize) -> &str {
+        name_in(&self.names, &self.name_ends, i)
+    }
+
+    /// The number of the channel `name`, added when new (channels are few).
+    fn channel_number(&mut self, name: &str) -> u32 {
+        let found = self.channels.iter().rposition(|c| c == name);
+        let i = found.unwrap_or_else(|| {
+            self.channels.push(name.to_owned());
+            self.channels.len() - 1
+        });
+        i as u32
+    }
+
+    /// Adds one variable; its references by name go to `refs`, resolved by `finish`.
+    fn push(
+        &mut self,
+        channel: &str,
+        name: &str,
+        spec: VarRange,
+        b: &Behaviour,
+        refs: &mut Vec<(u32, Ref, String)>,
+    ) {
+        let ci = self.channel_number(channel);
+        let i = self.vars.len() as u32;
+        let rng = &mut self.rng;
+        let (lo, hi) = (spec.low, spec.high.max(spec.low));
+        let mut named = |r: Ref, n: &Option<String>| {
+            if let Some(n) = n {
+                refs.push((i, r, n.clone()));
+            }
+        };
+        let kind = match b {
+            Behaviour::Constant | Behaviour::Steady { .. } => Kind::Constant,
+            Behaviour::Noise { step } => Kind::Noise { step: *step },
+            Behaviour::Wave { period, noise } => Kind::Wave {
+                period: (*period).max(2),
+                noise: *noise,
+                phase: rng.unit(),
+            },
+            Behaviour::Ramp { period } => Kind::Ramp {
+                period: (*period).max(2),
+            },
+            Behaviour::Tank {
+                fill,
+                drain,
+                inlet,
+                outlet,
+            } => {
+                named(Ref::TankInlet, inlet);
+                named(Ref::TankOutlet, outlet);
+                Kind::Tank {
+                    fill: *fill,
+                    drain: *drain,
+                    inlet: None,
+                    outlet: None,
+                    rising: rng.unit() < 0.5,
+                }
+            }
+            Behaviour::Pump {
+                tank,
+                inlet,
+                low_mark,
+                high_mark,
+            } => {
+                named(Ref::PumpTank, tank);
+                Kind::Pump {
+                    tank: None,
+                    inlet: *inlet,
+                    low: *low_mark,
+                    high: *high_mark,
+                    next_toggle: 50 + rng.next_u64() % 200,
+                }
+            }
+            // Resolved by `finish`; a flow without its pump is noise, a counter without
+            // its source a ramp (neither draws from the generator at build time).
+            Behaviour::Flow { pump, nominal } => {
+                named(Ref::FlowPump, &Some(pump.clone()));
+                Kind::Flow {
+                    pump: u32::MAX,
+                    nominal: *nominal,
+                }
+            }
+            Behaviour::Counter { source, scale } => {
+                named(Ref::CounterSource, &Some(source.clone()));
+                Kind::Counter {
+                    source: u32::MAX,
+                    scale: *scale,
+                }
+            }
+        };
+        let value = match (b, &kind) {
+            (Behaviour::Steady { value }, _) => value.clamp(lo, hi),
+            (_, kind) => match kind {
+                Kind::Pump { .. } => f64::from(rng.unit() < 0.5),
+                Kind::Counter { .. } | Kind::Ramp { .. } => lo,
+                Kind::Tank { .. } => lo + (hi - lo) * (0.3 + 0.4 * rng.unit()),
+                _ => lo + (hi - lo) * (0.4 + 0.2 * rng.unit()),
+            },
+        };
+        self.names.push_str(name);
+        self.name_ends.push(self.names.len() as u32);
+        self.index_insert(ci, i);
+        let h = hash_name(name);
+        let (names, ends) = (&self.names, &self.name_ends);
+        let name_of = |j: u32| name_in(names, ends, j as usize);
+        if self.by_name.find(h, |&j| name_of(j) == name).is_none() {
+            self.by_name.insert_unique(h, i, |&j| hash_name(name_of(j)));
+        }
+        self.vars.push(PlantVar {
+            channel: ci,
+            spec,
+            kind,
+            value,
+            quality: Quality::GOOD,
+            timestamp: self.epoch,
+            version: 1,
+        });
+    }
+
+    /// Indexes variable `i` (named already) under (`ci`, its name): the last one wins.
+    fn index_insert(&mut self, ci: u32, i: u32) {
+        let (names, ends) = (&self.names, &self.name_ends);
+        let name = name_in(names, ends, i as usize);
+        // The variables of the table so far plus `i` itself, whose channel is `ci`.
+        let channel_of = |j: u32| {
+            self.vars
+                .get(j as usize)
+                .map_or(ci, |v: &PlantVar| v.channel)
+        };
+        let h = channel_hash(ci, name);
+        match self.index.entry(
+            h,
+            |&j| channel_of(j) == ci && name_in(names, ends, j as usize) == name,
+            |&j| channel_hash(channel_of(j), name_in(names, ends, j as usize)),
+        ) {
+            hashbrown::hash_table::Entry::Occupied(mut e) => *e.get_mut() = i,
+            hashbrown::hash_table::Entry::Vacant(e) => {
+                e.insert(i);
+            }
+        }
+    }
+
+    /// Resolves the behaviours' references by name within their channels.
+    fn finish(&mut self, refs: Vec<(u32, Ref, String)>) {
+        for (i, r, name) in refs {
+            let ch = self.vars[i as usize].channel;
+            let target = self.lookup_in(ch, &name).map(|t| t as u32);
+            let var = &mut self.vars[i as usize];
+            match (&mut var.kind, r) {
+                (Kind::Tank { inlet, .. }, Ref::TankInlet) => *inlet = target,
+                (Kind::Tank { outlet, .. }, Ref::TankOutlet) => *outlet = target,
+                (Kind::Pump { tank, .. }, Ref::PumpTank) => *tank = target,
+                (Kind::Flow { pump, .. }, Ref::FlowPump) => match target {
+                    Some(t) => *pump = t,
+                    None => var.kind = Kind::Noise { step: 0.01 },
+                },
+                (Kind::Counter { source, .. }, Ref::CounterSource) => match target {
+                    Some(t) => *source = t,
+                    None => var.kind = Kind::Ramp { period: 6000 },
+                },
+                _ => {}
+            }
+        }
+    }
+
+    fn lookup_in(&self, ci: u32, variable: &str) -> Option<usize> {
+        let (names, ends) = (&self.names, &self.name_ends);
+        self.index
+            .find(channel_hash(ci, variable), |&j| {
+                self.vars[j as usize].channel == ci && name_in(names, ends, j as usize) == variable
+            })
+            .map(|&j| j as usize)
     }
 
     pub fn channels(&self) -> &[String] {
@@ -463,11 +655,13 @@ impl Plant {
     /// first channel defining it).
     pub fn lookup(&self, channel: &str, variable: &str) -> Option<usize> {
         if channel.is_empty() {
-            return self.by_name.get(variable).copied();
+            return self
+                .by_name
+                .find(hash_name(variable), |&j| self.name(j as usize) == variable)
+                .map(|&j| j as usize);
         }
-        self.index
-            .get(&(channel.to_owned(), variable.to_owned()))
-            .copied()
+        let ci = self.channels.iter().rposition(|c| c == channel)?;
+        self.lookup_in(ci as u32, variable)
     }
 
     /// The timestamp of tick `t`.
@@ -524,8 +718,8 @@ impl Plant {
                     outlet,
                     rising,
                 } => {
-                    let on = |p: &Option<usize>, vars: &[PlantVar]| {
-                        p.is_some_and(|p| vars[p].value >= 0.5)
+                    let on = |p: &Option<u32>, vars: &[PlantVar]| {
+                        p.is_some_and(|p| vars[p as usize].value >= 0.5)
                     };
                     let mut v = old;
                     if inlet.is_none() && outlet.is_none() {
@@ -555,7 +749,7 @@ impl Plant {
                     next_toggle,
                 } => match tank {
                     Some(t) => {
-                        let tv = &self.vars[*t];
+                        let tv = &self.vars[*t as usize];
                         let f = (tv.value - tv.spec.low)
                             / (tv.spec.high - tv.spec.low).max(f64::EPSILON);
                         let running = old >= 0.5;
@@ -576,14 +770,14 @@ impl Plant {
                     }
                 },
                 Kind::Flow { pump, nominal } => {
-                    if self.vars[*pump].value >= 0.5 {
+                    if self.vars[*pump as usize].value >= 0.5 {
                         (lo + span * *nominal + self.rng.signed() * 0.01 * span).clamp(lo, hi)
                     } else {
                         lo
                     }
                 }
                 Kind::Counter { source, scale } => {
-                    let v = old + self.vars[*source].value.max(0.0) * *scale;
+                    let v = old + self.vars[*source as usize].value.max(0.0) * *scale;
                     if v > hi {
                         lo
                     } else {
@@ -633,6 +827,12 @@ impl Plant {
         v.timestamp = timestamp.unwrap_or(now);
         v.version += 1;
     }
+}
+
+/// The name of variable `i` in an arena (`names`, `ends`: each name's end).
+fn name_in<'a>(names: &'a str, ends: &[u32], i: usize) -> &'a str {
+    let start = if i == 0 { 0 } else { ends[i - 1] as usize };
+    &names[start..ends[i] as usize]
 }
 
 fn is_integral(t: VarType) -> bool {
@@ -1020,11 +1220,11 @@ mod tests {
                 switches += 1;
                 last = p.vars()[pump].value;
             }
-            for var in p.vars() {
+            for (i, var) in p.vars().iter().enumerate() {
                 assert!(
                     var.value >= var.spec.low && var.value <= var.spec.high,
                     "{} = {}",
-                    var.spec.name,
+                    p.name(i),
                     var.value
                 );
             }
@@ -1055,11 +1255,11 @@ mod tests {
         let first = p.vars()[lvl].value;
         p.advance_to(600);
         assert_ne!(p.vars()[lvl].value, first, "a level moves");
-        for v in p.vars() {
+        for (i, v) in p.vars().iter().enumerate() {
             assert!(
                 v.value >= v.spec.low && v.value <= v.spec.high,
                 "{} = {}",
-                v.spec.name,
+                p.name(i),
                 v.value
             );
         }

@@ -8,6 +8,9 @@
 //!   data-type filters apply as DA 2.05a defines them (the asix original ignored them:
 //!   `ctopc_core::browse::BrowseCursor::browse_opc_item_ids`, items resolved through the
 //!   context's namespace), and so to the strings of the returned enumerator.
+//! - Every browse path includes the `_Diagnostics` branch beside the real address space
+//!   (`ctopc_core::diagnostics::browse`: the session's cursor and `browse`), over the
+//!   branch's tree of the current snapshot (`Runtime::diagnostics`).
 //! - BrowseAccessPaths: E_NOTIMPL, as the original (asix channels are not browsable).
 //! - Browse: the `[in, out]` continuation point is replaced only when the call succeeds
 //!   (the client's string is freed then); when the browse is complete the server writes an
@@ -25,6 +28,7 @@ use ctopc_core::browse::{
     BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
     PropertySelection,
 };
+use ctopc_core::diagnostics::browse::browse;
 use ctopc_core::limits;
 use ctopc_core::{OpcError, OpcResult};
 use std::sync::Arc;
@@ -55,8 +59,9 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
     ) -> windows::core::Result<()> {
         let direction: BrowseDirection = enum_arg(direction.0)?;
         let name = in_string(pname, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
+        let diag = self.ctx.runtime.diagnostics.space();
         self.cursor()
-            .change_browse_position(direction, &name)
+            .change_browse_position(direction, &name, &diag)
             .map_err(crate::error::to_com)
     }
 
@@ -80,6 +85,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                 return Err(abi::invalid_arg());
             }
             let filter = in_string(pfilter, limits::FILTER)?;
+            let diag = self.ctx.runtime.diagnostics.space();
             let names = self
                 .cursor()
                 .browse_opc_item_id_list(
@@ -88,6 +94,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                     data_type_filter.0,
                     access_rights_filter,
                     &*self.ctx.namespace,
+                    &diag,
                 )
                 .map_err(crate::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
@@ -105,9 +112,10 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         clear(pitem_id, PWSTR::null());
         nonnull(pitem_id)?;
         let data_id = in_string(pdata_id, limits::ITEM_ID.with_error(OpcError::InvalidArg))?;
+        let diag = self.ctx.runtime.diagnostics.space();
         let id = self
             .cursor()
-            .get_item_id(&data_id)
+            .get_item_id(&data_id, &diag)
             .map_err(crate::error::to_com)?;
         let id = OwnedWstr::new(&id)?;
         // SAFETY: checked non-null; the only allocation has succeeded.
@@ -240,10 +248,13 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                 vendor_filter: &vendor_filter,
             };
             let space = &self.ctx.address_space;
+            let diag = self.ctx.runtime.diagnostics.space();
             let with_values = return_values.as_bool();
             let cx = self.props_ctx();
             let mut result = match selection {
-                None => space.browse(&req).map(|r| BrowseResult::<ElementProps> {
+                None => browse(space, &diag, &req, |s, q| s.browse(q)).map(|r| BrowseResult::<
+                    ElementProps,
+                > {
                     elements: r
                         .elements
                         .into_iter()
@@ -263,8 +274,10 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                         PropertySelection::All => None,
                         PropertySelection::Ids(ids) => Some(ids),
                     };
-                    space.browse_with_properties(&req, |id| {
-                        props::static_properties(&cx, id, ids, with_values)
+                    browse(space, &diag, &req, |s, q| {
+                        s.browse_with_properties(q, |id| {
+                            props::static_properties(&cx, id, ids, with_values)
+                        })
                     })
                 }
             }

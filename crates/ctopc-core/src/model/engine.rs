@@ -196,6 +196,24 @@ impl Engine {
         }
     }
 
+    /// Per session: its groups (not removed) and the items in them, by session handle
+    /// (for the `_Diagnostics` branch, [`crate::diagnostics`]).
+    pub fn session_stats(&self) -> Vec<(SessionHandle, usize, usize)> {
+        let mut out: Vec<(SessionHandle, usize, usize)> = self
+            .sessions
+            .keys()
+            .map(|&s| (SessionHandle(s), 0, 0))
+            .collect();
+        out.sort_unstable_by_key(|e| e.0);
+        for g in self.groups.iter().flatten().filter(|g| !g.deleted) {
+            if let Ok(i) = out.binary_search_by_key(&g.session, |e| e.0) {
+                out[i].1 += 1;
+                out[i].2 += g.items.len();
+            }
+        }
+        out
+    }
+
     // ---- sessions ------------------------------------------------------------------
 
     /// A new server object (one per COM client).

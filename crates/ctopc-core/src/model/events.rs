@@ -65,6 +65,33 @@ pub struct DataChange {
     pub items: Vec<ItemValue>,
 }
 
+/// The most items one scheduled OnDataChange call carries. A subscription update of more
+/// items is delivered as several calls ([`DataChange::calls`]), so that the server never
+/// holds one client call's VARIANTs, arrays and marshalling buffer for every item of a
+/// large group at once (issue 16: the peak of a 100,000-item subscription).
+pub const MAX_ITEMS_PER_CALLBACK: usize = 10_000;
+
+impl DataChange {
+    /// The OnDataChange calls this data change is delivered in, each with its
+    /// hrMasterquality, hrMastererror and items. A subscription update is split into
+    /// calls of at most [`MAX_ITEMS_PER_CALLBACK`] items, in order, each call's master
+    /// codes those of its own items (OPC DA: they summarise the call's arrays); a refresh
+    /// completion (one call per transaction ID, as clients expect) and a keep-alive are
+    /// one call with the event's codes.
+    pub fn calls(&self) -> Vec<(Option<OpcError>, Option<OpcError>, &[ItemValue])> {
+        if self.kind != DataChangeKind::Subscription || self.items.len() <= MAX_ITEMS_PER_CALLBACK {
+            return vec![(self.master_quality, self.master_error, &self.items[..])];
+        }
+        self.items
+            .chunks(MAX_ITEMS_PER_CALLBACK)
+            .map(|chunk| {
+                let (q, e) = master_codes(chunk);
+                (q, e, chunk)
+            })
+            .collect()
+    }
+}
+
 /// IOPCDataCallback::OnReadComplete (async Read / ReadMaxAge).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReadComplete {
@@ -159,4 +186,70 @@ pub(crate) fn master_codes(items: &[ItemValue]) -> (Option<OpcError>, Option<Opc
         Some(OpcError::False)
     };
     (quality, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn change(kind: DataChangeKind, n: usize, bad: &[usize]) -> DataChange {
+        let items = (0..n)
+            .map(|i| ItemValue {
+                client_handle: i as u32,
+                value: Value::I4(i as i32),
+                quality: if bad.contains(&i) {
+                    Quality::BAD
+                } else {
+                    Quality::GOOD
+                },
+                timestamp: Timestamp(0),
+                error: None,
+            })
+            .collect::<Vec<_>>();
+        let (master_quality, master_error) = master_codes(&items);
+        DataChange {
+            session: SessionHandle(1),
+            group: GroupHandle(1),
+            client_group: 7,
+            kind,
+            transaction_id: 0,
+            cancel_id: 0,
+            master_quality,
+            master_error,
+            items,
+        }
+    }
+
+    #[test]
+    fn a_large_subscription_update_is_split_with_each_calls_own_master_codes() {
+        let n = 2 * MAX_ITEMS_PER_CALLBACK + 5;
+        let d = change(
+            DataChangeKind::Subscription,
+            n,
+            &[MAX_ITEMS_PER_CALLBACK + 3],
+        );
+        let calls = d.calls();
+        let sizes: Vec<usize> = calls.iter().map(|c| c.2.len()).collect();
+        assert_eq!(sizes, [MAX_ITEMS_PER_CALLBACK, MAX_ITEMS_PER_CALLBACK, 5]);
+        let qualities: Vec<Option<OpcError>> = calls.iter().map(|c| c.0).collect();
+        assert_eq!(qualities, [None, Some(OpcError::False), None]);
+        // In order, every item once.
+        let handles: Vec<u32> = calls
+            .iter()
+            .flat_map(|c| c.2.iter().map(|i| i.client_handle))
+            .collect();
+        assert_eq!(handles, (0..n as u32).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn small_updates_and_refreshes_are_one_call_with_the_events_codes() {
+        let small = change(DataChangeKind::Subscription, MAX_ITEMS_PER_CALLBACK, &[0]);
+        let calls = small.calls();
+        assert_eq!(calls.len(), 1);
+        assert_eq!(calls[0].0, Some(OpcError::False));
+        let refresh = change(DataChangeKind::Refresh, 3 * MAX_ITEMS_PER_CALLBACK, &[]);
+        let calls = refresh.calls();
+        assert_eq!(calls.len(), 1);
+        assert_eq!(calls[0].2.len(), 3 * MAX_ITEMS_PER_CALLBACK);
+    }
 }

@@ -121,7 +121,7 @@ pub use engine::{
 };
 pub use events::{
     CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue, ReadComplete,
-    WriteComplete, WriteResult,
+    WriteComplete, WriteResult, MAX_ITEMS_PER_CALLBACK,
 };
 pub use group::{AddGroupResult, GroupParams, GroupState, RemoveGroupOutcome, SetGroupState};
 pub use item::{ItemAttributes, ItemDefinition, ItemResult};

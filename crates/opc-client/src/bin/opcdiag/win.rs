@@ -350,20 +350,17 @@ impl Session {
         &self,
         item_id: &str,
         progress: &mut Progress,
-    ) -> Result<Vec<client::BrowseElement>, String> {
+    ) -> windows::core::Result<Vec<client::BrowseElement>> {
         let mut out = Vec::new();
         let mut cp: Option<String> = None;
         loop {
-            let page = self
-                .server
-                .browse(&client::BrowseArgs {
-                    item_id: item_id.into(),
-                    continuation_point: cp.take(),
-                    max_elements: BROWSE_BATCH,
-                    filter: OPC_BROWSE_FILTER_ALL.0,
-                    ..Default::default()
-                })
-                .map_err(|e| self.failed(&format!("IOPCBrowse::Browse({item_id:?}) failed"), e))?;
+            let page = self.server.browse(&client::BrowseArgs {
+                item_id: item_id.into(),
+                continuation_point: cp.take(),
+                max_elements: BROWSE_BATCH,
+                filter: OPC_BROWSE_FILTER_ALL.0,
+                ..Default::default()
+            })?;
             progress.add(page.elements.len());
             out.extend(page.elements);
             match page.continuation_point {
@@ -390,7 +387,15 @@ impl Session {
         out: &mut Vec<TreeLine>,
         progress: &mut Progress,
     ) -> Result<(), String> {
-        let elements = self.browse_all(item_id, progress)?;
+        let elements = match self.browse_all(item_id, progress) {
+            Ok(e) => e,
+            // A branch that went away since its parent was listed (a client's branch of
+            // `_Diagnostics` whose client left): shown without children.
+            Err(e) if depth > 0 && e.code() == OPC_E_UNKNOWNITEMID => Vec::new(),
+            Err(e) => {
+                return Err(self.failed(&format!("IOPCBrowse::Browse({item_id:?}) failed"), e))
+            }
+        };
         let (branches, leaves): (Vec<_>, Vec<_>) = elements
             .into_iter()
             .partition(|e| e.flags & OPC_BROWSE_HASCHILDREN != 0);
@@ -436,11 +441,16 @@ impl Session {
                 branch: true,
             });
             if !matches!(max_depth, Some(m) if depth + 1 >= m) {
-                self.server
-                    .change_browse_position(OPC_BROWSE_DOWN, &b)
-                    .map_err(|e| {
-                        self.failed(&format!("ChangeBrowsePosition(DOWN {b:?}) failed"), e)
-                    })?;
+                match self.server.change_browse_position(OPC_BROWSE_DOWN, &b) {
+                    Ok(()) => {}
+                    // Gone since it was listed (as in `tree3`): shown without children.
+                    Err(e) if e.code() == windows::Win32::Foundation::E_INVALIDARG => continue,
+                    Err(e) => {
+                        return Err(
+                            self.failed(&format!("ChangeBrowsePosition(DOWN {b:?}) failed"), e)
+                        )
+                    }
+                }
                 let r = self.tree2(depth + 1, max_depth, out, progress);
                 self.server
                     .change_browse_position(OPC_BROWSE_UP, "")
