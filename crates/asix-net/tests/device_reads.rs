@@ -82,12 +82,24 @@ impl VariableSource for Counting {
 fn namespace() -> Arc<AsixNamespace> {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("device_reads");
     let zez = dir.join("synthetic.zez");
-    if !zez.exists() {
+    // The tests of this file run at once, and in a clean target nobody has written the
+    // database yet: each file is written aside and renamed into place (the csv first), so
+    // no test ever reads a half-written one (seen in a clean clone: UnknownItemId).
+    static WRITTEN: std::sync::OnceLock<()> = std::sync::OnceLock::new();
+    WRITTEN.get_or_init(|| {
+        if zez.exists() {
+            return;
+        }
         std::fs::create_dir_all(&dir).unwrap();
         let g = synthetic_database(N);
-        std::fs::write(dir.join("atrybuty.csv"), g.csv).unwrap();
-        std::fs::write(&zez, g.zez).unwrap();
-    }
+        let put = |name: &str, text: &str| {
+            let tmp = dir.join(format!("{name}.{}.tmp", std::process::id()));
+            std::fs::write(&tmp, text).unwrap();
+            std::fs::rename(&tmp, dir.join(name)).unwrap();
+        };
+        put("atrybuty.csv", &g.csv);
+        put("synthetic.zez", &g.zez);
+    });
     let ini = format!("[Channel:*]\nItemsDatabase = {}\n", zez.display());
     let (cfg, _) = parse_config(ini.as_bytes(), "test.ini").unwrap();
     let (ns, w) = AsixNamespace::load(cfg);
