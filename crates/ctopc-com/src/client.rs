@@ -15,10 +15,16 @@ use windows::Win32::System::Com::{
 pub struct ComThread(());
 
 impl ComThread {
-    /// Joins the multithreaded apartment.
+    /// Joins the multithreaded apartment. Under Wine, the first time in the process, keeps
+    /// the sinks' interfaces registered and the MTA up for the process's life
+    /// (`wine_keepalive`: Wine's combase can hang when it unregisters one).
     pub fn mta() -> windows::core::Result<ComThread> {
         // SAFETY: paired with CoUninitialize in Drop, on this thread.
         unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
+        if let Err(e) = crate::wine_keepalive::keep_registered(crate::wine_keepalive::Role::Client)
+        {
+            tracing::warn!("{e}");
+        }
         Ok(ComThread(()))
     }
     /// Makes this thread a single-threaded apartment (it must pump messages to get callbacks).

@@ -153,6 +153,17 @@ pub fn init_security() {
     };
 }
 
+/// Under Wine: keeps every interface a server hands out registered with RPC for the
+/// process's life (`wine_keepalive`; after `init_security`, which must come before any
+/// marshal; on the main thread, in the MTA).
+pub fn keep_registered_under_wine() {
+    match crate::wine_keepalive::keep_registered(crate::wine_keepalive::Role::Server) {
+        Ok(0) => {}
+        Ok(n) => tracing::info!("wine keep-alive: {n} interfaces kept registered"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+}
+
 /// Registers `factory` as the class object of `clsid` for out-of-process activation
 /// (CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE); the caller revokes the cookie with
 /// CoRevokeClassObject before it drops the factory.
@@ -287,6 +298,7 @@ pub fn serve_as(
 ) -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
     init_security();
+    keep_registered_under_wine();
     let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
         crate::error::error(E_FAIL, &e)

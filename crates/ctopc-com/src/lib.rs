@@ -50,3 +50,5 @@ pub mod server_list;
 pub mod service;
 #[cfg(windows)]
 pub mod variant;
+#[cfg(windows)]
+pub mod wine_keepalive;

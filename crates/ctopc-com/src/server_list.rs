@@ -19,7 +19,10 @@ use crate::catalog::{self, parse_guid, Catalog, ClassEntry};
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
-use crate::host::{exe_path, init_security, register_class, ComInit, EXIT_LINGER, STARTUP_GRACE};
+use crate::host::{
+    exe_path, init_security, keep_registered_under_wine, register_class, ComInit, EXIT_LINGER,
+    STARTUP_GRACE,
+};
 use crate::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
     IOPCServerList_Impl,
@@ -655,6 +658,7 @@ pub fn serve_service() -> ComResult<()> {
 fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
     let _com = ComInit::mta()?;
     init_security();
+    keep_registered_under_wine();
     let lifetime = Lifetime::new();
     let for_factory = Arc::clone(&lifetime);
     let factory = ClassFactory::new(Arc::clone(&lifetime), move || create_instance(&for_factory));
