@@ -39,6 +39,11 @@ pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 /// How long the server stays up after its last client has gone, so that a client
 /// connecting right then is served instead of reaching a process that is exiting.
 pub const EXIT_LINGER: Duration = Duration::from_secs(3);
+/// How long a server that has revoked its class object to exit still waits for a client
+/// that got the class object from the system just before the revoke (its CreateInstance or
+/// LockServer arrives after it): such a client makes the server register again and serve
+/// on ([`serve_class`], `Lifetime::stays_unused`).
+pub const REVOKE_SETTLE: Duration = Duration::from_secs(1);
 
 /// COM initialised for the lifetime of the value (multithreaded apartment).
 pub(crate) struct ComInit;
@@ -176,6 +181,33 @@ pub fn register_class(
     unsafe { CoRegisterClassObject(clsid, factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE) }
 }
 
+/// Registers `factory` as the class object of `clsid` ([`register_class`]), serves until
+/// `wait` returns, and revokes it. When `wait` decided the server was unused (the last
+/// client gone, or none came) but a client arrives within [`REVOKE_SETTLE`] of the revoke,
+/// registers again and serves on: that client got the class object just before the revoke,
+/// and the process must not exit under it. (Windows's `CoReleaseServerProcess` suspends the
+/// class objects for this; Wine's does not.) Returns why the serving ended.
+pub fn serve_class(
+    clsid: &GUID,
+    factory: &windows::Win32::System::Com::IClassFactory,
+    lifetime: &Lifetime,
+    mut wait: impl FnMut() -> ExitReason,
+) -> windows::core::Result<ExitReason> {
+    loop {
+        let cookie = register_class(clsid, factory)?;
+        let reason = wait();
+        // SAFETY: the cookie came from CoRegisterClassObject above.
+        unsafe { CoRevokeClassObject(cookie)? };
+        if reason != ExitReason::StopRequested && !lifetime.stays_unused(REVOKE_SETTLE) {
+            tracing::info!(
+                "a client came while the class object was being revoked ({reason:?}): serving on"
+            );
+            continue;
+        }
+        return Ok(reason);
+    }
+}
+
 /// The folder of ServerCTOPC.exe (the install folder: ASIXConnect.ini, Log\).
 pub fn install_dir() -> Result<PathBuf, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
@@ -305,17 +337,20 @@ pub fn serve_as(
     })?;
     ctx.lifetime.stop_on(stop);
     let factory = server::class_factory(&ctx);
-    let cookie = register_class(&CLSID_SERVERCTOPC, &factory)?;
-    tracing::info!("serving {PROGID}");
-    let reason = match mode {
-        ServeMode::UntilUnused => ctx.lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
-        ServeMode::UntilStopped => {
-            ctx.lifetime.wait_for_stop();
-            ExitReason::StopRequested
+    let mut announced = false;
+    let reason = serve_class(&CLSID_SERVERCTOPC, &factory, &ctx.lifetime, || {
+        if !announced {
+            tracing::info!("serving {PROGID}");
+            announced = true;
         }
-    };
-    // SAFETY: the cookie came from CoRegisterClassObject above.
-    unsafe { CoRevokeClassObject(cookie)? };
+        match mode {
+            ServeMode::UntilUnused => ctx.lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
+            ServeMode::UntilStopped => {
+                ctx.lifetime.wait_for_stop();
+                ExitReason::StopRequested
+            }
+        }
+    })?;
     if reason == ExitReason::StopRequested {
         ctx.runtime.shutdown(ctx.lifetime.stop_reason());
     }

@@ -17,6 +17,9 @@ struct Counts {
     objects: usize,
     locks: usize,
     ever_used: bool,
+    /// Objects made and LockServer locks taken so far (never decreases): tells whether a
+    /// client came in a window even if it left again ([`Lifetime::stays_unused`]).
+    arrivals: u64,
     /// The reason of a requested stop (what clients get in IOPCShutdown), once requested.
     stop: Option<&'static str>,
 }
@@ -49,6 +52,7 @@ impl Lifetime {
             if lock {
                 c.locks += 1;
                 c.ever_used = true;
+                c.arrivals += 1;
             } else {
                 c.locks = c.locks.saturating_sub(1);
             }
@@ -130,6 +134,36 @@ impl Lifetime {
                 .unwrap_or_else(|p| p.into_inner().0);
         }
     }
+
+    /// After the class object was revoked: waits `settle` and tells whether the server
+    /// stayed unused all along (no object made, no lock taken in the window, none held at
+    /// its end) or a stop was requested. `false` means a client reached the server while
+    /// it was deciding to exit (it had the class object from the system just before the
+    /// revoke: `wait_until_unused` returned, then its CreateInstance came), so the server
+    /// must register its class object again and serve on instead of exiting under that
+    /// client. Returns as soon as a client comes.
+    pub fn stays_unused(&self, settle: Duration) -> bool {
+        let start = Instant::now();
+        let mut g = self.counts.lock().unwrap_or_else(|p| p.into_inner());
+        let arrivals = g.arrivals;
+        loop {
+            if g.stop.is_some() {
+                return true;
+            }
+            if g.arrivals != arrivals || g.objects > 0 || g.locks > 0 {
+                return false;
+            }
+            let left = settle.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                return true;
+            }
+            g = self
+                .changed
+                .wait_timeout(g, left)
+                .map(|(g, _)| g)
+                .unwrap_or_else(|p| p.into_inner().0);
+        }
+    }
 }
 
 /// A live COM object that keeps its context's server up (held by every server object,
@@ -141,6 +175,7 @@ impl ObjectGuard {
         lifetime.with(|c| {
             c.objects += 1;
             c.ever_used = true;
+            c.arrivals += 1;
         });
         ObjectGuard(Arc::clone(lifetime))
     }
@@ -245,6 +280,67 @@ mod tests {
         );
         l.lock_server(false);
         assert_eq!(waiter.join().unwrap(), ExitReason::LastClientGone);
+    }
+
+    #[test]
+    fn stays_unused_when_no_client_comes_within_the_settle_time() {
+        let l = Lifetime::new();
+        drop(ObjectGuard::new(&l));
+        let start = Instant::now();
+        assert!(l.stays_unused(SHORT));
+        assert!(start.elapsed() >= SHORT, "it waits the whole settle time");
+    }
+
+    #[test]
+    fn a_client_that_comes_during_the_settle_time_keeps_the_server() {
+        // One arriving (and holding an object) while the server settles.
+        let l = Lifetime::new();
+        let waiter = {
+            let l = Arc::clone(&l);
+            std::thread::spawn(move || {
+                let start = Instant::now();
+                (l.stays_unused(Duration::from_secs(30)), start.elapsed())
+            })
+        };
+        std::thread::sleep(SHORT);
+        let _guard = ObjectGuard::new(&l);
+        let (unused, took) = waiter.join().unwrap();
+        assert!(!unused);
+        assert!(
+            took < Duration::from_secs(10),
+            "it returns as soon as one comes"
+        );
+
+        // One that came and went again within the window also counts: it was there.
+        let l = Lifetime::new();
+        let waiter = {
+            let l = Arc::clone(&l);
+            std::thread::spawn(move || l.stays_unused(SHORT * 4))
+        };
+        std::thread::sleep(SHORT);
+        drop(ObjectGuard::new(&l));
+        assert!(!waiter.join().unwrap());
+
+        // A LockServer lock taken during the window, or held when it starts.
+        let l = Lifetime::new();
+        let waiter = {
+            let l = Arc::clone(&l);
+            std::thread::spawn(move || l.stays_unused(SHORT * 4))
+        };
+        std::thread::sleep(SHORT);
+        l.lock_server(true);
+        assert!(!waiter.join().unwrap());
+        assert!(!l.stays_unused(SHORT), "a lock held at the start");
+        l.lock_server(false);
+        assert!(l.stays_unused(SHORT));
+    }
+
+    #[test]
+    fn a_stop_request_ends_the_settle_time_as_unused() {
+        let l = Lifetime::new();
+        let _guard = ObjectGuard::new(&l);
+        l.request_stop("test");
+        assert!(l.stays_unused(Duration::from_secs(30)));
     }
 
     #[test]

@@ -20,14 +20,14 @@ use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
 use crate::host::{
-    exe_path, init_security, keep_registered_under_wine, register_class, ComInit, EXIT_LINGER,
+    exe_path, init_security, keep_registered_under_wine, serve_class, ComInit, EXIT_LINGER,
     STARTUP_GRACE,
 };
 use crate::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
     IOPCServerList_Impl,
 };
-use crate::lifetime::{Lifetime, ObjectGuard, StopSignal};
+use crate::lifetime::{ExitReason, Lifetime, ObjectGuard, StopSignal};
 use crate::registration::{self, View, VIEWS};
 use crate::registry;
 use crate::service;
@@ -39,7 +39,7 @@ use windows::Win32::Foundation::{
     CO_E_CLASSSTRING, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, E_FAIL, E_POINTER,
     REGDB_E_CLASSNOTREG, S_OK,
 };
-use windows::Win32::System::Com::{CoRevokeClassObject, IEnumGUID};
+use windows::Win32::System::Com::IEnumGUID;
 use windows::Win32::System::Registry::{
     RegCloseKey, RegEnumKeyExW, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT,
     HKEY_LOCAL_MACHINE, KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, REG_SAM_FLAGS,
@@ -662,16 +662,20 @@ fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
     let lifetime = Lifetime::new();
     let for_factory = Arc::clone(&lifetime);
     let factory = ClassFactory::new(Arc::clone(&lifetime), move || create_instance(&for_factory));
-    let cookie = register_class(&CLSID_OPC_SERVER_LIST, &factory)?;
-    match stop {
-        Some(stop) => {
-            lifetime.stop_on(&stop);
-            lifetime.wait_for_stop();
-        }
-        None => {
-            let _ = lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER);
-        }
+    if let Some(stop) = &stop {
+        lifetime.stop_on(stop);
     }
-    // SAFETY: the cookie came from CoRegisterClassObject above.
-    unsafe { CoRevokeClassObject(cookie) }
+    serve_class(
+        &CLSID_OPC_SERVER_LIST,
+        &factory,
+        &lifetime,
+        || match &stop {
+            Some(_) => {
+                lifetime.wait_for_stop();
+                ExitReason::StopRequested
+            }
+            None => lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
+        },
+    )?;
+    Ok(())
 }
