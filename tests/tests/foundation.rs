@@ -7,7 +7,9 @@ use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
 use std::time::Duration;
 use windows::core::{IUnknown, Interface, GUID, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE};
-use windows::Win32::System::Com::{CLSIDFromProgID, CoCreateInstance, CLSCTX_LOCAL_SERVER};
+use windows::Win32::System::Com::{
+    CLSIDFromProgID, CoCreateInstance, CoGetClassObject, IClassFactory, CLSCTX_LOCAL_SERVER,
+};
 
 const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
@@ -174,6 +176,60 @@ fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
             "the server process did not exit after its last client left"
         );
     }
+}
+
+/// A client that got the class object just before the server decided to exit (linger
+/// over, class object revoked) and calls CreateInstance after the revoke is served: the
+/// server registers its class object again and serves on (`host::serve_class`), instead
+/// of exiting under the new object.
+#[test]
+fn a_client_that_creates_an_instance_right_after_the_revoke_is_served_on() {
+    let _com = ComThread::mta().unwrap();
+    // SAFETY: a valid ProgID string; COM is initialised above.
+    let clsid = unsafe { CLSIDFromProgID(&windows::core::HSTRING::from(PROGID)) }.unwrap();
+    let server = Server::connect(PROGID).unwrap();
+    let first = server.status().unwrap().start_time;
+    // SAFETY: a valid CLSID; COM is initialised above.
+    let factory: IClassFactory =
+        unsafe { CoGetClassObject(&clsid, CLSCTX_LOCAL_SERVER, None) }.expect("the class object");
+    let (y, m, d) = ctopc_com::clock::local_date();
+    let log = e2e_tests::artifact(&format!("Log/ServerCTOPC.{y:04}{m:02}{d:02}.log"));
+    let count = |what: &str| {
+        std::fs::read_to_string(&log)
+            .unwrap_or_default()
+            .matches(what)
+            .count()
+    };
+    let (revoked, served_on) = (ctopc_com::host::REVOKED_LOG, "serving on");
+    let (revoked_before, served_on_before) = (count(revoked), count(served_on));
+    // The last object of this binary goes: the server lingers, then revokes its class
+    // object (the class factory proxy held here does not count as a client).
+    drop(server);
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    while count(revoked) == revoked_before {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server did not revoke its class object after its last client left"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SAFETY: no aggregation; the factory is a live proxy.
+    let unknown: IUnknown = unsafe { factory.CreateInstance(None) }
+        .expect("CreateInstance on the class object got just before the revoke");
+    let again = Server::from_unknown(unknown).unwrap();
+    // Well past the settle time: the same process still serves this client.
+    std::thread::sleep(ctopc_com::host::REVOKE_SETTLE + Duration::from_secs(1));
+    let s = again.status().expect("GetStatus after the settle time");
+    assert_eq!(s.start_time, first, "the same server process serves on");
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while count(served_on) == served_on_before {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the server did not log that it serves on"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_alive(&again);
 }
 
 #[test]

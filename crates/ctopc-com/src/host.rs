@@ -43,7 +43,10 @@ pub const EXIT_LINGER: Duration = Duration::from_secs(3);
 /// that got the class object from the system just before the revoke (its CreateInstance or
 /// LockServer arrives after it): such a client makes the server register again and serve
 /// on ([`serve_class`], `Lifetime::stays_unused`).
-pub const REVOKE_SETTLE: Duration = Duration::from_secs(1);
+pub const REVOKE_SETTLE: Duration = Duration::from_secs(2);
+/// What the log says when the class object has been revoked to exit (the e2e test of the
+/// settle time waits for it).
+pub const REVOKED_LOG: &str = "class object revoked";
 
 /// COM initialised for the lifetime of the value (multithreaded apartment).
 pub(crate) struct ComInit;
@@ -198,13 +201,17 @@ pub fn serve_class(
         let reason = wait();
         // SAFETY: the cookie came from CoRegisterClassObject above.
         unsafe { CoRevokeClassObject(cookie)? };
-        if reason != ExitReason::StopRequested && !lifetime.stays_unused(REVOKE_SETTLE) {
-            tracing::info!(
-                "a client came while the class object was being revoked ({reason:?}): serving on"
-            );
-            continue;
+        if reason == ExitReason::StopRequested {
+            return Ok(reason);
         }
-        return Ok(reason);
+        tracing::info!(
+            "{REVOKED_LOG} ({reason:?}); exiting unless a client comes within {} ms",
+            REVOKE_SETTLE.as_millis()
+        );
+        if lifetime.stays_unused(REVOKE_SETTLE) {
+            return Ok(reason);
+        }
+        tracing::info!("a client came while the class object was being revoked: serving on");
     }
 }
 
