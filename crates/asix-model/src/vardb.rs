@@ -7,17 +7,21 @@
 //!
 //! Layout (issue 16: large plants have up to a million variables). No `String` per cell
 //! or per map key:
-//! - every cell of the table is text in one `CellTable`, row after row, with a `u16` end
-//!   per cell relative to its row (17 columns: 34 B), a `u32` start and a `u32` line per
-//!   row; the row's text is ~90 B (at most 65,535 B, [`MAX_ROW_BYTES`]);
-//! - the `Name` and public-name (alias) indexes are `hashbrown::HashTable<u32>`s of row
-//!   numbers, names compared in the table (~6 B each per variable);
+//! - every cell of the table is text in one `CellTable`, row after row, with a `u8` end
+//!   per cell relative to its row (17 columns: 17 B; `u16` ends aside for a row of more
+//!   than 255 B) and a `u32` start per row; the row's text is ~90 B (at most 65,535 B,
+//!   [`MAX_ROW_BYTES`]); the lines are kept as runs of consecutive lines (one run for a
+//!   file without blank lines or line breaks in quoted cells);
+//! - the `Name` index is a `hashbrown::HashTable<u32>` of row numbers, names compared in
+//!   the table (~10 B per variable at 1,000,000); the public-name index is another in
+//!   alias mode only (else the public names are the names);
 //! - the tree ([`GroupNode`]) holds `u32` rows (4 B per variable);
-//! - a slot per variable (16 B) for its decoded [`Variable`], made on first use and kept.
+//! - a slot for each variable's decoded [`Variable`], in chunks of 64 made on first use.
 //!
-//! About 165 B per variable in all (181 B measured with 1,000,000 variables by
-//! `cargo bench -p asix-model --bench vardb`). [`load_database_file`] streams the CSV into
-//! the table ([`for_each_csv_record`]); [`VarView`] reads a variable's attributes in place.
+//! About 125 B per variable in all (134 B measured with 1,000,000 variables by
+//! `cargo bench -p asix-net --bench scale_start`). [`load_database_file`] streams the CSV
+//! into the table ([`for_each_csv_record`], reading bytes); [`VarView`] reads a variable's
+//! attributes in place.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -693,27 +697,35 @@ impl GroupNode {
 }
 
 /// Every cell of the attribute table in one text, row after row: the start of each row
-/// in it (`u32`) and the end of each cell relative to its row's start (`u16`): cell `k`
-/// (row `r = k / ncols`, column `c = k % ncols`) is
-/// `text[starts[r] + ends[k - 1]..starts[r] + ends[k]]` (from the row's start when `c` is
-/// 0). 2 bytes per cell and 4 per row plus the text itself; a row holds at most 65,535
-/// bytes of text.
+/// in it (`u32`) and the end of each cell relative to its row's start: cell `k` (row
+/// `r = k / ncols`, column `c = k % ncols`) is `text[starts[r] + ends[k - 1]..starts[r] +
+/// ends[k]]` (from the row's start when `c` is 0). The ends are one byte (`u8`) for rows
+/// of up to 255 bytes of text, the usual row; a longer row (at most 65,535 bytes) has its
+/// ends in `wide_ends` (`u16`), found through `wide_rows`, and zeros in `ends`. So 1 byte
+/// per cell and 4 per row plus the text itself, and a line per run of rows on consecutive
+/// lines (one run for a file without blank lines or line breaks in quoted cells).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 struct CellTable {
     text: String,
     starts: Vec<u32>,
-    ends: Vec<u16>,
+    ends: Vec<u8>,
+    /// The rows of more than 255 bytes, by row: (row, where its ends start in `wide_ends`).
+    wide_rows: Vec<(u32, u32)>,
+    wide_ends: Vec<u16>,
     ncols: usize,
-    /// The line of each row in the file.
-    lines: Vec<u32>,
+    /// Runs of rows on consecutive lines of the file, by row: (first row, its line).
+    line_runs: Vec<(u32, u32)>,
 }
 
 /// The most text a row of the attribute table may hold ([`CellTable`]'s `u16` ends).
 pub const MAX_ROW_BYTES: usize = u16::MAX as usize;
 
+/// The most text of a row whose cell ends are one byte each ([`CellTable`]).
+const NARROW_ROW_BYTES: usize = u8::MAX as usize;
+
 impl CellTable {
     fn rows(&self) -> usize {
-        self.lines.len()
+        self.starts.len()
     }
 
     fn push_row<'a>(
@@ -725,46 +737,97 @@ impl CellTable {
         let too_long = |m: &str| (line, m.to_owned());
         let start32 = u32::try_from(start)
             .map_err(|_| too_long("the attribute table holds more than 4 GB of text"))?;
+        let row = u32::try_from(self.starts.len())
+            .map_err(|_| too_long("the attribute table holds more than 4 billion rows"))?;
         let cells_before = self.ends.len();
+        let wide_before = self.wide_ends.len();
+        let wide_start = u32::try_from(wide_before)
+            .map_err(|_| too_long("the attribute table holds too many long rows"))?;
+        let mut wide = false;
         for c in cells {
             self.text.push_str(c);
-            let Ok(end) = u16::try_from(self.text.len() - start) else {
+            let len = self.text.len() - start;
+            let Ok(end) = u16::try_from(len) else {
                 self.text.truncate(start);
                 self.ends.truncate(cells_before);
+                self.wide_ends.truncate(wide_before);
                 return Err(too_long(&format!(
                     "the row holds more than {MAX_ROW_BYTES} bytes of text"
                 )));
             };
-            self.ends.push(end);
+            if !wide && len > NARROW_ROW_BYTES {
+                // The row's ends so far move to `wide_ends`.
+                wide = true;
+                let row_ends = &mut self.ends[cells_before..];
+                self.wide_ends
+                    .extend(row_ends.iter().map(|&e| u16::from(e)));
+                row_ends.fill(0);
+            }
+            if wide {
+                self.wide_ends.push(end);
+                self.ends.push(0);
+            } else {
+                self.ends.push(end as u8);
+            }
+        }
+        if wide {
+            self.wide_rows.push((row, wide_start));
         }
         self.starts.push(start32);
-        self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        let line = u32::try_from(line).unwrap_or(u32::MAX);
+        if self
+            .line_runs
+            .last()
+            .map(|&(r, l)| l.saturating_add(row - r))
+            != Some(line)
+        {
+            self.line_runs.push((row, line));
+        }
         Ok(())
     }
 
+    /// The line of `row` in the file.
+    fn line(&self, row: usize) -> usize {
+        let run = self.line_runs.partition_point(|&(r, _)| r as usize <= row);
+        match run.checked_sub(1).and_then(|k| self.line_runs.get(k)) {
+            Some(&(r, l)) => l.saturating_add((row - r as usize) as u32) as usize,
+            None => 0,
+        }
+    }
+
     fn cell(&self, row: usize, col: usize) -> &str {
-        let k = row * self.ncols + col;
         let base = self.starts[row] as usize;
-        let start = if col == 0 {
-            0
+        let row_end = self
+            .starts
+            .get(row + 1)
+            .map_or(self.text.len(), |&s| s as usize);
+        let (start, end) = if row_end - base <= NARROW_ROW_BYTES {
+            let k = row * self.ncols + col;
+            let start = if col == 0 { 0 } else { self.ends[k - 1] };
+            (usize::from(start), usize::from(self.ends[k]))
         } else {
-            self.ends[k - 1] as usize
+            let w = self.wide_rows.partition_point(|&(r, _)| (r as usize) < row);
+            let k = self.wide_rows[w].1 as usize + col;
+            let start = if col == 0 { 0 } else { self.wide_ends[k - 1] };
+            (usize::from(start), usize::from(self.wide_ends[k]))
         };
-        &self.text[base + start..base + self.ends[k] as usize]
+        &self.text[base + start..base + end]
     }
 
     fn shrink_to_fit(&mut self) {
         self.text.shrink_to_fit();
         self.starts.shrink_to_fit();
         self.ends.shrink_to_fit();
-        self.lines.shrink_to_fit();
+        self.wide_rows.shrink_to_fit();
+        self.wide_ends.shrink_to_fit();
+        self.line_runs.shrink_to_fit();
     }
 }
 
 /// Every variable of the table (hidden ones included), in table order, stored compactly:
-/// the cells in one [`CellTable`] (the text of the row, 2 bytes a cell, 4 a row), the line
-/// (4 bytes) and a slot (16 bytes) for the decoded [`Variable`], made when first asked for
-/// ([`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
+/// the cells in one [`CellTable`] (the text of the row, 1 byte a cell, 4 a row) and a slot
+/// for the decoded [`Variable`] (chunks of 64 slots made when one of them is first asked
+/// for: [`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
 /// variables use [`Variables::view`], which decodes nothing it is not asked for.
 #[derive(Debug, Clone, Default)]
 pub struct Variables {
@@ -774,8 +837,16 @@ pub struct Variables {
     public_col: usize,
     /// The column of each of [`columns::ALL`].
     known: Vec<Option<usize>>,
-    decoded: Vec<OnceLock<Box<Variable>>>,
+    /// A slot for each variable's decoded copy, in chunks of [`DECODED_CHUNK`] made when
+    /// one of their variables is first decoded (no slot per variable until then).
+    decoded: Vec<OnceLock<DecodedChunk>>,
 }
+
+/// The decoded slots of [`DECODED_CHUNK`] variables.
+type DecodedChunk = Box<[OnceLock<Box<Variable>>]>;
+
+/// Variables per chunk of [`Variables`]' decoded slots.
+const DECODED_CHUNK: usize = 64;
 
 impl PartialEq for Variables {
     fn eq(&self, other: &Self) -> bool {
@@ -795,8 +866,14 @@ impl Variables {
 
     /// Variable `i`, decoded (and kept decoded).
     pub fn get(&self, i: usize) -> Option<&Variable> {
-        let slot = self.decoded.get(i)?;
-        Some(slot.get_or_init(|| Box::new(self.view(i).decode())))
+        (i < self.len()).then(|| self.decoded_at(i))
+    }
+
+    /// Variable `i` (`i < len()`), decoded (and kept decoded).
+    fn decoded_at(&self, i: usize) -> &Variable {
+        let chunk = self.decoded[i / DECODED_CHUNK]
+            .get_or_init(|| (0..DECODED_CHUNK).map(|_| OnceLock::new()).collect());
+        chunk[i % DECODED_CHUNK].get_or_init(|| Box::new(self.view(i).decode()))
     }
 
     pub fn first(&self) -> Option<&Variable> {
@@ -805,10 +882,7 @@ impl Variables {
 
     /// Every variable, decoded (see [`Variables::views`] for a scan that decodes nothing).
     pub fn iter(&self) -> impl ExactSizeIterator<Item = &Variable> + '_ {
-        self.decoded
-            .iter()
-            .enumerate()
-            .map(|(i, slot)| &**slot.get_or_init(|| Box::new(self.view(i).decode())))
+        (0..self.len()).map(|i| self.decoded_at(i))
     }
 
     /// A view of variable `i` (`i < len()`), reading its cells in place.
@@ -855,7 +929,7 @@ impl<'a> VarView<'a> {
     }
 
     pub fn line(&self) -> usize {
-        self.vars.cells.lines[self.i] as usize
+        self.vars.cells.line(self.i)
     }
 
     /// The cell of column `col` (`""` past the last column).
@@ -1080,12 +1154,13 @@ impl PartialEq for NameIndex {
 
 /// A loaded, validated variable database, with aliases applied.
 ///
-/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u16` end per
-/// cell and a `u32` start per row; the two name indexes (`Name`, the public name) are hash tables of `u32` row
-/// indexes that compare names in that table; the tree holds `u32` indexes. For a row of
-/// 17 cells of about 90 bytes that is about 90 + 34 (cell ends) + 4 (row start) + 4
-/// (line) + 16 (decoded slot) + 2 × ~6 (indexes) + 4 (tree) ≈ 165 bytes per variable until a variable is
-/// decoded (its [`Variable`] copy, about 1 KB, is kept once made).
+/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u8` end per
+/// cell (rows of up to 255 bytes) and a `u32` start per row; the name index (`Name`; the
+/// public name's is another in alias mode only) is a hash table of `u32` row indexes that
+/// compare names in that table; the tree holds `u32` indexes. For a row of 17 cells of
+/// about 90 bytes that is about 90 + 17 (cell ends) + 4 (row start) + ~10 (index at a
+/// million) + 4 (tree) ≈ 125 bytes per variable until a variable is decoded (its
+/// [`Variable`] copy, about 1 KB, is kept once made).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VarDatabase {
     pub title: Option<String>,
@@ -1095,7 +1170,9 @@ pub struct VarDatabase {
     /// The browse tree (only visible variables).
     pub root: GroupNode,
     pub alias_column: Option<String>,
-    by_public: NameIndex,
+    /// The public-name index in alias mode; without aliases the public names are the
+    /// names, and `by_name` serves both.
+    by_public: Option<NameIndex>,
     by_name: NameIndex,
 }
 
@@ -1188,7 +1265,9 @@ impl VarDatabase {
             name_col,
             public_col: alias_col.unwrap_or(name_col),
             known: columns::ALL.iter().map(|c| col(c)).collect(),
-            decoded: (0..n).map(|_| OnceLock::new()).collect(),
+            decoded: (0..n.div_ceil(DECODED_CHUNK))
+                .map(|_| OnceLock::new())
+                .collect(),
         };
         let cells = &variables.cells;
         // Every name first (limits and control variables may name later rows); the row a
@@ -1197,7 +1276,8 @@ impl VarDatabase {
         for i in 0..n {
             by_name.insert(cells, i);
         }
-        let mut by_public = NameIndex::new(alias_col.unwrap_or(name_col), n);
+        // Only in alias mode: else every public name is the (unique, non-empty) name.
+        let mut by_public = alias_col.map(|col| NameIndex::new(col, n));
         for v in variables.views() {
             let line = v.line();
             let err = |m: String| DbError::invalid(file, line, m);
@@ -1260,7 +1340,8 @@ impl VarDatabase {
                 return Err(err(format!("variable `{name}` is defined twice")));
             }
             let public_name = v.public_name();
-            if !public_name.is_empty() {
+            // Without aliases the public name is the name, checked and indexed above.
+            if let (false, Some(by_public)) = (public_name.is_empty(), by_public.as_mut()) {
                 check_name("alias", public_name).map_err(err)?;
                 if by_public.insert(cells, index) != index {
                     return Err(err(format!(
@@ -1355,7 +1436,7 @@ impl VarDatabase {
 
     /// The index of the visible variable a client names, decoding nothing.
     pub fn find_public_index(&self, name: &str) -> Option<usize> {
-        self.by_public.find(&self.variables.cells, name)
+        self.public_index().find(&self.variables.cells, name)
     }
 
     /// The variable with this asix name (visible or not).
@@ -1381,7 +1462,11 @@ impl VarDatabase {
 
     /// The number of visible variables.
     pub fn visible_count(&self) -> usize {
-        self.by_public.len()
+        self.public_index().len()
+    }
+
+    fn public_index(&self) -> &NameIndex {
+        self.by_public.as_ref().unwrap_or(&self.by_name)
     }
 
     /// All attributes of a variable as (column, cell) pairs.
@@ -1776,6 +1861,42 @@ X
                 let _ = VarDatabase::build(&t, None, Some("Alias"));
             }
             let _ = parse_var_set(text.as_bytes(), "f.zez");
+        }
+
+        /// The compact table holds every cell and line as the table of strings does: rows
+        /// short and long (one-byte ends and two-byte ends), blank lines and line breaks in
+        /// quoted cells between them.
+        #[test]
+        fn the_cell_table_holds_what_the_csv_says(
+            rows in proptest::collection::vec(
+                (proptest::collection::vec(0usize..200, 3), 0usize..3, any::<bool>()),
+                0..12,
+            ),
+        ) {
+            let mut csv = String::from("Name;Description;Unit\n");
+            for (r, (lens, blanks, multiline)) in rows.iter().enumerate() {
+                let desc = "ż".repeat(lens[1]);
+                let unit = "u".repeat(lens[2]);
+                let desc = if *multiline { format!("\"{desc}\nnext\"") } else { desc };
+                csv.push_str(&format!("N{r}_{};{desc};{unit}\n", "n".repeat(lens[0])));
+                csv.push_str(&"\n".repeat(*blanks));
+            }
+            let table = parse_attribute_table(csv.as_bytes(), "t.csv").unwrap();
+            let (columns, cells) = read_cell_table(csv.as_bytes(), "t.csv").unwrap();
+            prop_assert_eq!(&columns, &table.columns);
+            prop_assert_eq!(cells.rows(), table.rows.len());
+            for (r, (line, row)) in table.rows.iter().enumerate() {
+                prop_assert_eq!(cells.line(r), *line);
+                for (c, cell) in row.iter().enumerate() {
+                    prop_assert_eq!(cells.cell(r, c), cell.as_str());
+                }
+            }
+            let long = table
+                .rows
+                .iter()
+                .filter(|(_, row)| row.iter().map(String::len).sum::<usize>() > NARROW_ROW_BYTES)
+                .count();
+            prop_assert_eq!(cells.wide_rows.len(), long);
         }
 
         /// The byte reader reads every text as the char reader it replaced did: the same
