@@ -111,8 +111,20 @@ impl fmt::Display for Warning {
 
 /// Parses a boolean the asix way: `tak`/`true`/`1` and `nie`/`false`/`0`, ASCII
 /// case-insensitive, surrounding blanks ignored.
+/// `text.trim()`, without looking at a char when both ends are ASCII and not blank (the
+/// usual cell).
+pub fn trim(text: &str) -> &str {
+    let plain = |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !(b as char).is_whitespace());
+    let b = text.as_bytes();
+    if b.is_empty() || plain(b.first()) && plain(b.last()) {
+        text
+    } else {
+        text.trim()
+    }
+}
+
 pub fn parse_bool(text: &str) -> Option<bool> {
-    let t = text.trim();
+    let t = trim(text);
     for yes in ["tak", "true", "1"] {
         if t.eq_ignore_ascii_case(yes) {
             return Some(true);
@@ -130,7 +142,7 @@ pub fn parse_bool(text: &str) -> Option<bool> {
 /// text has exactly one comma and no point (Polish spreadsheets write `12,5`); an
 /// optional exponent. Surrounding blanks ignored; NaN and infinities are rejected.
 pub fn parse_number(text: &str) -> Option<f64> {
-    let t = text.trim();
+    let t = trim(text);
     if t.is_empty() {
         return None;
     }

@@ -31,7 +31,7 @@ use std::sync::OnceLock;
 use hashbrown::HashTable;
 
 use super::format::FormatSpec;
-use super::text::{decode_text, parse_bool, parse_number, Warning};
+use super::text::{decode_text, parse_bool, parse_number, trim, Warning};
 use ctopc_core::{OpcError, VarType};
 
 /// A database that cannot be used: `code` is `ASKOM_E_VarBaseNotFound` (a file is missing)
@@ -152,7 +152,7 @@ impl CsvFields {
             |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !(b as char).is_whitespace());
         let field = &self.buf.as_bytes()[start..];
         // Nothing to trim when both ends are ASCII and not blank (the usual cell).
-        let trimmed = plain(field.first()) && plain(field.last());
+        let trimmed = field.is_empty() || plain(field.first()) && plain(field.last());
         if !quoted && !trimmed {
             let s = &self.buf[start..];
             let lead = s.len() - s.trim_start().len();
@@ -540,7 +540,7 @@ fn for_each_var_set_line<'t>(
     let mut in_group = false;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
-        let t = raw.trim();
+        let t = trim(raw);
         if t.is_empty() || t.starts_with(';') || t.starts_with('#') {
             continue;
         }
@@ -960,7 +960,7 @@ impl<'a> VarView<'a> {
 
     fn number(&self, column: &str) -> Result<Option<f64>, String> {
         let t = self.known(column);
-        if t.trim().is_empty() {
+        if trim(t).is_empty() {
             return Ok(None);
         }
         parse_number(t)
@@ -996,12 +996,12 @@ impl<'a> VarView<'a> {
 
     /// `Format` as written (trimmed).
     pub fn format_text(&self) -> &'a str {
-        self.known(columns::FORMAT).trim()
+        trim(self.known(columns::FORMAT))
     }
 
     /// A limit column (`WarnLow` .. `AlarmHigh`).
     pub fn limit(&self, column: &str) -> Option<LimitRef<'a>> {
-        let t = self.known(column).trim();
+        let t = trim(self.known(column));
         if t.is_empty() {
             return None;
         }
@@ -1013,13 +1013,13 @@ impl<'a> VarView<'a> {
 
     /// `ControlVariable`.
     pub fn control_variable(&self) -> Option<&'a str> {
-        let c = self.known(columns::CONTROL_VARIABLE).trim();
+        let c = trim(self.known(columns::CONTROL_VARIABLE));
         (!c.is_empty()).then_some(c)
     }
 
     fn writable_checked(&self) -> Result<bool, String> {
         let w = self.known(columns::WRITABLE);
-        if w.trim().is_empty() {
+        if trim(w).is_empty() {
             return Ok(true);
         }
         parse_bool(w).ok_or_else(|| {
@@ -1176,13 +1176,22 @@ pub struct VarDatabase {
     by_name: NameIndex,
 }
 
+/// Whether `name` holds a control character (bytes for ASCII, the usual name).
+fn has_control(name: &str) -> bool {
+    if name.is_ascii() {
+        name.bytes().any(|b| b.is_ascii_control())
+    } else {
+        name.chars().any(char::is_control)
+    }
+}
+
 fn check_name(kind: &str, name: &str) -> Result<(), String> {
     if name.starts_with('.') || name.ends_with('.') || name.contains("..") {
         return Err(format!(
             "{kind} `{name}` may not start or end with `.` or contain `..`"
         ));
     }
-    if name.chars().any(char::is_control) || name.trim() != name {
+    if has_control(name) || trim(name) != name {
         return Err(format!(
             "{kind} `{name}` has control characters or surrounding blanks"
         ));
@@ -1191,7 +1200,7 @@ fn check_name(kind: &str, name: &str) -> Result<(), String> {
 }
 
 fn parse_data_type(text: &str) -> Option<VarType> {
-    let t = text.trim();
+    let t = trim(text);
     if t.is_empty() {
         return Some(VarType::R4);
     }
@@ -1897,6 +1906,15 @@ X
                 .filter(|(_, row)| row.iter().map(String::len).sum::<usize>() > NARROW_ROW_BYTES)
                 .count();
             prop_assert_eq!(cells.wide_rows.len(), long);
+        }
+
+        /// The fast `trim` and control check agree with `str::trim` and `char::is_control`.
+        #[test]
+        fn fast_trim_and_control_check_are_the_std_ones(
+            s in "([ \t\u{b}\u{1f}\u{7f}\u{85}\u{a0}\u{3000}]|[A-Za-z0-9]|ż){0,12}",
+        ) {
+            prop_assert_eq!(trim(&s), s.trim());
+            prop_assert_eq!(has_control(&s), s.chars().any(char::is_control));
         }
 
         /// The byte reader reads every text as the char reader it replaced did: the same

@@ -223,11 +223,23 @@ fn for_each_database_var(
     default_channel: &str,
     mut f: impl FnMut(&str, &str, VarRange, Behaviour),
 ) {
-    let controls: std::collections::HashSet<&str> = db
-        .variables
-        .views()
-        .filter_map(|v| v.control_variable())
-        .collect();
+    // The rows named as some row's control variable (names are unique in a database; a
+    // run of rows usually names the same one, looked up once).
+    let mut controls = vec![false; db.variables.len()];
+    let mut last: Option<(&str, Option<usize>)> = None;
+    for v in db.variables.views() {
+        let Some(c) = v.control_variable() else {
+            continue;
+        };
+        let row = match last {
+            Some((l, row)) if l == c => row,
+            _ => db.find_real_index(c),
+        };
+        if let Some(r) = row {
+            controls[r] = true;
+        }
+        last = Some((c, row));
+    }
     let column = |name: &str| db.column(name).unwrap_or(usize::MAX);
     let (channel_col, alias_col) = (column("Channel"), column("Alias"));
     for var in db.variables.views() {
@@ -241,7 +253,7 @@ fn for_each_database_var(
             high: high.max(low),
             writable: var.writable(),
         };
-        let b = if controls.contains(var.name()) {
+        let b = if controls[var.index()] {
             Behaviour::Steady { value: 0.0 }
         } else {
             Behaviour::guess_tagged_range(var.name(), &range, var.cell(alias_col))
