@@ -379,7 +379,7 @@ fn read_cell_table(bytes: &[u8], file: &str) -> Result<(Vec<String>, CellTable),
     let mut cells = CellTable::default();
     let columns = read_table(bytes, file, |line, fields, ncols| {
         cells.ncols = ncols;
-        cells.push_row(line, (0..ncols).map(|i| fields.get(i)))
+        cells.push_fields(line, fields, ncols)
     })?;
     cells.ncols = columns.len();
     Ok((columns, cells))
@@ -774,6 +774,40 @@ impl CellTable {
             self.wide_rows.push((row, wide_start));
         }
         self.starts.push(start32);
+        self.push_line(row, line);
+        Ok(())
+    }
+
+    /// [`CellTable::push_row`] of the first `ncols` fields of a CSV record (missing ones
+    /// empty): the record's buffer is its cells one after the other, so a row of up to
+    /// 255 bytes is copied at once with its ends.
+    fn push_fields(
+        &mut self,
+        line: usize,
+        fields: &CsvFields,
+        ncols: usize,
+    ) -> Result<(), (usize, String)> {
+        let n = fields.len().min(ncols);
+        let len = n.checked_sub(1).map_or(0, |last| fields.ends[last]);
+        let (Ok(start), Ok(row)) = (
+            u32::try_from(self.text.len()),
+            u32::try_from(self.starts.len()),
+        ) else {
+            return self.push_row(line, (0..ncols).map(|i| fields.get(i)));
+        };
+        if len > NARROW_ROW_BYTES {
+            return self.push_row(line, (0..ncols).map(|i| fields.get(i)));
+        }
+        self.text.push_str(&fields.buf[..len]);
+        self.ends.extend(fields.ends[..n].iter().map(|&e| e as u8));
+        self.ends.extend(std::iter::repeat_n(len as u8, ncols - n));
+        self.starts.push(start);
+        self.push_line(row, line);
+        Ok(())
+    }
+
+    /// Notes that `row` is on `line` (a new run unless the last run goes on to it).
+    fn push_line(&mut self, row: u32, line: usize) {
         let line = u32::try_from(line).unwrap_or(u32::MAX);
         if self
             .line_runs
@@ -783,7 +817,6 @@ impl CellTable {
         {
             self.line_runs.push((row, line));
         }
-        Ok(())
     }
 
     /// The line of `row` in the file.
@@ -1878,16 +1911,22 @@ X
         #[test]
         fn the_cell_table_holds_what_the_csv_says(
             rows in proptest::collection::vec(
-                (proptest::collection::vec(0usize..200, 3), 0usize..3, any::<bool>()),
+                (proptest::collection::vec(0usize..200, 3), 0usize..3, any::<bool>(), 0usize..3),
                 0..12,
             ),
         ) {
             let mut csv = String::from("Name;Description;Unit\n");
-            for (r, (lens, blanks, multiline)) in rows.iter().enumerate() {
+            for (r, (lens, blanks, multiline, tail)) in rows.iter().enumerate() {
                 let desc = "ż".repeat(lens[1]);
                 let unit = "u".repeat(lens[2]);
                 let desc = if *multiline { format!("\"{desc}\nnext\"") } else { desc };
-                csv.push_str(&format!("N{r}_{};{desc};{unit}\n", "n".repeat(lens[0])));
+                let name = format!("N{r}_{}", "n".repeat(lens[0]));
+                // Every cell, the last missing, or empty cells past the header's.
+                csv.push_str(&match tail {
+                    0 => format!("{name};{desc};{unit}\n"),
+                    1 => format!("{name};{desc}\n"),
+                    _ => format!("{name};{desc};{unit};;\n"),
+                });
                 csv.push_str(&"\n".repeat(*blanks));
             }
             let table = parse_attribute_table(csv.as_bytes(), "t.csv").unwrap();
