@@ -567,7 +567,7 @@ fn for_each_var_set_line<'t>(
             in_group = true;
             SetLine::Group(path)
         } else if in_group {
-            if t.chars().any(char::is_control) {
+            if has_control(t) {
                 return Err(DbError::invalid(
                     file,
                     line,
@@ -1315,9 +1315,16 @@ impl VarDatabase {
         // Every name first (limits and control variables may name later rows); the row a
         // name maps to is its first.
         let mut by_name = NameIndex::new(name_col, n);
+        // The rows whose name an earlier row has (an error, reported in row order below).
+        let mut repeated: Vec<u32> = Vec::new();
         for i in 0..n {
-            by_name.insert(cells, i);
+            if by_name.insert(cells, i) != i {
+                repeated.push(i as u32);
+            }
         }
+        // The last control variable looked up, and whether the table has it (a run of
+        // rows usually names the same one).
+        let mut last_control: Option<(&str, bool)> = None;
         // Only in alias mode: else every public name is the (unique, non-empty) name.
         let mut by_public = alias_col.map(|col| NameIndex::new(col, n));
         for v in variables.views() {
@@ -1367,7 +1374,12 @@ impl VarDatabase {
                 }
             }
             if let Some(control) = v.control_variable() {
-                if by_name.find(cells, control).is_none() {
+                let known = match last_control {
+                    Some((c, known)) if c == control => known,
+                    _ => by_name.find(cells, control).is_some(),
+                };
+                last_control = Some((control, known));
+                if !known {
                     warnings.push(Warning::new(
                         file,
                         line,
@@ -1378,7 +1390,7 @@ impl VarDatabase {
             v.writable_checked().map_err(err)?;
             v.number(columns::BAR_BASE).map_err(err)?;
             let index = v.index();
-            if by_name.find(cells, name) != Some(index) {
+            if repeated.binary_search(&(index as u32)).is_ok() {
                 return Err(err(format!("variable `{name}` is defined twice")));
             }
             let public_name = v.public_name();
@@ -1803,6 +1815,11 @@ mod tests {
         assert_eq!(a.control_variable.as_deref(), Some("Z"));
         assert_eq!(a.data_type, VarType::R4);
         assert!(a.writable);
+        // A run of rows naming the same control variable: each is warned of, or none.
+        let text = "Name;ControlVariable\nA;Z\nB;Z\nC;A\nD;A\nE;Z\n";
+        let (_, w) = VarDatabase::build(&table(text).unwrap(), None, None).unwrap();
+        let lines: Vec<usize> = w.iter().map(|w| w.line).collect();
+        assert_eq!(lines, vec![2, 3, 6], "{w:?}");
         let e = VarDatabase::build(&table("Name;Alias\nA;x\n").unwrap(), None, Some("Alias2"))
             .unwrap_err();
         assert!(e.message.contains("AliasAttributeName"));
