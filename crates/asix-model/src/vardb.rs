@@ -937,6 +937,30 @@ impl<'a> IntoIterator for &'a Variables {
     }
 }
 
+/// The position of a well-known column in [`columns::ALL`] (a match, not a search: every
+/// attribute of every row is found through it at load).
+fn known_index(name: &str) -> Option<usize> {
+    use columns::*;
+    Some(match name {
+        NAME => 0,
+        DESCRIPTION => 1,
+        DESCRIPTION_EN => 2,
+        UNIT => 3,
+        RANGE_FROM => 4,
+        RANGE_TO => 5,
+        DATA_TYPE => 6,
+        FORMAT => 7,
+        WARN_LOW => 8,
+        WARN_HIGH => 9,
+        ALARM_LOW => 10,
+        ALARM_HIGH => 11,
+        CONTROL_VARIABLE => 12,
+        BAR_BASE => 13,
+        WRITABLE => 14,
+        _ => return None,
+    })
+}
+
 /// One variable read in place from the compact table: its cells and, on demand, each
 /// decoded attribute. The decoders are the ones [`VarDatabase::build`] validated with, so
 /// on a built database they do not fail.
@@ -982,11 +1006,7 @@ impl<'a> VarView<'a> {
 
     /// The cell of a well-known column ([`columns`]); `""` when the table has none.
     pub fn known(&self, name: &str) -> &'a str {
-        // The callers pass the constants of `columns`: found by address first.
-        columns::ALL
-            .iter()
-            .position(|c| std::ptr::eq(*c, name))
-            .or_else(|| columns::ALL.iter().position(|c| *c == name))
+        known_index(name)
             .and_then(|i| self.vars.known.get(i).copied().flatten())
             .map_or("", |c| self.cell(c))
     }
@@ -1780,6 +1800,15 @@ mod tests {
         assert_eq!(t.columns, vec!["Name", "Unit"]);
         assert_eq!(t.rows[0].1, vec!["A", ""]);
         assert_eq!(t.rows[1].1, vec!["B", "m"]);
+    }
+
+    #[test]
+    fn well_known_columns_are_found_at_their_place() {
+        for (i, c) in columns::ALL.iter().enumerate() {
+            assert_eq!(known_index(c), Some(i), "{c}");
+        }
+        assert_eq!(known_index("Alias"), None);
+        assert_eq!(known_index("name"), None, "as before: exact names");
     }
 
     #[test]

@@ -335,7 +335,11 @@ impl AddressSpaceBuilder {
         for (new_index, &old) in order.iter().enumerate() {
             let b = &bnodes[old as usize];
             let name = intern_str(b.name(&btext), &mut text, &mut interned);
-            let item_id = intern_str(b.item_id(&btext), &mut text, &mut interned);
+            // A node whose item ID is its name (most leaves) is interned once.
+            let item_id = match b.item_id {
+                None => name,
+                Some(_) => intern_str(b.item_id(&btext), &mut text, &mut interned),
+            };
             let first_child = b.children.first().map_or(0, |&c| new_of_old[c as usize]);
             debug_assert!(b
                 .children
