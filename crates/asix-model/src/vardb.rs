@@ -253,7 +253,7 @@ pub fn for_each_csv_record(
             }
             continue;
         }
-        if b == sep0 && text[i..].starts_with(sep_str) {
+        if b == sep0 && (sep_str.len() == 1 || text[i..].starts_with(sep_str)) {
             fields.end_field(quoted);
             quoted = false;
             after_quote = false;
