@@ -111,8 +111,20 @@ impl fmt::Display for Warning {
 
 /// Parses a boolean the asix way: `tak`/`true`/`1` and `nie`/`false`/`0`, ASCII
 /// case-insensitive, surrounding blanks ignored.
+/// `text.trim()`, without looking at a char when both ends are ASCII and not blank (the
+/// usual cell).
+pub fn trim(text: &str) -> &str {
+    let plain = |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !(b as char).is_whitespace());
+    let b = text.as_bytes();
+    if b.is_empty() || plain(b.first()) && plain(b.last()) {
+        text
+    } else {
+        text.trim()
+    }
+}
+
 pub fn parse_bool(text: &str) -> Option<bool> {
-    let t = text.trim();
+    let t = trim(text);
     for yes in ["tak", "true", "1"] {
         if t.eq_ignore_ascii_case(yes) {
             return Some(true);
@@ -130,9 +142,22 @@ pub fn parse_bool(text: &str) -> Option<bool> {
 /// text has exactly one comma and no point (Polish spreadsheets write `12,5`); an
 /// optional exponent. Surrounding blanks ignored; NaN and infinities are rejected.
 pub fn parse_number(text: &str) -> Option<f64> {
-    let t = text.trim();
+    let t = trim(text);
     if t.is_empty() {
         return None;
+    }
+    // The usual cell, an integer of up to 15 digits, read exactly without the float parser
+    // (a million rows hold several numbers each).
+    let (negative, digits) = match t.as_bytes()[0] {
+        b'-' => (true, &t[1..]),
+        b'+' => (false, &t[1..]),
+        _ => (false, t),
+    };
+    if !digits.is_empty() && digits.len() <= 15 && digits.bytes().all(|b| b.is_ascii_digit()) {
+        let v = digits
+            .bytes()
+            .fold(0u64, |a, b| a * 10 + u64::from(b - b'0')) as f64;
+        return Some(if negative { -v } else { v });
     }
     let owned;
     let t = if !t.contains('.') && t.matches(',').count() == 1 {
@@ -217,6 +242,39 @@ mod tests {
         for t in [
             "", "1,000.5", "1,2,3", "inf", "NaN", "KW_L101", "0x10", "1e999",
         ] {
+            assert_eq!(parse_number(t), None, "{t}");
+        }
+    }
+
+    /// Integers (read without the float parser) read as the float parser reads them, the
+    /// sign of -0 included, up to the 15 digits of the fast path and past them.
+    #[test]
+    fn integers_read_as_the_float_parser_reads_them() {
+        for t in [
+            "0",
+            "-0",
+            "+0",
+            "7",
+            "-7",
+            "+7",
+            "100",
+            "007",
+            "999999999999999",
+            "-999999999999999",
+            "1000000000000000",
+            "12345678901234567890",
+            " 42 ",
+        ] {
+            let want = t.trim().parse::<f64>().ok();
+            let got = parse_number(t);
+            assert_eq!(got, want, "{t}");
+            assert_eq!(
+                got.map(f64::is_sign_negative),
+                want.map(f64::is_sign_negative),
+                "{t}"
+            );
+        }
+        for t in ["-", "+", "--1", "1-", "+-1"] {
             assert_eq!(parse_number(t), None, "{t}");
         }
     }

@@ -7,17 +7,21 @@
 //!
 //! Layout (issue 16: large plants have up to a million variables). No `String` per cell
 //! or per map key:
-//! - every cell of the table is text in one `CellTable`, row after row, with a `u16` end
-//!   per cell relative to its row (17 columns: 34 B), a `u32` start and a `u32` line per
-//!   row; the row's text is ~90 B (at most 65,535 B, [`MAX_ROW_BYTES`]);
-//! - the `Name` and public-name (alias) indexes are `hashbrown::HashTable<u32>`s of row
-//!   numbers, names compared in the table (~6 B each per variable);
+//! - every cell of the table is text in one `CellTable`, row after row, with a `u8` end
+//!   per cell relative to its row (17 columns: 17 B; `u16` ends aside for a row of more
+//!   than 255 B) and a `u32` start per row; the row's text is ~90 B (at most 65,535 B,
+//!   [`MAX_ROW_BYTES`]); the lines are kept as runs of consecutive lines (one run for a
+//!   file without blank lines or line breaks in quoted cells);
+//! - the `Name` index is a `hashbrown::HashTable<u32>` of row numbers, names compared in
+//!   the table (~10 B per variable at 1,000,000); the public-name index is another in
+//!   alias mode only (else the public names are the names);
 //! - the tree ([`GroupNode`]) holds `u32` rows (4 B per variable);
-//! - a slot per variable (16 B) for its decoded [`Variable`], made on first use and kept.
+//! - a slot for each variable's decoded [`Variable`], in chunks of 64 made on first use.
 //!
-//! About 165 B per variable in all (181 B measured with 1,000,000 variables by
-//! `cargo bench -p asix-model --bench vardb`). [`load_database_file`] streams the CSV into
-//! the table ([`for_each_csv_record`]); [`VarView`] reads a variable's attributes in place.
+//! About 125 B per variable in all (134 B measured with 1,000,000 variables by
+//! `cargo bench -p asix-net --bench scale_start`). [`load_database_file`] streams the CSV
+//! into the table ([`for_each_csv_record`], reading bytes); [`VarView`] reads a variable's
+//! attributes in place.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -27,7 +31,7 @@ use std::sync::OnceLock;
 use hashbrown::HashTable;
 
 use super::format::FormatSpec;
-use super::text::{decode_text, parse_bool, parse_number, Warning};
+use super::text::{decode_text, parse_bool, parse_number, trim, Warning};
 use ctopc_core::{OpcError, VarType};
 
 /// A database that cannot be used: `code` is `ASKOM_E_VarBaseNotFound` (a file is missing)
@@ -144,7 +148,12 @@ impl CsvFields {
     /// Ends the field that started at [`CsvFields::start`]; unquoted fields are trimmed.
     fn end_field(&mut self, quoted: bool) {
         let start = self.start();
-        if !quoted {
+        let plain =
+            |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !(b as char).is_whitespace());
+        let field = &self.buf.as_bytes()[start..];
+        // Nothing to trim when both ends are ASCII and not blank (the usual cell).
+        let trimmed = field.is_empty() || plain(field.first()) && plain(field.last());
+        if !quoted && !trimmed {
             let s = &self.buf[start..];
             let lead = s.len() - s.trim_start().len();
             let len = s.trim().len();
@@ -177,15 +186,23 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
 
 /// [`parse_csv`] streaming: calls `record(line, fields)` for each record as it is read,
 /// with one reused buffer; an error of `record` stops the reading and is returned.
+///
+/// Reads bytes, not chars: every byte that means something (the separator's first byte,
+/// `"`, CR, LF) is ASCII or starts a char, so the text between two of them is copied as
+/// one slice (issue 16: a million rows are read at start).
 pub fn for_each_csv_record(
     text: &str,
     sep: char,
     mut record: impl FnMut(usize, &CsvFields) -> Result<(), (usize, String)>,
 ) -> Result<(), (usize, String)> {
+    let mut sep_utf8 = [0u8; 4];
+    let sep_str: &str = sep.encode_utf8(&mut sep_utf8);
+    let sep0 = sep_str.as_bytes()[0];
+    let bytes = text.as_bytes();
+    let special = |b: u8| b == sep0 || matches!(b, b'"' | b'\r' | b'\n');
     let mut fields = CsvFields::default();
     let mut line = 1usize;
     let mut record_line = 1usize;
-    let mut chars = text.chars().peekable();
     // State of the current field: was it quoted, and is the quote closed.
     let mut quoted = false;
     let mut in_quotes = false;
@@ -202,43 +219,54 @@ pub fn for_each_csv_record(
             fields.clear();
             r
         };
-    while let Some(c) = chars.next() {
+    let mut i = 0;
+    while i < bytes.len() {
+        let b = bytes[i];
         if in_quotes {
-            match c {
-                '"' if chars.peek() == Some(&'"') => {
-                    chars.next();
+            match b {
+                b'"' if bytes.get(i + 1) == Some(&b'"') => {
                     fields.buf.push('"');
+                    i += 2;
                 }
-                '"' => {
+                b'"' => {
                     in_quotes = false;
                     after_quote = true;
+                    i += 1;
                 }
-                '\r' => {
-                    if chars.peek() == Some(&'\n') {
-                        chars.next();
-                    }
+                b'\r' | b'\n' => {
+                    i += if b == b'\r' && bytes.get(i + 1) == Some(&b'\n') {
+                        2
+                    } else {
+                        1
+                    };
                     line += 1;
                     fields.buf.push('\n');
                 }
-                '\n' => {
-                    line += 1;
-                    fields.buf.push('\n');
+                _ => {
+                    let run = bytes[i..]
+                        .iter()
+                        .position(|&b| matches!(b, b'"' | b'\r' | b'\n'))
+                        .map_or(bytes.len(), |k| i + k);
+                    fields.buf.push_str(&text[i..run]);
+                    i = run;
                 }
-                _ => fields.buf.push(c),
             }
             continue;
         }
-        if c == sep {
+        if b == sep0 && (sep_str.len() == 1 || text[i..].starts_with(sep_str)) {
             fields.end_field(quoted);
             quoted = false;
             after_quote = false;
+            i += sep_str.len();
             continue;
         }
-        match c {
-            '\r' | '\n' => {
-                if c == '\r' && chars.peek() == Some(&'\n') {
-                    chars.next();
-                }
+        match b {
+            b'\r' | b'\n' => {
+                i += if b == b'\r' && bytes.get(i + 1) == Some(&b'\n') {
+                    2
+                } else {
+                    1
+                };
                 end_record(&mut fields, quoted, record_line)?;
                 quoted = false;
                 after_quote = false;
@@ -246,18 +274,29 @@ pub fn for_each_csv_record(
                 record_line = line;
             }
             _ if after_quote => {
+                let c = text[i..].chars().next().unwrap_or(' ');
                 if !c.is_whitespace() {
                     return Err((line, format!("text `{c}` after a closing quote")));
                 }
+                i += c.len_utf8();
             }
-            '"' if fields.buf[fields.start()..].trim().is_empty() => {
+            b'"' if fields.buf[fields.start()..].trim().is_empty() => {
                 let start = fields.start();
                 fields.buf.truncate(start);
                 quoted = true;
                 in_quotes = true;
                 quote_line = line;
+                i += 1;
             }
-            _ => fields.buf.push(c),
+            _ => {
+                // Up to the next byte that means something (a char boundary).
+                let run = bytes[i + 1..]
+                    .iter()
+                    .position(|&b| special(b))
+                    .map_or(bytes.len(), |k| i + 1 + k);
+                fields.buf.push_str(&text[i..run]);
+                i = run;
+            }
         }
     }
     if in_quotes {
@@ -340,7 +379,7 @@ fn read_cell_table(bytes: &[u8], file: &str) -> Result<(Vec<String>, CellTable),
     let mut cells = CellTable::default();
     let columns = read_table(bytes, file, |line, fields, ncols| {
         cells.ncols = ncols;
-        cells.push_row(line, (0..ncols).map(|i| fields.get(i)))
+        cells.push_fields(line, fields, ncols)
     })?;
     cells.ncols = columns.len();
     Ok((columns, cells))
@@ -501,7 +540,7 @@ fn for_each_var_set_line<'t>(
     let mut in_group = false;
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
-        let t = raw.trim();
+        let t = trim(raw);
         if t.is_empty() || t.starts_with(';') || t.starts_with('#') {
             continue;
         }
@@ -528,7 +567,7 @@ fn for_each_var_set_line<'t>(
             in_group = true;
             SetLine::Group(path)
         } else if in_group {
-            if t.chars().any(char::is_control) {
+            if has_control(t) {
                 return Err(DbError::invalid(
                     file,
                     line,
@@ -658,27 +697,35 @@ impl GroupNode {
 }
 
 /// Every cell of the attribute table in one text, row after row: the start of each row
-/// in it (`u32`) and the end of each cell relative to its row's start (`u16`): cell `k`
-/// (row `r = k / ncols`, column `c = k % ncols`) is
-/// `text[starts[r] + ends[k - 1]..starts[r] + ends[k]]` (from the row's start when `c` is
-/// 0). 2 bytes per cell and 4 per row plus the text itself; a row holds at most 65,535
-/// bytes of text.
+/// in it (`u32`) and the end of each cell relative to its row's start: cell `k` (row
+/// `r = k / ncols`, column `c = k % ncols`) is `text[starts[r] + ends[k - 1]..starts[r] +
+/// ends[k]]` (from the row's start when `c` is 0). The ends are one byte (`u8`) for rows
+/// of up to 255 bytes of text, the usual row; a longer row (at most 65,535 bytes) has its
+/// ends in `wide_ends` (`u16`), found through `wide_rows`, and zeros in `ends`. So 1 byte
+/// per cell and 4 per row plus the text itself, and a line per run of rows on consecutive
+/// lines (one run for a file without blank lines or line breaks in quoted cells).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 struct CellTable {
     text: String,
     starts: Vec<u32>,
-    ends: Vec<u16>,
+    ends: Vec<u8>,
+    /// The rows of more than 255 bytes, by row: (row, where its ends start in `wide_ends`).
+    wide_rows: Vec<(u32, u32)>,
+    wide_ends: Vec<u16>,
     ncols: usize,
-    /// The line of each row in the file.
-    lines: Vec<u32>,
+    /// Runs of rows on consecutive lines of the file, by row: (first row, its line).
+    line_runs: Vec<(u32, u32)>,
 }
 
 /// The most text a row of the attribute table may hold ([`CellTable`]'s `u16` ends).
 pub const MAX_ROW_BYTES: usize = u16::MAX as usize;
 
+/// The most text of a row whose cell ends are one byte each ([`CellTable`]).
+const NARROW_ROW_BYTES: usize = u8::MAX as usize;
+
 impl CellTable {
     fn rows(&self) -> usize {
-        self.lines.len()
+        self.starts.len()
     }
 
     fn push_row<'a>(
@@ -690,46 +737,130 @@ impl CellTable {
         let too_long = |m: &str| (line, m.to_owned());
         let start32 = u32::try_from(start)
             .map_err(|_| too_long("the attribute table holds more than 4 GB of text"))?;
+        let row = u32::try_from(self.starts.len())
+            .map_err(|_| too_long("the attribute table holds more than 4 billion rows"))?;
         let cells_before = self.ends.len();
+        let wide_before = self.wide_ends.len();
+        let wide_start = u32::try_from(wide_before)
+            .map_err(|_| too_long("the attribute table holds too many long rows"))?;
+        let mut wide = false;
         for c in cells {
             self.text.push_str(c);
-            let Ok(end) = u16::try_from(self.text.len() - start) else {
+            let len = self.text.len() - start;
+            let Ok(end) = u16::try_from(len) else {
                 self.text.truncate(start);
                 self.ends.truncate(cells_before);
+                self.wide_ends.truncate(wide_before);
                 return Err(too_long(&format!(
                     "the row holds more than {MAX_ROW_BYTES} bytes of text"
                 )));
             };
-            self.ends.push(end);
+            if !wide && len > NARROW_ROW_BYTES {
+                // The row's ends so far move to `wide_ends`.
+                wide = true;
+                let row_ends = &mut self.ends[cells_before..];
+                self.wide_ends
+                    .extend(row_ends.iter().map(|&e| u16::from(e)));
+                row_ends.fill(0);
+            }
+            if wide {
+                self.wide_ends.push(end);
+                self.ends.push(0);
+            } else {
+                self.ends.push(end as u8);
+            }
+        }
+        if wide {
+            self.wide_rows.push((row, wide_start));
         }
         self.starts.push(start32);
-        self.lines.push(u32::try_from(line).unwrap_or(u32::MAX));
+        self.push_line(row, line);
         Ok(())
     }
 
-    fn cell(&self, row: usize, col: usize) -> &str {
-        let k = row * self.ncols + col;
-        let base = self.starts[row] as usize;
-        let start = if col == 0 {
-            0
-        } else {
-            self.ends[k - 1] as usize
+    /// [`CellTable::push_row`] of the first `ncols` fields of a CSV record (missing ones
+    /// empty): the record's buffer is its cells one after the other, so a row of up to
+    /// 255 bytes is copied at once with its ends.
+    fn push_fields(
+        &mut self,
+        line: usize,
+        fields: &CsvFields,
+        ncols: usize,
+    ) -> Result<(), (usize, String)> {
+        let n = fields.len().min(ncols);
+        let len = n.checked_sub(1).map_or(0, |last| fields.ends[last]);
+        let (Ok(start), Ok(row)) = (
+            u32::try_from(self.text.len()),
+            u32::try_from(self.starts.len()),
+        ) else {
+            return self.push_row(line, (0..ncols).map(|i| fields.get(i)));
         };
-        &self.text[base + start..base + self.ends[k] as usize]
+        if len > NARROW_ROW_BYTES {
+            return self.push_row(line, (0..ncols).map(|i| fields.get(i)));
+        }
+        self.text.push_str(&fields.buf[..len]);
+        self.ends.extend(fields.ends[..n].iter().map(|&e| e as u8));
+        self.ends.extend(std::iter::repeat_n(len as u8, ncols - n));
+        self.starts.push(start);
+        self.push_line(row, line);
+        Ok(())
+    }
+
+    /// Notes that `row` is on `line` (a new run unless the last run goes on to it).
+    fn push_line(&mut self, row: u32, line: usize) {
+        let line = u32::try_from(line).unwrap_or(u32::MAX);
+        if self
+            .line_runs
+            .last()
+            .map(|&(r, l)| l.saturating_add(row - r))
+            != Some(line)
+        {
+            self.line_runs.push((row, line));
+        }
+    }
+
+    /// The line of `row` in the file.
+    fn line(&self, row: usize) -> usize {
+        let run = self.line_runs.partition_point(|&(r, _)| r as usize <= row);
+        match run.checked_sub(1).and_then(|k| self.line_runs.get(k)) {
+            Some(&(r, l)) => l.saturating_add((row - r as usize) as u32) as usize,
+            None => 0,
+        }
+    }
+
+    fn cell(&self, row: usize, col: usize) -> &str {
+        let base = self.starts[row] as usize;
+        let row_end = self
+            .starts
+            .get(row + 1)
+            .map_or(self.text.len(), |&s| s as usize);
+        let (start, end) = if row_end - base <= NARROW_ROW_BYTES {
+            let k = row * self.ncols + col;
+            let start = if col == 0 { 0 } else { self.ends[k - 1] };
+            (usize::from(start), usize::from(self.ends[k]))
+        } else {
+            let w = self.wide_rows.partition_point(|&(r, _)| (r as usize) < row);
+            let k = self.wide_rows[w].1 as usize + col;
+            let start = if col == 0 { 0 } else { self.wide_ends[k - 1] };
+            (usize::from(start), usize::from(self.wide_ends[k]))
+        };
+        &self.text[base + start..base + end]
     }
 
     fn shrink_to_fit(&mut self) {
         self.text.shrink_to_fit();
         self.starts.shrink_to_fit();
         self.ends.shrink_to_fit();
-        self.lines.shrink_to_fit();
+        self.wide_rows.shrink_to_fit();
+        self.wide_ends.shrink_to_fit();
+        self.line_runs.shrink_to_fit();
     }
 }
 
 /// Every variable of the table (hidden ones included), in table order, stored compactly:
-/// the cells in one [`CellTable`] (the text of the row, 2 bytes a cell, 4 a row), the line
-/// (4 bytes) and a slot (16 bytes) for the decoded [`Variable`], made when first asked for
-/// ([`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
+/// the cells in one [`CellTable`] (the text of the row, 1 byte a cell, 4 a row) and a slot
+/// for the decoded [`Variable`] (chunks of 64 slots made when one of them is first asked
+/// for: [`Variables::get`], [`VarDatabase::find_public`], iteration). Scans over many
 /// variables use [`Variables::view`], which decodes nothing it is not asked for.
 #[derive(Debug, Clone, Default)]
 pub struct Variables {
@@ -739,8 +870,16 @@ pub struct Variables {
     public_col: usize,
     /// The column of each of [`columns::ALL`].
     known: Vec<Option<usize>>,
-    decoded: Vec<OnceLock<Box<Variable>>>,
+    /// A slot for each variable's decoded copy, in chunks of [`DECODED_CHUNK`] made when
+    /// one of their variables is first decoded (no slot per variable until then).
+    decoded: Vec<OnceLock<DecodedChunk>>,
 }
+
+/// The decoded slots of [`DECODED_CHUNK`] variables.
+type DecodedChunk = Box<[OnceLock<Box<Variable>>]>;
+
+/// Variables per chunk of [`Variables`]' decoded slots.
+const DECODED_CHUNK: usize = 64;
 
 impl PartialEq for Variables {
     fn eq(&self, other: &Self) -> bool {
@@ -760,8 +899,14 @@ impl Variables {
 
     /// Variable `i`, decoded (and kept decoded).
     pub fn get(&self, i: usize) -> Option<&Variable> {
-        let slot = self.decoded.get(i)?;
-        Some(slot.get_or_init(|| Box::new(self.view(i).decode())))
+        (i < self.len()).then(|| self.decoded_at(i))
+    }
+
+    /// Variable `i` (`i < len()`), decoded (and kept decoded).
+    fn decoded_at(&self, i: usize) -> &Variable {
+        let chunk = self.decoded[i / DECODED_CHUNK]
+            .get_or_init(|| (0..DECODED_CHUNK).map(|_| OnceLock::new()).collect());
+        chunk[i % DECODED_CHUNK].get_or_init(|| Box::new(self.view(i).decode()))
     }
 
     pub fn first(&self) -> Option<&Variable> {
@@ -770,10 +915,7 @@ impl Variables {
 
     /// Every variable, decoded (see [`Variables::views`] for a scan that decodes nothing).
     pub fn iter(&self) -> impl ExactSizeIterator<Item = &Variable> + '_ {
-        self.decoded
-            .iter()
-            .enumerate()
-            .map(|(i, slot)| &**slot.get_or_init(|| Box::new(self.view(i).decode())))
+        (0..self.len()).map(|i| self.decoded_at(i))
     }
 
     /// A view of variable `i` (`i < len()`), reading its cells in place.
@@ -793,6 +935,30 @@ impl<'a> IntoIterator for &'a Variables {
     fn into_iter(self) -> Self::IntoIter {
         Box::new(self.iter())
     }
+}
+
+/// The position of a well-known column in [`columns::ALL`] (a match, not a search: every
+/// attribute of every row is found through it at load).
+fn known_index(name: &str) -> Option<usize> {
+    use columns::*;
+    Some(match name {
+        NAME => 0,
+        DESCRIPTION => 1,
+        DESCRIPTION_EN => 2,
+        UNIT => 3,
+        RANGE_FROM => 4,
+        RANGE_TO => 5,
+        DATA_TYPE => 6,
+        FORMAT => 7,
+        WARN_LOW => 8,
+        WARN_HIGH => 9,
+        ALARM_LOW => 10,
+        ALARM_HIGH => 11,
+        CONTROL_VARIABLE => 12,
+        BAR_BASE => 13,
+        WRITABLE => 14,
+        _ => return None,
+    })
 }
 
 /// One variable read in place from the compact table: its cells and, on demand, each
@@ -820,7 +986,7 @@ impl<'a> VarView<'a> {
     }
 
     pub fn line(&self) -> usize {
-        self.vars.cells.lines[self.i] as usize
+        self.vars.cells.line(self.i)
     }
 
     /// The cell of column `col` (`""` past the last column).
@@ -840,16 +1006,14 @@ impl<'a> VarView<'a> {
 
     /// The cell of a well-known column ([`columns`]); `""` when the table has none.
     pub fn known(&self, name: &str) -> &'a str {
-        columns::ALL
-            .iter()
-            .position(|c| *c == name)
+        known_index(name)
             .and_then(|i| self.vars.known.get(i).copied().flatten())
             .map_or("", |c| self.cell(c))
     }
 
     fn number(&self, column: &str) -> Result<Option<f64>, String> {
         let t = self.known(column);
-        if t.trim().is_empty() {
+        if trim(t).is_empty() {
             return Ok(None);
         }
         parse_number(t)
@@ -885,12 +1049,12 @@ impl<'a> VarView<'a> {
 
     /// `Format` as written (trimmed).
     pub fn format_text(&self) -> &'a str {
-        self.known(columns::FORMAT).trim()
+        trim(self.known(columns::FORMAT))
     }
 
     /// A limit column (`WarnLow` .. `AlarmHigh`).
     pub fn limit(&self, column: &str) -> Option<LimitRef<'a>> {
-        let t = self.known(column).trim();
+        let t = trim(self.known(column));
         if t.is_empty() {
             return None;
         }
@@ -902,13 +1066,13 @@ impl<'a> VarView<'a> {
 
     /// `ControlVariable`.
     pub fn control_variable(&self) -> Option<&'a str> {
-        let c = self.known(columns::CONTROL_VARIABLE).trim();
+        let c = trim(self.known(columns::CONTROL_VARIABLE));
         (!c.is_empty()).then_some(c)
     }
 
     fn writable_checked(&self) -> Result<bool, String> {
         let w = self.known(columns::WRITABLE);
-        if w.trim().is_empty() {
+        if trim(w).is_empty() {
             return Ok(true);
         }
         parse_bool(w).ok_or_else(|| {
@@ -1043,12 +1207,13 @@ impl PartialEq for NameIndex {
 
 /// A loaded, validated variable database, with aliases applied.
 ///
-/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u16` end per
-/// cell and a `u32` start per row; the two name indexes (`Name`, the public name) are hash tables of `u32` row
-/// indexes that compare names in that table; the tree holds `u32` indexes. For a row of
-/// 17 cells of about 90 bytes that is about 90 + 34 (cell ends) + 4 (row start) + 4
-/// (line) + 16 (decoded slot) + 2 × ~6 (indexes) + 4 (tree) ≈ 165 bytes per variable until a variable is
-/// decoded (its [`Variable`] copy, about 1 KB, is kept once made).
+/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u8` end per
+/// cell (rows of up to 255 bytes) and a `u32` start per row; the name index (`Name`; the
+/// public name's is another in alias mode only) is a hash table of `u32` row indexes that
+/// compare names in that table; the tree holds `u32` indexes. For a row of 17 cells of
+/// about 90 bytes that is about 90 + 17 (cell ends) + 4 (row start) + ~10 (index at a
+/// million) + 4 (tree) ≈ 125 bytes per variable until a variable is decoded (its
+/// [`Variable`] copy, about 1 KB, is kept once made).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VarDatabase {
     pub title: Option<String>,
@@ -1058,8 +1223,19 @@ pub struct VarDatabase {
     /// The browse tree (only visible variables).
     pub root: GroupNode,
     pub alias_column: Option<String>,
-    by_public: NameIndex,
+    /// The public-name index in alias mode; without aliases the public names are the
+    /// names, and `by_name` serves both.
+    by_public: Option<NameIndex>,
     by_name: NameIndex,
+}
+
+/// Whether `name` holds a control character (bytes for ASCII, the usual name).
+fn has_control(name: &str) -> bool {
+    if name.is_ascii() {
+        name.bytes().any(|b| b.is_ascii_control())
+    } else {
+        name.chars().any(char::is_control)
+    }
 }
 
 fn check_name(kind: &str, name: &str) -> Result<(), String> {
@@ -1068,7 +1244,7 @@ fn check_name(kind: &str, name: &str) -> Result<(), String> {
             "{kind} `{name}` may not start or end with `.` or contain `..`"
         ));
     }
-    if name.chars().any(char::is_control) || name.trim() != name {
+    if has_control(name) || trim(name) != name {
         return Err(format!(
             "{kind} `{name}` has control characters or surrounding blanks"
         ));
@@ -1077,7 +1253,7 @@ fn check_name(kind: &str, name: &str) -> Result<(), String> {
 }
 
 fn parse_data_type(text: &str) -> Option<VarType> {
-    let t = text.trim();
+    let t = trim(text);
     if t.is_empty() {
         return Some(VarType::R4);
     }
@@ -1151,16 +1327,26 @@ impl VarDatabase {
             name_col,
             public_col: alias_col.unwrap_or(name_col),
             known: columns::ALL.iter().map(|c| col(c)).collect(),
-            decoded: (0..n).map(|_| OnceLock::new()).collect(),
+            decoded: (0..n.div_ceil(DECODED_CHUNK))
+                .map(|_| OnceLock::new())
+                .collect(),
         };
         let cells = &variables.cells;
         // Every name first (limits and control variables may name later rows); the row a
         // name maps to is its first.
         let mut by_name = NameIndex::new(name_col, n);
+        // The rows whose name an earlier row has (an error, reported in row order below).
+        let mut repeated: Vec<u32> = Vec::new();
         for i in 0..n {
-            by_name.insert(cells, i);
+            if by_name.insert(cells, i) != i {
+                repeated.push(i as u32);
+            }
         }
-        let mut by_public = NameIndex::new(alias_col.unwrap_or(name_col), n);
+        // The last control variable looked up, and whether the table has it (a run of
+        // rows usually names the same one).
+        let mut last_control: Option<(&str, bool)> = None;
+        // Only in alias mode: else every public name is the (unique, non-empty) name.
+        let mut by_public = alias_col.map(|col| NameIndex::new(col, n));
         for v in variables.views() {
             let line = v.line();
             let err = |m: String| DbError::invalid(file, line, m);
@@ -1208,7 +1394,12 @@ impl VarDatabase {
                 }
             }
             if let Some(control) = v.control_variable() {
-                if by_name.find(cells, control).is_none() {
+                let known = match last_control {
+                    Some((c, known)) if c == control => known,
+                    _ => by_name.find(cells, control).is_some(),
+                };
+                last_control = Some((control, known));
+                if !known {
                     warnings.push(Warning::new(
                         file,
                         line,
@@ -1219,11 +1410,12 @@ impl VarDatabase {
             v.writable_checked().map_err(err)?;
             v.number(columns::BAR_BASE).map_err(err)?;
             let index = v.index();
-            if by_name.find(cells, name) != Some(index) {
+            if repeated.binary_search(&(index as u32)).is_ok() {
                 return Err(err(format!("variable `{name}` is defined twice")));
             }
             let public_name = v.public_name();
-            if !public_name.is_empty() {
+            // Without aliases the public name is the name, checked and indexed above.
+            if let (false, Some(by_public)) = (public_name.is_empty(), by_public.as_mut()) {
                 check_name("alias", public_name).map_err(err)?;
                 if by_public.insert(cells, index) != index {
                     return Err(err(format!(
@@ -1318,7 +1510,7 @@ impl VarDatabase {
 
     /// The index of the visible variable a client names, decoding nothing.
     pub fn find_public_index(&self, name: &str) -> Option<usize> {
-        self.by_public.find(&self.variables.cells, name)
+        self.public_index().find(&self.variables.cells, name)
     }
 
     /// The variable with this asix name (visible or not).
@@ -1344,7 +1536,11 @@ impl VarDatabase {
 
     /// The number of visible variables.
     pub fn visible_count(&self) -> usize {
-        self.by_public.len()
+        self.public_index().len()
+    }
+
+    fn public_index(&self) -> &NameIndex {
+        self.by_public.as_ref().unwrap_or(&self.by_name)
     }
 
     /// All attributes of a variable as (column, cell) pairs.
@@ -1434,6 +1630,104 @@ pub fn load_database_file(
 }
 
 #[cfg(test)]
+/// The char-by-char reader [`for_each_csv_record`] replaced, kept as the reference its
+/// tests compare with.
+///
+/// [`parse_csv`] streaming: calls `record(line, fields)` for each record as it is read,
+/// with one reused buffer; an error of `record` stops the reading and is returned.
+pub(crate) fn for_each_csv_record_chars(
+    text: &str,
+    sep: char,
+    mut record: impl FnMut(usize, &CsvFields) -> Result<(), (usize, String)>,
+) -> Result<(), (usize, String)> {
+    let mut fields = CsvFields::default();
+    let mut line = 1usize;
+    let mut record_line = 1usize;
+    let mut chars = text.chars().peekable();
+    // State of the current field: was it quoted, and is the quote closed.
+    let mut quoted = false;
+    let mut in_quotes = false;
+    let mut quote_line = 0usize;
+    let mut after_quote = false;
+    let mut end_record =
+        |fields: &mut CsvFields, quoted: bool, record_line: usize| -> Result<(), (usize, String)> {
+            fields.end_field(quoted);
+            let r = if !(fields.len() == 1 && fields.get(0).is_empty() && !quoted) {
+                record(record_line, fields)
+            } else {
+                Ok(())
+            };
+            fields.clear();
+            r
+        };
+    while let Some(c) = chars.next() {
+        if in_quotes {
+            match c {
+                '"' if chars.peek() == Some(&'"') => {
+                    chars.next();
+                    fields.buf.push('"');
+                }
+                '"' => {
+                    in_quotes = false;
+                    after_quote = true;
+                }
+                '\r' => {
+                    if chars.peek() == Some(&'\n') {
+                        chars.next();
+                    }
+                    line += 1;
+                    fields.buf.push('\n');
+                }
+                '\n' => {
+                    line += 1;
+                    fields.buf.push('\n');
+                }
+                _ => fields.buf.push(c),
+            }
+            continue;
+        }
+        if c == sep {
+            fields.end_field(quoted);
+            quoted = false;
+            after_quote = false;
+            continue;
+        }
+        match c {
+            '\r' | '\n' => {
+                if c == '\r' && chars.peek() == Some(&'\n') {
+                    chars.next();
+                }
+                end_record(&mut fields, quoted, record_line)?;
+                quoted = false;
+                after_quote = false;
+                line += 1;
+                record_line = line;
+            }
+            _ if after_quote => {
+                if !c.is_whitespace() {
+                    return Err((line, format!("text `{c}` after a closing quote")));
+                }
+            }
+            '"' if fields.buf[fields.start()..].trim().is_empty() => {
+                let start = fields.start();
+                fields.buf.truncate(start);
+                quoted = true;
+                in_quotes = true;
+                quote_line = line;
+            }
+            _ => fields.buf.push(c),
+        }
+    }
+    if in_quotes {
+        return Err((quote_line, "quoted field is not closed".into()));
+    }
+    if !fields.is_empty() || fields.buf.len() > fields.start() || quoted {
+        end_record(&mut fields, quoted, record_line)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
@@ -1509,6 +1803,15 @@ mod tests {
     }
 
     #[test]
+    fn well_known_columns_are_found_at_their_place() {
+        for (i, c) in columns::ALL.iter().enumerate() {
+            assert_eq!(known_index(c), Some(i), "{c}");
+        }
+        assert_eq!(known_index("Alias"), None);
+        assert_eq!(known_index("name"), None, "as before: exact names");
+    }
+
+    #[test]
     fn build_errors_and_warnings() {
         let err_rows: &[(&str, usize, &str)] = &[
             ("Name;RangeFrom\nA;abc\n", 2, "not a number"),
@@ -1541,6 +1844,11 @@ mod tests {
         assert_eq!(a.control_variable.as_deref(), Some("Z"));
         assert_eq!(a.data_type, VarType::R4);
         assert!(a.writable);
+        // A run of rows naming the same control variable: each is warned of, or none.
+        let text = "Name;ControlVariable\nA;Z\nB;Z\nC;A\nD;A\nE;Z\n";
+        let (_, w) = VarDatabase::build(&table(text).unwrap(), None, None).unwrap();
+        let lines: Vec<usize> = w.iter().map(|w| w.line).collect();
+        assert_eq!(lines, vec![2, 3, 6], "{w:?}");
         let e = VarDatabase::build(&table("Name;Alias\nA;x\n").unwrap(), None, Some("Alias2"))
             .unwrap_err();
         assert!(e.message.contains("AliasAttributeName"));
@@ -1641,6 +1949,81 @@ X
                 let _ = VarDatabase::build(&t, None, Some("Alias"));
             }
             let _ = parse_var_set(text.as_bytes(), "f.zez");
+        }
+
+        /// The compact table holds every cell and line as the table of strings does: rows
+        /// short and long (one-byte ends and two-byte ends), blank lines and line breaks in
+        /// quoted cells between them.
+        #[test]
+        fn the_cell_table_holds_what_the_csv_says(
+            rows in proptest::collection::vec(
+                (proptest::collection::vec(0usize..200, 3), 0usize..3, any::<bool>(), 0usize..3),
+                0..12,
+            ),
+        ) {
+            let mut csv = String::from("Name;Description;Unit\n");
+            for (r, (lens, blanks, multiline, tail)) in rows.iter().enumerate() {
+                let desc = "ż".repeat(lens[1]);
+                let unit = "u".repeat(lens[2]);
+                let desc = if *multiline { format!("\"{desc}\nnext\"") } else { desc };
+                let name = format!("N{r}_{}", "n".repeat(lens[0]));
+                // Every cell, the last missing, or empty cells past the header's.
+                csv.push_str(&match tail {
+                    0 => format!("{name};{desc};{unit}\n"),
+                    1 => format!("{name};{desc}\n"),
+                    _ => format!("{name};{desc};{unit};;\n"),
+                });
+                csv.push_str(&"\n".repeat(*blanks));
+            }
+            let table = parse_attribute_table(csv.as_bytes(), "t.csv").unwrap();
+            let (columns, cells) = read_cell_table(csv.as_bytes(), "t.csv").unwrap();
+            prop_assert_eq!(&columns, &table.columns);
+            prop_assert_eq!(cells.rows(), table.rows.len());
+            for (r, (line, row)) in table.rows.iter().enumerate() {
+                prop_assert_eq!(cells.line(r), *line);
+                for (c, cell) in row.iter().enumerate() {
+                    prop_assert_eq!(cells.cell(r, c), cell.as_str());
+                }
+            }
+            let long = table
+                .rows
+                .iter()
+                .filter(|(_, row)| row.iter().map(String::len).sum::<usize>() > NARROW_ROW_BYTES)
+                .count();
+            prop_assert_eq!(cells.wide_rows.len(), long);
+        }
+
+        /// The fast `trim` and control check agree with `str::trim` and `char::is_control`.
+        #[test]
+        fn fast_trim_and_control_check_are_the_std_ones(
+            s in "([ \t\u{b}\u{1f}\u{7f}\u{85}\u{a0}\u{3000}]|[A-Za-z0-9]|ż){0,12}",
+        ) {
+            prop_assert_eq!(trim(&s), s.trim());
+            prop_assert_eq!(has_control(&s), s.chars().any(char::is_control));
+        }
+
+        /// The byte reader reads every text as the char reader it replaced did: the same
+        /// records, lines and errors (separators of one and more bytes, quotes, line
+        /// breaks, blanks ASCII and not, non-ASCII text).
+        #[test]
+        fn the_byte_csv_reader_is_the_char_reader(
+            text in "([;,\t\"\r\n \u{b}\u{a0}\u{3000}§]|[A-Za-z0-9%.]|ż){0,200}",
+            sep in prop::sample::select(vec![';', ',', '\t', '§', 'ż']),
+        ) {
+            let read = |chars: bool| {
+                let mut out = Vec::new();
+                let push = |line: usize, f: &CsvFields| {
+                    out.push((line, f.iter().map(str::to_owned).collect::<Vec<_>>()));
+                    Ok(())
+                };
+                let r = if chars {
+                    super::for_each_csv_record_chars(&text, sep, push)
+                } else {
+                    for_each_csv_record(&text, sep, push)
+                };
+                (r, out)
+            };
+            prop_assert_eq!(read(false), read(true));
         }
     }
 }

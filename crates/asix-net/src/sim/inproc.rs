@@ -77,14 +77,8 @@ impl PlantSource {
     /// A plant with every variable of every loaded database of `ns` (channels from the
     /// `Channel` attribute, else `*`), seeded deterministically, starting at `now`.
     pub fn new(ns: &AsixNamespace, seed: u64, now: Timestamp) -> PlantSource {
-        let dbs: Vec<&asix_model::VarDatabase> = ns.databases().map(|db| &**db).collect();
-        let plant = Plant::from_databases(
-            dbs.iter().copied(),
-            DEFAULT_PLANT_CHANNEL,
-            seed,
-            TICK_MS,
-            now,
-        );
+        let dbs: Vec<Arc<asix_model::VarDatabase>> = ns.databases().cloned().collect();
+        let plant = Plant::from_databases(&dbs, DEFAULT_PLANT_CHANNEL, seed, TICK_MS, now);
         PlantSource {
             sampling: BTreeMap::new(),
             plant,
@@ -140,7 +134,7 @@ impl PlantSource {
 
     fn write_one(&mut self, var: u32, v: &ItemVqt) -> Result<(), OpcError> {
         let var = var as usize;
-        if !self.plant.vars()[var].spec.writable {
+        if !self.plant.vars()[var].spec().writable {
             return Err(OpcError::WriteErrorDeviceRequestIllegal);
         }
         let x = numeric(&v.value).ok_or(OpcError::BadType)?;

@@ -423,7 +423,7 @@ struct Sub {
     sampling: u32,
     changes_only: bool,
     /// Version of the VQT last sent; 0 forces the next send.
-    sent_version: u64,
+    sent_version: u32,
 }
 
 struct Group {
@@ -823,14 +823,14 @@ fn write(shared: &Shared, client: &str, local: bool, items: Vec<WriteItem>) -> V
                     OpcError::WriteErrorIllegalCommand
                 }
             })?;
-            if !p.vars()[i].spec.writable {
+            if !p.vars()[i].spec().writable {
                 return Err(OpcError::WriteErrorDeviceRequestIllegal);
             }
             let x = numeric(value).ok_or(OpcError::BadType)?;
             if failed {
                 return Err(OpcError::WriteErrorDriverTransmisionError);
             }
-            let x = if p.vars()[i].spec.var_type == VarType::R4 {
+            let x = if p.vars()[i].spec().var_type == VarType::R4 {
                 x as f32 as f64
             } else {
                 x

@@ -223,11 +223,23 @@ fn for_each_database_var(
     default_channel: &str,
     mut f: impl FnMut(&str, &str, VarRange, Behaviour),
 ) {
-    let controls: std::collections::HashSet<&str> = db
-        .variables
-        .views()
-        .filter_map(|v| v.control_variable())
-        .collect();
+    // The rows named as some row's control variable (names are unique in a database; a
+    // run of rows usually names the same one, looked up once).
+    let mut controls = vec![false; db.variables.len()];
+    let mut last: Option<(&str, Option<usize>)> = None;
+    for v in db.variables.views() {
+        let Some(c) = v.control_variable() else {
+            continue;
+        };
+        let row = match last {
+            Some((l, row)) if l == c => row,
+            _ => db.find_real_index(c),
+        };
+        if let Some(r) = row {
+            controls[r] = true;
+        }
+        last = Some((c, row));
+    }
     let column = |name: &str| db.column(name).unwrap_or(usize::MAX);
     let (channel_col, alias_col) = (column("Channel"), column("Alias"));
     for var in db.variables.views() {
@@ -241,7 +253,7 @@ fn for_each_database_var(
             high: high.max(low),
             writable: var.writable(),
         };
-        let b = if controls.contains(var.name()) {
+        let b = if controls[var.index()] {
             Behaviour::Steady { value: 0.0 }
         } else {
             Behaviour::guess_tagged_range(var.name(), &range, var.cell(alias_col))
@@ -322,7 +334,9 @@ fn fnv_upper(s: &str) -> u64 {
     h
 }
 
-#[derive(Debug, Clone)]
+/// How a variable evolves, as [`Plant::step`] computes it: decoded from a [`PlantVar`]'s
+/// compact fields ([`PlantVar::kind`]) and stored back ([`PlantVar::keep_state`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
     Constant,
     Noise {
@@ -360,33 +374,261 @@ enum Kind {
     },
 }
 
-/// One variable's state (about 100 bytes; its name is in the plant's arena).
-#[derive(Debug, Clone)]
-pub struct PlantVar {
-    pub channel: u32,
-    pub spec: VarRange,
-    kind: Kind,
-    /// Engineering value.
-    pub value: f64,
-    pub quality: Quality,
-    pub timestamp: Timestamp,
-    /// Bumped whenever the VQT changes (lets subscribers send only changes).
-    pub version: u64,
+/// The variant of a [`Kind`], one byte of a [`PlantVar`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum KindTag {
+    Constant,
+    Noise,
+    Wave,
+    Ramp,
+    Tank,
+    Pump,
+    Flow,
+    Counter,
 }
 
-/// The plant. Compact for large databases: the variables' names are one arena string
-/// (`names`, `name_ends`), the indexes `HashTable<u32>`s of variable numbers that compare
-/// the names in it (no key strings).
+/// No variable (a reference of a behaviour that names none).
+const NO_VAR: u32 = u32::MAX;
+
+fn opt_var(v: u32) -> Option<u32> {
+    (v != NO_VAR).then_some(v)
+}
+
+/// One variable's state: 64 bytes (issue 16: a million of them), its name in the
+/// database it comes from or in the plant's arena ([`Plant::name`]). A behaviour's
+/// parameters (the same few for most variables) are in the plant's `params`, its state and
+/// references in `state`, `a`, `b` and `flag` ([`PlantVar::kind`]).
+#[derive(Debug, Clone)]
+pub struct PlantVar {
+    low: f64,
+    high: f64,
+    /// Engineering value.
+    pub value: f64,
+    pub timestamp: Timestamp,
+    /// Wave: the phase (`f64` bits); Pump: the tick of its next toggle.
+    state: u64,
+    /// The behaviour's parameters in the plant's `params`.
+    param: u32,
+    /// Wave, Ramp: the period; Tank: the inlet pump; Pump: the tank; Flow: the pump;
+    /// Counter: the source ([`NO_VAR`]: none).
+    a: u32,
+    /// Tank: the outlet pump.
+    b: u32,
+    /// Bumped whenever the VQT changes (lets subscribers send only changes; never 0).
+    pub version: u32,
+    pub quality: Quality,
+    var_type: VarType,
+    tag: KindTag,
+    /// Tank: rising; Pump: an inlet pump.
+    flag: bool,
+    writable: bool,
+}
+
+impl PlantVar {
+    /// Type, range and writability.
+    pub fn spec(&self) -> VarRange {
+        VarRange {
+            var_type: self.var_type,
+            low: self.low,
+            high: self.high,
+            writable: self.writable,
+        }
+    }
+
+    /// The behaviour, with its parameters from `params`.
+    fn kind(&self, params: &[[f64; 2]]) -> Kind {
+        let p = params.get(self.param as usize).copied().unwrap_or([0.0; 2]);
+        match self.tag {
+            KindTag::Constant => Kind::Constant,
+            KindTag::Noise => Kind::Noise { step: p[0] },
+            KindTag::Wave => Kind::Wave {
+                period: self.a,
+                noise: p[0],
+                phase: f64::from_bits(self.state),
+            },
+            KindTag::Ramp => Kind::Ramp { period: self.a },
+            KindTag::Tank => Kind::Tank {
+                fill: p[0],
+                drain: p[1],
+                inlet: opt_var(self.a),
+                outlet: opt_var(self.b),
+                rising: self.flag,
+            },
+            KindTag::Pump => Kind::Pump {
+                tank: opt_var(self.a),
+                inlet: self.flag,
+                low: p[0],
+                high: p[1],
+                next_toggle: self.state,
+            },
+            KindTag::Flow => Kind::Flow {
+                pump: self.a,
+                nominal: p[0],
+            },
+            KindTag::Counter => Kind::Counter {
+                source: self.a,
+                scale: p[0],
+            },
+        }
+    }
+
+    /// Keeps what a step changes of the behaviour (a tank's direction, a pump's next
+    /// toggle); its parameters and references do not change.
+    fn keep_state(&mut self, kind: &Kind) {
+        match *kind {
+            Kind::Tank { rising, .. } => self.flag = rising,
+            Kind::Pump { next_toggle, .. } => self.state = next_toggle,
+            _ => {}
+        }
+    }
+}
+
+/// The behaviours' parameters of a plant, each pair once (a million variables share a
+/// few). Interned while the plant is built.
+#[derive(Debug, Clone, Default)]
+struct Params {
+    list: Vec<[f64; 2]>,
+    index: std::collections::HashMap<[u64; 2], u32>,
+}
+
+impl Params {
+    fn intern(&mut self, p: [f64; 2]) -> u32 {
+        let key = [p[0].to_bits(), p[1].to_bits()];
+        // A plant has a few: a look along the list before hashing.
+        if self.list.len() <= 16 {
+            let found = self
+                .list
+                .iter()
+                .position(|q| [q[0].to_bits(), q[1].to_bits()] == key);
+            if let Some(i) = found {
+                return i as u32;
+            }
+        }
+        let list = &mut self.list;
+        *self.index.entry(key).or_insert_with(|| {
+            list.push(p);
+            (list.len() - 1) as u32
+        })
+    }
+
+    /// The fields of a [`PlantVar`] that hold `kind`: tag, param, a, b, flag, state.
+    fn encode(&mut self, kind: &Kind) -> (KindTag, u32, u32, u32, bool, u64) {
+        let var = |v: Option<u32>| v.unwrap_or(NO_VAR);
+        match *kind {
+            Kind::Constant => (KindTag::Constant, 0, NO_VAR, NO_VAR, false, 0),
+            Kind::Noise { step } => (
+                KindTag::Noise,
+                self.intern([step, 0.0]),
+                NO_VAR,
+                NO_VAR,
+                false,
+                0,
+            ),
+            Kind::Wave {
+                period,
+                noise,
+                phase,
+            } => (
+                KindTag::Wave,
+                self.intern([noise, 0.0]),
+                period,
+                NO_VAR,
+                false,
+                phase.to_bits(),
+            ),
+            Kind::Ramp { period } => (KindTag::Ramp, 0, period, NO_VAR, false, 0),
+            Kind::Tank {
+                fill,
+                drain,
+                inlet,
+                outlet,
+                rising,
+            } => (
+                KindTag::Tank,
+                self.intern([fill, drain]),
+                var(inlet),
+                var(outlet),
+                rising,
+                0,
+            ),
+            Kind::Pump {
+                tank,
+                inlet,
+                low,
+                high,
+                next_toggle,
+            } => (
+                KindTag::Pump,
+                self.intern([low, high]),
+                var(tank),
+                NO_VAR,
+                inlet,
+                next_toggle,
+            ),
+            Kind::Flow { pump, nominal } => (
+                KindTag::Flow,
+                self.intern([nominal, 0.0]),
+                pump,
+                NO_VAR,
+                false,
+                0,
+            ),
+            Kind::Counter { source, scale } => (
+                KindTag::Counter,
+                self.intern([scale, 0.0]),
+                source,
+                NO_VAR,
+                false,
+                0,
+            ),
+        }
+    }
+}
+
+/// Where a plant's names are, and how they are looked up.
+#[derive(Debug, Clone)]
+enum Names {
+    /// Names of its own (a plant of [`ChannelDef`]s: asix-sim, tests): one arena string
+    /// (`names`, `ends`), each variable's channel, and `HashTable<u32>` indexes of
+    /// variable numbers that compare the names in the arena.
+    Own {
+        names: String,
+        ends: Vec<u32>,
+        channel: Vec<u32>,
+        /// (channel, name) → the last variable of that name in the channel.
+        index: HashTable<u32>,
+        /// name → the first variable of that name in any channel.
+        by_name: HashTable<u32>,
+    },
+    /// The databases' names (a plant of [`Plant::from_databases`]): variable `first + r`
+    /// is row `r` of a database, found by the database's `Name` index. A name is in a
+    /// database once, so the last variable of a name in a channel is that of the last
+    /// database holding it in the channel, and the first in any channel that of the first.
+    Databases {
+        dbs: Vec<DbPart>,
+        default_channel: String,
+    },
+}
+
+/// A database of a plant made from databases.
+#[derive(Debug, Clone)]
+struct DbPart {
+    db: std::sync::Arc<asix_model::VarDatabase>,
+    /// The plant number of its first row.
+    first: u32,
+    /// Its `Channel` column.
+    channel_col: Option<usize>,
+}
+
+/// The plant. Compact for large databases: a [`PlantVar`] of 64 bytes a variable, the names
+/// those of the databases (nothing per variable but the `PlantVar`) or, for a plant of
+/// channel definitions, one arena with indexes comparing names in it.
 #[derive(Debug, Clone)]
 pub struct Plant {
     channels: Vec<String>,
     vars: Vec<PlantVar>,
-    names: String,
-    name_ends: Vec<u32>,
-    /// (channel, name) → the last variable of that name in the channel.
-    index: HashTable<u32>,
-    /// name → the first variable of that name in any channel.
-    by_name: HashTable<u32>,
+    params: Params,
+    names: Names,
     rng: Rng,
     tick: u64,
     tick_ms: u64,
@@ -415,11 +657,20 @@ impl Plant {
     /// Builds the plant; `epoch` is the timestamp of tick 0.
     pub fn new(channels: &[ChannelDef], seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
         let n = channels.iter().map(|c| c.vars.len()).sum();
-        let mut p = Plant::empty(n, seed, tick_ms, epoch);
+        let names = Names::Own {
+            names: String::new(),
+            ends: Vec::with_capacity(n),
+            channel: Vec::with_capacity(n),
+            index: HashTable::with_capacity(n),
+            by_name: HashTable::with_capacity(n),
+        };
+        let mut p = Plant::empty(n, names, seed, tick_ms, epoch);
         let mut refs = Vec::new();
         for ch in channels {
             for (spec, b) in &ch.vars {
-                p.push(&ch.name, &spec.name, spec.range(), b, &mut refs);
+                let ci = p.channel_number(&ch.name);
+                p.name_own(ci, &spec.name);
+                p.push(spec.range(), b, &mut refs);
             }
         }
         p.finish(refs);
@@ -427,35 +678,55 @@ impl Plant {
     }
 
     /// The plant of every variable of `dbs` (as [`channels_from_database`] makes them),
-    /// built straight from the databases' compact tables: no list of specs in between, so
-    /// that a database of a million variables costs the plant only its own state.
-    pub fn from_databases<'a>(
-        dbs: impl IntoIterator<Item = &'a asix_model::VarDatabase> + Clone,
+    /// built straight from the databases' compact tables and keeping them for the names:
+    /// no list of specs in between, and no name or index of its own, so that a database
+    /// of a million variables costs the plant only its `PlantVar`s.
+    pub fn from_databases(
+        dbs: &[std::sync::Arc<asix_model::VarDatabase>],
         default_channel: &str,
         seed: u64,
         tick_ms: u64,
         epoch: Timestamp,
     ) -> Plant {
-        let n = dbs.clone().into_iter().map(|d| d.variables.len()).sum();
-        let mut p = Plant::empty(n, seed, tick_ms, epoch);
-        let mut refs = Vec::new();
+        let n = dbs.iter().map(|d| d.variables.len()).sum();
+        let mut parts = Vec::with_capacity(dbs.len());
+        let mut first = 0u32;
         for db in dbs {
-            for_each_database_var(db, default_channel, |channel, name, range, b| {
-                p.push(channel, name, range, &b, &mut refs);
+            parts.push(DbPart {
+                db: std::sync::Arc::clone(db),
+                first,
+                channel_col: db.column("Channel"),
+            });
+            first = first.saturating_add(db.variables.len() as u32);
+        }
+        let names = Names::Databases {
+            dbs: parts,
+            default_channel: default_channel.to_owned(),
+        };
+        let mut p = Plant::empty(n, names, seed, tick_ms, epoch);
+        let mut refs = Vec::new();
+        let mut last_channel = String::new();
+        for db in dbs {
+            for_each_database_var(db, default_channel, |channel, _name, range, b| {
+                // The channels in order of appearance (rows of a channel mostly come
+                // together: looked up once a run).
+                if last_channel != channel || p.channels.is_empty() {
+                    p.channel_number(channel);
+                    channel.clone_into(&mut last_channel);
+                }
+                p.push(range, &b, &mut refs);
             });
         }
         p.finish(refs);
         p
     }
 
-    fn empty(n: usize, seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
+    fn empty(n: usize, names: Names, seed: u64, tick_ms: u64, epoch: Timestamp) -> Plant {
         Plant {
             channels: Vec::new(),
             vars: Vec::with_capacity(n),
-            names: String::new(),
-            name_ends: Vec::with_capacity(n),
-            index: HashTable::with_capacity(n),
-            by_name: HashTable::with_capacity(n),
+            params: Params::default(),
+            names,
             rng: Rng::new(seed),
             tick: 0,
             tick_ms: tick_ms.max(1),
@@ -463,9 +734,53 @@ impl Plant {
         }
     }
 
+    /// The database and row of variable `i` of a plant made from databases.
+    fn row_of(dbs: &[DbPart], i: usize) -> Option<(&DbPart, usize)> {
+        let k = dbs
+            .partition_point(|d| d.first as usize <= i)
+            .checked_sub(1)?;
+        let d = &dbs[k];
+        let row = i - d.first as usize;
+        (row < d.db.variables.len()).then_some((d, row))
+    }
+
     /// The name of variable `i`.
     pub fn name(&self, i: usize) -> &str {
-        name_in(&self.names, &self.name_ends, i)
+        match &self.names {
+            Names::Own { names, ends, .. } => name_in(names, ends, i),
+            Names::Databases { dbs, .. } => {
+                Plant::row_of(dbs, i).map_or("", |(d, r)| d.db.variables.view(r).name())
+            }
+        }
+    }
+
+    /// The name of the channel of variable `i`.
+    fn channel_name(&self, i: usize) -> &str {
+        match &self.names {
+            Names::Own { channel, .. } => channel
+                .get(i)
+                .and_then(|&c| self.channels.get(c as usize))
+                .map_or("", String::as_str),
+            Names::Databases {
+                dbs,
+                default_channel,
+            } => Plant::row_of(dbs, i).map_or("", |(d, r)| {
+                let c = d
+                    .channel_col
+                    .map_or("", |col| d.db.variables.view(r).cell(col).trim());
+                if c.is_empty() {
+                    default_channel
+                } else {
+                    c
+                }
+            }),
+        }
+    }
+
+    /// The number of the channel of variable `i` in [`Plant::channels`].
+    pub fn channel_of(&self, i: usize) -> Option<usize> {
+        let name = self.channel_name(i);
+        self.channels.iter().rposition(|c| c == name)
     }
 
     /// The number of the channel `name`, added when new (channels are few).
@@ -478,16 +793,43 @@ impl Plant {
         i as u32
     }
 
+    /// Names the next variable (a plant of its own names): `name` in channel `ci`, indexed.
+    fn name_own(&mut self, ci: u32, name: &str) {
+        let Names::Own {
+            names,
+            ends,
+            channel,
+            index,
+            by_name,
+        } = &mut self.names
+        else {
+            return;
+        };
+        let i = ends.len() as u32;
+        names.push_str(name);
+        ends.push(names.len() as u32);
+        channel.push(ci);
+        let (names, ends, channel) = (&*names, &*ends, &*channel);
+        let name_of = |j: u32| name_in(names, ends, j as usize);
+        let channel_of = |j: u32| channel[j as usize];
+        match index.entry(
+            channel_hash(ci, name),
+            |&j| channel_of(j) == ci && name_of(j) == name,
+            |&j| channel_hash(channel_of(j), name_of(j)),
+        ) {
+            hashbrown::hash_table::Entry::Occupied(mut e) => *e.get_mut() = i,
+            hashbrown::hash_table::Entry::Vacant(e) => {
+                e.insert(i);
+            }
+        }
+        let h = hash_name(name);
+        if by_name.find(h, |&j| name_of(j) == name).is_none() {
+            by_name.insert_unique(h, i, |&j| hash_name(name_of(j)));
+        }
+    }
+
     /// Adds one variable; its references by name go to `refs`, resolved by `finish`.
-    fn push(
-        &mut self,
-        channel: &str,
-        name: &str,
-        spec: VarRange,
-        b: &Behaviour,
-        refs: &mut Vec<(u32, Ref, String)>,
-    ) {
-        let ci = self.channel_number(channel);
+    fn push(&mut self, spec: VarRange, b: &Behaviour, refs: &mut Vec<(u32, Ref, String)>) {
         let i = self.vars.len() as u32;
         let rng = &mut self.rng;
         let (lo, hi) = (spec.low, spec.high.max(spec.low));
@@ -543,14 +885,14 @@ impl Plant {
             Behaviour::Flow { pump, nominal } => {
                 named(Ref::FlowPump, &Some(pump.clone()));
                 Kind::Flow {
-                    pump: u32::MAX,
+                    pump: NO_VAR,
                     nominal: *nominal,
                 }
             }
             Behaviour::Counter { source, scale } => {
                 named(Ref::CounterSource, &Some(source.clone()));
                 Kind::Counter {
-                    source: u32::MAX,
+                    source: NO_VAR,
                     scale: *scale,
                 }
             }
@@ -564,79 +906,80 @@ impl Plant {
                 _ => lo + (hi - lo) * (0.4 + 0.2 * rng.unit()),
             },
         };
-        self.names.push_str(name);
-        self.name_ends.push(self.names.len() as u32);
-        self.index_insert(ci, i);
-        let h = hash_name(name);
-        let (names, ends) = (&self.names, &self.name_ends);
-        let name_of = |j: u32| name_in(names, ends, j as usize);
-        if self.by_name.find(h, |&j| name_of(j) == name).is_none() {
-            self.by_name.insert_unique(h, i, |&j| hash_name(name_of(j)));
-        }
+        let (tag, param, a, b, flag, state) = self.params.encode(&kind);
         self.vars.push(PlantVar {
-            channel: ci,
-            spec,
-            kind,
+            low: spec.low,
+            high: spec.high,
             value,
-            quality: Quality::GOOD,
             timestamp: self.epoch,
+            state,
+            param,
+            a,
+            b,
             version: 1,
+            quality: Quality::GOOD,
+            var_type: spec.var_type,
+            tag,
+            flag,
+            writable: spec.writable,
         });
-    }
-
-    /// Indexes variable `i` (named already) under (`ci`, its name): the last one wins.
-    fn index_insert(&mut self, ci: u32, i: u32) {
-        let (names, ends) = (&self.names, &self.name_ends);
-        let name = name_in(names, ends, i as usize);
-        // The variables of the table so far plus `i` itself, whose channel is `ci`.
-        let channel_of = |j: u32| {
-            self.vars
-                .get(j as usize)
-                .map_or(ci, |v: &PlantVar| v.channel)
-        };
-        let h = channel_hash(ci, name);
-        match self.index.entry(
-            h,
-            |&j| channel_of(j) == ci && name_in(names, ends, j as usize) == name,
-            |&j| channel_hash(channel_of(j), name_in(names, ends, j as usize)),
-        ) {
-            hashbrown::hash_table::Entry::Occupied(mut e) => *e.get_mut() = i,
-            hashbrown::hash_table::Entry::Vacant(e) => {
-                e.insert(i);
-            }
-        }
     }
 
     /// Resolves the behaviours' references by name within their channels.
     fn finish(&mut self, refs: Vec<(u32, Ref, String)>) {
         for (i, r, name) in refs {
-            let ch = self.vars[i as usize].channel;
-            let target = self.lookup_in(ch, &name).map(|t| t as u32);
-            let var = &mut self.vars[i as usize];
-            match (&mut var.kind, r) {
+            let target = self
+                .channel_of(i as usize)
+                .and_then(|ch| self.lookup_in(ch, &name))
+                .map(|t| t as u32);
+            let mut kind = self.vars[i as usize].kind(&self.params.list);
+            match (&mut kind, r) {
                 (Kind::Tank { inlet, .. }, Ref::TankInlet) => *inlet = target,
                 (Kind::Tank { outlet, .. }, Ref::TankOutlet) => *outlet = target,
                 (Kind::Pump { tank, .. }, Ref::PumpTank) => *tank = target,
                 (Kind::Flow { pump, .. }, Ref::FlowPump) => match target {
                     Some(t) => *pump = t,
-                    None => var.kind = Kind::Noise { step: 0.01 },
+                    None => kind = Kind::Noise { step: 0.01 },
                 },
                 (Kind::Counter { source, .. }, Ref::CounterSource) => match target {
                     Some(t) => *source = t,
-                    None => var.kind = Kind::Ramp { period: 6000 },
+                    None => kind = Kind::Ramp { period: 6000 },
                 },
                 _ => {}
             }
+            let (tag, param, a, b, flag, state) = self.params.encode(&kind);
+            let var = &mut self.vars[i as usize];
+            (var.tag, var.param, var.a, var.b, var.flag, var.state) =
+                (tag, param, a, b, flag, state);
         }
+        self.params.index = Default::default();
     }
 
-    fn lookup_in(&self, ci: u32, variable: &str) -> Option<usize> {
-        let (names, ends) = (&self.names, &self.name_ends);
-        self.index
-            .find(channel_hash(ci, variable), |&j| {
-                self.vars[j as usize].channel == ci && name_in(names, ends, j as usize) == variable
-            })
-            .map(|&j| j as usize)
+    /// The last variable named `variable` in channel `ci`.
+    fn lookup_in(&self, ci: usize, variable: &str) -> Option<usize> {
+        match &self.names {
+            Names::Own {
+                names,
+                ends,
+                channel,
+                index,
+                ..
+            } => {
+                let ci = ci as u32;
+                index
+                    .find(channel_hash(ci, variable), |&j| {
+                        channel[j as usize] == ci && name_in(names, ends, j as usize) == variable
+                    })
+                    .map(|&j| j as usize)
+            }
+            Names::Databases { dbs, .. } => {
+                let channel = self.channels.get(ci)?;
+                dbs.iter().rev().find_map(|d| {
+                    let i = d.first as usize + d.db.find_real_index(variable)?;
+                    (self.channel_name(i) == channel).then_some(i)
+                })
+            }
+        }
     }
 
     pub fn channels(&self) -> &[String] {
@@ -655,13 +998,24 @@ impl Plant {
     /// first channel defining it).
     pub fn lookup(&self, channel: &str, variable: &str) -> Option<usize> {
         if channel.is_empty() {
-            return self
-                .by_name
-                .find(hash_name(variable), |&j| self.name(j as usize) == variable)
-                .map(|&j| j as usize);
+            return match &self.names {
+                Names::Own {
+                    names,
+                    ends,
+                    by_name,
+                    ..
+                } => by_name
+                    .find(hash_name(variable), |&j| {
+                        name_in(names, ends, j as usize) == variable
+                    })
+                    .map(|&j| j as usize),
+                Names::Databases { dbs, .. } => dbs
+                    .iter()
+                    .find_map(|d| Some(d.first as usize + d.db.find_real_index(variable)?)),
+            };
         }
         let ci = self.channels.iter().rposition(|c| c == channel)?;
-        self.lookup_in(ci as u32, variable)
+        self.lookup_in(ci, variable)
     }
 
     /// The timestamp of tick `t`.
@@ -685,13 +1039,10 @@ impl Plant {
         let now = self.time_of(self.tick);
         let tick = self.tick;
         for i in 0..self.vars.len() {
-            let (lo, hi) = (
-                self.vars[i].spec.low,
-                self.vars[i].spec.high.max(self.vars[i].spec.low),
-            );
+            let (lo, hi) = (self.vars[i].low, self.vars[i].high.max(self.vars[i].low));
             let span = (hi - lo).max(f64::EPSILON);
             let old = self.vars[i].value;
-            let mut kind = self.vars[i].kind.clone();
+            let mut kind = self.vars[i].kind(&self.params.list);
             let new = match &mut kind {
                 Kind::Constant => old,
                 Kind::Noise { step } => {
@@ -750,8 +1101,7 @@ impl Plant {
                 } => match tank {
                     Some(t) => {
                         let tv = &self.vars[*t as usize];
-                        let f = (tv.value - tv.spec.low)
-                            / (tv.spec.high - tv.spec.low).max(f64::EPSILON);
+                        let f = (tv.value - tv.low) / (tv.high - tv.low).max(f64::EPSILON);
                         let running = old >= 0.5;
                         let (start, stop) = if *inlet {
                             (f < *low, f > *high)
@@ -786,18 +1136,18 @@ impl Plant {
                 }
             };
             let var = &mut self.vars[i];
-            var.kind = kind;
+            var.keep_state(&kind);
             // Integral types change only when their rounded value does.
-            let changed = if is_integral(var.spec.var_type) {
+            let changed = if is_integral(var.var_type) {
                 new.round() != old.round()
             } else {
                 new != old
             };
             var.value = new;
-            if changed || !var.quality.is_good() && !matches!(var.kind, Kind::Constant) {
+            if changed || !var.quality.is_good() && var.tag != KindTag::Constant {
                 var.quality = Quality::GOOD;
                 var.timestamp = now;
-                var.version += 1;
+                var.version = next_version(var.version);
             }
         }
     }
@@ -806,7 +1156,7 @@ impl Plant {
     pub fn vqt(&self, i: usize) -> Vqt {
         let v = &self.vars[i];
         Vqt {
-            value: typed(v.spec.var_type, v.value),
+            value: typed(v.var_type, v.value),
             quality: v.quality,
             timestamp: v.timestamp,
         }
@@ -825,8 +1175,13 @@ impl Plant {
         v.value = value;
         v.quality = quality.unwrap_or(Quality::GOOD);
         v.timestamp = timestamp.unwrap_or(now);
-        v.version += 1;
+        v.version = next_version(v.version);
     }
+}
+
+/// The version after `v` (wrapping past 0, which subscribers use for "nothing sent").
+fn next_version(v: u32) -> u32 {
+    v.wrapping_add(1).max(1)
 }
 
 /// The name of variable `i` in an arena (`names`, `ends`: each name's end).
@@ -1222,7 +1577,7 @@ mod tests {
             }
             for (i, var) in p.vars().iter().enumerate() {
                 assert!(
-                    var.value >= var.spec.low && var.value <= var.spec.high,
+                    var.value >= var.spec().low && var.value <= var.spec().high,
                     "{} = {}",
                     p.name(i),
                     var.value
@@ -1257,7 +1612,7 @@ mod tests {
         assert_ne!(p.vars()[lvl].value, first, "a level moves");
         for (i, v) in p.vars().iter().enumerate() {
             assert!(
-                v.value >= v.spec.low && v.value <= v.spec.high,
+                v.value >= v.spec().low && v.value <= v.spec().high,
                 "{} = {}",
                 p.name(i),
                 v.value
@@ -1272,6 +1627,106 @@ mod tests {
         // Control variables report healthy.
         let k = p.lookup("DIAGNOSTYKA", "KW_K001").unwrap();
         assert_eq!(p.vqt(k).value, Value::I2(0));
+    }
+
+    /// A digest of every variable's VQT and version after `ticks` ticks, with a write on
+    /// the way.
+    fn history_digest(p: &mut Plant, ticks: u64) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        let mut eat = |text: String| {
+            for b in text.bytes() {
+                h = (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3);
+            }
+        };
+        p.advance_to(ticks / 2);
+        p.set(1, 12.0, None, None);
+        p.advance_to(ticks);
+        for i in 0..p.vars().len() {
+            eat(format!("{i} {:?} {}", p.vqt(i), p.vars()[i].version));
+        }
+        h
+    }
+
+    fn demo_db() -> asix_model::VarDatabase {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        match asix_model::load_database_file(&path, None) {
+            Ok((db, _)) => db,
+            Err(e) => panic!("demo database at {}: {e}", path.display()),
+        }
+    }
+
+    /// The simulation's values are a function of the seed: these digests were taken before
+    /// the plant's layout was made compact (issue 16), which must not change a value.
+    #[test]
+    fn histories_are_those_of_the_plant_before_its_compact_layout() {
+        let mut acid = Plant::new(&[acid_plant()], 42, 100, Timestamp(0));
+        let chs = channels_from_database(&demo_db(), ACID_PLANT_CHANNEL);
+        let mut demo = Plant::new(&chs, 5, 250, Timestamp(1_000_000));
+        let db = demo_db();
+        let mut from_db = Plant::from_databases(
+            &[std::sync::Arc::new(db)],
+            ACID_PLANT_CHANNEL,
+            9,
+            250,
+            Timestamp(0),
+        );
+        let digests = (
+            history_digest(&mut acid, 3000),
+            history_digest(&mut demo, 3000),
+            history_digest(&mut from_db, 3000),
+        );
+        assert_eq!(
+            digests,
+            (
+                7135225649673736161,
+                1555995000226565030,
+                15002386707565514508
+            )
+        );
+    }
+
+    /// A plant made from databases looks names up through the databases' index as a plant
+    /// of its own names does through its own: by channel the last variable of the name in
+    /// the channel, without one the first in any channel (here: a database twice).
+    #[test]
+    fn a_plant_of_databases_finds_names_as_a_plant_of_its_own_names() {
+        let db = std::sync::Arc::new(demo_db());
+        let n = db.variables.len();
+        let p = Plant::from_databases(&[db.clone(), db.clone()], "CH", 1, 100, Timestamp(0));
+        let own = Plant::new(&channels_from_database(&db, "CH"), 1, 100, Timestamp(0));
+        assert_eq!(p.vars().len(), 2 * n);
+        let mut channels = own.channels().to_vec();
+        channels.sort();
+        let mut ours = p.channels().to_vec();
+        ours.sort();
+        assert_eq!(ours, channels);
+        for i in 0..n {
+            let name = p.name(i);
+            assert_eq!(p.name(n + i), name);
+            let ch = &p.channels()[p.channel_of(i).unwrap()];
+            assert_eq!(p.lookup(ch, name), Some(n + i), "{ch} {name}");
+            assert_eq!(p.lookup("", name), Some(i), "{name}");
+            let o = own.lookup(ch, name).unwrap();
+            assert_eq!(
+                (own.name(o), own.vars()[o].spec()),
+                (name, p.vars()[i].spec())
+            );
+            let other = p.channels().iter().find(|c| *c != ch).unwrap();
+            assert_eq!(p.lookup(other, name), None, "{name} is not in {other}");
+            assert_eq!(
+                p.lookup(ch, &name.to_lowercase()),
+                None,
+                "names keep their case"
+            );
+        }
+        assert_eq!(p.lookup("", "NO_SUCH_VARIABLE"), None);
+        assert_eq!(p.lookup("NO_SUCH_CHANNEL", p.name(0)), None);
+    }
+
+    #[test]
+    fn plant_variables_stay_compact() {
+        assert!(std::mem::size_of::<PlantVar>() <= 64);
     }
 
     #[test]

@@ -49,6 +49,9 @@ pub enum BuildError {
 
 const BRANCH: u8 = 1;
 const ITEM: u8 = 2;
+/// The node's item ID is not its name: it is in [`AddressSpace::item_ids`] (a leaf's item ID
+/// is mostly its name, so a node holds no span for it).
+const OWN_ITEM_ID: u8 = 4;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 struct Span {
@@ -59,7 +62,6 @@ struct Span {
 #[derive(Debug, Clone)]
 struct Node {
     name: Span,
-    item_id: Span,
     parent: u32,
     first_child: u32,
     child_count: u32,
@@ -328,20 +330,29 @@ impl AddressSpaceBuilder {
         let mut text = String::new();
         let mut interned: HashTable<Span> = HashTable::with_capacity(bnodes.len());
         let mut nodes: Vec<Node> = Vec::with_capacity(bnodes.len());
+        // The item IDs that are not the node's name, by node.
+        let mut item_ids: Vec<(u32, Span)> = Vec::new();
         for (new_index, &old) in order.iter().enumerate() {
             let b = &bnodes[old as usize];
             let name = intern_str(b.name(&btext), &mut text, &mut interned);
-            let item_id = intern_str(b.item_id(&btext), &mut text, &mut interned);
+            // A node whose item ID is its name (most leaves) is interned once.
+            let item_id = match b.item_id {
+                None => name,
+                Some(_) => intern_str(b.item_id(&btext), &mut text, &mut interned),
+            };
             let first_child = b.children.first().map_or(0, |&c| new_of_old[c as usize]);
             debug_assert!(b
                 .children
                 .iter()
                 .enumerate()
                 .all(|(k, &c)| new_of_old[c as usize] == first_child + k as u32));
-            let flags = if new_index == 0 { BRANCH } else { b.flags };
+            let mut flags = if new_index == 0 { BRANCH } else { b.flags };
+            if item_id != name {
+                flags |= OWN_ITEM_ID;
+                item_ids.push((new_index as u32, item_id));
+            }
             nodes.push(Node {
                 name,
-                item_id,
                 parent: new_of_old[b.parent as usize],
                 first_child,
                 child_count: b.children.len() as u32,
@@ -350,10 +361,12 @@ impl AddressSpaceBuilder {
         }
         drop(interned);
         text.shrink_to_fit();
+        item_ids.shrink_to_fit();
 
         let mut space = AddressSpace {
             text,
             nodes,
+            item_ids,
             children_by_name: Vec::new(),
             by_item_id: Vec::new(),
             flat_items: Vec::new(),
@@ -436,6 +449,9 @@ fn hash_child(parent: u32, name: &str) -> u64 {
 pub struct AddressSpace {
     text: String,
     nodes: Vec<Node>,
+    /// The item IDs of the nodes whose item ID is not their name ([`OWN_ITEM_ID`]), by
+    /// node.
+    item_ids: Vec<(u32, Span)>,
     children_by_name: Vec<u32>,
     by_item_id: Vec<u32>,
     /// In a flat space: the items in pre-order, one per item ID.
@@ -565,7 +581,14 @@ impl AddressSpace {
     }
 
     fn item_id_of(&self, id: u32) -> &str {
-        self.str_of(self.nodes[id as usize].item_id)
+        let node = &self.nodes[id as usize];
+        if node.flags & OWN_ITEM_ID == 0 {
+            return self.str_of(node.name);
+        }
+        match self.item_ids.binary_search_by_key(&id, |&(n, _)| n) {
+            Ok(k) => self.str_of(self.item_ids[k].1),
+            Err(_) => self.str_of(node.name),
+        }
     }
 
     /// Items at and below `id` (excluding `id` itself), pre-order, first occurrence of each
@@ -614,7 +637,7 @@ impl AddressSpace {
             eat(self.name_of(i as u32).as_bytes());
             eat(&[0xFF]);
             eat(self.item_id_of(i as u32).as_bytes());
-            eat(&[0xFE, n.flags]);
+            eat(&[0xFE, n.flags & (BRANCH | ITEM)]);
             eat(&n.child_count.to_le_bytes());
             eat(&n.parent.to_le_bytes());
         }
@@ -669,7 +692,7 @@ impl<'a> NodeRef<'a> {
 
     /// The fully qualified item ID (for asix: the bare variable name); `""` for the root.
     pub fn item_id(&self) -> &'a str {
-        self.space.str_of(self.node().item_id)
+        self.space.item_id_of(self.id)
     }
 
     pub fn is_root(&self) -> bool {
@@ -731,6 +754,23 @@ impl<'a> NodeRef<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A node is 24 bytes (issue 16: a million leaves): its item ID is its name unless it
+    /// has one of its own, kept aside.
+    #[test]
+    fn nodes_stay_compact_and_own_item_ids_are_kept_aside() {
+        assert!(std::mem::size_of::<Node>() <= 24);
+        let mut b = AddressSpace::builder();
+        let g = b.add_branch(NodeId::ROOT, "G", "group/G").unwrap();
+        b.add_leaf(g, "x", "x").unwrap();
+        b.add_leaf(g, "y", "G.y").unwrap();
+        let space = b.build();
+        assert_eq!(space.item_ids.len(), 2, "G and y");
+        let ids: Vec<&str> = (1..space.nodes.len() as u32)
+            .map(|i| space.node_ref(i).item_id())
+            .collect();
+        assert_eq!(ids, vec!["group/G", "x", "G.y"]);
+    }
 
     fn sample() -> AddressSpace {
         AddressSpace::from_paths(
