@@ -181,17 +181,86 @@ struct Slot<V> {
     r: ItemRes<V>,
 }
 
-/// A raw variable wanted by subscribed items.
+/// Keys of items, most often none or one: those inline, more in a vector of their own
+/// (16 bytes, no allocation for one item: most variables of a large subscription have
+/// exactly one, issue 16).
+#[derive(Debug, Clone, Default, PartialEq)]
+enum Keys {
+    #[default]
+    None,
+    One(SourceKey),
+    // Boxed: a thin pointer keeps `Keys` at 16 bytes (a `Vec` or boxed slice: 24).
+    #[allow(clippy::box_collection)]
+    Many(Box<Vec<SourceKey>>),
+}
+
+impl Keys {
+    fn as_slice(&self) -> &[SourceKey] {
+        match self {
+            Keys::None => &[],
+            Keys::One(k) => std::slice::from_ref(k),
+            Keys::Many(v) => v,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.as_slice().is_empty()
+    }
+
+    fn contains(&self, k: &SourceKey) -> bool {
+        self.as_slice().contains(k)
+    }
+
+    fn push(&mut self, k: SourceKey) {
+        *self = match std::mem::take(self) {
+            Keys::None => Keys::One(k),
+            Keys::One(first) => Keys::Many(Box::new(vec![first, k])),
+            Keys::Many(mut v) => {
+                v.push(k);
+                Keys::Many(v)
+            }
+        };
+    }
+
+    /// Removes `k`: every occurrence of it, or with `first_only` the first.
+    fn remove(&mut self, k: SourceKey, first_only: bool) {
+        match self {
+            Keys::None => {}
+            Keys::One(x) => {
+                if *x == k {
+                    *self = Keys::None;
+                }
+            }
+            Keys::Many(v) => {
+                if first_only {
+                    if let Some(i) = v.iter().position(|x| *x == k) {
+                        v.swap_remove(i);
+                    }
+                } else {
+                    v.retain(|x| *x != k);
+                }
+                match v[..] {
+                    [] => *self = Keys::None,
+                    [one] => *self = Keys::One(one),
+                    _ => {}
+                }
+            }
+        }
+    }
+}
+
+/// A raw variable wanted by subscribed items (40 bytes).
+#[derive(Default)]
 struct VarState {
     /// The items reading it.
-    items: Vec<SourceKey>,
+    items: Keys,
     /// The items whose quality rules read it (control and limit variables), an item once
     /// per variable (twice while it is subscribed again).
-    rule_users: Vec<SourceKey>,
+    rule_users: Keys,
     /// Its last sample, kept only where it is read: when the source cannot
     /// [`VariableSource::peek`] (the quality rules read it), or for a rule variable (a new
     /// value or quality re-checks its users). Boxed: most variables of the simulation keep
-    /// none (56 bytes a variable instead of 96).
+    /// none.
     last: Option<Box<Vqt>>,
 }
 
@@ -368,8 +437,9 @@ impl<S: VariableSource> AsixBackend<S> {
     fn rate_of(&self, v: &S::Var) -> Option<u32> {
         let st = self.vars.get(v)?;
         st.items
+            .as_slice()
             .iter()
-            .chain(&st.rule_users)
+            .chain(st.rule_users.as_slice())
             .filter_map(|k| self.slot_of(*k))
             .map(|s| s.rate)
             .min()
@@ -399,15 +469,12 @@ impl<S: VariableSource> AsixBackend<S> {
         let Some((var, t)) = r.resolved() else {
             return;
         };
-        let st = self.vars.entry(var.clone()).or_insert_with(VarState::new);
+        let st = self.vars.entry(var.clone()).or_default();
         if !st.items.contains(&k) {
-            // Most variables have one item: room for exactly one, not the four a first
-            // push makes room for (100,000 subscribed variables, issue 16).
-            st.items.reserve_exact(1);
             st.items.push(k);
         }
         for v in t.rule_variables() {
-            let st = self.vars.entry(v.clone()).or_insert_with(VarState::new);
+            let st = self.vars.entry(v.clone()).or_default();
             st.rule_users.push(k);
         }
     }
@@ -419,13 +486,11 @@ impl<S: VariableSource> AsixBackend<S> {
             return;
         };
         if let Some(st) = self.vars.get_mut(var) {
-            st.items.retain(|x| *x != k);
+            st.items.remove(k, false);
         }
         for v in t.rule_variables() {
             if let Some(st) = self.vars.get_mut(v) {
-                if let Some(i) = st.rule_users.iter().position(|x| *x == k) {
-                    st.rule_users.swap_remove(i);
-                }
+                st.rule_users.remove(k, true);
             }
         }
     }
@@ -783,7 +848,7 @@ impl<S: VariableSource> AsixBackend<S> {
             // A late sample of a variable let go.
             return;
         };
-        for &k in &st.items {
+        for &k in st.items.as_slice() {
             if let Some((_, t)) = self.slot_of(k).and_then(|s| s.r.resolved()) {
                 out.updates.push((k, self.item_vqt(t, vqt.clone())));
             }
@@ -793,7 +858,7 @@ impl<S: VariableSource> AsixBackend<S> {
         let users = if st.rule_users.is_empty() || st.last.as_deref().is_some_and(same) {
             Vec::new()
         } else {
-            st.rule_users.clone()
+            st.rule_users.as_slice().to_vec()
         };
         let before: Vec<(SourceKey, Quality)> = users
             .into_iter()
@@ -844,16 +909,6 @@ impl<S: VariableSource> AsixBackend<S> {
                     },
                 )),
             }
-        }
-    }
-}
-
-impl VarState {
-    fn new() -> Self {
-        VarState {
-            items: Vec::new(),
-            rule_users: Vec::new(),
-            last: None,
         }
     }
 }
@@ -1344,5 +1399,30 @@ mod tests {
         assert!(Arc::ptr_eq(&treatment(&it[0]), &treatment(&it[1])));
         assert!(!Arc::ptr_eq(&treatment(&it[0]), &treatment(&it[2])));
         assert_eq!(b.treatments.len(), 2);
+    }
+
+    /// The item lists of a variable: none and one inline, more in a vector, back to one
+    /// and none as items go; `first_only` takes one use of a rule user away.
+    #[test]
+    fn item_keys_go_inline_and_back() {
+        let it = items(&ns(), &["KW_K001", "KW_K002"]);
+        let (a, b) = (it[0].key, it[1].key);
+        assert_ne!(a, b);
+        let mut k = Keys::default();
+        assert!(k.is_empty());
+        k.push(a);
+        assert_eq!(k, Keys::One(a));
+        k.push(b);
+        k.push(a);
+        assert_eq!(k.as_slice(), [a, b, a]);
+        k.remove(a, true);
+        assert_eq!(k.as_slice(), [a, b]);
+        k.remove(b, false);
+        assert_eq!(k, Keys::One(a));
+        k.push(a);
+        k.remove(a, false);
+        assert_eq!(k, Keys::None);
+        assert_eq!(std::mem::size_of::<Keys>(), 16);
+        assert_eq!(std::mem::size_of::<VarState>(), 40);
     }
 }
