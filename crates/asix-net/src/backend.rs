@@ -167,6 +167,9 @@ impl<V> ItemRes<V> {
     }
 }
 
+/// The most raw samples whose room [`AsixBackend`] keeps from one poll to the next.
+const RAW_SAMPLES_KEPT: usize = 4096;
+
 /// The most distinct treatments [`AsixBackend::share`] keeps for sharing (a plant has
 /// few: a derivation and the rules of a channel).
 const SHARED_TREATMENTS: usize = 64;
@@ -948,6 +951,12 @@ impl<S: VariableSource> Backend for AsixBackend<S> {
         }
         for (id, r) in raw.writes.drain(..) {
             self.answer_write(id, r);
+        }
+        // Kept for the next poll only while small: the samples of a large subscription
+        // would otherwise hold a buffer of every variable's last sample between polls (56
+        // bytes a variable, issue 16); a poll of many samples allocates it anew.
+        if raw.samples.capacity() > RAW_SAMPLES_KEPT {
+            raw.samples = Vec::new();
         }
         self.raw = raw;
         out.read_results.append(&mut self.ready.read_results);
