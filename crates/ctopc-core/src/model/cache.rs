@@ -244,11 +244,20 @@ pub(crate) struct SourceTable {
     /// from the configuration, not from clients.
     eu_ranges: Vec<(f64, f64)>,
     eu_range_ids: HashMap<(u64, u64), u32>,
+    /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
+    /// that many when the entries must grow, rather than a quarter more.
+    batch_left: usize,
 }
 
 impl SourceTable {
     pub fn live(&self) -> usize {
         self.live
+    }
+
+    /// Says how many items of an AddItems call are left, this one included (0 after the
+    /// call): at most that many new entries are coming.
+    pub fn batch_left(&mut self, n: usize) {
+        self.batch_left = n;
     }
 
     /// The entry for `def`, created if needed (constant items get their value now).
@@ -318,9 +327,16 @@ impl SourceTable {
             None => {
                 if self.entries.len() == self.entries.capacity() {
                     // Grow by a quarter, not double: the entries are most of the memory of
-                    // a large configuration, and doubling would leave up to half unused.
-                    self.entries
-                        .reserve_exact((self.entries.len() / 4).max(1024));
+                    // a large configuration, and doubling would leave up to half unused;
+                    // by the rest of a large AddItems at once, so that the entries of one
+                    // large call take what they need and no more (issue 16).
+                    let quarter = (self.entries.len() / 4).max(1024);
+                    let grow = if self.batch_left >= quarter {
+                        self.batch_left
+                    } else {
+                        quarter
+                    };
+                    self.entries.reserve_exact(grow);
                 }
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
@@ -758,6 +774,29 @@ mod tests {
         assert_eq!(t.eu_ranges.len(), 2);
         assert!(matches!(t.eu_info(b), EuInfo::Analog { low, high } if (low, high) == (-5.0, 5.0)));
         assert!(matches!(t.eu_info(d), EuInfo::None));
+    }
+
+    /// The entries of a large AddItems take the room they need, no more; small calls
+    /// grow the table by a quarter (at least 1,024).
+    #[test]
+    fn a_large_call_reserves_its_entries_exactly() {
+        let def = |i: u32| ItemDef {
+            source_key: format!("K{i}"),
+            channel: "*".into(),
+            canonical_type: VarType::R8,
+            access_rights: 3,
+            eu: EuInfo::None,
+            constant: None,
+        };
+        let mut t = SourceTable::default();
+        for i in 0..5000 {
+            t.batch_left(5000 - i as usize);
+            t.find_or_insert(&def(i), Timestamp(0));
+        }
+        t.batch_left(0);
+        assert_eq!(t.entries.capacity(), 5000);
+        t.find_or_insert(&def(5000), Timestamp(0));
+        assert_eq!(t.entries.capacity(), 5000 + 1250);
     }
 
     #[test]

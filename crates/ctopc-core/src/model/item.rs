@@ -247,7 +247,8 @@ impl Engine {
             g.items.reserve_exact(items.len());
         }
         let mut out = Vec::with_capacity(items.len());
-        for d in items {
+        for (i, d) in items.iter().enumerate() {
+            self.sources.batch_left(items.len() - i);
             let def = match self.resolve(d) {
                 Ok(def) => def,
                 Err(e) => {
@@ -296,6 +297,7 @@ impl Engine {
             g.items.push(it);
             out.push(Ok(result));
         }
+        self.sources.batch_left(0);
         Ok(out)
     }
 
