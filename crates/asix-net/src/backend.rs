@@ -537,19 +537,23 @@ impl<S: VariableSource> AsixBackend<S> {
     fn subscribe(&mut self, now: Timestamp, subs: Vec<(SourceItem, u32)>) {
         let mut touched = Touched::new();
         let mut subscribed = Vec::with_capacity(subs.len());
+        // The slots this request reaches: grown once, by a quarter (not double: large
+        // configurations, see the engine's source table) or to exactly what a large
+        // request needs if that is more.
+        let top = subs
+            .iter()
+            .map(|(item, _)| item.key.index() as usize + 1)
+            .max();
+        if let Some(top) = top.filter(|&t| t > self.slots.capacity()) {
+            let quarter = (self.slots.len() / 4).max(1024);
+            let need = top - self.slots.len();
+            self.slots
+                .reserve_exact(if need > quarter { need } else { quarter });
+        }
         for (item, rate) in subs {
             let key = item.key;
             let i = key.index() as usize;
             if self.slots.len() <= i {
-                if self.slots.capacity() <= i {
-                    // Grow by a quarter, not double (large configurations: see the engine's
-                    // source table).
-                    self.slots.reserve_exact(
-                        (i + 1 - self.slots.len())
-                            .max(self.slots.len() / 4)
-                            .max(1024),
-                    );
-                }
                 self.slots.resize_with(i + 1, || None);
             }
             // The rates before, with the item (or a stale one) still in its slot.
