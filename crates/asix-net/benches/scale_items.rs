@@ -2,20 +2,30 @@
 //! over the in-process simulation of the synthetic database (`asix_model::synthetic`,
 //! 200,000 variables), `cargo bench -p asix-net --bench scale_items`.
 //!
-//! Std only (harness = false). A counting global allocator gives the live heap: bytes per item of 100,000 items added to an inactive group (one
-//! AddItems), of the same group made active (subscribed at the simulation, first samples
-//! in), and of the first OnDataChange of every item while it is pending. These are the
-//! server-side shares of the figures `scale-client` measures from outside under Wine
-//! (issue 16); the rest is the COM transport and Wine's heap.
+//! Std only (harness = false). A counting global allocator gives the live heap, and
+//! `/proc/self/statm` the resident memory (Linux; glibc's heap, not Wine's), per item of
+//! 100,000 items:
+//! 1. added to an inactive group (one AddItems): the engine alone;
+//! 2. the group made active (subscribed at the simulation, first samples in, the first
+//!    OnDataChange delivered), split into what the engine's calls and the backend's calls
+//!    left allocated, and the pending OnDataChange while it is under way;
+//! 3. after [`CYCLES`] update cycles at 1 s, each OnDataChange delivered (acknowledged
+//!    with `data_change_delivered`) before the next: the growth over those cycles.
+//!
+//! These are the server-side shares of the figures `scale-client` measures from outside
+//! under Wine (issue 16); the rest is the COM transport and Wine's heap.
 
 use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
 use asix_model::AsixNamespace;
 use asix_net::inproc::InProcessSim;
-use ctopc_core::model::{Engine, EngineConfig, Event, GroupParams, ItemDefinition, SetGroupState};
+use ctopc_core::model::{
+    Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SetGroupState,
+};
+use ctopc_core::model::{SourceKey, SourceRequest, Subscription};
 use ctopc_core::source::{Backend, SourceOutput};
-use ctopc_core::{Timestamp, VarType};
+use ctopc_core::{Timestamp, VarType, Vqt};
 
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
@@ -25,8 +35,18 @@ fn live() -> isize {
     s.bytes_allocated as isize - s.bytes_deallocated as isize
 }
 
+/// Resident memory of this process, bytes (0 where `/proc` is not there).
+fn rss() -> isize {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<isize>().ok())
+        .map_or(0, |pages| pages * 4096)
+}
+
 const VARIABLES: usize = 200_000;
 const ITEMS: usize = 100_000;
+/// Update cycles at 1 s after the first OnDataChange.
+const CYCLES: usize = 5;
 
 fn namespace() -> Arc<AsixNamespace> {
     let dir = std::env::temp_dir().join(format!("scale_items_{VARIABLES}"));
@@ -51,34 +71,100 @@ fn per_item(bytes: isize) -> f64 {
     bytes as f64 / ITEMS as f64
 }
 
+/// The engine and the backend stepped as the driver does, with the live heap each side's
+/// calls left behind counted apart (ownership moving between them, such as a request the
+/// backend consumes, counts where it is freed).
+struct Rig {
+    e: Engine,
+    sim: InProcessSim,
+    engine_bytes: isize,
+    backend_bytes: isize,
+}
+
+impl Rig {
+    fn engine<T>(&mut self, f: impl FnOnce(&mut Engine) -> T) -> T {
+        let b = live();
+        let r = f(&mut self.e);
+        self.engine_bytes += live() - b;
+        r
+    }
+
+    fn backend<T>(&mut self, f: impl FnOnce(&mut InProcessSim) -> T) -> T {
+        let b = live();
+        let r = f(&mut self.sim);
+        self.backend_bytes += live() - b;
+        r
+    }
+
+    fn step(&mut self, now: Timestamp, events: &mut Vec<Event>) {
+        for _ in 0..3 {
+            while let Some(r) = self.engine(|e| e.poll_source_request()) {
+                // The request is the engine's until the backend has taken it in.
+                let handed = match &r {
+                    SourceRequest::Subscribe(v) => v.capacity() * size_of::<Subscription>(),
+                    _ => 0,
+                } as isize;
+                self.engine_bytes -= handed;
+                self.backend_bytes += handed;
+                self.backend(|s| s.request(now, r));
+            }
+            let out = self.backend(|s| {
+                let mut out = SourceOutput::default();
+                s.poll(now, &mut out);
+                out
+            });
+            // The samples are the backend's output until the engine has taken them in.
+            let handed = (out.updates.capacity() * size_of::<(SourceKey, Vqt)>()) as isize;
+            self.backend_bytes -= handed;
+            self.engine_bytes += handed;
+            self.engine(|e| {
+                e.handle_source_updates(now, out.updates);
+                e.handle_timeout(now);
+                while let Some(ev) = e.poll_event() {
+                    events.push(ev);
+                }
+            });
+        }
+    }
+
+    /// Delivers the events (drops them) and acknowledges the scheduled OnDataChanges.
+    fn deliver(&mut self, now: Timestamp, g: GroupHandle, events: &mut Vec<Event>) -> usize {
+        let mut values = 0;
+        for ev in events.drain(..) {
+            if let Event::DataChange(d) = ev {
+                values += d.items.len();
+                let scheduled = d.kind.is_scheduled();
+                // The event is the engine's output until delivered.
+                self.engine(|e| {
+                    drop(d);
+                    if scheduled {
+                        e.data_change_delivered(now, g);
+                    }
+                });
+            }
+        }
+        values
+    }
+}
+
 fn main() {
     let ns = namespace();
     let mut now = Timestamp::from_filetime_parts(0, 0x01DC_0000);
-    let mut e = Engine::new(EngineConfig::default(), ns.clone());
-    let mut sim = InProcessSim::new(ns, 1, now);
-    let mut step = |e: &mut Engine, now: Timestamp, events: &mut Vec<Event>| {
-        for _ in 0..3 {
-            while let Some(r) = e.poll_source_request() {
-                sim.request(now, r);
-            }
-            let mut out = SourceOutput::default();
-            sim.poll(now, &mut out);
-            e.handle_source_updates(now, out.updates);
-            e.handle_timeout(now);
-            while let Some(ev) = e.poll_event() {
-                events.push(ev);
-            }
-        }
+    let mut rig = Rig {
+        e: Engine::new(EngineConfig::default(), ns.clone()),
+        sim: InProcessSim::new(ns, 1, now),
+        engine_bytes: 0,
+        backend_bytes: 0,
     };
-    let s = e.open_session();
+    let s = rig.e.open_session();
     let params = GroupParams {
         name: "",
         active: false,
         update_rate: 1000,
         ..Default::default()
     };
-    let g = e.add_group(now, s, &params).expect("group").group;
-    e.set_callback_connected(now, g, true).expect("connect");
+    let g = rig.e.add_group(now, s, &params).expect("group").group;
+    rig.e.set_callback_connected(now, g, true).expect("connect");
     let names: Vec<String> = (0..ITEMS).map(variable_name).collect();
     let defs: Vec<ItemDefinition> = names
         .iter()
@@ -94,40 +180,80 @@ fn main() {
     println!(
         "engine + in-process simulation, {VARIABLES} synthetic variables, {ITEMS} items, natively"
     );
-
-    let before = live();
-    let added = e.add_items(now, g, &defs).expect("add");
-    assert!(added.iter().all(Result::is_ok));
-    drop(added);
-    let mut events = Vec::new();
-    step(&mut e, now, &mut events);
-    let after_add = live();
     println!(
-        "inactive group: live {:>6.0} B/item",
-        per_item(after_add - before)
+        "sizes: Value {} B, Vqt {} B, ItemValue {} B, SourceItem {} B, \
+         Resolution<u32> {} B",
+        std::mem::size_of::<ctopc_core::Value>(),
+        std::mem::size_of::<ctopc_core::Vqt>(),
+        std::mem::size_of::<ctopc_core::model::ItemValue>(),
+        std::mem::size_of::<ctopc_core::model::SourceItem>(),
+        std::mem::size_of::<asix_net::pipeline::Resolution<u32>>(),
     );
 
+    let mut events = Vec::new();
+    let (heap0, rss0) = (live(), rss());
+    rig.engine(|e| {
+        let added = e.add_items(now, g, &defs).expect("add");
+        assert!(added.iter().all(Result::is_ok));
+    });
+    rig.step(now, &mut events);
+    assert!(events.is_empty());
+    let (heap1, rss1) = (live(), rss());
+    println!(
+        "1. inactive group item:      heap {:>6.1} B/item (engine {:.1}, backend {:.1}), \
+         resident {:>6.1} B/item",
+        per_item(heap1 - heap0),
+        per_item(rig.engine_bytes),
+        per_item(rig.backend_bytes),
+        per_item(rss1 - rss0),
+    );
+
+    (rig.engine_bytes, rig.backend_bytes) = (0, 0);
     let active = SetGroupState {
         active: Some(true),
         ..Default::default()
     };
-    e.set_group_state(now, g, &active).expect("activate");
-    step(&mut e, now, &mut events);
+    rig.engine(|e| e.set_group_state(now, g, &active).expect("activate"));
+    rig.step(now, &mut events);
     now = now.add_millis(1000);
-    step(&mut e, now, &mut events);
-    let values: usize = events
-        .iter()
-        .map(|ev| match ev {
-            Event::DataChange(d) => d.items.len(),
-            _ => 0,
-        })
-        .sum();
-    let with_events = live();
-    drop(events);
+    rig.step(now, &mut events);
+    let pending = live();
+    let values = rig.deliver(now, g, &mut events);
+    assert!(values >= ITEMS, "the first OnDataChange reports every item");
+    let (heap2, rss2) = (live(), rss());
     println!(
-        "activated: live {:>6.0} B/item more (subscription), {:>6.0} B/item more with the \
-         pending OnDataChange ({values} values)",
-        per_item(live() - after_add),
-        per_item(with_events - live()),
+        "2. active, subscribed item:  heap {:>6.1} B/item more (engine {:.1}, backend {:.1}), \
+         resident {:>6.1} B/item more; the pending OnDataChanges {:.1} B/item ({values} values)",
+        per_item(heap2 - heap1),
+        per_item(rig.engine_bytes),
+        per_item(rig.backend_bytes),
+        per_item(rss2 - rss1),
+        per_item(pending - heap2),
+    );
+
+    (rig.engine_bytes, rig.backend_bytes) = (0, 0);
+    let mut peak = 0;
+    let mut delivered = 0;
+    for _ in 0..CYCLES {
+        now = now.add_millis(1000);
+        rig.step(now, &mut events);
+        peak = peak.max(live() - heap2);
+        delivered += rig.deliver(now, g, &mut events);
+    }
+    let (heap3, rss3) = (live(), rss());
+    println!(
+        "3. after {CYCLES} cycles at 1 s:    heap {:>6.1} B/item more (engine {:.1}, backend \
+         {:.1}), resident {:>6.1} B/item more; peak while pending {:.1} B/item ({delivered} \
+         values)",
+        per_item(heap3 - heap2),
+        per_item(rig.engine_bytes),
+        per_item(rig.backend_bytes),
+        per_item(rss3 - rss2),
+        per_item(peak),
+    );
+    println!(
+        "total from AddItems to after the cycles: heap {:.1} B/item, resident {:.1} B/item",
+        per_item(heap3 - heap0),
+        per_item(rss3 - rss0),
     );
 }

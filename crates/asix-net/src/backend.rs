@@ -44,7 +44,7 @@ use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
 
 use crate::client::ItemKey;
-use crate::pipeline::{self, Resolution};
+use crate::pipeline::{self, Resolution, Treatment};
 
 /// Identifies one raw device read or write of a [`VariableSource`] (chosen by the adapter).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -147,26 +147,123 @@ impl<V> Unserved<V> {
     }
 }
 
-/// A subscribed source item, at its [`SourceKey::index`] (24 bytes).
+/// What the adapter keeps of an item's resolution: its variable with its treatment,
+/// shared with the other items treated the same way ([`AsixBackend::share`]: a plain value
+/// item costs its variable and a pointer, issue 16), or one of the [`Unserved`]
+/// resolutions.
+#[derive(Clone)]
+enum ItemRes<V> {
+    Var(V, Arc<Treatment<V>>),
+    Unserved(Arc<Res<V>>),
+}
+
+impl<V> ItemRes<V> {
+    /// The variable and its treatment, if the item has a variable.
+    fn resolved(&self) -> Option<(&V, &Treatment<V>)> {
+        match self {
+            ItemRes::Var(v, t) => Some((v, t)),
+            ItemRes::Unserved(_) => None,
+        }
+    }
+}
+
+/// The most raw samples whose room [`AsixBackend`] keeps from one poll to the next.
+const RAW_SAMPLES_KEPT: usize = 4096;
+
+/// The most distinct treatments [`AsixBackend::share`] keeps for sharing (a plant has
+/// few: a derivation and the rules of a channel).
+const SHARED_TREATMENTS: usize = 64;
+
+/// A subscribed source item, at its [`SourceKey::index`] (32 bytes with the simulation's
+/// variables).
 struct Slot<V> {
     key: SourceKey,
     /// Sampling rate asked for, ms.
     rate: u32,
     /// Resolved when subscribed.
-    r: Arc<Res<V>>,
+    r: ItemRes<V>,
 }
 
-/// A raw variable wanted by subscribed items.
+/// Keys of items, most often none or one: those inline, more in a vector of their own
+/// (16 bytes, no allocation for one item: most variables of a large subscription have
+/// exactly one, issue 16).
+#[derive(Debug, Clone, Default, PartialEq)]
+enum Keys {
+    #[default]
+    None,
+    One(SourceKey),
+    // Boxed: a thin pointer keeps `Keys` at 16 bytes (a `Vec` or boxed slice: 24).
+    #[allow(clippy::box_collection)]
+    Many(Box<Vec<SourceKey>>),
+}
+
+impl Keys {
+    fn as_slice(&self) -> &[SourceKey] {
+        match self {
+            Keys::None => &[],
+            Keys::One(k) => std::slice::from_ref(k),
+            Keys::Many(v) => v,
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.as_slice().is_empty()
+    }
+
+    fn contains(&self, k: &SourceKey) -> bool {
+        self.as_slice().contains(k)
+    }
+
+    fn push(&mut self, k: SourceKey) {
+        *self = match std::mem::take(self) {
+            Keys::None => Keys::One(k),
+            Keys::One(first) => Keys::Many(Box::new(vec![first, k])),
+            Keys::Many(mut v) => {
+                v.push(k);
+                Keys::Many(v)
+            }
+        };
+    }
+
+    /// Removes `k`: every occurrence of it, or with `first_only` the first.
+    fn remove(&mut self, k: SourceKey, first_only: bool) {
+        match self {
+            Keys::None => {}
+            Keys::One(x) => {
+                if *x == k {
+                    *self = Keys::None;
+                }
+            }
+            Keys::Many(v) => {
+                if first_only {
+                    if let Some(i) = v.iter().position(|x| *x == k) {
+                        v.swap_remove(i);
+                    }
+                } else {
+                    v.retain(|x| *x != k);
+                }
+                match v[..] {
+                    [] => *self = Keys::None,
+                    [one] => *self = Keys::One(one),
+                    _ => {}
+                }
+            }
+        }
+    }
+}
+
+/// A raw variable wanted by subscribed items (40 bytes).
+#[derive(Default)]
 struct VarState {
     /// The items reading it.
-    items: Vec<SourceKey>,
+    items: Keys,
     /// The items whose quality rules read it (control and limit variables), an item once
     /// per variable (twice while it is subscribed again).
-    rule_users: Vec<SourceKey>,
+    rule_users: Keys,
     /// Its last sample, kept only where it is read: when the source cannot
     /// [`VariableSource::peek`] (the quality rules read it), or for a rule variable (a new
     /// value or quality re-checks its users). Boxed: most variables of the simulation keep
-    /// none (56 bytes a variable instead of 96).
+    /// none.
     last: Option<Box<Vqt>>,
 }
 
@@ -184,7 +281,7 @@ struct Pending<V> {
     /// subscribed items' from their slots, the others' in `own`).
     items: Vec<SourceItem>,
     /// Reads: the resolutions made for this request, by ascending position.
-    own: Vec<(usize, Arc<Res<V>>)>,
+    own: Vec<(usize, ItemRes<V>)>,
     remaining: usize,
 }
 
@@ -236,6 +333,8 @@ pub struct AsixBackend<S: VariableSource> {
     slots: Vec<Option<Slot<S::Var>>>,
     vars: HashMap<S::Var, VarState>,
     unserved: Unserved<S::Var>,
+    /// The treatments subscribed items share ([`Self::share`]).
+    treatments: Vec<Arc<Treatment<S::Var>>>,
     /// Items subscribed since the last poll that get a sample at once (their variable was
     /// sampled already, or they have none).
     fresh: Vec<SourceKey>,
@@ -257,6 +356,7 @@ impl<S: VariableSource> AsixBackend<S> {
             slots: Vec::new(),
             vars: HashMap::new(),
             unserved: Unserved::new(),
+            treatments: Vec::new(),
             fresh: Vec::new(),
             next_raw: 0,
             parts: HashMap::new(),
@@ -284,14 +384,35 @@ impl<S: VariableSource> AsixBackend<S> {
     }
 
     /// Resolves an item through the pipeline, with the source's handles.
-    fn resolve(&self, item: &SourceItem) -> Arc<Res<S::Var>> {
+    fn resolve(&self, item: &SourceItem) -> ItemRes<S::Var> {
         let source = &self.source;
         match pipeline::resolve(&self.ns, item, |k| source.lookup(&item.channel, k)) {
-            Resolution::NotLive => Arc::clone(&self.unserved.not_live),
-            Resolution::NoVariable(Derivation::Value) => Arc::clone(&self.unserved.value),
-            Resolution::NoVariable(_) => Arc::clone(&self.unserved.derived),
-            r @ Resolution::Resolved(_) => Arc::new(r),
+            Resolution::NotLive => ItemRes::Unserved(Arc::clone(&self.unserved.not_live)),
+            Resolution::NoVariable(Derivation::Value) => {
+                ItemRes::Unserved(Arc::clone(&self.unserved.value))
+            }
+            Resolution::NoVariable(_) => ItemRes::Unserved(Arc::clone(&self.unserved.derived)),
+            Resolution::Resolved(r) => ItemRes::Var(r.key, Arc::new(r.treatment)),
         }
+    }
+
+    /// A resolution to keep: its treatment replaced by an equal one already kept, if any
+    /// (else it is kept for the next items, up to [`SHARED_TREATMENTS`] in use at once).
+    fn share(&mut self, r: ItemRes<S::Var>) -> ItemRes<S::Var> {
+        let ItemRes::Var(v, t) = r else {
+            return r;
+        };
+        if let Some(same) = self.treatments.iter().find(|x| ***x == *t) {
+            return ItemRes::Var(v, Arc::clone(same));
+        }
+        if self.treatments.len() == SHARED_TREATMENTS {
+            // Those no item uses any more make room.
+            self.treatments.retain(|x| Arc::strong_count(x) > 1);
+        }
+        if self.treatments.len() < SHARED_TREATMENTS {
+            self.treatments.push(Arc::clone(&t));
+        }
+        ItemRes::Var(v, t)
     }
 
     /// A variable's current raw VQT: the source's, else the last sample.
@@ -303,17 +424,15 @@ impl<S: VariableSource> AsixBackend<S> {
 
     /// An item's VQT from a raw sample of its variable (quality rules over the current
     /// values of its rule variables, then the derivation).
-    fn item_vqt(&self, r: &pipeline::Resolved<S::Var>, raw: Vqt) -> Vqt {
-        r.sample(raw, |v| self.current(v))
+    fn item_vqt(&self, t: &Treatment<S::Var>, raw: Vqt) -> Vqt {
+        t.sample(raw, |v| self.current(v))
     }
 
     /// A subscribed item's current VQT; `None` before its variable has one.
     fn current_vqt(&self, k: SourceKey) -> Option<Vqt> {
-        let Resolution::Resolved(r) = &*self.slot_of(k)?.r else {
-            return None;
-        };
-        let raw = self.current(&r.key)?;
-        Some(self.item_vqt(r, raw))
+        let (v, t) = self.slot_of(k)?.r.resolved()?;
+        let raw = self.current(v)?;
+        Some(self.item_vqt(t, raw))
     }
 
     /// The rate a variable is subscribed at: the fastest of the items reading it or whose
@@ -321,8 +440,9 @@ impl<S: VariableSource> AsixBackend<S> {
     fn rate_of(&self, v: &S::Var) -> Option<u32> {
         let st = self.vars.get(v)?;
         st.items
+            .as_slice()
             .iter()
-            .chain(&st.rule_users)
+            .chain(st.rule_users.as_slice())
             .filter_map(|k| self.slot_of(*k))
             .map(|s| s.rate)
             .min()
@@ -338,47 +458,42 @@ impl<S: VariableSource> AsixBackend<S> {
     }
 
     /// [`Self::touch`] for an item's variable and its rule variables.
-    fn touch_item(&self, touched: &mut Touched<S::Var>, r: &Res<S::Var>) {
-        if let Resolution::Resolved(r) = r {
-            self.touch(touched, &r.key);
-            for v in r.rule_variables() {
+    fn touch_item(&self, touched: &mut Touched<S::Var>, r: &ItemRes<S::Var>) {
+        if let Some((var, t)) = r.resolved() {
+            self.touch(touched, var);
+            for v in t.rule_variables() {
                 self.touch(touched, v);
             }
         }
     }
 
     /// Adds item `k` to the fan-out of its variable and to the users of its rule variables.
-    fn attach(&mut self, k: SourceKey, r: &Res<S::Var>) {
-        let Resolution::Resolved(r) = r else {
+    fn attach(&mut self, k: SourceKey, r: &ItemRes<S::Var>) {
+        let Some((var, t)) = r.resolved() else {
             return;
         };
-        let st = self.vars.entry(r.key.clone()).or_insert_with(VarState::new);
+        let st = self.vars.entry(var.clone()).or_default();
         if !st.items.contains(&k) {
-            // Most variables have one item: room for exactly one, not the four a first
-            // push makes room for (100,000 subscribed variables, issue 16).
-            st.items.reserve_exact(1);
             st.items.push(k);
         }
-        for v in r.rule_variables() {
-            let st = self.vars.entry(v.clone()).or_insert_with(VarState::new);
+        for v in t.rule_variables() {
+            let st = self.vars.entry(v.clone()).or_default();
             st.rule_users.push(k);
         }
     }
 
     /// Takes item `k` out of the fan-out of its variable and one use out of its rule
     /// variables. (A variable nothing wants any more goes in [`Self::apply_touched`].)
-    fn detach(&mut self, k: SourceKey, r: &Res<S::Var>) {
-        let Resolution::Resolved(r) = r else {
+    fn detach(&mut self, k: SourceKey, r: &ItemRes<S::Var>) {
+        let Some((var, t)) = r.resolved() else {
             return;
         };
-        if let Some(st) = self.vars.get_mut(&r.key) {
-            st.items.retain(|x| *x != k);
+        if let Some(st) = self.vars.get_mut(var) {
+            st.items.remove(k, false);
         }
-        for v in r.rule_variables() {
+        for v in t.rule_variables() {
             if let Some(st) = self.vars.get_mut(v) {
-                if let Some(i) = st.rule_users.iter().position(|x| *x == k) {
-                    st.rule_users.swap_remove(i);
-                }
+                st.rule_users.remove(k, true);
             }
         }
     }
@@ -422,23 +537,27 @@ impl<S: VariableSource> AsixBackend<S> {
     fn subscribe(&mut self, now: Timestamp, subs: Vec<(SourceItem, u32)>) {
         let mut touched = Touched::new();
         let mut subscribed = Vec::with_capacity(subs.len());
+        // The slots this request reaches: grown once, by a quarter (not double: large
+        // configurations, see the engine's source table) or to exactly what a large
+        // request needs if that is more.
+        let top = subs
+            .iter()
+            .map(|(item, _)| item.key.index() as usize + 1)
+            .max();
+        if let Some(top) = top.filter(|&t| t > self.slots.capacity()) {
+            let quarter = (self.slots.len() / 4).max(1024);
+            let need = top - self.slots.len();
+            self.slots
+                .reserve_exact(if need > quarter { need } else { quarter });
+        }
         for (item, rate) in subs {
             let key = item.key;
             let i = key.index() as usize;
             if self.slots.len() <= i {
-                if self.slots.capacity() <= i {
-                    // Grow by a quarter, not double (large configurations: see the engine's
-                    // source table).
-                    self.slots.reserve_exact(
-                        (i + 1 - self.slots.len())
-                            .max(self.slots.len() / 4)
-                            .max(1024),
-                    );
-                }
                 self.slots.resize_with(i + 1, || None);
             }
             // The rates before, with the item (or a stale one) still in its slot.
-            let existing = self.slots[i].as_ref().map(|s| (s.key, Arc::clone(&s.r)));
+            let existing = self.slots[i].as_ref().map(|s| (s.key, s.r.clone()));
             if let Some((_, r)) = &existing {
                 self.touch_item(&mut touched, r);
             }
@@ -456,6 +575,7 @@ impl<S: VariableSource> AsixBackend<S> {
                         self.detach(old_key, &old_r);
                     }
                     let r = self.resolve(&item);
+                    let r = self.share(r);
                     self.touch_item(&mut touched, &r);
                     self.attach(key, &r);
                     self.slots[i] = Some(Slot { key, rate, r });
@@ -465,8 +585,8 @@ impl<S: VariableSource> AsixBackend<S> {
         }
         let new = self.apply_touched(now, touched);
         for k in subscribed {
-            let at_once = match self.slot_of(k).map(|s| &*s.r) {
-                Some(Resolution::Resolved(r)) => !new.contains(&r.key),
+            let at_once = match self.slot_of(k).map(|s| &s.r) {
+                Some(ItemRes::Var(v, _)) => !new.contains(v),
                 Some(_) => true,
                 None => false,
             };
@@ -482,7 +602,7 @@ impl<S: VariableSource> AsixBackend<S> {
             let Some(s) = self.slot_of(k) else {
                 continue;
             };
-            let r = Arc::clone(&s.r);
+            let r = s.r.clone();
             self.touch_item(&mut touched, &r);
             if let Some(Some(s)) = self.slots.get_mut(k.index() as usize) {
                 s.rate = rate;
@@ -498,7 +618,7 @@ impl<S: VariableSource> AsixBackend<S> {
                 continue;
             };
             // The rates before, with the item still in its slot.
-            let r = Arc::clone(&s.r);
+            let r = s.r.clone();
             self.touch_item(&mut touched, &r);
             self.slots[k.index() as usize] = None;
             self.detach(k, &r);
@@ -536,20 +656,20 @@ impl<S: VariableSource> AsixBackend<S> {
     fn read_vqt(
         &self,
         items: &[SourceItem],
-        own: &[(usize, Arc<Res<S::Var>>)],
+        own: &[(usize, ItemRes<S::Var>)],
         i: usize,
         raw: Vqt,
     ) -> Result<Vqt, OpcError> {
         let r = match own.binary_search_by_key(&i, |(j, _)| *j) {
-            Ok(j) => &*own[j].1,
+            Ok(j) => &own[j].1,
             Err(_) => {
                 let key = items.get(i).ok_or(OpcError::Fail)?.key;
-                &*self.slot_of(key).ok_or(OpcError::ItemUnknown)?.r
+                &self.slot_of(key).ok_or(OpcError::ItemUnknown)?.r
             }
         };
-        Ok(match r {
-            Resolution::Resolved(r) => self.item_vqt(r, raw),
-            Resolution::NotLive | Resolution::NoVariable(_) => raw,
+        Ok(match r.resolved() {
+            Some((_, t)) => self.item_vqt(t, raw),
+            None => raw,
         })
     }
 
@@ -648,24 +768,22 @@ impl<S: VariableSource> AsixBackend<S> {
         let mut by_part: Parts<S::Part, S::Var> = Vec::new();
         for (i, item) in items.iter().enumerate() {
             // The subscribed item's resolution, else one made for this request.
-            let own;
-            let r = match self.slot_of(item.key) {
-                Some(s) => &*s.r,
+            let var = match self.slot_of(item.key) {
+                Some(s) => s.r.resolved().map(|(v, _)| v.clone()),
                 None => {
-                    own = self.resolve(item);
-                    p.own.push((i, Arc::clone(&own)));
-                    &*own
+                    let own = self.resolve(item);
+                    let var = own.resolved().map(|(v, _)| v.clone());
+                    p.own.push((i, own));
+                    var
                 }
             };
-            match r {
-                Resolution::Resolved(x) => {
-                    let e = part_entry(&mut by_part, self.source.part(&x.key));
+            match var {
+                Some(var) => {
+                    let e = part_entry(&mut by_part, self.source.part(&var));
                     e.1.push(i);
-                    e.2.push(x.key.clone());
+                    e.2.push(var);
                 }
-                Resolution::NotLive | Resolution::NoVariable(_) => {
-                    p.refuse(i, Err(OpcError::ItemUnknown));
-                }
+                None => p.refuse(i, Err(OpcError::ItemUnknown)),
             }
         }
         p.items = items;
@@ -691,31 +809,33 @@ impl<S: VariableSource> AsixBackend<S> {
         for (i, (item, v)) in items.enumerate() {
             let own;
             let r = match self.slot_of(item.key) {
-                Some(s) => &*s.r,
+                Some(s) => &s.r,
                 None => {
                     own = self.resolve(&item);
-                    &*own
+                    &own
                 }
             };
             let checked = match r {
-                Resolution::NotLive => Err(OpcError::ItemUnknown),
-                Resolution::NoVariable(d) => {
-                    pipeline::check_write(d, false, &v.value).and(Err(OpcError::ItemUnknown))
-                }
                 // Derived items cannot be written; values must be integers or reals;
                 // read-only variables are refused here already.
-                Resolution::Resolved(x) => x.check_write(&v.value).map(|()| x),
+                ItemRes::Var(var, t) => t.check_write(&v.value).map(|()| var),
+                ItemRes::Unserved(u) => match &**u {
+                    Resolution::NoVariable(d) => {
+                        pipeline::check_write(d, false, &v.value).and(Err(OpcError::ItemUnknown))
+                    }
+                    Resolution::NotLive | Resolution::Resolved(_) => Err(OpcError::ItemUnknown),
+                },
             };
             match checked {
-                Ok(x) => {
+                Ok(var) => {
                     // Simple and extended writes go in requests of their own.
                     let part = (
-                        self.source.part(&x.key),
+                        self.source.part(var),
                         v.quality.is_some() || v.timestamp.is_some(),
                     );
                     let e = part_entry(&mut by_part, part);
                     e.1.push(i);
-                    e.2.push((x.key.clone(), v));
+                    e.2.push((var.clone(), v));
                 }
                 Err(e) => p.refuse(i, Err(e)),
             }
@@ -735,9 +855,9 @@ impl<S: VariableSource> AsixBackend<S> {
             // A late sample of a variable let go.
             return;
         };
-        for &k in &st.items {
-            if let Some(Resolution::Resolved(r)) = self.slot_of(k).map(|s| &*s.r) {
-                out.updates.push((k, self.item_vqt(r, vqt.clone())));
+        for &k in st.items.as_slice() {
+            if let Some((_, t)) = self.slot_of(k).and_then(|s| s.r.resolved()) {
+                out.updates.push((k, self.item_vqt(t, vqt.clone())));
             }
         }
         // Only a new value or quality of a rule variable can change the rules' outcome.
@@ -745,7 +865,7 @@ impl<S: VariableSource> AsixBackend<S> {
         let users = if st.rule_users.is_empty() || st.last.as_deref().is_some_and(same) {
             Vec::new()
         } else {
-            st.rule_users.clone()
+            st.rule_users.as_slice().to_vec()
         };
         let before: Vec<(SourceKey, Quality)> = users
             .into_iter()
@@ -781,13 +901,13 @@ impl<S: VariableSource> AsixBackend<S> {
             let Some(s) = self.slot_of(k) else {
                 continue;
             };
-            match &*s.r {
-                Resolution::Resolved(r) => {
-                    if let Some(raw) = self.current(&r.key) {
-                        out.updates.push((k, self.item_vqt(r, raw)));
+            match &s.r {
+                ItemRes::Var(v, t) => {
+                    if let Some(raw) = self.current(v) {
+                        out.updates.push((k, self.item_vqt(t, raw)));
                     }
                 }
-                Resolution::NotLive | Resolution::NoVariable(_) => out.updates.push((
+                ItemRes::Unserved(_) => out.updates.push((
                     k,
                     Vqt {
                         value: Value::Empty,
@@ -796,16 +916,6 @@ impl<S: VariableSource> AsixBackend<S> {
                     },
                 )),
             }
-        }
-    }
-}
-
-impl VarState {
-    fn new() -> Self {
-        VarState {
-            items: Vec::new(),
-            rule_users: Vec::new(),
-            last: None,
         }
     }
 }
@@ -845,6 +955,12 @@ impl<S: VariableSource> Backend for AsixBackend<S> {
         }
         for (id, r) in raw.writes.drain(..) {
             self.answer_write(id, r);
+        }
+        // Kept for the next poll only while small: the samples of a large subscription
+        // would otherwise hold a buffer of every variable's last sample between polls (56
+        // bytes a variable, issue 16); a poll of many samples allocates it anew.
+        if raw.samples.capacity() > RAW_SAMPLES_KEPT {
+            raw.samples = Vec::new();
         }
         self.raw = raw;
         out.read_results.append(&mut self.ready.read_results);
@@ -1279,5 +1395,47 @@ mod tests {
                 ]
             )]
         );
+    }
+
+    /// Items treated the same way (here two control variables: no limits, no control
+    /// variable of their own, read-only) share one treatment, so that a plain item costs
+    /// its slot (issue 16); an item treated otherwise has its own.
+    #[test]
+    fn items_treated_alike_share_their_treatment() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_K001", "KW_K002", "KW_A110"]);
+        subscribe(&mut b, &[(&it[0], 1000), (&it[1], 1000), (&it[2], 1000)]);
+        let treatment = |i: &SourceItem| match &b.slot_of(i.key).expect("subscribed").r {
+            ItemRes::Var(_, t) => Arc::clone(t),
+            ItemRes::Unserved(_) => panic!("{} has a variable", i.item_id),
+        };
+        assert!(Arc::ptr_eq(&treatment(&it[0]), &treatment(&it[1])));
+        assert!(!Arc::ptr_eq(&treatment(&it[0]), &treatment(&it[2])));
+        assert_eq!(b.treatments.len(), 2);
+    }
+
+    /// The item lists of a variable: none and one inline, more in a vector, back to one
+    /// and none as items go; `first_only` takes one use of a rule user away.
+    #[test]
+    fn item_keys_go_inline_and_back() {
+        let it = items(&ns(), &["KW_K001", "KW_K002"]);
+        let (a, b) = (it[0].key, it[1].key);
+        assert_ne!(a, b);
+        let mut k = Keys::default();
+        assert!(k.is_empty());
+        k.push(a);
+        assert_eq!(k, Keys::One(a));
+        k.push(b);
+        k.push(a);
+        assert_eq!(k.as_slice(), [a, b, a]);
+        k.remove(a, true);
+        assert_eq!(k.as_slice(), [a, b]);
+        k.remove(b, false);
+        assert_eq!(k, Keys::One(a));
+        k.push(a);
+        k.remove(a, false);
+        assert_eq!(k, Keys::None);
+        assert_eq!(std::mem::size_of::<Keys>(), 16);
+        assert_eq!(std::mem::size_of::<VarState>(), 40);
     }
 }

@@ -39,6 +39,16 @@ pub const CHANNEL_ATTRIBUTE: &str = "Channel";
 pub struct Resolved<V> {
     /// The asix variable.
     pub key: V,
+    /// What is done with the variable's samples and with writes. Apart from the key,
+    /// because items on different variables mostly share it (a plain value item of a
+    /// channel without rules): the adapter keeps one of each kind, not one per item.
+    pub treatment: Treatment<V>,
+}
+
+/// What the pipeline does with an item's samples and writes, everything of a
+/// [`Resolved`] item but its variable.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Treatment<V> {
     /// How the item's value derives from the variable's.
     pub derivation: Derivation,
     /// What the quality rules read of the variable's database definition (limits,
@@ -162,22 +172,44 @@ pub fn resolve_id<V>(
     };
     Resolution::Resolved(Resolved {
         key,
-        derivation: live.derivation,
-        rule_def: live
-            .definition
-            .as_ref()
-            .filter(|_| rules.check_limits || rules.check_control_variables)
-            .map(RuleDef::of)
-            .filter(|d| !d.is_empty())
-            .map(Box::new),
-        read_only: live.definition.as_ref().is_some_and(|d| !d.writable),
-        rules,
-        control,
-        limits,
+        treatment: Treatment {
+            derivation: live.derivation,
+            rule_def: live
+                .definition
+                .as_ref()
+                .filter(|_| rules.check_limits || rules.check_control_variables)
+                .map(RuleDef::of)
+                .filter(|d| !d.is_empty())
+                .map(Box::new),
+            read_only: live.definition.as_ref().is_some_and(|d| !d.writable),
+            rules,
+            control,
+            limits,
+        },
     })
 }
 
 impl<V> Resolved<V> {
+    /// See [`Treatment::rule_variables`].
+    pub fn rule_variables(&self) -> Vec<&V>
+    where
+        V: PartialEq,
+    {
+        self.treatment.rule_variables()
+    }
+
+    /// See [`Treatment::sample`].
+    pub fn sample(&self, raw: Vqt, current: impl Fn(&V) -> Option<Vqt>) -> Vqt {
+        self.treatment.sample(raw, current)
+    }
+
+    /// See [`Treatment::check_write`].
+    pub fn check_write(&self, value: &Value) -> Result<(), OpcError> {
+        self.treatment.check_write(value)
+    }
+}
+
+impl<V> Treatment<V> {
     /// The variables the item's quality rules read (control and limit variables), each
     /// once.
     pub fn rule_variables(&self) -> Vec<&V>
@@ -333,12 +365,12 @@ mod tests {
         let f = furnace(Quality::GOOD, Quality::GOOD);
         let r = resolved(f.resolve(&ns(BOTH), "KW_A100"));
         assert_eq!(r.key, "KW_A100");
-        assert_eq!(r.control.as_deref(), Some("KW_K002"));
-        let limits: Vec<&str> = r.limits.iter().map(|(n, _)| &**n).collect();
+        assert_eq!(r.treatment.control.as_deref(), Some("KW_K002"));
+        let limits: Vec<&str> = r.treatment.limits.iter().map(|(n, _)| &**n).collect();
         assert_eq!(limits, ["KW_L001", "KW_L002"]);
         assert_eq!(r.rule_variables().len(), 3);
         let r = resolved(f.resolve(&ns(""), "KW_A100"));
-        assert_eq!((r.control, r.limits.len()), (None, 0));
+        assert_eq!((r.treatment.control, r.treatment.limits.len()), (None, 0));
         assert_eq!(
             f.resolve(&ns(BOTH), "no such item at all!"),
             Resolution::NotLive

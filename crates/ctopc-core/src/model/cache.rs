@@ -9,7 +9,7 @@ use std::sync::Arc;
 use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
 use super::util::Interner;
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
-use crate::{Quality, Timestamp, Value, VarType, Vqt};
+use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
 /// "Never refreshed by the source."
 pub(crate) const NEVER: Timestamp = Timestamp(i64::MIN);
@@ -134,11 +134,13 @@ pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// One source item in the cache (96 bytes; its key string is the only other allocation,
-/// shared with every [`SourceItem`] sent to the data source).
+/// One source item in the cache (88 bytes; its key is in [`SourceTable`]'s key text, no
+/// allocation of its own).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
-    pub key: Arc<str>,
+    /// The key: its start and length in `SourceTable::keys`.
+    key_at: u32,
+    key_len: u32,
     pub value: CachedValue,
     pub timestamp: Timestamp,
     /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
@@ -223,10 +225,20 @@ impl SourceEntry {
     }
 }
 
+/// The keys of the cache's entries one after another in one string, so that a key costs
+/// its bytes and no allocation (issue 16). A freed entry's key is garbage until garbage is
+/// most of the text; then the text is rebuilt from the live entries' keys.
+#[derive(Default)]
+struct KeyText {
+    text: String,
+    garbage: usize,
+}
+
 /// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
 #[derive(Default)]
 pub(crate) struct SourceTable {
     pub entries: Vec<SourceEntry>,
+    keys: KeyText,
     free: Vec<u32>,
     /// (channel, source key) -> entry index.
     index: SourceIndex,
@@ -244,6 +256,9 @@ pub(crate) struct SourceTable {
     /// from the configuration, not from clients.
     eu_ranges: Vec<(f64, f64)>,
     eu_range_ids: HashMap<(u64, u64), u32>,
+    /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
+    /// that many when the entries must grow, rather than a quarter more.
+    batch_left: usize,
 }
 
 impl SourceTable {
@@ -251,17 +266,63 @@ impl SourceTable {
         self.live
     }
 
-    /// The entry for `def`, created if needed (constant items get their value now).
-    pub fn find_or_insert(&mut self, def: &ItemDef, now: Timestamp) -> u32 {
+    /// Says how many items of an AddItems call are left, this one included (0 after the
+    /// call): at most that many new entries are coming.
+    pub fn batch_left(&mut self, n: usize) {
+        self.batch_left = n;
+    }
+
+    /// An entry's key.
+    pub fn key(&self, idx: u32) -> &str {
+        let e = &self.entries[idx as usize];
+        Self::key_in(&self.keys.text, e)
+    }
+
+    fn key_in<'a>(text: &'a str, e: &SourceEntry) -> &'a str {
+        let at = e.key_at as usize;
+        text.get(at..at + e.key_len as usize).unwrap_or("")
+    }
+
+    /// Appends a key to the key text: its start, or `None` when the text would pass 4 GiB
+    /// even without its garbage.
+    fn add_key(&mut self, key: &str) -> Option<u32> {
+        let fits = |text: usize| u32::try_from(text + key.len()).is_ok();
+        if !fits(self.keys.text.len()) {
+            self.compact_keys();
+        }
+        if !fits(self.keys.text.len()) {
+            return None;
+        }
+        let at = self.keys.text.len() as u32;
+        self.keys.text.push_str(key);
+        Some(at)
+    }
+
+    /// Rebuilds the key text from the live entries' keys.
+    fn compact_keys(&mut self) {
+        let live = self.keys.text.len() - self.keys.garbage;
+        let mut text = String::with_capacity(live);
+        for e in self.entries.iter_mut().filter(|e| e.flags & LIVE != 0) {
+            let key = Self::key_in(&self.keys.text, e);
+            e.key_at = text.len() as u32;
+            text.push_str(key);
+        }
+        self.keys = KeyText { text, garbage: 0 };
+    }
+
+    /// The entry for `def`, created if needed (constant items get their value now);
+    /// E_OUTOFMEMORY when the cache's keys would pass 4 GiB.
+    pub fn find_or_insert(&mut self, def: &ItemDef, now: Timestamp) -> Result<u32, OpcError> {
         let channel = self.paths.intern(&def.channel);
         let hash = key_hash(channel, &def.source_key);
-        let entries = &self.entries;
+        let (entries, text) = (&self.entries, &self.keys.text);
         if let Some(idx) = self.index.find(hash, |i| {
             let e = &entries[i as usize];
-            e.key_hash == hash && e.channel == channel && *e.key == *def.source_key
+            e.key_hash == hash && e.channel == channel && Self::key_in(text, e) == def.source_key
         }) {
-            return idx;
+            return Ok(idx);
         }
+        let key_at = self.add_key(&def.source_key).ok_or(OpcError::OutOfMemory)?;
         let (value, quality, refreshed_at, mut flags) = match &def.constant {
             Some(v) => (
                 CachedValue::from_value(v.clone()),
@@ -288,7 +349,8 @@ impl SourceTable {
             EuInfo::None => 0,
         };
         let entry = SourceEntry {
-            key: def.source_key.as_str().into(),
+            key_at,
+            key_len: def.source_key.len() as u32,
             value,
             timestamp: now,
             refreshed_at,
@@ -318,9 +380,16 @@ impl SourceTable {
             None => {
                 if self.entries.len() == self.entries.capacity() {
                     // Grow by a quarter, not double: the entries are most of the memory of
-                    // a large configuration, and doubling would leave up to half unused.
-                    self.entries
-                        .reserve_exact((self.entries.len() / 4).max(1024));
+                    // a large configuration, and doubling would leave up to half unused;
+                    // by the rest of a large AddItems at once, so that the entries of one
+                    // large call take what they need and no more (issue 16).
+                    let quarter = (self.entries.len() / 4).max(1024);
+                    let grow = if self.batch_left >= quarter {
+                        self.batch_left
+                    } else {
+                        quarter
+                    };
+                    self.entries.reserve_exact(grow);
                 }
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
@@ -333,7 +402,7 @@ impl SourceTable {
         self.index
             .insert(hash, idx, |i| entries[i as usize].key_hash);
         self.live += 1;
-        idx
+        Ok(idx)
     }
 
     fn intern_range(&mut self, low: f64, high: f64) -> u32 {
@@ -369,7 +438,7 @@ impl SourceTable {
         SourceItem {
             key: SourceKey::new(idx, e.generation),
             channel: self.paths.get(e.channel).clone(),
-            item_id: Arc::clone(&e.key),
+            item_id: Arc::from(Self::key_in(&self.keys.text, e)),
             canonical_type: e.canonical,
         }
     }
@@ -574,13 +643,17 @@ impl SourceTable {
         }
         let e = &mut self.entries[idx as usize];
         self.index.remove(e.key_hash, idx);
-        e.key = Arc::from("");
+        self.keys.garbage += e.key_len as usize;
+        e.key_len = 0;
         e.value = CachedValue::EMPTY;
         e.set_rates(RateSet::Empty);
         e.flags = 0;
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
         self.live -= 1;
+        if self.keys.garbage > 4096 && self.keys.garbage > self.keys.text.len() / 2 {
+            self.compact_keys();
+        }
     }
 }
 
@@ -683,7 +756,7 @@ mod tests {
             eu: EuInfo::None,
             constant: None,
         };
-        let i = t.find_or_insert(&def, Timestamp(0));
+        let i = t.find_or_insert(&def, Timestamp(0)).unwrap();
         assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
         t.add_rate(i, 5000);
         t.add_rate(i, 1000);
@@ -714,37 +787,45 @@ mod tests {
             eu,
             constant: None,
         };
-        let a = t.find_or_insert(
-            &def(
-                "A",
-                EuInfo::Analog {
-                    low: 0.0,
-                    high: 100.0,
-                },
-            ),
-            Timestamp(0),
-        );
-        let b = t.find_or_insert(
-            &def(
-                "B",
-                EuInfo::Analog {
-                    low: -5.0,
-                    high: 5.0,
-                },
-            ),
-            Timestamp(0),
-        );
-        let c = t.find_or_insert(
-            &def(
-                "C",
-                EuInfo::Analog {
-                    low: 0.0,
-                    high: 100.0,
-                },
-            ),
-            Timestamp(0),
-        );
-        let d = t.find_or_insert(&def("D", EuInfo::None), Timestamp(0));
+        let a = t
+            .find_or_insert(
+                &def(
+                    "A",
+                    EuInfo::Analog {
+                        low: 0.0,
+                        high: 100.0,
+                    },
+                ),
+                Timestamp(0),
+            )
+            .unwrap();
+        let b = t
+            .find_or_insert(
+                &def(
+                    "B",
+                    EuInfo::Analog {
+                        low: -5.0,
+                        high: 5.0,
+                    },
+                ),
+                Timestamp(0),
+            )
+            .unwrap();
+        let c = t
+            .find_or_insert(
+                &def(
+                    "C",
+                    EuInfo::Analog {
+                        low: 0.0,
+                        high: 100.0,
+                    },
+                ),
+                Timestamp(0),
+            )
+            .unwrap();
+        let d = t
+            .find_or_insert(&def("D", EuInfo::None), Timestamp(0))
+            .unwrap();
         let range = |i: u32| t.analog_range(&t.entries[i as usize]);
         assert_eq!(
             (range(a), range(b), range(c), range(d)),
@@ -760,10 +841,72 @@ mod tests {
         assert!(matches!(t.eu_info(d), EuInfo::None));
     }
 
+    /// The entries of a large AddItems take the room they need, no more; small calls
+    /// grow the table by a quarter (at least 1,024).
+    #[test]
+    fn a_large_call_reserves_its_entries_exactly() {
+        let def = |i: u32| ItemDef {
+            source_key: format!("K{i}"),
+            channel: "*".into(),
+            canonical_type: VarType::R8,
+            access_rights: 3,
+            eu: EuInfo::None,
+            constant: None,
+        };
+        let mut t = SourceTable::default();
+        for i in 0..5000 {
+            t.batch_left(5000 - i as usize);
+            t.find_or_insert(&def(i), Timestamp(0)).unwrap();
+        }
+        t.batch_left(0);
+        assert_eq!(t.entries.capacity(), 5000);
+        t.find_or_insert(&def(5000), Timestamp(0)).unwrap();
+        assert_eq!(t.entries.capacity(), 5000 + 1250);
+    }
+
+    /// The keys live in one text; freed keys are dropped from it when they are most of
+    /// it, and the live entries keep their keys and are found by them.
+    #[test]
+    fn keys_survive_the_compaction_of_the_key_text() {
+        let def = |i: u32| ItemDef {
+            source_key: format!("KEY_{i:06}"),
+            channel: "*".into(),
+            canonical_type: VarType::R8,
+            access_rights: 3,
+            eu: EuInfo::None,
+            constant: None,
+        };
+        let mut t = SourceTable::default();
+        let idx: Vec<u32> = (0..2000)
+            .map(|i| t.find_or_insert(&def(i), Timestamp(0)).unwrap())
+            .collect();
+        for &i in &idx {
+            t.add_ref(i);
+        }
+        assert_eq!(t.keys.text.len(), 2000 * 10);
+        for &i in idx.iter().filter(|&&i| i % 7 != 0) {
+            t.release(i);
+        }
+        t.flush(&mut VecDeque::new());
+        let text = t.keys.text.len();
+        assert!(text < 2000 * 10, "compacted");
+        assert!(t.keys.garbage <= text / 2);
+        assert_eq!(text - t.keys.garbage, 286 * 10);
+        for (n, &i) in idx.iter().enumerate().filter(|(_, &i)| i % 7 == 0) {
+            assert_eq!(t.key(i), format!("KEY_{n:06}"));
+            assert_eq!(t.find_or_insert(&def(n as u32), Timestamp(0)), Ok(i));
+            assert_eq!(&*t.source_item(i).item_id, t.key(i));
+        }
+        // A freed slot reused: the new key is appended, the old one is garbage.
+        let j = t.find_or_insert(&def(9999), Timestamp(0)).unwrap();
+        assert_eq!(t.key(j), "KEY_009999");
+        assert_eq!(t.keys.text.len(), text + 10);
+    }
+
     #[test]
     fn entries_stay_small() {
         assert!(
-            std::mem::size_of::<SourceEntry>() <= 96,
+            std::mem::size_of::<SourceEntry>() <= 88,
             "{}",
             std::mem::size_of::<SourceEntry>()
         );

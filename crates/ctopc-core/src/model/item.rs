@@ -247,7 +247,8 @@ impl Engine {
             g.items.reserve_exact(items.len());
         }
         let mut out = Vec::with_capacity(items.len());
-        for d in items {
+        for (i, d) in items.iter().enumerate() {
+            self.sources.batch_left(items.len() - i);
             let def = match self.resolve(d) {
                 Ok(def) => def,
                 Err(e) => {
@@ -255,10 +256,16 @@ impl Engine {
                     continue;
                 }
             };
-            let src = self.sources.find_or_insert(&def, now);
+            let src = match self.sources.find_or_insert(&def, now) {
+                Ok(src) => src,
+                Err(e) => {
+                    out.push(Err(e));
+                    continue;
+                }
+            };
             self.sources.add_ref(src);
             let path = self.sources.paths.intern(d.access_path);
-            let (name, alias) = if *self.sources.entries[src as usize].key == *d.item_id {
+            let (name, alias) = if self.sources.key(src) == d.item_id {
                 (path, 0)
             } else {
                 (self.names.acquire(d.item_id, path), ALIAS)
@@ -296,6 +303,7 @@ impl Engine {
             g.items.push(it);
             out.push(Ok(result));
         }
+        self.sources.batch_left(0);
         Ok(out)
     }
 
@@ -460,7 +468,7 @@ impl Engine {
                     let (id, path) = self.names.get(it.name);
                     (id.to_string(), path)
                 } else {
-                    (e.key.to_string(), it.name)
+                    (self.sources.key(it.source).to_string(), it.name)
                 };
                 ItemAttributes {
                     access_path: self.sources.paths.get(path).to_string(),
@@ -493,7 +501,7 @@ impl Engine {
                     if it.flags & ALIAS != 0 {
                         self.names.get(it.name).0.to_string()
                     } else {
-                        self.sources.entries[it.source as usize].key.to_string()
+                        self.sources.key(it.source).to_string()
                     }
                 })
             })

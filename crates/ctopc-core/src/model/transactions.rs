@@ -847,12 +847,14 @@ impl Engine {
         };
         match def {
             Err(e) => slot.out = SlotOut::Err(e),
-            Ok(def) => {
-                let src = self.sources.find_or_insert(&def, now);
-                self.sources.add_ref(src);
-                slot.source = src;
-                slot.source_gen = self.sources.entries[src as usize].generation;
-            }
+            Ok(def) => match self.sources.find_or_insert(&def, now) {
+                Err(e) => slot.out = SlotOut::Err(e),
+                Ok(src) => {
+                    self.sources.add_ref(src);
+                    slot.source = src;
+                    slot.source_gen = self.sources.entries[src as usize].generation;
+                }
+            },
         }
         slot
     }
