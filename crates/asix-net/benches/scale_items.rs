@@ -1,6 +1,7 @@
 //! What one group of many items costs the server natively (no COM, no Wine): the engine
 //! over the in-process simulation of the synthetic database (`asix_model::synthetic`,
-//! 200,000 variables), `cargo bench -p asix-net --bench scale_items`.
+//! 200,000 variables; `SCALE_ITEMS_VARIABLES=N` for another size), `cargo bench -p asix-net
+//! --bench scale_items`.
 //!
 //! Std only (harness = false). A counting global allocator gives the live heap, and
 //! `/proc/self/statm` the resident memory (Linux; glibc's heap, not Wine's), per item of
@@ -43,17 +44,23 @@ fn rss() -> isize {
         .map_or(0, |pages| pages * 4096)
 }
 
-const VARIABLES: usize = 200_000;
+/// The synthetic database's size (`SCALE_ITEMS_VARIABLES` overrides it).
+fn variables() -> usize {
+    std::env::var("SCALE_ITEMS_VARIABLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200_000)
+}
 const ITEMS: usize = 100_000;
 /// Update cycles at 1 s after the first OnDataChange.
 const CYCLES: usize = 5;
 
 fn namespace() -> Arc<AsixNamespace> {
-    let dir = std::env::temp_dir().join(format!("scale_items_{VARIABLES}"));
+    let dir = std::env::temp_dir().join(format!("scale_items_{}", variables()));
     let zez = dir.join("synthetic.zez");
     if !zez.exists() {
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let g = synthetic_database(VARIABLES);
+        let g = synthetic_database(variables());
         std::fs::write(dir.join("atrybuty.csv"), g.csv).expect("csv");
         std::fs::write(&zez, g.zez).expect("zez");
     }
@@ -178,7 +185,8 @@ fn main() {
         })
         .collect();
     println!(
-        "engine + in-process simulation, {VARIABLES} synthetic variables, {ITEMS} items, natively"
+        "engine + in-process simulation, {} synthetic variables, {ITEMS} items, natively",
+        variables()
     );
     println!(
         "sizes: Value {} B, Vqt {} B, ItemValue {} B, SourceItem {} B, \
