@@ -31,17 +31,10 @@ use ctopc_core::{Timestamp, VarType, Vqt};
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
-fn live() -> isize {
-    let s = GLOBAL.stats();
-    s.bytes_allocated as isize - s.bytes_deallocated as isize
-}
+mod support;
 
-/// Resident memory of this process, bytes (0 where `/proc` is not there).
-fn rss() -> isize {
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| s.split_whitespace().nth(1)?.parse::<isize>().ok())
-        .map_or(0, |pages| pages * 4096)
+fn live() -> isize {
+    support::live(GLOBAL)
 }
 
 /// The synthetic database's size (`SCALE_ITEMS_VARIABLES` overrides it).
@@ -199,14 +192,14 @@ fn main() {
     );
 
     let mut events = Vec::new();
-    let (heap0, rss0) = (live(), rss());
+    let (heap0, rss0) = (live(), support::resident());
     rig.engine(|e| {
         let added = e.add_items(now, g, &defs).expect("add");
         assert!(added.iter().all(Result::is_ok));
     });
     rig.step(now, &mut events);
     assert!(events.is_empty());
-    let (heap1, rss1) = (live(), rss());
+    let (heap1, rss1) = (live(), support::resident());
     println!(
         "1. inactive group item:      heap {:>6.1} B/item (engine {:.1}, backend {:.1}), \
          resident {:>6.1} B/item",
@@ -228,7 +221,7 @@ fn main() {
     let pending = live();
     let values = rig.deliver(now, g, &mut events);
     assert!(values >= ITEMS, "the first OnDataChange reports every item");
-    let (heap2, rss2) = (live(), rss());
+    let (heap2, rss2) = (live(), support::resident());
     println!(
         "2. active, subscribed item:  heap {:>6.1} B/item more (engine {:.1}, backend {:.1}), \
          resident {:>6.1} B/item more; the pending OnDataChanges {:.1} B/item ({values} values)",
@@ -248,7 +241,7 @@ fn main() {
         peak = peak.max(live() - heap2);
         delivered += rig.deliver(now, g, &mut events);
     }
-    let (heap3, rss3) = (live(), rss());
+    let (heap3, rss3) = (live(), support::resident());
     println!(
         "3. after {CYCLES} cycles at 1 s:    heap {:>6.1} B/item more (engine {:.1}, backend \
          {:.1}), resident {:>6.1} B/item more; peak while pending {:.1} B/item ({delivered} \

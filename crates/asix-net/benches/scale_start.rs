@@ -23,29 +23,10 @@ use ctopc_core::Timestamp;
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
+mod support;
+
 fn live() -> isize {
-    let s = GLOBAL.stats();
-    s.bytes_allocated as isize - s.bytes_deallocated as isize
-}
-
-fn statm_resident() -> isize {
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| s.split_whitespace().nth(1)?.parse::<isize>().ok())
-        .map_or(0, |pages| pages * 4096)
-}
-
-/// The process's CPU time (user + system, `/proc/self/stat`, 100 ticks a second).
-fn cpu_seconds() -> f64 {
-    std::fs::read_to_string("/proc/self/stat")
-        .ok()
-        .and_then(|s| {
-            let rest = &s[s.rfind(')')? + 2..];
-            let f: Vec<&str> = rest.split_whitespace().collect();
-            let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-            Some(ticks / 100.0)
-        })
-        .unwrap_or(0.0)
+    support::live(GLOBAL)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -58,18 +39,18 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn run_once(zez: &Path) -> [f64; 8] {
     let ini = format!("[Channel:*]\nItemsDatabase = {}\n", zez.display());
     let (cfg, _) = parse_config(ini.as_bytes(), "bench.ini").expect("config");
-    let (heap0, rss0, cpu0) = (live(), statm_resident(), cpu_seconds());
+    let (heap0, rss0, cpu0) = (live(), support::resident(), support::cpu_seconds());
     let (ns, _warnings) = AsixNamespace::load(cfg);
-    let (heap1, cpu1) = (live(), cpu_seconds());
+    let (heap1, cpu1) = (live(), support::cpu_seconds());
     let count = match ns.database_state(BASIC_CHANNEL) {
         ChannelDatabase::Loaded(db) => db.variables.len(),
         other => panic!("{zez:?} not loaded: {other:?}"),
     };
     let space = build_address_space(&ns).expect("address space");
-    let (heap2, cpu2) = (live(), cpu_seconds());
+    let (heap2, cpu2) = (live(), support::cpu_seconds());
     let plant = PlantSource::new(&ns, 1, Timestamp::from_filetime_parts(0, 0x01DC_0000));
-    let (heap3, cpu3) = (live(), cpu_seconds());
-    let resident = statm_resident() - rss0;
+    let (heap3, cpu3) = (live(), support::cpu_seconds());
+    let resident = support::resident() - rss0;
     assert!(space.len() > count, "{} nodes", space.len());
     assert_eq!(plant.plant().vars().len(), count);
     [

@@ -26,9 +26,10 @@ use ctopc_core::{Timestamp, Value, VarType};
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
+mod support;
+
 fn live() -> isize {
-    let s = GLOBAL.stats();
-    s.bytes_allocated as isize - s.bytes_deallocated as isize
+    support::live(GLOBAL)
 }
 
 const MEMORY_ITEMS: usize = 80_000;
