@@ -745,18 +745,22 @@ mod tests {
         }
     }
 
-    #[test]
-    fn rate_set_tracks_the_fastest_subscriber() {
-        let mut t = SourceTable::default();
-        let def = ItemDef {
-            source_key: "X".into(),
+    /// A plain R8 item of `key` on channel `*`, readable and writable, no EU.
+    fn r8_def(source_key: String) -> ItemDef {
+        ItemDef {
+            source_key,
             channel: "*".into(),
             canonical_type: VarType::R8,
             access_rights: 3,
             eu: EuInfo::None,
             constant: None,
-        };
-        let i = t.find_or_insert(&def, Timestamp(0)).unwrap();
+        }
+    }
+
+    #[test]
+    fn rate_set_tracks_the_fastest_subscriber() {
+        let mut t = SourceTable::default();
+        let i = t.find_or_insert(&r8_def("X".into()), Timestamp(0)).unwrap();
         assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
         t.add_rate(i, 5000);
         t.add_rate(i, 1000);
@@ -845,14 +849,7 @@ mod tests {
     /// grow the table by a quarter (at least 1,024).
     #[test]
     fn a_large_call_reserves_its_entries_exactly() {
-        let def = |i: u32| ItemDef {
-            source_key: format!("K{i}"),
-            channel: "*".into(),
-            canonical_type: VarType::R8,
-            access_rights: 3,
-            eu: EuInfo::None,
-            constant: None,
-        };
+        let def = |i: u32| r8_def(format!("K{i}"));
         let mut t = SourceTable::default();
         for i in 0..5000 {
             t.batch_left(5000 - i as usize);
@@ -868,14 +865,7 @@ mod tests {
     /// it, and the live entries keep their keys and are found by them.
     #[test]
     fn keys_survive_the_compaction_of_the_key_text() {
-        let def = |i: u32| ItemDef {
-            source_key: format!("KEY_{i:06}"),
-            channel: "*".into(),
-            canonical_type: VarType::R8,
-            access_rights: 3,
-            eu: EuInfo::None,
-            constant: None,
-        };
+        let def = |i: u32| r8_def(format!("KEY_{i:06}"));
         let mut t = SourceTable::default();
         let idx: Vec<u32> = (0..2000)
             .map(|i| t.find_or_insert(&def(i), Timestamp(0)).unwrap())
