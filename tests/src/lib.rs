@@ -14,6 +14,7 @@ pub mod hostile;
 pub mod io_support;
 pub mod probe;
 pub mod server_config;
+pub mod start;
 
 pub use ctopc_com::client::{ComThread, Server};
 pub use ctopc_com::interfaces;

@@ -9,6 +9,7 @@
 
 use e2e_tests::doctor::{repo_root, unix_path, BrokenPrefix, Run};
 use e2e_tests::own_artifact;
+use e2e_tests::start::StartRetrying;
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
@@ -34,7 +35,7 @@ fn doctor_here(args: &[&str], limit: Duration) -> Run {
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
-        .spawn()
+        .spawn_retrying()
         .unwrap_or_else(|e| panic!("start {}: {e}", exe.display()));
     let mut out = child.stdout.take().unwrap();
     let mut err = child.stderr.take().unwrap();
@@ -120,7 +121,7 @@ fn the_text_report_has_one_line_per_check_and_a_summary() {
     let out = Command::new(&exe)
         .args(["doctor", "--timeout", "30"])
         .stdin(Stdio::null())
-        .output()
+        .output_retrying()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(

@@ -15,6 +15,7 @@ use ctopc_core::value::ArrayValue;
 use ctopc_core::{Value, VarType};
 use e2e_tests::hostile::*;
 use e2e_tests::interfaces::*;
+use e2e_tests::start::StartRetrying;
 use e2e_tests::{connect, ComThread, PROGID};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
@@ -604,7 +605,7 @@ fn z_a_client_that_exits_without_releasing_leaves_the_server_answering() {
             .args(["--exact", "hostile_child", "--ignored", "--test-threads=1"])
             .env(CHILD_VAR, "1")
             .stdin(std::process::Stdio::null())
-            .output()
+            .output_retrying()
             .unwrap()
     });
     assert!(

@@ -530,6 +530,7 @@ mod through_the_proxy {
     use super::*;
     use ctopc_com::client::{BrowseArgs, BrowseElement, BrowsePage, ComThread, Server};
     use e2e_tests::probe::{self, client as read};
+    use e2e_tests::start::StartRetrying;
     use e2e_tests::{artifact, code, interfaces::*};
     use std::process::Command;
     use std::sync::OnceLock;
@@ -556,7 +557,7 @@ mod through_the_proxy {
         let exe = artifact("marshal-probe.exe");
         let mut child = Command::new(&exe)
             .arg("/RegServer")
-            .spawn()
+            .spawn_retrying()
             .map_err(|e| format!("{}: {e}", exe.display()))?;
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {

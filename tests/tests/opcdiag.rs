@@ -4,6 +4,7 @@
 #![cfg(windows)]
 
 use e2e_tests::own_artifact;
+use e2e_tests::start::StartRetrying;
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -40,7 +41,7 @@ fn opcdiag_with(args: &[&str], env: &[(&str, &str)], limit: Duration) -> Run {
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
-        .spawn()
+        .spawn_retrying()
         .unwrap_or_else(|e| {
             panic!(
                 "start {}: {e} (built by `cargo xtask build`)",

@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use e2e_tests::artifact;
+use e2e_tests::start::StartRetrying;
 use windows::core::{GUID, PCWSTR};
 use windows::Win32::System::Com::{
     CLSIDFromProgID, CoCreateInstance, ICatInformation, CLSCTX_INPROC_SERVER,
@@ -23,7 +24,7 @@ const CATID_DA30: &str = "{CC603642-66D7-48F1-B69A-B625E73652D7}";
 fn run(args: &[&str]) -> std::process::Output {
     std::process::Command::new(artifact("ServerCTOPC.exe"))
         .args(args)
-        .output()
+        .output_retrying()
         .expect("run ServerCTOPC.exe")
 }
 

@@ -14,6 +14,7 @@ use ctopc_com::registration::{
     CATID_OPC_DA_SERVER_30, CLSID_SERVERCTOPC,
 };
 use ctopc_com::registry;
+use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, ComThread};
 use windows::core::GUID;
 use windows::Win32::Foundation::{CO_E_CLASSSTRING, REGDB_E_CLASSNOTREG, S_FALSE, S_OK};
@@ -234,7 +235,7 @@ fn the_opc_enumerator_skips_resets_and_clones() {
 fn run_server_list(args: &[&str]) -> std::process::Output {
     std::process::Command::new(artifact("OpcServerList.exe"))
         .args(args)
-        .output()
+        .output_retrying()
         .expect("run OpcServerList.exe")
 }
 

@@ -11,6 +11,7 @@ use ctopc_com::client::server_list::ServerBrowser;
 use ctopc_com::registration::{
     guid_string, APPID_SERVER_LIST, CATID_OPC_DA_SERVER_20, CLSID_SERVERCTOPC,
 };
+use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, processes_named, ComThread};
 use std::time::{Duration, Instant};
 use windows::core::{GUID, PCWSTR};
@@ -29,7 +30,7 @@ const EXE: &str = "OpcServerList.exe";
 fn browser_exe(arg: &str) -> std::process::ExitStatus {
     std::process::Command::new(artifact(EXE))
         .arg(arg)
-        .status()
+        .status_retrying()
         .expect("run OpcServerList.exe")
 }
 

@@ -15,6 +15,7 @@
 use ctopc_com::client::Server;
 use ctopc_com::clock::now;
 use ctopc_core::Timestamp;
+use e2e_tests::start::StartRetrying;
 use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID,
 };
@@ -230,7 +231,7 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
         .arg("-Embedding")
         .env("SERVERCTOPC_INI", &ini)
         .creation_flags(CREATE_NEW_CONSOLE.0)
-        .spawn()
+        .spawn_retrying()
         .expect("start ServerCTOPC.exe -Embedding");
     let server = connect_to_started_server(server_process.id(), since);
     let (s, rx) = sink();
@@ -248,7 +249,7 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
         ])
         .env(HELPER_PID_VAR, server_process.id().to_string())
         .stdin(std::process::Stdio::null())
-        .output()
+        .output_retrying()
     {
         Ok(o) => format!(
             "{}: {}",

@@ -6,6 +6,7 @@
 //! so the service is controlled from inside this test process while it is alive.
 #![cfg(windows)]
 
+use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, assert_alive, connect, interfaces::*, wait_for_no_other_server};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -25,7 +26,7 @@ const SERVICE: windows::core::PCWSTR = windows::core::w!("ServerCTOPC");
 fn server_exe(arg: &str) -> std::process::ExitStatus {
     std::process::Command::new(artifact("ServerCTOPC.exe"))
         .arg(arg)
-        .status()
+        .status_retrying()
         .expect("run ServerCTOPC.exe")
 }
 

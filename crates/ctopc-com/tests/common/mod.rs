@@ -23,11 +23,17 @@
 //! value that is never dereferenced) and asserts that a failed call wrote NULL/0 there.
 #![allow(dead_code, unused_imports)]
 
+/// Starting a process through Wine's transient start failure: the e2e crate's helper,
+/// compiled in here too (the file depends on `std` only).
+#[path = "../../../../tests/src/start.rs"]
+mod start;
+
 use asix_net::inproc::InProcessSim;
 use ctopc_com::context::{self, Context};
 use ctopc_com::interfaces::*;
 use ctopc_com::{host, server};
 use ctopc_core::source::Backend;
+use start::StartRetrying;
 use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 use std::sync::{Arc, OnceLock, Weak};
@@ -423,7 +429,7 @@ pub fn passes_in_child(name: &str) -> bool {
     let out = std::process::Command::new(exe)
         .args([name, "--exact", "--ignored", "--test-threads=1"])
         .env(CHILD_ENV, name)
-        .output()
+        .output_retrying()
         .expect("run the test binary as a child");
     if !out.status.success() {
         eprintln!(
