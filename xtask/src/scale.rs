@@ -124,6 +124,46 @@ impl Options {
 }
 
 /// The median of `xs` (the mean of the middle two of an even count); `None` when empty.
+/// ServerCTOPC.exe's stack reserve per thread, KB (`crates/server/build.rs`: 256 MiB).
+const STACK_RESERVE_KB: u64 = 256 * 1024;
+
+/// Thread stacks of a process: how many and their resident MB.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stacks {
+    pub count: usize,
+    pub rss_mb: f64,
+}
+
+/// The thread stacks in a `/proc/PID/smaps` text: the mappings of at least `reserve_kb`
+/// (every thread of the server reserves the exe's 256 MiB; nothing else maps that much),
+/// with their resident memory. Wine keeps about 1 MB of each resident whatever the
+/// reserve (measured: 976 KB in every thread of opcdiag.exe, 2 MiB reserve, as in the
+/// server's), so a phase that starts threads grows by that much per thread, none of it
+/// the server's data.
+pub fn thread_stacks(smaps: &str, reserve_kb: u64) -> Stacks {
+    let mut count = 0;
+    let mut rss_kb = 0u64;
+    let mut big = false;
+    for line in smaps.lines() {
+        let mut words = line.split_whitespace();
+        let first = words.next().unwrap_or("");
+        if let Some((a, b)) = first.split_once('-') {
+            if let (Ok(a), Ok(b)) = (u64::from_str_radix(a, 16), u64::from_str_radix(b, 16)) {
+                big = b.saturating_sub(a) / 1024 >= reserve_kb;
+                count += usize::from(big);
+                continue;
+            }
+        }
+        if big && first == "Rss:" {
+            rss_kb += words.next().and_then(|w| w.parse().ok()).unwrap_or(0);
+        }
+    }
+    Stacks {
+        count,
+        rss_mb: rss_kb as f64 / 1024.0,
+    }
+}
+
 pub fn median(xs: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = xs.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
@@ -393,7 +433,7 @@ fn start_server(pfx: &Path, p: &Programs, c: &Config) -> Result<Server, String> 
     let (mut pid, mut cpu_at_serving) = (None, None);
     loop {
         if pid.is_none() {
-            pid = soak::server_pid(&p.server);
+            pid = soak::server_pid(&p.server, pfx);
         }
         let startup = parse_startup(&log_text());
         if cpu_at_serving.is_none() && startup.is_some_and(|s| s.serving_ms.is_some()) {
@@ -403,7 +443,7 @@ fn start_server(pfx: &Path, p: &Programs, c: &Config) -> Result<Server, String> 
             startup.filter(|s| s.serving_ms.is_some() && s.simulation_ready_ms.is_some())
         {
             let pid = pid
-                .or_else(|| soak::server_pid(&p.server))
+                .or_else(|| soak::server_pid(&p.server, pfx))
                 .ok_or("scale: the server serves but its process is not found")?;
             return Ok(Server {
                 child,
@@ -436,6 +476,13 @@ impl Server {
         soak::rss_mb(self.pid).ok_or_else(|| format!("scale: no VmRSS for pid {}", self.pid))
     }
 
+    /// The server's thread stacks now: how many, and their resident MB.
+    fn stacks(&self) -> Result<Stacks, String> {
+        let smaps = std::fs::read_to_string(format!("/proc/{}/smaps", self.pid))
+            .map_err(|e| format!("scale: smaps of pid {}: {e}", self.pid))?;
+        Ok(thread_stacks(&smaps, STACK_RESERVE_KB))
+    }
+
     fn stop(mut self, pfx: &Path) {
         wine::wineserver_in(pfx, "-k", Duration::from_secs(20));
         let _ = self.child.kill();
@@ -455,6 +502,9 @@ struct Run {
     add_ms: f64,
     per_item_b: f64,
     subscription_mb: f64,
+    /// Of `subscription_mb`, what new threads' stacks hold (Wine keeps ~1 MB resident per
+    /// thread, see [`thread_stacks`]).
+    subscription_stacks_mb: f64,
 }
 
 impl Default for Run {
@@ -469,6 +519,7 @@ impl Default for Run {
             add_ms: f64::NAN,
             per_item_b: f64::NAN,
             subscription_mb: f64::NAN,
+            subscription_stacks_mb: f64::NAN,
         }
     }
 }
@@ -614,6 +665,7 @@ fn items_phase(
         return Err("scale-client: expected `ready connected`".into());
     };
     let before = s.rss()?;
+    let stacks_before = s.stacks()?;
     cl.go()?;
     let Ready::Added {
         items: n,
@@ -624,11 +676,16 @@ fn items_phase(
         return Err("scale-client: expected `ready added`".into());
     };
     let added = s.rss()?;
+    let stacks_added = s.stacks()?;
     run.add_ms = ms;
     run.per_item_b = (added - before) * 1024.0 * 1024.0 / n.max(1) as f64;
     println!(
-        "scale: {}: AddItems of {n} in one call {ms:.0} ms, {errors} errors; RSS {before:.1} → {added:.1} MB: {:.0} B per group item",
-        c.label, run.per_item_b
+        "scale: {}: AddItems of {n} in one call {ms:.0} ms, {errors} errors; RSS {before:.1} → {added:.1} MB: {:.0} B per group item; thread stacks {:+.1} MB (threads {} → {})",
+        c.label,
+        run.per_item_b,
+        stacks_added.rss_mb - stacks_before.rss_mb,
+        stacks_before.count,
+        stacks_added.count
     );
     cl.go()?;
     let _ = cl.next()?;
@@ -638,6 +695,7 @@ fn items_phase(
     cl.go()?;
     cl.next()?;
     let added = s.rss()?;
+    let stacks_added = s.stacks()?;
     cl.go()?;
     let Ready::Subscribed { ms, values } = cl.next()? else {
         return Err("scale-client: expected `ready subscribed`".into());
@@ -649,10 +707,12 @@ fn items_phase(
         cl.next()?;
     }
     let sub = s.rss()?;
+    let stacks_sub = s.stacks()?;
     run.subscription_mb = sub - added;
+    run.subscription_stacks_mb = stacks_sub.rss_mb - stacks_added.rss_mb;
     println!(
-        "scale: {}: active subscription of {items} items at 1 s: first callback after {ms:.0} ms ({values} values); RSS {added:.1} → {sub:.1} MB: +{:.1} MB",
-        c.label, run.subscription_mb
+        "scale: {}: active subscription of {items} items at 1 s: first callback after {ms:.0} ms ({values} values); RSS {added:.1} → {sub:.1} MB: +{:.1} MB, of it thread stacks +{:.1} MB (threads {} → {})",
+        c.label, run.subscription_mb, run.subscription_stacks_mb, stacks_added.count, stacks_sub.count
     );
     cl.quit();
     Ok(())
@@ -885,6 +945,11 @@ fn summary(o: &Options, results: &[(Config, Vec<Run>)]) {
             Box::new(move |_, r| fmt(med(r, |r| r.subscription_mb), "MB", 1)),
             "≤ 15 MB",
         ),
+        (
+            "… of it, the stacks of threads started meanwhile (Wine: ~1 MB a thread)",
+            Box::new(move |_, r| fmt(med(r, |r| r.subscription_stacks_mb), "MB", 1)),
+            "—",
+        ),
     ];
     for (name, f, goal) in rows {
         let cells: Vec<String> = results
@@ -965,6 +1030,28 @@ pub fn run(args: &[String]) -> Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thread_stacks_are_the_mappings_of_the_reserve_with_their_resident_memory() {
+        let smaps = "\
+00022000-10120000 rw-p 00000000 00:00 0
+Size:             263160 kB
+Rss:                1036 kB
+Pss:                1036 kB
+7fe107bc2000-7fe117cc0000 rw-p 00000000 00:00 0
+Size:             263160 kB
+Rss:                 976 kB
+129a0000-13ac0000 rw-p 00000000 00:00 0
+Size:              17536 kB
+Rss:               17468 kB
+140000000-140001000 r--p 00000000 08:01 123 /x/ServerCTOPC.exe
+Rss:                   4 kB
+";
+        let s = thread_stacks(smaps, STACK_RESERVE_KB);
+        assert_eq!(s.count, 2);
+        assert!((s.rss_mb - 2012.0 / 1024.0).abs() < 1e-9, "{s:?}");
+        assert_eq!(thread_stacks("", STACK_RESERVE_KB).count, 0);
+    }
 
     #[test]
     fn median_of_odd_even_and_empty() {

@@ -128,10 +128,12 @@ fn options(args: &[String]) -> Result<Options, String> {
     Ok(o)
 }
 
-/// The Linux PID of the Wine process running ServerCTOPC.exe `-Embedding` from `exe`: its
-/// command line holds the exe's Windows path under this worktree (started by COM)
-/// or starts with its Unix path (started by the scale benchmark through the loader).
-pub fn server_pid(exe: &Path) -> Option<u32> {
+/// The Linux PID of the Wine process running ServerCTOPC.exe `-Embedding` from `exe` in
+/// the Wine prefix `pfx`: its command line holds the exe's Windows path under this
+/// worktree (started by COM) or starts with its Unix path (started by the scale benchmark
+/// through the loader), and its environment names `pfx` (a server of the same build in
+/// another prefix, e.g. the test prefix's, is not this one).
+pub fn server_pid(exe: &Path, pfx: &Path) -> Option<u32> {
     let windows = wine::windows_path(exe);
     let unix = exe.display().to_string();
     for e in std::fs::read_dir("/proc").ok()?.flatten() {
@@ -143,11 +145,25 @@ pub fn server_pid(exe: &Path) -> Option<u32> {
         };
         let cmd = String::from_utf8_lossy(&cmd);
         let ours = cmd.contains(&windows) || cmd.starts_with(&unix);
-        if ours && cmd.contains("-Embedding") {
+        if ours && cmd.contains("-Embedding") && in_prefix(&e.path(), pfx) {
             return Some(pid);
         }
     }
     None
+}
+
+/// Whether the process at `proc_dir` (`/proc/PID`) runs in the Wine prefix `pfx`.
+fn in_prefix(proc_dir: &Path, pfx: &Path) -> bool {
+    std::fs::read(proc_dir.join("environ")).is_ok_and(|env| environ_names_prefix(&env, pfx))
+}
+
+/// Whether a `/proc/PID/environ` text sets `WINEPREFIX` to `pfx`.
+pub fn environ_names_prefix(environ: &[u8], pfx: &Path) -> bool {
+    let want = pfx.as_os_str().as_encoded_bytes();
+    environ.split(|&b| b == 0).any(|var| {
+        var.strip_prefix(b"WINEPREFIX=")
+            .is_some_and(|v| v.strip_suffix(b"/").unwrap_or(v) == want)
+    })
 }
 
 /// VmRSS of `pid` in MB.
@@ -565,7 +581,7 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
     )?;
     let started = Instant::now();
     let pid = loop {
-        if let Some(p) = server_pid(server) {
+        if let Some(p) = server_pid(server, pfx) {
             break p;
         }
         if started.elapsed() > Duration::from_secs(60) {
@@ -731,7 +747,30 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
 
 #[cfg(test)]
 mod tests {
-    use super::{parse_counts, predicted_bytes, slope};
+    use super::{environ_names_prefix, parse_counts, predicted_bytes, slope};
+    use std::path::Path;
+
+    #[test]
+    fn the_server_of_a_prefix_is_told_by_its_environment() {
+        let env = b"HOME=/root\0WINEPREFIX=/w/target/wine/scale-prefix\0WINEDEBUG=-all\0";
+        assert!(environ_names_prefix(
+            env,
+            Path::new("/w/target/wine/scale-prefix")
+        ));
+        assert!(!environ_names_prefix(
+            env,
+            Path::new("/w/target/wine/prefix")
+        ));
+        assert!(environ_names_prefix(
+            b"WINEPREFIX=/w/p/\0",
+            Path::new("/w/p")
+        ));
+        assert!(!environ_names_prefix(
+            b"XWINEPREFIX=/w/p\0",
+            Path::new("/w/p")
+        ));
+        assert!(!environ_names_prefix(b"", Path::new("/w/p")));
+    }
 
     #[test]
     fn counts_and_the_bytes_they_predict() {
