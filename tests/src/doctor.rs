@@ -8,6 +8,7 @@
 //! `/bin/sh`), but gives no handle to wait for, so the script's output and exit status
 //! come back through files, polled with a time limit.
 
+use crate::start::StartRetrying;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -164,7 +165,7 @@ pub fn unix_sh(dir: &str, script: &str, limit: Duration) -> (i32, String) {
         .stdin(std::process::Stdio::null())
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
-        .spawn()
+        .spawn_retrying()
         .expect("start /bin/sh through Wine");
     let deadline = Instant::now() + limit;
     loop {
@@ -246,6 +247,6 @@ impl Drop for BrokenPrefix {
             .stdin(std::process::Stdio::null())
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
-            .spawn();
+            .spawn_retrying();
     }
 }

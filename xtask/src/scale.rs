@@ -22,8 +22,11 @@
 //!   wall time of the whole opcdiag run (the line count is checked);
 //! - **items** (needs `scale-client`, tests/src/bin/scale-client.rs): one client with
 //!   `--items I` in an inactive group: the AddItems time it reports and
-//!   (RSS after AddItems − RSS connected) / I; then a client with an active group
-//!   at 1 s: RSS after its first callbacks covered every item − RSS after AddItems;
+//!   (RSS after AddItems − RSS connected) / I; then a client that adds them to an
+//!   inactive group too and then subscribes (Advise, SetState active, 1 s): RSS after
+//!   its first callbacks covered every item and five more seconds − RSS after its
+//!   AddItems (no subscription before its stage 3: `scale-client --active`); the thread
+//!   stacks of each phase are shown apart ([`thread_stacks`]);
 //! - **soak** (once, the largest size, after the runs): that active subscription for
 //!   `--soak-minutes`, a stdin line a second (`ready tick ...`), RSS sampled every 10 s;
 //!   the least-squares slope after the first fifth (warm-up).
@@ -501,6 +504,8 @@ struct Run {
     tree_s: f64,
     add_ms: f64,
     per_item_b: f64,
+    /// Of `per_item_b`, what new threads' stacks hold (the client's connection).
+    per_item_stacks_b: f64,
     subscription_mb: f64,
     /// Of `subscription_mb`, what new threads' stacks hold (Wine keeps ~1 MB resident per
     /// thread, see [`thread_stacks`]).
@@ -518,6 +523,7 @@ impl Default for Run {
             tree_s: f64::NAN,
             add_ms: f64::NAN,
             per_item_b: f64::NAN,
+            per_item_stacks_b: f64::NAN,
             subscription_mb: f64::NAN,
             subscription_stacks_mb: f64::NAN,
         }
@@ -679,6 +685,8 @@ fn items_phase(
     let stacks_added = s.stacks()?;
     run.add_ms = ms;
     run.per_item_b = (added - before) * 1024.0 * 1024.0 / n.max(1) as f64;
+    run.per_item_stacks_b =
+        (stacks_added.rss_mb - stacks_before.rss_mb) * 1024.0 * 1024.0 / n.max(1) as f64;
     println!(
         "scale: {}: AddItems of {n} in one call {ms:.0} ms, {errors} errors; RSS {before:.1} → {added:.1} MB: {:.0} B per group item; thread stacks {:+.1} MB (threads {} → {})",
         c.label,
@@ -939,6 +947,11 @@ fn summary(o: &Options, results: &[(Config, Vec<Run>)]) {
             "resident growth per group item",
             Box::new(move |_, r| fmt(med(r, |r| r.per_item_b), "B", 0)),
             "≤ 150 B",
+        ),
+        (
+            "… of it, the stacks of threads started meanwhile (Wine: ~1 MB a thread)",
+            Box::new(move |_, r| fmt(med(r, |r| r.per_item_stacks_b), "B", 0)),
+            "—",
         ),
         (
             "extra memory of the active subscription",
