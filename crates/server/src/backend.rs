@@ -90,7 +90,13 @@ impl Deferred {
             }
             self.state = match handle.take().map(JoinHandle::join) {
                 Some(Ok(b)) => State::Ready(b),
-                _ => State::Failed,
+                _ => {
+                    tracing::error!(
+                        "the data source could not be built (its thread ended in a panic): \
+                         no values; device reads and writes fail after SourceTimeout"
+                    );
+                    State::Failed
+                }
             };
         }
         match &mut self.state {
@@ -201,6 +207,30 @@ mod tests {
         d.poll(Timestamp(3), &mut out);
         assert_eq!(out.read_results.len(), 1);
         assert_eq!(out.read_results[0].0, SourceReqId(1));
+    }
+
+    /// A builder that panics leaves a source that answers nothing and never blocks: the
+    /// request returns (the engine fails it after `SourceTimeout`, tests/model_io.rs), poll
+    /// hands out nothing and asks for no step.
+    #[test]
+    fn a_failed_build_answers_nothing_and_blocks_nothing() {
+        let wakes = Arc::new(Wakes::default());
+        let mut d = Deferred::start(true, wakes, || -> Box<dyn Backend> {
+            panic!("the test's builder fails")
+        })
+        .unwrap();
+        // Returns although the builder failed (it joins the ended thread).
+        d.request(Timestamp(1), SourceRequest::Unsubscribe(Vec::new()));
+        let mut out = SourceOutput::default();
+        d.poll(Timestamp(2), &mut out);
+        assert!(out.is_empty());
+        assert_eq!(d.poll_timeout(), None);
+        assert!(d.channels().is_empty());
+        assert!(d.is_simulation());
+        // And again, with nothing left to join.
+        d.request(Timestamp(3), SourceRequest::Unsubscribe(Vec::new()));
+        d.poll(Timestamp(4), &mut out);
+        assert!(out.is_empty());
     }
 
     #[test]
