@@ -206,10 +206,6 @@ impl Keys {
         }
     }
 
-    fn is_empty(&self) -> bool {
-        self.as_slice().is_empty()
-    }
-
     fn contains(&self, k: &SourceKey) -> bool {
         self.as_slice().contains(k)
     }
@@ -252,7 +248,7 @@ impl Keys {
     }
 }
 
-/// A raw variable wanted by subscribed items (40 bytes).
+/// A raw variable's full state in [`Vars`] (40 bytes).
 #[derive(Default)]
 struct VarState {
     /// The items reading it.
@@ -265,6 +261,200 @@ struct VarState {
     /// value or quality re-checks its users). Boxed: most variables of the simulation keep
     /// none.
     last: Option<Box<Vqt>>,
+}
+
+/// Marks a [`Vars`] entry that indexes [`Vars::rich`]; an entry without it is the slot
+/// index of the variable's only item.
+const RICH: u32 = 1 << 31;
+
+/// The raw variables wanted by subscribed items. Most variables of a large subscription
+/// are read by exactly one item, with no item's rules reading them and no sample kept:
+/// such a variable's entry is that item's slot index, 4 bytes besides the variable in the
+/// map (a `u32` variable of the simulation: 8 bytes and a control byte, where a
+/// [`VarState`] in the map cost 48 and a control byte, issue 16). The others have a
+/// [`VarState`] in `rich`, and go back to the short form once they are plain again
+/// ([`Vars::settle`]).
+struct Vars<V> {
+    map: HashMap<V, u32>,
+    rich: Vec<VarState>,
+    /// Indices of `rich` free for reuse.
+    free: Vec<u32>,
+}
+
+/// A variable's entry in [`Vars`].
+enum VarRef<'a> {
+    /// Read by the item at this slot index, and that is all.
+    One(u32),
+    Rich(&'a VarState),
+}
+
+impl<V: Eq + Hash + Clone> Vars<V> {
+    fn new() -> Self {
+        Vars {
+            map: HashMap::new(),
+            rich: Vec::new(),
+            free: Vec::new(),
+        }
+    }
+
+    fn get(&self, v: &V) -> Option<VarRef<'_>> {
+        let e = *self.map.get(v)?;
+        Some(if e & RICH == 0 {
+            VarRef::One(e)
+        } else {
+            VarRef::Rich(&self.rich[(e & !RICH) as usize])
+        })
+    }
+
+    /// The variable's last sample, if kept.
+    fn last(&self, v: &V) -> Option<&Vqt> {
+        match self.get(v)? {
+            VarRef::One(_) => None,
+            VarRef::Rich(st) => st.last.as_deref(),
+        }
+    }
+
+    fn keys(&self) -> impl Iterator<Item = &V> {
+        self.map.keys()
+    }
+
+    /// The variable's full state, made from its short entry (`one`: the key of the item at
+    /// a slot index) or anew.
+    fn rich_mut(&mut self, v: &V, one: impl FnOnce(u32) -> Option<SourceKey>) -> &mut VarState {
+        let e = self.map.get(v).copied();
+        if let Some(e) = e.filter(|e| e & RICH != 0) {
+            return &mut self.rich[(e & !RICH) as usize];
+        }
+        let st = VarState {
+            items: match e.and_then(one) {
+                Some(k) => Keys::One(k),
+                None => Keys::None,
+            },
+            ..VarState::default()
+        };
+        let i = match self.free.pop() {
+            Some(i) => {
+                self.rich[i as usize] = st;
+                i
+            }
+            None => {
+                self.rich.push(st);
+                (self.rich.len() - 1) as u32
+            }
+        };
+        debug_assert!(i < RICH);
+        match self.map.get_mut(v) {
+            Some(e) => *e = RICH | i,
+            None => {
+                self.map.insert(v.clone(), RICH | i);
+            }
+        }
+        &mut self.rich[i as usize]
+    }
+
+    /// Item `k` reads `v` (noted once).
+    fn add_item(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        match self.map.get(v) {
+            None if k.index() < RICH => {
+                self.map.insert(v.clone(), k.index());
+                return;
+            }
+            Some(&e) if e & RICH == 0 && e == k.index() => return,
+            _ => {}
+        }
+        let st = self.rich_mut(v, one);
+        if !st.items.contains(&k) {
+            st.items.push(k);
+        }
+    }
+
+    /// Item `k`'s rules read `v` (noted once per use).
+    fn add_rule_user(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        self.rich_mut(v, one).rule_users.push(k);
+    }
+
+    /// Item `k` no longer reads `v` (a variable nothing else needs keeps its entry, if it
+    /// has a full state, until [`Self::remove`]).
+    fn remove_item(&mut self, v: &V, k: SourceKey) {
+        let Some(&e) = self.map.get(v) else {
+            return;
+        };
+        if e & RICH == 0 {
+            if e == k.index() {
+                self.map.remove(v);
+            }
+        } else {
+            self.rich[(e & !RICH) as usize].items.remove(k, false);
+        }
+    }
+
+    /// One use of `v` by item `k`'s rules less.
+    fn remove_rule_user(&mut self, v: &V, k: SourceKey) {
+        if let Some(&e) = self.map.get(v) {
+            if e & RICH != 0 {
+                self.rich[(e & !RICH) as usize].rule_users.remove(k, true);
+            }
+        }
+    }
+
+    /// Forgets `v`.
+    fn remove(&mut self, v: &V) {
+        if let Some(e) = self.map.remove(v) {
+            if e & RICH != 0 {
+                self.free_rich(e & !RICH);
+            }
+        }
+    }
+
+    fn free_rich(&mut self, i: u32) {
+        self.rich[i as usize] = VarState::default();
+        self.free.push(i);
+        if self.free.len() == self.rich.len() {
+            // None left: their room goes too.
+            self.rich = Vec::new();
+            self.free = Vec::new();
+        }
+    }
+
+    /// Keeps `last` as the variable's last sample (`Some`), or keeps none.
+    fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        match last {
+            Some(vqt) => match &mut self.rich_mut(v, one).last {
+                Some(last) => **last = vqt,
+                last @ None => *last = Some(Box::new(vqt)),
+            },
+            None => {
+                if let Some(&e) = self.map.get(v) {
+                    if e & RICH != 0 {
+                        self.rich[(e & !RICH) as usize].last = None;
+                        self.settle(v);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Gives a variable read by one item and nothing else its short entry again.
+    fn settle(&mut self, v: &V) {
+        let Some(e) = self.map.get_mut(v) else {
+            return;
+        };
+        if *e & RICH == 0 {
+            return;
+        }
+        let i = *e & !RICH;
+        if let VarState {
+            items: Keys::One(k),
+            rule_users: Keys::None,
+            last: None,
+        } = &self.rich[i as usize]
+        {
+            if k.index() < RICH {
+                *e = k.index();
+                self.free_rich(i);
+            }
+        }
+    }
 }
 
 /// The variables a request touched, with the rate each was subscribed at before it
@@ -331,7 +521,7 @@ pub struct AsixBackend<S: VariableSource> {
     source: S,
     /// Indexed by [`SourceKey::index`].
     slots: Vec<Option<Slot<S::Var>>>,
-    vars: HashMap<S::Var, VarState>,
+    vars: Vars<S::Var>,
     unserved: Unserved<S::Var>,
     /// The treatments subscribed items share ([`Self::share`]).
     treatments: Vec<Arc<Treatment<S::Var>>>,
@@ -354,7 +544,7 @@ impl<S: VariableSource> AsixBackend<S> {
             ns,
             source,
             slots: Vec::new(),
-            vars: HashMap::new(),
+            vars: Vars::new(),
             unserved: Unserved::new(),
             treatments: Vec::new(),
             fresh: Vec::new(),
@@ -417,9 +607,7 @@ impl<S: VariableSource> AsixBackend<S> {
 
     /// A variable's current raw VQT: the source's, else the last sample.
     fn current(&self, v: &S::Var) -> Option<Vqt> {
-        self.source
-            .peek(v)
-            .or_else(|| self.vars.get(v)?.last.as_deref().cloned())
+        self.source.peek(v).or_else(|| self.vars.last(v).cloned())
     }
 
     /// An item's VQT from a raw sample of its variable (quality rules over the current
@@ -438,14 +626,17 @@ impl<S: VariableSource> AsixBackend<S> {
     /// The rate a variable is subscribed at: the fastest of the items reading it or whose
     /// rules read it; `None` when nothing wants it.
     fn rate_of(&self, v: &S::Var) -> Option<u32> {
-        let st = self.vars.get(v)?;
-        st.items
-            .as_slice()
-            .iter()
-            .chain(st.rule_users.as_slice())
-            .filter_map(|k| self.slot_of(*k))
-            .map(|s| s.rate)
-            .min()
+        match self.vars.get(v)? {
+            VarRef::One(i) => self.slots.get(i as usize)?.as_ref().map(|s| s.rate),
+            VarRef::Rich(st) => st
+                .items
+                .as_slice()
+                .iter()
+                .chain(st.rule_users.as_slice())
+                .filter_map(|k| self.slot_of(*k))
+                .map(|s| s.rate)
+                .min(),
+        }
     }
 
     /// Notes the rate of a variable a request is about to change (the first note of a
@@ -467,18 +658,17 @@ impl<S: VariableSource> AsixBackend<S> {
         }
     }
 
-    /// Adds item `k` to the fan-out of its variable and to the users of its rule variables.
+    /// Adds item `k` (in its slot already) to the fan-out of its variable and to the users
+    /// of its rule variables.
     fn attach(&mut self, k: SourceKey, r: &ItemRes<S::Var>) {
         let Some((var, t)) = r.resolved() else {
             return;
         };
-        let st = self.vars.entry(var.clone()).or_default();
-        if !st.items.contains(&k) {
-            st.items.push(k);
-        }
+        let slots = &self.slots;
+        let one = |i: u32| slots.get(i as usize)?.as_ref().map(|s| s.key);
+        self.vars.add_item(var, k, one);
         for v in t.rule_variables() {
-            let st = self.vars.entry(v.clone()).or_default();
-            st.rule_users.push(k);
+            self.vars.add_rule_user(v, k, one);
         }
     }
 
@@ -488,13 +678,9 @@ impl<S: VariableSource> AsixBackend<S> {
         let Some((var, t)) = r.resolved() else {
             return;
         };
-        if let Some(st) = self.vars.get_mut(var) {
-            st.items.remove(k, false);
-        }
+        self.vars.remove_item(var, k);
         for v in t.rule_variables() {
-            if let Some(st) = self.vars.get_mut(v) {
-                st.rule_users.remove(k, true);
-            }
+            self.vars.remove_rule_user(v, k);
         }
     }
 
@@ -516,13 +702,15 @@ impl<S: VariableSource> AsixBackend<S> {
                         gone.push(v);
                     }
                 }
-                Some(after) if before != Some(after) => {
-                    if before.is_none() {
-                        new.push(v.clone());
+                Some(after) => {
+                    self.vars.settle(&v);
+                    if before != Some(after) {
+                        if before.is_none() {
+                            new.push(v.clone());
+                        }
+                        wanted.push((v, after));
                     }
-                    wanted.push((v, after));
                 }
-                Some(_) => {}
             }
         }
         if !gone.is_empty() {
@@ -577,8 +765,12 @@ impl<S: VariableSource> AsixBackend<S> {
                     let r = self.resolve(&item);
                     let r = self.share(r);
                     self.touch_item(&mut touched, &r);
+                    self.slots[i] = Some(Slot {
+                        key,
+                        rate,
+                        r: r.clone(),
+                    });
                     self.attach(key, &r);
-                    self.slots[i] = Some(Slot { key, rate, r });
                 }
             }
             subscribed.push(key);
@@ -851,21 +1043,36 @@ impl<S: VariableSource> AsixBackend<S> {
     /// holds.) Such a report keeps the item's value and takes the later of the two
     /// timestamps, the time the quality became what it is.
     fn update(&mut self, v: S::Var, vqt: Vqt, out: &mut SourceOutput) {
-        let Some(st) = self.vars.get(&v) else {
+        let one;
+        let (items, rule_users, last) = match self.vars.get(&v) {
             // A late sample of a variable let go.
-            return;
+            None => return,
+            Some(VarRef::One(i)) => {
+                one = self
+                    .slots
+                    .get(i as usize)
+                    .and_then(Option::as_ref)
+                    .map(|s| s.key);
+                (one.as_slice(), &[][..], None)
+            }
+            Some(VarRef::Rich(st)) => (
+                st.items.as_slice(),
+                st.rule_users.as_slice(),
+                st.last.as_deref(),
+            ),
         };
-        for &k in st.items.as_slice() {
+        for &k in items {
             if let Some((_, t)) = self.slot_of(k).and_then(|s| s.r.resolved()) {
                 out.updates.push((k, self.item_vqt(t, vqt.clone())));
             }
         }
         // Only a new value or quality of a rule variable can change the rules' outcome.
         let same = |l: &Vqt| l.value == vqt.value && l.quality == vqt.quality;
-        let users = if st.rule_users.is_empty() || st.last.as_deref().is_some_and(same) {
+        let ruled = !rule_users.is_empty();
+        let users = if !ruled || last.is_some_and(same) {
             Vec::new()
         } else {
-            st.rule_users.as_slice().to_vec()
+            rule_users.to_vec()
         };
         let before: Vec<(SourceKey, Quality)> = users
             .into_iter()
@@ -873,16 +1080,9 @@ impl<S: VariableSource> AsixBackend<S> {
             .collect();
         let at = vqt.timestamp;
         let keep = self.source.peek(&v).is_none();
-        if let Some(st) = self.vars.get_mut(&v) {
-            if keep || !st.rule_users.is_empty() {
-                match &mut st.last {
-                    Some(last) => **last = vqt,
-                    None => st.last = Some(Box::new(vqt)),
-                }
-            } else {
-                st.last = None;
-            }
-        }
+        let slots = &self.slots;
+        let one = |i: u32| slots.get(i as usize)?.as_ref().map(|s| s.key);
+        self.vars.set_last(&v, (keep || ruled).then_some(vqt), one);
         for (k, q) in before {
             if let Some(mut x) = self.current_vqt(k) {
                 if x.quality != q {
@@ -1014,6 +1214,9 @@ mod tests {
         writes: Vec<(RawId, Vec<(u32, ItemVqt)>)>,
         /// Handed out at the next poll.
         out: RawOutput<u32>,
+        /// The current values `peek` gives (the simulation's way); `None`: it gives none
+        /// (the network's way).
+        plant: Option<BTreeMap<u32, Vqt>>,
     }
 
     impl VariableSource for Fake {
@@ -1027,6 +1230,9 @@ mod tests {
         }
         fn part(&self, var: &u32) -> &'static str {
             VARS[*var as usize].0
+        }
+        fn peek(&self, var: &u32) -> Option<Vqt> {
+            self.plant.as_ref()?.get(var).cloned()
         }
         fn subscribe(&mut self, _now: Timestamp, vars: Vec<(u32, u32)>) {
             for (v, rate) in vars {
@@ -1414,6 +1620,47 @@ mod tests {
         assert_eq!(b.treatments.len(), 2);
     }
 
+    /// With a source that can peek (the simulation), a variable of one item and no rules
+    /// keeps no sample and stays short; a second item makes it a full state, and it is
+    /// short again when that item goes; samples fan out alike.
+    #[test]
+    fn a_peeking_source_keeps_plain_variables_short() {
+        let (mut b, ns) = backend();
+        let now = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
+        b.source.plant = Some(BTreeMap::from([
+            (A000, now(4.0)),
+            (K001, Vqt::new(Value::I2(0), Quality::GOOD, T)),
+        ]));
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        let (a, pct) = (&it[0], &it[1]);
+        let short = |b: &AsixBackend<Fake>, v: u32| matches!(b.vars.get(&v), Some(VarRef::One(_)));
+        subscribe(&mut b, &[(a, 1000)]);
+        assert!(short(&b, A000));
+        assert!(!short(&b, K001), "a rule variable has its users");
+        let out = poll(&mut b, &[(A000, Value::R4(4.0))]);
+        assert_eq!(out.updates.len(), 1);
+        assert!(short(&b, A000), "no sample kept");
+        assert!(b.vars.last(&K001).is_none());
+        poll(&mut b, &[(K001, Value::I2(0))]);
+        assert!(
+            b.vars.last(&K001).is_some(),
+            "a rule variable's sample is kept"
+        );
+
+        subscribe(&mut b, &[(pct, 1000)]);
+        assert!(!short(&b, A000));
+        let out = poll(&mut b, &[(A000, Value::R4(4.0))]);
+        let got: Vec<SourceKey> = out.updates.iter().map(|(k, _)| *k).collect();
+        assert!(got.contains(&a.key) && got.contains(&pct.key), "{got:?}");
+        b.request(T, SourceRequest::Unsubscribe(vec![pct.key]));
+        assert!(short(&b, A000));
+        let out = poll(&mut b, &[(A000, Value::R4(5.0))]);
+        assert_eq!(out.updates.len(), 1);
+        assert_eq!(out.updates[0].0, a.key);
+        b.request(T, SourceRequest::Unsubscribe(vec![a.key]));
+        assert!(b.vars.map.is_empty() && b.vars.rich.is_empty());
+    }
+
     /// The item lists of a variable: none and one inline, more in a vector, back to one
     /// and none as items go; `first_only` takes one use of a rule user away.
     #[test]
@@ -1422,7 +1669,7 @@ mod tests {
         let (a, b) = (it[0].key, it[1].key);
         assert_ne!(a, b);
         let mut k = Keys::default();
-        assert!(k.is_empty());
+        assert!(k.as_slice().is_empty());
         k.push(a);
         assert_eq!(k, Keys::One(a));
         k.push(b);
@@ -1437,5 +1684,76 @@ mod tests {
         assert_eq!(k, Keys::None);
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
+    }
+
+    /// A variable read by one item and nothing else is that item's slot index; a second
+    /// item, a rule user or a kept sample give it a full state, and it goes back to the
+    /// short form (its full state's room reused, or freed with the last) once it is plain
+    /// again.
+    #[test]
+    fn variables_of_one_item_are_kept_short() {
+        let it = items(&ns(), &["KW_K001", "KW_K002", "KW_A000"]);
+        let (a, b, c) = (it[0].key, it[1].key, it[2].key);
+        let keys = [a, b, c];
+        let one = |i: u32| keys.iter().copied().find(|k| k.index() == i);
+        let short = |vars: &Vars<u32>, v: u32| match vars.get(&v) {
+            Some(VarRef::One(i)) => Some(i),
+            _ => None,
+        };
+        let rich = |vars: &Vars<u32>, v: u32| match vars.get(&v) {
+            Some(VarRef::Rich(st)) => Some((
+                st.items.as_slice().to_vec(),
+                st.rule_users.as_slice().to_vec(),
+                st.last.is_some(),
+            )),
+            _ => None,
+        };
+        let mut vars = Vars::new();
+        vars.add_item(&1, a, one);
+        vars.add_item(&1, a, one);
+        assert_eq!(short(&vars, 1), Some(a.index()));
+        vars.add_item(&1, b, one);
+        assert_eq!(rich(&vars, 1), Some((vec![a, b], vec![], false)));
+        vars.remove_item(&1, a);
+        vars.settle(&1);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        assert!(vars.rich.is_empty() && vars.free.is_empty(), "room freed");
+
+        // An item whose rules read its own variable.
+        vars.add_item(&2, c, one);
+        vars.add_rule_user(&2, c, one);
+        assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], false)));
+        vars.set_last(&2, Some(Vqt::default()), one);
+        assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], true)));
+        assert_eq!(vars.last(&2), Some(&Vqt::default()));
+        // A rule user alone, then a kept sample alone.
+        vars.add_rule_user(&3, a, one);
+        assert_eq!(rich(&vars, 3), Some((vec![], vec![a], false)));
+        vars.set_last(&1, Some(Vqt::default()), one);
+        assert_eq!(rich(&vars, 1), Some((vec![b], vec![], true)));
+        assert_eq!(vars.rich.len(), 3);
+        vars.set_last(&1, None, one);
+        assert_eq!(short(&vars, 1), Some(b.index()), "plain again");
+        vars.remove_rule_user(&2, c);
+        vars.settle(&2);
+        assert!(rich(&vars, 2).is_some(), "its sample is still kept");
+        vars.set_last(&2, None, one);
+        assert_eq!(short(&vars, 2), Some(c.index()));
+        assert_eq!(vars.free.len(), 2);
+        vars.add_item(&4, a, one);
+        vars.add_item(&4, b, one);
+        assert_eq!(vars.free.len(), 1, "free room reused");
+        assert_eq!(vars.last(&4), None);
+
+        vars.remove_rule_user(&3, a);
+        assert!(rich(&vars, 3).is_some(), "kept until removed");
+        vars.remove(&3);
+        vars.remove(&4);
+        vars.remove_item(&1, b);
+        assert!(vars.get(&1).is_none(), "a short entry goes with its item");
+        vars.remove_item(&2, a);
+        assert_eq!(short(&vars, 2), Some(c.index()), "another item's");
+        vars.remove(&2);
+        assert!(vars.map.is_empty() && vars.rich.is_empty() && vars.free.is_empty());
     }
 }
