@@ -67,6 +67,15 @@ fn namespace() -> Arc<AsixNamespace> {
     Arc::new(ns)
 }
 
+/// The heap an `Arc<str>` frees when it is dropped, if nothing else holds it.
+fn made_for(s: &Arc<str>) -> usize {
+    if Arc::strong_count(s) > 1 || Arc::weak_count(s) > 0 {
+        return 0;
+    }
+    // The two counts and the bytes, at the counts' alignment.
+    (2 * size_of::<usize>() + s.len()).next_multiple_of(align_of::<usize>())
+}
+
 fn per_item(bytes: isize) -> f64 {
     bytes as f64 / ITEMS as f64
 }
@@ -99,9 +108,13 @@ impl Rig {
     fn step(&mut self, now: Timestamp, events: &mut Vec<Event>) {
         for _ in 0..3 {
             while let Some(r) = self.engine(|e| e.poll_source_request()) {
-                // The request is the engine's until the backend has taken it in.
+                // The request is the engine's until the backend has taken it in, with the
+                // item IDs made for it (the backend drops them).
                 let handed = match &r {
-                    SourceRequest::Subscribe(v) => v.capacity() * size_of::<Subscription>(),
+                    SourceRequest::Subscribe(v) => {
+                        v.capacity() * size_of::<Subscription>()
+                            + v.iter().map(|s| made_for(&s.item.item_id)).sum::<usize>()
+                    }
                     _ => 0,
                 } as isize;
                 self.engine_bytes -= handed;
