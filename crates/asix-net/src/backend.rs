@@ -174,10 +174,10 @@ const RAW_SAMPLES_KEPT: usize = 4096;
 /// few: a derivation and the rules of a channel).
 const SHARED_TREATMENTS: usize = 64;
 
-/// A subscribed source item, at its [`SourceKey::index`] (32 bytes with the simulation's
-/// variables).
+/// A subscribed source item, at its [`SourceKey::index`] (24 bytes with the simulation's
+/// variables: the index is the slot's, only the generation is kept).
 struct Slot<V> {
-    key: SourceKey,
+    generation: u32,
     /// Sampling rate asked for, ms.
     rate: u32,
     /// Resolved when subscribed.
@@ -570,7 +570,13 @@ impl<S: VariableSource> AsixBackend<S> {
         self.slots
             .get(key.index() as usize)?
             .as_ref()
-            .filter(|s| s.key == key)
+            .filter(|s| s.generation == key.generation())
+    }
+
+    /// The key of the item in slot `i`.
+    fn key_at(slots: &[Option<Slot<S::Var>>], i: u32) -> Option<SourceKey> {
+        let s = slots.get(i as usize)?.as_ref()?;
+        Some(SourceKey::new(i, s.generation))
     }
 
     /// Resolves an item through the pipeline, with the source's handles.
@@ -665,7 +671,7 @@ impl<S: VariableSource> AsixBackend<S> {
             return;
         };
         let slots = &self.slots;
-        let one = |i: u32| slots.get(i as usize)?.as_ref().map(|s| s.key);
+        let one = |i: u32| Self::key_at(slots, i);
         self.vars.add_item(var, k, one);
         for v in t.rule_variables() {
             self.vars.add_rule_user(v, k, one);
@@ -745,7 +751,9 @@ impl<S: VariableSource> AsixBackend<S> {
                 self.slots.resize_with(i + 1, || None);
             }
             // The rates before, with the item (or a stale one) still in its slot.
-            let existing = self.slots[i].as_ref().map(|s| (s.key, s.r.clone()));
+            let existing = self.slots[i]
+                .as_ref()
+                .map(|s| (SourceKey::new(key.index(), s.generation), s.r.clone()));
             if let Some((_, r)) = &existing {
                 self.touch_item(&mut touched, r);
             }
@@ -766,7 +774,7 @@ impl<S: VariableSource> AsixBackend<S> {
                     let r = self.share(r);
                     self.touch_item(&mut touched, &r);
                     self.slots[i] = Some(Slot {
-                        key,
+                        generation: key.generation(),
                         rate,
                         r: r.clone(),
                     });
@@ -1048,11 +1056,7 @@ impl<S: VariableSource> AsixBackend<S> {
             // A late sample of a variable let go.
             None => return,
             Some(VarRef::One(i)) => {
-                one = self
-                    .slots
-                    .get(i as usize)
-                    .and_then(Option::as_ref)
-                    .map(|s| s.key);
+                one = Self::key_at(&self.slots, i);
                 (one.as_slice(), &[][..], None)
             }
             Some(VarRef::Rich(st)) => (
@@ -1081,7 +1085,7 @@ impl<S: VariableSource> AsixBackend<S> {
         let at = vqt.timestamp;
         let keep = self.source.peek(&v).is_none();
         let slots = &self.slots;
-        let one = |i: u32| slots.get(i as usize)?.as_ref().map(|s| s.key);
+        let one = |i: u32| Self::key_at(slots, i);
         self.vars.set_last(&v, (keep || ruled).then_some(vqt), one);
         for (k, q) in before {
             if let Some(mut x) = self.current_vqt(k) {
@@ -1684,6 +1688,7 @@ mod tests {
         assert_eq!(k, Keys::None);
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
+        assert_eq!(std::mem::size_of::<Option<Slot<u32>>>(), 24);
     }
 
     /// A variable read by one item and nothing else is that item's slot index; a second
