@@ -695,7 +695,7 @@ impl<S: VariableSource> AsixBackend<S> {
     /// wanted or wanted at another rate. Done once per request, from the state before and
     /// after it, so that a variable let go and taken again in one request is never
     /// unsubscribed, and the rate asked for is the final one. Returns the variables newly
-    /// subscribed (their first sample comes from the source).
+    /// subscribed (their first sample comes from the source), in order.
     fn apply_touched(&mut self, now: Timestamp, touched: Touched<S::Var>) -> Vec<S::Var> {
         let mut gone = Vec::new();
         let mut wanted = Vec::new();
@@ -786,7 +786,7 @@ impl<S: VariableSource> AsixBackend<S> {
         let new = self.apply_touched(now, touched);
         for k in subscribed {
             let at_once = match self.slot_of(k).map(|s| &s.r) {
-                Some(ItemRes::Var(v, _)) => !new.contains(v),
+                Some(ItemRes::Var(v, _)) => new.binary_search(v).is_err(),
                 Some(_) => true,
                 None => false,
             };
