@@ -1,7 +1,9 @@
 //! What one group of many items costs the server natively (no COM, no Wine): the engine
 //! over the in-process simulation of the synthetic database (`asix_model::synthetic`,
 //! 200,000 variables; `SCALE_ITEMS_VARIABLES=N` for another size), `cargo bench -p asix-net
-//! --bench scale_items`.
+//! --bench scale_items`. `SCALE_ITEMS_RULES=1`: the channel checks limits and control
+//! variables (`CheckLimits`, `CheckControlVariables`; off by default, as in the asix
+//! configuration).
 //!
 //! Std only (harness = false). A counting global allocator gives the live heap, and
 //! `/proc/self/statm` the resident memory (Linux; glibc's heap, not Wine's), per item of
@@ -44,6 +46,10 @@ fn variables() -> usize {
         .and_then(|v| v.parse().ok())
         .unwrap_or(200_000)
 }
+/// Whether the channel checks the quality rules (`SCALE_ITEMS_RULES=1`).
+fn rules() -> bool {
+    std::env::var("SCALE_ITEMS_RULES").is_ok_and(|v| v == "1")
+}
 const ITEMS: usize = 100_000;
 /// Update cycles at 1 s after the first OnDataChange.
 const CYCLES: usize = 5;
@@ -57,8 +63,13 @@ fn namespace() -> Arc<AsixNamespace> {
         std::fs::write(dir.join("atrybuty.csv"), g.csv).expect("csv");
         std::fs::write(&zez, g.zez).expect("zez");
     }
+    let rules = if rules() {
+        "CheckLimits = tak\nCheckControlVariables = tak\n"
+    } else {
+        ""
+    };
     let ini = format!(
-        "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {}\n",
+        "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {}\n{rules}",
         zez.display()
     );
     let (cfg, _) = asix_model::parse_config(ini.as_bytes(), "scale.ini").expect("ini");
@@ -191,8 +202,10 @@ fn main() {
         })
         .collect();
     println!(
-        "engine + in-process simulation, {} synthetic variables, {ITEMS} items, natively",
-        variables()
+        "engine + in-process simulation, {} synthetic variables, {ITEMS} items, quality \
+         rules {}, natively",
+        variables(),
+        if rules() { "checked" } else { "off" },
     );
     println!(
         "sizes: Value {} B, Vqt {} B, ItemValue {} B, SourceItem {} B, \
