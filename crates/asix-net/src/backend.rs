@@ -170,8 +170,9 @@ impl<V> ItemRes<V> {
 /// The most raw samples whose room [`AsixBackend`] keeps from one poll to the next.
 const RAW_SAMPLES_KEPT: usize = 4096;
 
-/// The most distinct treatments [`AsixBackend::share`] keeps for sharing (a plant has
-/// few: a derivation and the rules of a channel).
+/// The most distinct treatments [`AsixBackend::share`] keeps for sharing (without quality
+/// rules a plant has few: a derivation and the rules of a channel; with them, the limits
+/// and control variable of each kind of variable).
 const SHARED_TREATMENTS: usize = 64;
 
 /// A subscribed source item, at its [`SourceKey::index`] (24 bytes with the simulation's
@@ -592,8 +593,12 @@ impl<S: VariableSource> AsixBackend<S> {
         }
     }
 
-    /// A resolution to keep: its treatment replaced by an equal one already kept, if any
-    /// (else it is kept for the next items, up to [`SHARED_TREATMENTS`] in use at once).
+    /// A resolution to keep: its treatment replaced by an equal one already kept, if any,
+    /// else kept for the next items: up to [`SHARED_TREATMENTS`], those no item uses any
+    /// more making room first, then the one kept longest. (Items treated alike mostly come
+    /// together, as a branch of the database's variables whose control variable and limits
+    /// are the same; keeping only the first kinds, a large subscription with quality rules
+    /// had a treatment per item after the first 64 kinds, 200 B an item, issue 16.)
     fn share(&mut self, r: ItemRes<S::Var>) -> ItemRes<S::Var> {
         let ItemRes::Var(v, t) = r else {
             return r;
@@ -602,12 +607,12 @@ impl<S: VariableSource> AsixBackend<S> {
             return ItemRes::Var(v, Arc::clone(same));
         }
         if self.treatments.len() == SHARED_TREATMENTS {
-            // Those no item uses any more make room.
             self.treatments.retain(|x| Arc::strong_count(x) > 1);
         }
-        if self.treatments.len() < SHARED_TREATMENTS {
-            self.treatments.push(Arc::clone(&t));
+        if self.treatments.len() == SHARED_TREATMENTS {
+            self.treatments.remove(0);
         }
+        self.treatments.push(Arc::clone(&t));
         ItemRes::Var(v, t)
     }
 
@@ -1663,6 +1668,59 @@ mod tests {
         assert_eq!(out.updates[0].0, a.key);
         b.request(T, SourceRequest::Unsubscribe(vec![a.key]));
         assert!(b.vars.map.is_empty() && b.vars.rich.is_empty());
+    }
+
+    /// Past [`SHARED_TREATMENTS`] kinds in use, a new kind takes the place of the one kept
+    /// longest, so that the items of one kind coming together still share it.
+    #[test]
+    fn past_the_kinds_kept_new_kinds_are_still_shared() {
+        let (mut b, _) = backend();
+        let kind = |i: usize| {
+            let t = Treatment {
+                derivation: Derivation::Percentage {
+                    low: i as f64,
+                    high: 1000.0,
+                },
+                rule_def: None,
+                read_only: true,
+                rules: Default::default(),
+                control: None,
+                limits: Vec::new(),
+            };
+            ItemRes::Var(A000, Arc::new(t))
+        };
+        let treatment = |r: &ItemRes<u32>| match r {
+            ItemRes::Var(_, t) => Arc::clone(t),
+            ItemRes::Unserved(_) => unreachable!(),
+        };
+        // Items of many kinds, two of each in a row, all subscribed (held here).
+        let mut held = Vec::new();
+        for i in 0..SHARED_TREATMENTS * 3 {
+            let first = b.share(kind(i));
+            let second = b.share(kind(i));
+            assert!(
+                Arc::ptr_eq(&treatment(&first), &treatment(&second)),
+                "kind {i}"
+            );
+            held.push(first);
+            held.push(second);
+        }
+        assert_eq!(b.treatments.len(), SHARED_TREATMENTS);
+        // The last kinds are kept, the first ones not.
+        let again = b.share(kind(SHARED_TREATMENTS * 3 - 1));
+        assert!(Arc::ptr_eq(
+            &treatment(&again),
+            &treatment(&held[held.len() - 1])
+        ));
+        let first_again = b.share(kind(0));
+        assert!(!Arc::ptr_eq(&treatment(&first_again), &treatment(&held[0])));
+        // Kinds no item uses make room before those in use (here only the last kind).
+        let last = held.pop().expect("held");
+        drop((held, again, first_again));
+        let new = b.share(kind(10_000));
+        assert_eq!(b.treatments.len(), 2, "unused ones went");
+        assert!(Arc::ptr_eq(&b.treatments[0], &treatment(&last)));
+        assert!(Arc::ptr_eq(&b.treatments[1], &treatment(&new)));
     }
 
     /// The item lists of a variable: none and one inline, more in a vector, back to one
