@@ -269,12 +269,13 @@ struct VarState {
 const RICH: u32 = 1 << 31;
 
 /// The raw variables wanted by subscribed items. Most variables of a large subscription
-/// are read by exactly one item, with no item's rules reading them and no sample kept:
-/// such a variable's entry is that item's slot index, 4 bytes besides the variable in the
-/// map (a `u32` variable of the simulation: 8 bytes and a control byte, where a
-/// [`VarState`] in the map cost 48 and a control byte, issue 16). The others have a
-/// [`VarState`] in `rich`, and go back to the short form once they are plain again
-/// ([`Vars::settle`]).
+/// of the simulation are read by exactly one item, with no item's rules reading them and
+/// no sample kept: such a variable's entry is that item's slot index, 4 bytes besides the
+/// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte,
+/// where a [`VarState`] in the map cost 48 and a control byte, issue 16). The others have
+/// a [`VarState`] in `rich`, and go back to the short form once they are plain again
+/// ([`Vars::settle`]). On the network every sampled variable keeps its last sample, so
+/// has a [`VarState`]: about as much as one in the map cost.
 struct Vars<V> {
     map: HashMap<V, u32>,
     rich: Vec<VarState>,
@@ -339,6 +340,12 @@ impl<V: Eq + Hash + Clone> Vars<V> {
                 i
             }
             None => {
+                if self.rich.len() == self.rich.capacity() {
+                    // By a quarter, not double: a source that cannot peek (the network)
+                    // keeps every sampled variable's last sample here, and doubling would
+                    // leave up to half of a large subscription's room unused.
+                    self.rich.reserve_exact((self.rich.len() / 4).max(16));
+                }
                 self.rich.push(st);
                 (self.rich.len() - 1) as u32
             }
