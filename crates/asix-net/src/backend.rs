@@ -274,13 +274,17 @@ const RICH: u32 = 1 << 31;
 /// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte,
 /// where a [`VarState`] in the map cost 48 and a control byte, issue 16). The others have
 /// a [`VarState`] in `rich`, and go back to the short form once they are plain again
-/// ([`Vars::settle`]). On the network every sampled variable keeps its last sample, so
-/// has a [`VarState`]: about as much as one in the map cost.
+/// ([`Vars::settle`]). A source that cannot peek (the network) keeps every sampled
+/// variable's last sample: a short variable's is in `lasts` at its item's slot index (48
+/// bytes, where a [`VarState`] and a boxed sample cost 88).
 struct Vars<V> {
     map: HashMap<V, u32>,
     rich: Vec<VarState>,
     /// Indices of `rich` free for reuse.
     free: Vec<u32>,
+    /// The last samples of short variables, at their items' slot indices; empty while none
+    /// is kept (the simulation's plain variables keep none).
+    lasts: Vec<Option<Vqt>>,
 }
 
 /// A variable's entry in [`Vars`].
@@ -296,6 +300,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
             map: HashMap::new(),
             rich: Vec::new(),
             free: Vec::new(),
+            lasts: Vec::new(),
         }
     }
 
@@ -311,7 +316,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// The variable's last sample, if kept.
     fn last(&self, v: &V) -> Option<&Vqt> {
         match self.get(v)? {
-            VarRef::One(_) => None,
+            VarRef::One(i) => self.lasts.get(i as usize)?.as_ref(),
             VarRef::Rich(st) => st.last.as_deref(),
         }
     }
@@ -332,7 +337,8 @@ impl<V: Eq + Hash + Clone> Vars<V> {
                 Some(k) => Keys::One(k),
                 None => Keys::None,
             },
-            ..VarState::default()
+            rule_users: Keys::None,
+            last: e.and_then(|i| self.take_last(i)).map(Box::new),
         };
         let i = match self.free.pop() {
             Some(i) => {
@@ -390,6 +396,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
         if e & RICH == 0 {
             if e == k.index() {
                 self.map.remove(v);
+                self.take_last(e);
             }
         } else {
             self.rich[(e & !RICH) as usize].items.remove(k, false);
@@ -410,8 +417,29 @@ impl<V: Eq + Hash + Clone> Vars<V> {
         if let Some(e) = self.map.remove(v) {
             if e & RICH != 0 {
                 self.free_rich(e & !RICH);
+            } else {
+                self.take_last(e);
             }
         }
+    }
+
+    /// Takes the last sample kept at slot index `i`.
+    fn take_last(&mut self, i: u32) -> Option<Vqt> {
+        self.lasts.get_mut(i as usize)?.take()
+    }
+
+    /// The room for the last sample at slot index `i`, made if need be (by what is missing,
+    /// or a quarter: the slots are dense).
+    fn last_at(&mut self, i: u32) -> &mut Option<Vqt> {
+        let i = i as usize;
+        if i >= self.lasts.len() {
+            if i >= self.lasts.capacity() {
+                let grow = (i + 1 - self.lasts.len()).max(self.lasts.len() / 4).max(16);
+                self.lasts.reserve_exact(grow);
+            }
+            self.lasts.resize(i + 1, None);
+        }
+        &mut self.lasts[i]
     }
 
     fn free_rich(&mut self, i: u32) {
@@ -426,42 +454,55 @@ impl<V: Eq + Hash + Clone> Vars<V> {
 
     /// Keeps `last` as the variable's last sample (`Some`), or keeps none.
     fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
-        match last {
-            Some(vqt) => match &mut self.rich_mut(v, one).last {
+        let e = self.map.get(v).copied();
+        match (last, e) {
+            (Some(vqt), Some(i)) if i & RICH == 0 => *self.last_at(i) = Some(vqt),
+            (Some(vqt), _) => match &mut self.rich_mut(v, one).last {
                 Some(last) => **last = vqt,
                 last @ None => *last = Some(Box::new(vqt)),
             },
-            None => {
-                if let Some(&e) = self.map.get(v) {
-                    if e & RICH != 0 {
-                        self.rich[(e & !RICH) as usize].last = None;
-                        self.settle(v);
-                    }
-                }
+            (None, Some(i)) if i & RICH == 0 => {
+                self.take_last(i);
             }
+            (None, Some(e)) => {
+                self.rich[(e & !RICH) as usize].last = None;
+                self.settle(v);
+            }
+            (None, None) => {}
         }
     }
 
-    /// Gives a variable read by one item and nothing else its short entry again.
+    /// Gives a variable read by one item and nothing else its short entry again (with its
+    /// last sample, where short variables keep theirs already).
     fn settle(&mut self, v: &V) {
-        let Some(e) = self.map.get_mut(v) else {
+        let Some(&e) = self.map.get(v) else {
             return;
         };
-        if *e & RICH == 0 {
+        if e & RICH == 0 {
             return;
         }
-        let i = *e & !RICH;
-        if let VarState {
+        let i = e & !RICH;
+        let VarState {
             items: Keys::One(k),
             rule_users: Keys::None,
-            last: None,
+            last,
         } = &self.rich[i as usize]
-        {
-            if k.index() < RICH {
-                *e = k.index();
-                self.free_rich(i);
-            }
+        else {
+            return;
+        };
+        let k = k.index();
+        // A last sample moves only into room made already (a peeking source's
+        // variables keep theirs only while rules read them).
+        if k >= RICH || last.is_some() && k as usize >= self.lasts.len() {
+            return;
         }
+        if let Some(last) = self.rich[i as usize].last.take() {
+            self.lasts[k as usize] = Some(*last);
+        }
+        if let Some(e) = self.map.get_mut(v) {
+            *e = k;
+        }
+        self.free_rich(i);
     }
 }
 
@@ -1754,6 +1795,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
         assert_eq!(std::mem::size_of::<Option<Slot<u32>>>(), 24);
+        assert_eq!(std::mem::size_of::<Option<Vqt>>(), 48);
     }
 
     /// A variable read by one item and nothing else is that item's slot index; a second
@@ -1796,23 +1838,52 @@ mod tests {
         vars.set_last(&2, Some(Vqt::default()), one);
         assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], true)));
         assert_eq!(vars.last(&2), Some(&Vqt::default()));
-        // A rule user alone, then a kept sample alone.
-        vars.add_rule_user(&3, a, one);
-        assert_eq!(rich(&vars, 3), Some((vec![], vec![a], false)));
-        vars.set_last(&1, Some(Vqt::default()), one);
-        assert_eq!(rich(&vars, 1), Some((vec![b], vec![], true)));
-        assert_eq!(vars.rich.len(), 3);
-        vars.set_last(&1, None, one);
-        assert_eq!(short(&vars, 1), Some(b.index()), "plain again");
         vars.remove_rule_user(&2, c);
         vars.settle(&2);
-        assert!(rich(&vars, 2).is_some(), "its sample is still kept");
+        assert!(
+            rich(&vars, 2).is_some(),
+            "its sample is kept, and short variables keep none yet"
+        );
         vars.set_last(&2, None, one);
         assert_eq!(short(&vars, 2), Some(c.index()));
-        assert_eq!(vars.free.len(), 2);
+        // A rule user alone.
+        vars.add_rule_user(&3, a, one);
+        assert_eq!(rich(&vars, 3), Some((vec![], vec![a], false)));
+
+        // A kept sample alone stays short (the network's way), moves into a full state
+        // with a second item and back with the first.
+        let x = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
+        vars.set_last(&1, Some(x(1.0)), one);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        assert_eq!(vars.last(&1), Some(&x(1.0)));
+        vars.set_last(&1, Some(x(2.0)), one);
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        vars.add_item(&1, a, one);
+        assert_eq!(rich(&vars, 1), Some((vec![b, a], vec![], true)));
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert!(vars.lasts.iter().all(Option::is_none));
+        vars.remove_item(&1, a);
+        vars.settle(&1);
+        assert_eq!(short(&vars, 1), Some(b.index()), "with its sample");
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        vars.set_last(&1, None, one);
+        assert_eq!(vars.last(&1), None);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        vars.set_last(&1, Some(x(3.0)), one);
+        vars.remove_item(&1, b);
+        assert!(vars.get(&1).is_none(), "a short entry goes with its item");
+        assert!(vars.lasts.iter().all(Option::is_none), "and its sample");
+        vars.add_item(&1, b, one);
+        assert_eq!(vars.last(&1), None);
+
+        assert_eq!((vars.rich.len(), vars.free.len()), (2, 1));
         vars.add_item(&4, a, one);
         vars.add_item(&4, b, one);
-        assert_eq!(vars.free.len(), 1, "free room reused");
+        assert_eq!(
+            (vars.rich.len(), vars.free.len()),
+            (2, 0),
+            "free room reused"
+        );
         assert_eq!(vars.last(&4), None);
 
         vars.remove_rule_user(&3, a);
