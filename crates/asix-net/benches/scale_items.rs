@@ -1,7 +1,11 @@
 //! What one group of many items costs the server natively (no COM, no Wine): the engine
 //! over the in-process simulation of the synthetic database (`asix_model::synthetic`,
 //! 200,000 variables; `SCALE_ITEMS_VARIABLES=N` for another size), `cargo bench -p asix-net
-//! --bench scale_items`.
+//! --bench scale_items`. `SCALE_ITEMS_RULES=1`: the channel checks limits and control
+//! variables (`CheckLimits`, `CheckControlVariables`; off by default, as in the asix
+//! configuration). `SCALE_ITEMS_NO_PEEK=1`: the simulation cannot tell a variable's
+//! current value (`VariableSource::peek`), as the network cannot, so that the backend
+//! keeps each variable's last sample the network's way.
 //!
 //! Std only (harness = false). A counting global allocator gives the live heap, and
 //! `/proc/self/statm` the resident memory (Linux; glibc's heap, not Wine's), per item of
@@ -20,7 +24,10 @@ use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
 use asix_model::AsixNamespace;
-use asix_net::inproc::InProcessSim;
+use asix_net::backend::{AsixBackend, RawId, RawOutput, VariableSource};
+use asix_net::inproc::{InProcessSim, PlantSource};
+use asix_net::ItemKey;
+use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::model::{
     Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SetGroupState,
 };
@@ -44,6 +51,10 @@ fn variables() -> usize {
         .and_then(|v| v.parse().ok())
         .unwrap_or(200_000)
 }
+/// Whether the channel checks the quality rules (`SCALE_ITEMS_RULES=1`).
+fn rules() -> bool {
+    std::env::var("SCALE_ITEMS_RULES").is_ok_and(|v| v == "1")
+}
 const ITEMS: usize = 100_000;
 /// Update cycles at 1 s after the first OnDataChange.
 const CYCLES: usize = 5;
@@ -57,14 +68,28 @@ fn namespace() -> Arc<AsixNamespace> {
         std::fs::write(dir.join("atrybuty.csv"), g.csv).expect("csv");
         std::fs::write(&zez, g.zez).expect("zez");
     }
+    let rules = if rules() {
+        "CheckLimits = tak\nCheckControlVariables = tak\n"
+    } else {
+        ""
+    };
     let ini = format!(
-        "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {}\n",
+        "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {}\n{rules}",
         zez.display()
     );
     let (cfg, _) = asix_model::parse_config(ini.as_bytes(), "scale.ini").expect("ini");
     let (ns, w) = AsixNamespace::load(cfg);
     assert!(w.is_empty(), "{w:?}");
     Arc::new(ns)
+}
+
+/// The heap an `Arc<str>` frees when it is dropped, if nothing else holds it.
+fn made_for(s: &Arc<str>) -> usize {
+    if Arc::strong_count(s) > 1 || Arc::weak_count(s) > 0 {
+        return 0;
+    }
+    // The two counts and the bytes, at the counts' alignment.
+    (2 * size_of::<usize>() + s.len()).next_multiple_of(align_of::<usize>())
 }
 
 fn per_item(bytes: isize) -> f64 {
@@ -74,14 +99,44 @@ fn per_item(bytes: isize) -> f64 {
 /// The engine and the backend stepped as the driver does, with the live heap each side's
 /// calls left behind counted apart (ownership moving between them, such as a request the
 /// backend consumes, counts where it is freed).
-struct Rig {
+/// The simulation without [`VariableSource::peek`] (`SCALE_ITEMS_NO_PEEK=1`).
+struct NoPeek(PlantSource);
+
+impl VariableSource for NoPeek {
+    type Var = u32;
+    type Part = ();
+    fn lookup(&self, channel: &Arc<str>, key: &ItemKey) -> Option<u32> {
+        self.0.lookup(channel, key)
+    }
+    fn part(&self, _var: &u32) {}
+    fn subscribe(&mut self, now: Timestamp, vars: Vec<(u32, u32)>) {
+        self.0.subscribe(now, vars)
+    }
+    fn unsubscribe(&mut self, now: Timestamp, vars: Vec<u32>) {
+        self.0.unsubscribe(now, vars)
+    }
+    fn read(&mut self, now: Timestamp, id: RawId, vars: Vec<u32>) {
+        self.0.read(now, id, vars)
+    }
+    fn write(&mut self, now: Timestamp, id: RawId, items: Vec<(u32, ItemVqt)>) {
+        self.0.write(now, id, items)
+    }
+    fn poll(&mut self, now: Timestamp, out: &mut RawOutput<u32>) {
+        self.0.poll(now, out)
+    }
+    fn poll_timeout(&self) -> Option<Timestamp> {
+        self.0.poll_timeout()
+    }
+}
+
+struct Rig<S: VariableSource> {
     e: Engine,
-    sim: InProcessSim,
+    sim: AsixBackend<S>,
     engine_bytes: isize,
     backend_bytes: isize,
 }
 
-impl Rig {
+impl<S: VariableSource> Rig<S> {
     fn engine<T>(&mut self, f: impl FnOnce(&mut Engine) -> T) -> T {
         let b = live();
         let r = f(&mut self.e);
@@ -89,7 +144,7 @@ impl Rig {
         r
     }
 
-    fn backend<T>(&mut self, f: impl FnOnce(&mut InProcessSim) -> T) -> T {
+    fn backend<T>(&mut self, f: impl FnOnce(&mut AsixBackend<S>) -> T) -> T {
         let b = live();
         let r = f(&mut self.sim);
         self.backend_bytes += live() - b;
@@ -99,9 +154,13 @@ impl Rig {
     fn step(&mut self, now: Timestamp, events: &mut Vec<Event>) {
         for _ in 0..3 {
             while let Some(r) = self.engine(|e| e.poll_source_request()) {
-                // The request is the engine's until the backend has taken it in.
+                // The request is the engine's until the backend has taken it in, with the
+                // item IDs made for it (the backend drops them).
                 let handed = match &r {
-                    SourceRequest::Subscribe(v) => v.capacity() * size_of::<Subscription>(),
+                    SourceRequest::Subscribe(v) => {
+                        v.capacity() * size_of::<Subscription>()
+                            + v.iter().map(|s| made_for(&s.item.item_id)).sum::<usize>()
+                    }
                     _ => 0,
                 } as isize;
                 self.engine_bytes -= handed;
@@ -149,10 +208,30 @@ impl Rig {
 
 fn main() {
     let ns = namespace();
-    let mut now = Timestamp::from_filetime_parts(0, 0x01DC_0000);
+    let now = Timestamp::from_filetime_parts(0, 0x01DC_0000);
+    let no_peek = std::env::var("SCALE_ITEMS_NO_PEEK").is_ok_and(|v| v == "1");
+    if no_peek {
+        let source = NoPeek(PlantSource::new(&ns, 1, now));
+        run(
+            ns.clone(),
+            now,
+            AsixBackend::from_source(ns, source),
+            "cannot peek",
+        );
+    } else {
+        run(ns.clone(), now, InProcessSim::new(ns, 1, now), "peeks");
+    }
+}
+
+fn run<S: VariableSource>(
+    ns: Arc<AsixNamespace>,
+    mut now: Timestamp,
+    sim: AsixBackend<S>,
+    peek: &str,
+) {
     let mut rig = Rig {
-        e: Engine::new(EngineConfig::default(), ns.clone()),
-        sim: InProcessSim::new(ns, 1, now),
+        e: Engine::new(EngineConfig::default(), ns),
+        sim,
         engine_bytes: 0,
         backend_bytes: 0,
     };
@@ -178,8 +257,10 @@ fn main() {
         })
         .collect();
     println!(
-        "engine + in-process simulation, {} synthetic variables, {ITEMS} items, natively",
-        variables()
+        "engine + in-process simulation ({peek}), {} synthetic variables, {ITEMS} items, \
+         quality rules {}, natively",
+        variables(),
+        if rules() { "checked" } else { "off" },
     );
     println!(
         "sizes: Value {} B, Vqt {} B, ItemValue {} B, SourceItem {} B, \

@@ -170,14 +170,15 @@ impl<V> ItemRes<V> {
 /// The most raw samples whose room [`AsixBackend`] keeps from one poll to the next.
 const RAW_SAMPLES_KEPT: usize = 4096;
 
-/// The most distinct treatments [`AsixBackend::share`] keeps for sharing (a plant has
-/// few: a derivation and the rules of a channel).
+/// The most distinct treatments [`AsixBackend::share`] keeps for sharing (without quality
+/// rules a plant has few: a derivation and the rules of a channel; with them, the limits
+/// and control variable of each kind of variable).
 const SHARED_TREATMENTS: usize = 64;
 
-/// A subscribed source item, at its [`SourceKey::index`] (32 bytes with the simulation's
-/// variables).
+/// A subscribed source item, at its [`SourceKey::index`] (24 bytes with the simulation's
+/// variables: the index is the slot's, only the generation is kept).
 struct Slot<V> {
-    key: SourceKey,
+    generation: u32,
     /// Sampling rate asked for, ms.
     rate: u32,
     /// Resolved when subscribed.
@@ -204,10 +205,6 @@ impl Keys {
             Keys::One(k) => std::slice::from_ref(k),
             Keys::Many(v) => v,
         }
-    }
-
-    fn is_empty(&self) -> bool {
-        self.as_slice().is_empty()
     }
 
     fn contains(&self, k: &SourceKey) -> bool {
@@ -252,7 +249,7 @@ impl Keys {
     }
 }
 
-/// A raw variable wanted by subscribed items (40 bytes).
+/// A raw variable's full state in [`Vars`] (40 bytes).
 #[derive(Default)]
 struct VarState {
     /// The items reading it.
@@ -265,6 +262,248 @@ struct VarState {
     /// value or quality re-checks its users). Boxed: most variables of the simulation keep
     /// none.
     last: Option<Box<Vqt>>,
+}
+
+/// Marks a [`Vars`] entry that indexes [`Vars::rich`]; an entry without it is the slot
+/// index of the variable's only item.
+const RICH: u32 = 1 << 31;
+
+/// The raw variables wanted by subscribed items. Most variables of a large subscription
+/// of the simulation are read by exactly one item, with no item's rules reading them and
+/// no sample kept: such a variable's entry is that item's slot index, 4 bytes besides the
+/// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte,
+/// where a [`VarState`] in the map cost 48 and a control byte, issue 16). The others have
+/// a [`VarState`] in `rich`, and go back to the short form once they are plain again
+/// ([`Vars::settle`]). A source that cannot peek (the network) keeps every sampled
+/// variable's last sample: a short variable's is in `lasts` at its item's slot index (48
+/// bytes, where a [`VarState`] and a boxed sample cost 88).
+struct Vars<V> {
+    map: HashMap<V, u32>,
+    rich: Vec<VarState>,
+    /// Indices of `rich` free for reuse.
+    free: Vec<u32>,
+    /// The last samples of short variables, at their items' slot indices; empty while none
+    /// is kept (the simulation's plain variables keep none).
+    lasts: Vec<Option<Vqt>>,
+}
+
+/// A variable's entry in [`Vars`].
+enum VarRef<'a> {
+    /// Read by the item at this slot index, and that is all.
+    One(u32),
+    Rich(&'a VarState),
+}
+
+impl<V: Eq + Hash + Clone> Vars<V> {
+    fn new() -> Self {
+        Vars {
+            map: HashMap::new(),
+            rich: Vec::new(),
+            free: Vec::new(),
+            lasts: Vec::new(),
+        }
+    }
+
+    fn get(&self, v: &V) -> Option<VarRef<'_>> {
+        let e = *self.map.get(v)?;
+        Some(if e & RICH == 0 {
+            VarRef::One(e)
+        } else {
+            VarRef::Rich(&self.rich[(e & !RICH) as usize])
+        })
+    }
+
+    /// The variable's last sample, if kept.
+    fn last(&self, v: &V) -> Option<&Vqt> {
+        match self.get(v)? {
+            VarRef::One(i) => self.lasts.get(i as usize)?.as_ref(),
+            VarRef::Rich(st) => st.last.as_deref(),
+        }
+    }
+
+    fn keys(&self) -> impl Iterator<Item = &V> {
+        self.map.keys()
+    }
+
+    /// The variable's full state, made from its short entry (`one`: the key of the item at
+    /// a slot index) or anew.
+    fn rich_mut(&mut self, v: &V, one: impl FnOnce(u32) -> Option<SourceKey>) -> &mut VarState {
+        let e = self.map.get(v).copied();
+        if let Some(e) = e.filter(|e| e & RICH != 0) {
+            return &mut self.rich[(e & !RICH) as usize];
+        }
+        let st = VarState {
+            items: match e.and_then(one) {
+                Some(k) => Keys::One(k),
+                None => Keys::None,
+            },
+            rule_users: Keys::None,
+            last: e.and_then(|i| self.take_last(i)).map(Box::new),
+        };
+        let i = match self.free.pop() {
+            Some(i) => {
+                self.rich[i as usize] = st;
+                i
+            }
+            None => {
+                if self.rich.len() == self.rich.capacity() {
+                    // By a quarter, not double: a source that cannot peek (the network)
+                    // keeps every sampled variable's last sample here, and doubling would
+                    // leave up to half of a large subscription's room unused.
+                    self.rich.reserve_exact((self.rich.len() / 4).max(16));
+                }
+                self.rich.push(st);
+                (self.rich.len() - 1) as u32
+            }
+        };
+        debug_assert!(i < RICH);
+        match self.map.get_mut(v) {
+            Some(e) => *e = RICH | i,
+            None => {
+                self.map.insert(v.clone(), RICH | i);
+            }
+        }
+        &mut self.rich[i as usize]
+    }
+
+    /// Item `k` reads `v` (noted once).
+    fn add_item(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        match self.map.get(v) {
+            None if k.index() < RICH => {
+                self.map.insert(v.clone(), k.index());
+                return;
+            }
+            Some(&e) if e & RICH == 0 && e == k.index() => return,
+            _ => {}
+        }
+        let st = self.rich_mut(v, one);
+        if !st.items.contains(&k) {
+            st.items.push(k);
+        }
+    }
+
+    /// Item `k`'s rules read `v` (noted once per use).
+    fn add_rule_user(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        self.rich_mut(v, one).rule_users.push(k);
+    }
+
+    /// Item `k` no longer reads `v` (a variable nothing else needs keeps its entry, if it
+    /// has a full state, until [`Self::remove`]).
+    fn remove_item(&mut self, v: &V, k: SourceKey) {
+        let Some(&e) = self.map.get(v) else {
+            return;
+        };
+        if e & RICH == 0 {
+            if e == k.index() {
+                self.map.remove(v);
+                self.take_last(e);
+            }
+        } else {
+            self.rich[(e & !RICH) as usize].items.remove(k, false);
+        }
+    }
+
+    /// One use of `v` by item `k`'s rules less.
+    fn remove_rule_user(&mut self, v: &V, k: SourceKey) {
+        if let Some(&e) = self.map.get(v) {
+            if e & RICH != 0 {
+                self.rich[(e & !RICH) as usize].rule_users.remove(k, true);
+            }
+        }
+    }
+
+    /// Forgets `v`.
+    fn remove(&mut self, v: &V) {
+        if let Some(e) = self.map.remove(v) {
+            if e & RICH != 0 {
+                self.free_rich(e & !RICH);
+            } else {
+                self.take_last(e);
+            }
+        }
+    }
+
+    /// Takes the last sample kept at slot index `i`.
+    fn take_last(&mut self, i: u32) -> Option<Vqt> {
+        self.lasts.get_mut(i as usize)?.take()
+    }
+
+    /// The room for the last sample at slot index `i`, made if need be (by what is missing,
+    /// or a quarter: the slots are dense).
+    fn last_at(&mut self, i: u32) -> &mut Option<Vqt> {
+        let i = i as usize;
+        if i >= self.lasts.len() {
+            if i >= self.lasts.capacity() {
+                let grow = (i + 1 - self.lasts.len()).max(self.lasts.len() / 4).max(16);
+                self.lasts.reserve_exact(grow);
+            }
+            self.lasts.resize(i + 1, None);
+        }
+        &mut self.lasts[i]
+    }
+
+    fn free_rich(&mut self, i: u32) {
+        self.rich[i as usize] = VarState::default();
+        self.free.push(i);
+        if self.free.len() == self.rich.len() {
+            // None left: their room goes too.
+            self.rich = Vec::new();
+            self.free = Vec::new();
+        }
+    }
+
+    /// Keeps `last` as the variable's last sample (`Some`), or keeps none.
+    fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
+        let e = self.map.get(v).copied();
+        match (last, e) {
+            (Some(vqt), Some(i)) if i & RICH == 0 => *self.last_at(i) = Some(vqt),
+            (Some(vqt), _) => match &mut self.rich_mut(v, one).last {
+                Some(last) => **last = vqt,
+                last @ None => *last = Some(Box::new(vqt)),
+            },
+            (None, Some(i)) if i & RICH == 0 => {
+                self.take_last(i);
+            }
+            (None, Some(e)) => {
+                self.rich[(e & !RICH) as usize].last = None;
+                self.settle(v);
+            }
+            (None, None) => {}
+        }
+    }
+
+    /// Gives a variable read by one item and nothing else its short entry again (with its
+    /// last sample, where short variables keep theirs already).
+    fn settle(&mut self, v: &V) {
+        let Some(&e) = self.map.get(v) else {
+            return;
+        };
+        if e & RICH == 0 {
+            return;
+        }
+        let i = e & !RICH;
+        let VarState {
+            items: Keys::One(k),
+            rule_users: Keys::None,
+            last,
+        } = &self.rich[i as usize]
+        else {
+            return;
+        };
+        let k = k.index();
+        // A last sample moves only into room made already (a peeking source's
+        // variables keep theirs only while rules read them).
+        if k >= RICH || last.is_some() && k as usize >= self.lasts.len() {
+            return;
+        }
+        if let Some(last) = self.rich[i as usize].last.take() {
+            self.lasts[k as usize] = Some(*last);
+        }
+        if let Some(e) = self.map.get_mut(v) {
+            *e = k;
+        }
+        self.free_rich(i);
+    }
 }
 
 /// The variables a request touched, with the rate each was subscribed at before it
@@ -331,7 +570,7 @@ pub struct AsixBackend<S: VariableSource> {
     source: S,
     /// Indexed by [`SourceKey::index`].
     slots: Vec<Option<Slot<S::Var>>>,
-    vars: HashMap<S::Var, VarState>,
+    vars: Vars<S::Var>,
     unserved: Unserved<S::Var>,
     /// The treatments subscribed items share ([`Self::share`]).
     treatments: Vec<Arc<Treatment<S::Var>>>,
@@ -354,7 +593,7 @@ impl<S: VariableSource> AsixBackend<S> {
             ns,
             source,
             slots: Vec::new(),
-            vars: HashMap::new(),
+            vars: Vars::new(),
             unserved: Unserved::new(),
             treatments: Vec::new(),
             fresh: Vec::new(),
@@ -380,7 +619,13 @@ impl<S: VariableSource> AsixBackend<S> {
         self.slots
             .get(key.index() as usize)?
             .as_ref()
-            .filter(|s| s.key == key)
+            .filter(|s| s.generation == key.generation())
+    }
+
+    /// The key of the item in slot `i`.
+    fn key_at(slots: &[Option<Slot<S::Var>>], i: u32) -> Option<SourceKey> {
+        let s = slots.get(i as usize)?.as_ref()?;
+        Some(SourceKey::new(i, s.generation))
     }
 
     /// Resolves an item through the pipeline, with the source's handles.
@@ -396,8 +641,12 @@ impl<S: VariableSource> AsixBackend<S> {
         }
     }
 
-    /// A resolution to keep: its treatment replaced by an equal one already kept, if any
-    /// (else it is kept for the next items, up to [`SHARED_TREATMENTS`] in use at once).
+    /// A resolution to keep: its treatment replaced by an equal one already kept, if any,
+    /// else kept for the next items: up to [`SHARED_TREATMENTS`], those no item uses any
+    /// more making room first, then the one kept longest. (Items treated alike mostly come
+    /// together, as a branch of the database's variables whose control variable and limits
+    /// are the same; keeping only the first kinds, a large subscription with quality rules
+    /// had a treatment per item after the first 64 kinds, 200 B an item, issue 16.)
     fn share(&mut self, r: ItemRes<S::Var>) -> ItemRes<S::Var> {
         let ItemRes::Var(v, t) = r else {
             return r;
@@ -406,20 +655,18 @@ impl<S: VariableSource> AsixBackend<S> {
             return ItemRes::Var(v, Arc::clone(same));
         }
         if self.treatments.len() == SHARED_TREATMENTS {
-            // Those no item uses any more make room.
             self.treatments.retain(|x| Arc::strong_count(x) > 1);
         }
-        if self.treatments.len() < SHARED_TREATMENTS {
-            self.treatments.push(Arc::clone(&t));
+        if self.treatments.len() == SHARED_TREATMENTS {
+            self.treatments.remove(0);
         }
+        self.treatments.push(Arc::clone(&t));
         ItemRes::Var(v, t)
     }
 
     /// A variable's current raw VQT: the source's, else the last sample.
     fn current(&self, v: &S::Var) -> Option<Vqt> {
-        self.source
-            .peek(v)
-            .or_else(|| self.vars.get(v)?.last.as_deref().cloned())
+        self.source.peek(v).or_else(|| self.vars.last(v).cloned())
     }
 
     /// An item's VQT from a raw sample of its variable (quality rules over the current
@@ -438,14 +685,17 @@ impl<S: VariableSource> AsixBackend<S> {
     /// The rate a variable is subscribed at: the fastest of the items reading it or whose
     /// rules read it; `None` when nothing wants it.
     fn rate_of(&self, v: &S::Var) -> Option<u32> {
-        let st = self.vars.get(v)?;
-        st.items
-            .as_slice()
-            .iter()
-            .chain(st.rule_users.as_slice())
-            .filter_map(|k| self.slot_of(*k))
-            .map(|s| s.rate)
-            .min()
+        match self.vars.get(v)? {
+            VarRef::One(i) => self.slots.get(i as usize)?.as_ref().map(|s| s.rate),
+            VarRef::Rich(st) => st
+                .items
+                .as_slice()
+                .iter()
+                .chain(st.rule_users.as_slice())
+                .filter_map(|k| self.slot_of(*k))
+                .map(|s| s.rate)
+                .min(),
+        }
     }
 
     /// Notes the rate of a variable a request is about to change (the first note of a
@@ -467,18 +717,17 @@ impl<S: VariableSource> AsixBackend<S> {
         }
     }
 
-    /// Adds item `k` to the fan-out of its variable and to the users of its rule variables.
+    /// Adds item `k` (in its slot already) to the fan-out of its variable and to the users
+    /// of its rule variables.
     fn attach(&mut self, k: SourceKey, r: &ItemRes<S::Var>) {
         let Some((var, t)) = r.resolved() else {
             return;
         };
-        let st = self.vars.entry(var.clone()).or_default();
-        if !st.items.contains(&k) {
-            st.items.push(k);
-        }
+        let slots = &self.slots;
+        let one = |i: u32| Self::key_at(slots, i);
+        self.vars.add_item(var, k, one);
         for v in t.rule_variables() {
-            let st = self.vars.entry(v.clone()).or_default();
-            st.rule_users.push(k);
+            self.vars.add_rule_user(v, k, one);
         }
     }
 
@@ -488,13 +737,9 @@ impl<S: VariableSource> AsixBackend<S> {
         let Some((var, t)) = r.resolved() else {
             return;
         };
-        if let Some(st) = self.vars.get_mut(var) {
-            st.items.remove(k, false);
-        }
+        self.vars.remove_item(var, k);
         for v in t.rule_variables() {
-            if let Some(st) = self.vars.get_mut(v) {
-                st.rule_users.remove(k, true);
-            }
+            self.vars.remove_rule_user(v, k);
         }
     }
 
@@ -503,7 +748,7 @@ impl<S: VariableSource> AsixBackend<S> {
     /// wanted or wanted at another rate. Done once per request, from the state before and
     /// after it, so that a variable let go and taken again in one request is never
     /// unsubscribed, and the rate asked for is the final one. Returns the variables newly
-    /// subscribed (their first sample comes from the source).
+    /// subscribed (their first sample comes from the source), in order.
     fn apply_touched(&mut self, now: Timestamp, touched: Touched<S::Var>) -> Vec<S::Var> {
         let mut gone = Vec::new();
         let mut wanted = Vec::new();
@@ -516,13 +761,15 @@ impl<S: VariableSource> AsixBackend<S> {
                         gone.push(v);
                     }
                 }
-                Some(after) if before != Some(after) => {
-                    if before.is_none() {
-                        new.push(v.clone());
+                Some(after) => {
+                    self.vars.settle(&v);
+                    if before != Some(after) {
+                        if before.is_none() {
+                            new.push(v.clone());
+                        }
+                        wanted.push((v, after));
                     }
-                    wanted.push((v, after));
                 }
-                Some(_) => {}
             }
         }
         if !gone.is_empty() {
@@ -557,7 +804,9 @@ impl<S: VariableSource> AsixBackend<S> {
                 self.slots.resize_with(i + 1, || None);
             }
             // The rates before, with the item (or a stale one) still in its slot.
-            let existing = self.slots[i].as_ref().map(|s| (s.key, s.r.clone()));
+            let existing = self.slots[i]
+                .as_ref()
+                .map(|s| (SourceKey::new(key.index(), s.generation), s.r.clone()));
             if let Some((_, r)) = &existing {
                 self.touch_item(&mut touched, r);
             }
@@ -577,8 +826,12 @@ impl<S: VariableSource> AsixBackend<S> {
                     let r = self.resolve(&item);
                     let r = self.share(r);
                     self.touch_item(&mut touched, &r);
+                    self.slots[i] = Some(Slot {
+                        generation: key.generation(),
+                        rate,
+                        r: r.clone(),
+                    });
                     self.attach(key, &r);
-                    self.slots[i] = Some(Slot { key, rate, r });
                 }
             }
             subscribed.push(key);
@@ -586,7 +839,7 @@ impl<S: VariableSource> AsixBackend<S> {
         let new = self.apply_touched(now, touched);
         for k in subscribed {
             let at_once = match self.slot_of(k).map(|s| &s.r) {
-                Some(ItemRes::Var(v, _)) => !new.contains(v),
+                Some(ItemRes::Var(v, _)) => new.binary_search(v).is_err(),
                 Some(_) => true,
                 None => false,
             };
@@ -851,21 +1104,32 @@ impl<S: VariableSource> AsixBackend<S> {
     /// holds.) Such a report keeps the item's value and takes the later of the two
     /// timestamps, the time the quality became what it is.
     fn update(&mut self, v: S::Var, vqt: Vqt, out: &mut SourceOutput) {
-        let Some(st) = self.vars.get(&v) else {
+        let one;
+        let (items, rule_users, last) = match self.vars.get(&v) {
             // A late sample of a variable let go.
-            return;
+            None => return,
+            Some(VarRef::One(i)) => {
+                one = Self::key_at(&self.slots, i);
+                (one.as_slice(), &[][..], None)
+            }
+            Some(VarRef::Rich(st)) => (
+                st.items.as_slice(),
+                st.rule_users.as_slice(),
+                st.last.as_deref(),
+            ),
         };
-        for &k in st.items.as_slice() {
+        for &k in items {
             if let Some((_, t)) = self.slot_of(k).and_then(|s| s.r.resolved()) {
                 out.updates.push((k, self.item_vqt(t, vqt.clone())));
             }
         }
         // Only a new value or quality of a rule variable can change the rules' outcome.
         let same = |l: &Vqt| l.value == vqt.value && l.quality == vqt.quality;
-        let users = if st.rule_users.is_empty() || st.last.as_deref().is_some_and(same) {
+        let ruled = !rule_users.is_empty();
+        let users = if !ruled || last.is_some_and(same) {
             Vec::new()
         } else {
-            st.rule_users.as_slice().to_vec()
+            rule_users.to_vec()
         };
         let before: Vec<(SourceKey, Quality)> = users
             .into_iter()
@@ -873,16 +1137,9 @@ impl<S: VariableSource> AsixBackend<S> {
             .collect();
         let at = vqt.timestamp;
         let keep = self.source.peek(&v).is_none();
-        if let Some(st) = self.vars.get_mut(&v) {
-            if keep || !st.rule_users.is_empty() {
-                match &mut st.last {
-                    Some(last) => **last = vqt,
-                    None => st.last = Some(Box::new(vqt)),
-                }
-            } else {
-                st.last = None;
-            }
-        }
+        let slots = &self.slots;
+        let one = |i: u32| Self::key_at(slots, i);
+        self.vars.set_last(&v, (keep || ruled).then_some(vqt), one);
         for (k, q) in before {
             if let Some(mut x) = self.current_vqt(k) {
                 if x.quality != q {
@@ -1014,6 +1271,9 @@ mod tests {
         writes: Vec<(RawId, Vec<(u32, ItemVqt)>)>,
         /// Handed out at the next poll.
         out: RawOutput<u32>,
+        /// The current values `peek` gives (the simulation's way); `None`: it gives none
+        /// (the network's way).
+        plant: Option<BTreeMap<u32, Vqt>>,
     }
 
     impl VariableSource for Fake {
@@ -1027,6 +1287,9 @@ mod tests {
         }
         fn part(&self, var: &u32) -> &'static str {
             VARS[*var as usize].0
+        }
+        fn peek(&self, var: &u32) -> Option<Vqt> {
+            self.plant.as_ref()?.get(var).cloned()
         }
         fn subscribe(&mut self, _now: Timestamp, vars: Vec<(u32, u32)>) {
             for (v, rate) in vars {
@@ -1414,6 +1677,100 @@ mod tests {
         assert_eq!(b.treatments.len(), 2);
     }
 
+    /// With a source that can peek (the simulation), a variable of one item and no rules
+    /// keeps no sample and stays short; a second item makes it a full state, and it is
+    /// short again when that item goes; samples fan out alike.
+    #[test]
+    fn a_peeking_source_keeps_plain_variables_short() {
+        let (mut b, ns) = backend();
+        let now = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
+        b.source.plant = Some(BTreeMap::from([
+            (A000, now(4.0)),
+            (K001, Vqt::new(Value::I2(0), Quality::GOOD, T)),
+        ]));
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        let (a, pct) = (&it[0], &it[1]);
+        let short = |b: &AsixBackend<Fake>, v: u32| matches!(b.vars.get(&v), Some(VarRef::One(_)));
+        subscribe(&mut b, &[(a, 1000)]);
+        assert!(short(&b, A000));
+        assert!(!short(&b, K001), "a rule variable has its users");
+        let out = poll(&mut b, &[(A000, Value::R4(4.0))]);
+        assert_eq!(out.updates.len(), 1);
+        assert!(short(&b, A000), "no sample kept");
+        assert!(b.vars.last(&K001).is_none());
+        poll(&mut b, &[(K001, Value::I2(0))]);
+        assert!(
+            b.vars.last(&K001).is_some(),
+            "a rule variable's sample is kept"
+        );
+
+        subscribe(&mut b, &[(pct, 1000)]);
+        assert!(!short(&b, A000));
+        let out = poll(&mut b, &[(A000, Value::R4(4.0))]);
+        let got: Vec<SourceKey> = out.updates.iter().map(|(k, _)| *k).collect();
+        assert!(got.contains(&a.key) && got.contains(&pct.key), "{got:?}");
+        b.request(T, SourceRequest::Unsubscribe(vec![pct.key]));
+        assert!(short(&b, A000));
+        let out = poll(&mut b, &[(A000, Value::R4(5.0))]);
+        assert_eq!(out.updates.len(), 1);
+        assert_eq!(out.updates[0].0, a.key);
+        b.request(T, SourceRequest::Unsubscribe(vec![a.key]));
+        assert!(b.vars.map.is_empty() && b.vars.rich.is_empty());
+    }
+
+    /// Past [`SHARED_TREATMENTS`] kinds in use, a new kind takes the place of the one kept
+    /// longest, so that the items of one kind coming together still share it.
+    #[test]
+    fn past_the_kinds_kept_new_kinds_are_still_shared() {
+        let (mut b, _) = backend();
+        let kind = |i: usize| {
+            let t = Treatment {
+                derivation: Derivation::Percentage {
+                    low: i as f64,
+                    high: 1000.0,
+                },
+                rule_def: None,
+                read_only: true,
+                rules: Default::default(),
+                control: None,
+                limits: Vec::new(),
+            };
+            ItemRes::Var(A000, Arc::new(t))
+        };
+        let treatment = |r: &ItemRes<u32>| match r {
+            ItemRes::Var(_, t) => Arc::clone(t),
+            ItemRes::Unserved(_) => unreachable!(),
+        };
+        // Items of many kinds, two of each in a row, all subscribed (held here).
+        let mut held = Vec::new();
+        for i in 0..SHARED_TREATMENTS * 3 {
+            let first = b.share(kind(i));
+            let second = b.share(kind(i));
+            assert!(
+                Arc::ptr_eq(&treatment(&first), &treatment(&second)),
+                "kind {i}"
+            );
+            held.push(first);
+            held.push(second);
+        }
+        assert_eq!(b.treatments.len(), SHARED_TREATMENTS);
+        // The last kinds are kept, the first ones not.
+        let again = b.share(kind(SHARED_TREATMENTS * 3 - 1));
+        assert!(Arc::ptr_eq(
+            &treatment(&again),
+            &treatment(&held[held.len() - 1])
+        ));
+        let first_again = b.share(kind(0));
+        assert!(!Arc::ptr_eq(&treatment(&first_again), &treatment(&held[0])));
+        // Kinds no item uses make room before those in use (here only the last kind).
+        let last = held.pop().expect("held");
+        drop((held, again, first_again));
+        let new = b.share(kind(10_000));
+        assert_eq!(b.treatments.len(), 2, "unused ones went");
+        assert!(Arc::ptr_eq(&b.treatments[0], &treatment(&last)));
+        assert!(Arc::ptr_eq(&b.treatments[1], &treatment(&new)));
+    }
+
     /// The item lists of a variable: none and one inline, more in a vector, back to one
     /// and none as items go; `first_only` takes one use of a rule user away.
     #[test]
@@ -1422,7 +1779,7 @@ mod tests {
         let (a, b) = (it[0].key, it[1].key);
         assert_ne!(a, b);
         let mut k = Keys::default();
-        assert!(k.is_empty());
+        assert!(k.as_slice().is_empty());
         k.push(a);
         assert_eq!(k, Keys::One(a));
         k.push(b);
@@ -1437,5 +1794,107 @@ mod tests {
         assert_eq!(k, Keys::None);
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
+        assert_eq!(std::mem::size_of::<Option<Slot<u32>>>(), 24);
+        assert_eq!(std::mem::size_of::<Option<Vqt>>(), 48);
+    }
+
+    /// A variable read by one item and nothing else is that item's slot index; a second
+    /// item, a rule user or a kept sample give it a full state, and it goes back to the
+    /// short form (its full state's room reused, or freed with the last) once it is plain
+    /// again.
+    #[test]
+    fn variables_of_one_item_are_kept_short() {
+        let it = items(&ns(), &["KW_K001", "KW_K002", "KW_A000"]);
+        let (a, b, c) = (it[0].key, it[1].key, it[2].key);
+        let keys = [a, b, c];
+        let one = |i: u32| keys.iter().copied().find(|k| k.index() == i);
+        let short = |vars: &Vars<u32>, v: u32| match vars.get(&v) {
+            Some(VarRef::One(i)) => Some(i),
+            _ => None,
+        };
+        let rich = |vars: &Vars<u32>, v: u32| match vars.get(&v) {
+            Some(VarRef::Rich(st)) => Some((
+                st.items.as_slice().to_vec(),
+                st.rule_users.as_slice().to_vec(),
+                st.last.is_some(),
+            )),
+            _ => None,
+        };
+        let mut vars = Vars::new();
+        vars.add_item(&1, a, one);
+        vars.add_item(&1, a, one);
+        assert_eq!(short(&vars, 1), Some(a.index()));
+        vars.add_item(&1, b, one);
+        assert_eq!(rich(&vars, 1), Some((vec![a, b], vec![], false)));
+        vars.remove_item(&1, a);
+        vars.settle(&1);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        assert!(vars.rich.is_empty() && vars.free.is_empty(), "room freed");
+
+        // An item whose rules read its own variable.
+        vars.add_item(&2, c, one);
+        vars.add_rule_user(&2, c, one);
+        assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], false)));
+        vars.set_last(&2, Some(Vqt::default()), one);
+        assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], true)));
+        assert_eq!(vars.last(&2), Some(&Vqt::default()));
+        vars.remove_rule_user(&2, c);
+        vars.settle(&2);
+        assert!(
+            rich(&vars, 2).is_some(),
+            "its sample is kept, and short variables keep none yet"
+        );
+        vars.set_last(&2, None, one);
+        assert_eq!(short(&vars, 2), Some(c.index()));
+        // A rule user alone.
+        vars.add_rule_user(&3, a, one);
+        assert_eq!(rich(&vars, 3), Some((vec![], vec![a], false)));
+
+        // A kept sample alone stays short (the network's way), moves into a full state
+        // with a second item and back with the first.
+        let x = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
+        vars.set_last(&1, Some(x(1.0)), one);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        assert_eq!(vars.last(&1), Some(&x(1.0)));
+        vars.set_last(&1, Some(x(2.0)), one);
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        vars.add_item(&1, a, one);
+        assert_eq!(rich(&vars, 1), Some((vec![b, a], vec![], true)));
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert!(vars.lasts.iter().all(Option::is_none));
+        vars.remove_item(&1, a);
+        vars.settle(&1);
+        assert_eq!(short(&vars, 1), Some(b.index()), "with its sample");
+        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        vars.set_last(&1, None, one);
+        assert_eq!(vars.last(&1), None);
+        assert_eq!(short(&vars, 1), Some(b.index()));
+        vars.set_last(&1, Some(x(3.0)), one);
+        vars.remove_item(&1, b);
+        assert!(vars.get(&1).is_none(), "a short entry goes with its item");
+        assert!(vars.lasts.iter().all(Option::is_none), "and its sample");
+        vars.add_item(&1, b, one);
+        assert_eq!(vars.last(&1), None);
+
+        assert_eq!((vars.rich.len(), vars.free.len()), (2, 1));
+        vars.add_item(&4, a, one);
+        vars.add_item(&4, b, one);
+        assert_eq!(
+            (vars.rich.len(), vars.free.len()),
+            (2, 0),
+            "free room reused"
+        );
+        assert_eq!(vars.last(&4), None);
+
+        vars.remove_rule_user(&3, a);
+        assert!(rich(&vars, 3).is_some(), "kept until removed");
+        vars.remove(&3);
+        vars.remove(&4);
+        vars.remove_item(&1, b);
+        assert!(vars.get(&1).is_none(), "a short entry goes with its item");
+        vars.remove_item(&2, a);
+        assert_eq!(short(&vars, 2), Some(c.index()), "another item's");
+        vars.remove(&2);
+        assert!(vars.map.is_empty() && vars.rich.is_empty() && vars.free.is_empty());
     }
 }

@@ -41,7 +41,10 @@ pub struct SourceKey {
 }
 
 impl SourceKey {
-    pub(crate) const fn new(index: u32, generation: u32) -> Self {
+    /// The key of slot `index` in its `generation`: a backend that keeps an item's
+    /// generation in a table of its own at the index makes the key again from both (a key
+    /// the engine did not hand out is unknown to it).
+    pub const fn new(index: u32, generation: u32) -> Self {
         SourceKey { index, generation }
     }
     /// Slot index (dense, small: a backend may use it to index its own tables).
