@@ -151,6 +151,7 @@ impl Engine {
         };
         let e = &sources.entries[source as usize];
         let analog = sources.analog_range(e);
+        let s = sources.sample(e);
         refs.retain(|&(gh, h)| {
             let Some(&slot) = group_slots.get(&gh) else {
                 return false;
@@ -180,9 +181,9 @@ impl Engine {
                 .samples
                 .back()
                 .map_or((&it.last, it.last_quality), |(v, q, _)| (v, *q));
-            if e.quality == ref_quality
+            if s.quality == ref_quality
                 && !value_changed(
-                    &e.value,
+                    &s.value,
                     ref_value,
                     band(it.item_deadband(), group_deadband, analog),
                 )
@@ -190,7 +191,7 @@ impl Engine {
                 return true;
             }
             buf.samples
-                .push_back((e.value.clone(), e.quality, e.timestamp));
+                .push_back((s.value.clone(), s.quality, s.timestamp));
             g.buffered += 1;
             if buf.samples.len() > ITEM_BUFFER_SAMPLES || g.buffered > GROUP_BUFFER_SAMPLES {
                 buf.samples.pop_front();

@@ -134,19 +134,21 @@ pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// One source item in the cache (88 bytes; its key is in [`SourceTable`]'s key text, no
-/// allocation of its own).
+/// The entry has a sample of its own in `SourceTable::samples` (the data source delivered
+/// one, a device read did, or the item is a constant); without it, `sample` names the
+/// shared initial state of the entries created at the same time.
+pub(crate) const SAMPLED: u8 = 64;
+
+/// One source item in the cache (48 bytes; its key is in [`SourceTable`]'s key text and
+/// its sample in [`SourceTable`]'s samples, no allocation of its own).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    pub value: CachedValue,
-    pub timestamp: Timestamp,
-    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
-    pub refreshed_at: Timestamp,
-    /// `Engine::change_seq` when value or quality last changed.
-    pub changed_seq: u64,
+    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`SAMPLED`], else the
+    /// shared initial state (no value yet).
+    sample: u32,
     /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
     /// [`MANY_RATES`] an index into the side table.
     sub_rate: u32,
@@ -157,14 +159,55 @@ pub(crate) struct SourceEntry {
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
-    /// [`key_hash`] of (channel, key), for the index (it takes what was padding).
+    /// [`key_hash`] of (channel, key), for the index.
     pub key_hash: u32,
     /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
     eu_range: u32,
-    pub quality: Quality,
     pub canonical: VarType,
     pub access: u8,
     pub flags: u8,
+}
+
+/// What the cache holds of an entry's value (48 bytes), apart from the entry: an item that
+/// is never sampled (in inactive groups only) costs no sample of its own (issue 16).
+#[derive(Debug, Clone)]
+pub(crate) struct Sample {
+    pub value: CachedValue,
+    pub timestamp: Timestamp,
+    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
+    pub refreshed_at: Timestamp,
+    /// `Engine::change_seq` when value or quality last changed.
+    pub changed_seq: u64,
+    pub quality: Quality,
+    /// A shared initial state: the entries referring to it (0 for an entry's own sample).
+    refs: u32,
+}
+
+impl Sample {
+    /// The state of an entry before its first sample, created at `now`.
+    const fn initial(now: Timestamp) -> Self {
+        Sample {
+            value: CachedValue::EMPTY,
+            timestamp: now,
+            refreshed_at: NEVER,
+            changed_seq: 0,
+            quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
+            refs: 0,
+        }
+    }
+
+    /// Stores a sample; true when value or quality changed.
+    fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
+        let quality_changed = self.quality != vqt.quality;
+        let value_changed = !self.value.same_as(&vqt.value);
+        if value_changed {
+            self.value = CachedValue::from_value(vqt.value);
+        }
+        self.quality = vqt.quality;
+        self.timestamp = vqt.timestamp;
+        self.refreshed_at = now;
+        quality_changed || value_changed
+    }
 }
 
 impl SourceEntry {
@@ -196,9 +239,10 @@ impl SourceEntry {
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
-    /// The data source has delivered a sample (or the item is a constant).
+    /// The data source has delivered a sample (or a device read did, or the item is a
+    /// constant).
     pub fn has_sample(&self) -> bool {
-        self.refreshed_at != NEVER
+        self.flags & SAMPLED != 0
     }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
@@ -209,19 +253,6 @@ impl SourceEntry {
     }
     pub fn writable(&self) -> bool {
         u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
-    }
-
-    /// Stores a sample; true when value or quality changed.
-    pub fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
-        let quality_changed = self.quality != vqt.quality;
-        let value_changed = !self.value.same_as(&vqt.value);
-        if value_changed {
-            self.value = CachedValue::from_value(vqt.value);
-        }
-        self.quality = vqt.quality;
-        self.timestamp = vqt.timestamp;
-        self.refreshed_at = now;
-        quality_changed || value_changed
     }
 }
 
@@ -235,7 +266,6 @@ struct KeyText {
 }
 
 /// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
-#[derive(Default)]
 pub(crate) struct SourceTable {
     pub entries: Vec<SourceEntry>,
     keys: KeyText,
@@ -256,9 +286,38 @@ pub(crate) struct SourceTable {
     /// from the configuration, not from clients.
     eu_ranges: Vec<(f64, f64)>,
     eu_range_ids: HashMap<(u64, u64), u32>,
+    /// The entries' samples ([`SourceEntry::sample`]), with the free slots ...
+    samples: Vec<Sample>,
+    free_samples: Vec<u32>,
+    /// ... and the shared initial state last created (`u32::MAX`: none), which the entries
+    /// created at the same time share.
+    initial: u32,
     /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
     /// that many when the entries must grow, rather than a quarter more.
     batch_left: usize,
+}
+
+impl Default for SourceTable {
+    fn default() -> Self {
+        SourceTable {
+            entries: Vec::new(),
+            keys: KeyText::default(),
+            free: Vec::new(),
+            index: SourceIndex::default(),
+            paths: Interner::default(),
+            dirty: Vec::new(),
+            live: 0,
+            many_rates: Vec::new(),
+            free_many: Vec::new(),
+            enum_texts: HashMap::new(),
+            eu_ranges: Vec::new(),
+            eu_range_ids: HashMap::new(),
+            samples: Vec::new(),
+            free_samples: Vec::new(),
+            initial: u32::MAX,
+            batch_left: 0,
+        }
+    }
 }
 
 impl SourceTable {
@@ -323,19 +382,17 @@ impl SourceTable {
             return Ok(idx);
         }
         let key_at = self.add_key(&def.source_key).ok_or(OpcError::OutOfMemory)?;
-        let (value, quality, refreshed_at, mut flags) = match &def.constant {
-            Some(v) => (
-                CachedValue::from_value(v.clone()),
-                Quality::GOOD.with_limit(Quality::LIMIT_CONST),
-                now,
-                LIVE | CONSTANT,
-            ),
-            None => (
-                CachedValue::EMPTY,
-                Quality::BAD_WAITING_FOR_INITIAL_DATA,
-                NEVER,
-                LIVE,
-            ),
+        let (sample, mut flags) = match &def.constant {
+            Some(v) => {
+                let sample = self.alloc_sample(Sample {
+                    value: CachedValue::from_value(v.clone()),
+                    quality: Quality::GOOD.with_limit(Quality::LIMIT_CONST),
+                    refreshed_at: now,
+                    ..Sample::initial(now)
+                });
+                (sample, LIVE | CONSTANT | SAMPLED)
+            }
+            None => (self.share_initial(now), LIVE),
         };
         let eu_range = match &def.eu {
             EuInfo::Analog { low, high } => {
@@ -351,10 +408,7 @@ impl SourceTable {
         let entry = SourceEntry {
             key_at,
             key_len: def.source_key.len() as u32,
-            value,
-            timestamp: now,
-            refreshed_at,
-            changed_seq: 0,
+            sample,
             sub_rate: 0,
             sub_count: 0,
             announced_rate: 0,
@@ -363,7 +417,6 @@ impl SourceTable {
             channel,
             key_hash: hash,
             eu_range,
-            quality,
             canonical: def.canonical_type,
             access: (def.access_rights & (OPC_READABLE | OPC_WRITEABLE)) as u8,
             flags,
@@ -405,6 +458,88 @@ impl SourceTable {
         Ok(idx)
     }
 
+    /// A free sample slot holding `sample`. The samples grow by a quarter (at least
+    /// 1,024) but not past one per live entry while they can help it: most entries get
+    /// their first sample one by one, after the AddItems that made them.
+    fn alloc_sample(&mut self, sample: Sample) -> u32 {
+        if let Some(slot) = self.free_samples.pop() {
+            self.samples[slot as usize] = sample;
+            return slot;
+        }
+        let len = self.samples.len();
+        if len == self.samples.capacity() {
+            let quarter = (len / 4).max(1024);
+            let room = (self.live + 16).saturating_sub(len).max(64);
+            self.samples.reserve_exact(quarter.min(room));
+        }
+        self.samples.push(sample);
+        len as u32
+    }
+
+    /// The shared initial state for an entry created at `now` (one more entry refers to it).
+    fn share_initial(&mut self, now: Timestamp) -> u32 {
+        if let Some(s) = self.samples.get_mut(self.initial as usize) {
+            if s.refs > 0 && s.timestamp == now {
+                s.refs += 1;
+                return self.initial;
+            }
+        }
+        self.initial = self.alloc_sample(Sample {
+            refs: 1,
+            ..Sample::initial(now)
+        });
+        self.initial
+    }
+
+    /// Lets go of an entry's sample: its own, or one reference to a shared initial state.
+    fn release_sample(&mut self, slot: u32, own: bool) {
+        let s = &mut self.samples[slot as usize];
+        if !own {
+            s.refs -= 1;
+            if s.refs > 0 {
+                return;
+            }
+            if self.initial == slot {
+                self.initial = u32::MAX;
+            }
+        }
+        *s = Sample::initial(NEVER);
+        self.free_samples.push(slot);
+    }
+
+    /// The sample of an entry (the shared initial state before its first; a freed entry
+    /// has none: an empty one).
+    pub fn sample(&self, e: &SourceEntry) -> &Sample {
+        static FREED: Sample = Sample::initial(NEVER);
+        self.samples.get(e.sample as usize).unwrap_or(&FREED)
+    }
+
+    /// Stores a sample of the live entry `idx` (its first gets a slot of its own); when
+    /// value or quality changed, counts `seq` up and records it as the entry's change.
+    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) -> &Sample {
+        let e = &self.entries[idx as usize];
+        let (slot, own) = (e.sample, e.has_sample());
+        let slot = if own {
+            slot
+        } else {
+            let own = self.alloc_sample(Sample {
+                refs: 0,
+                ..self.samples[slot as usize].clone()
+            });
+            self.release_sample(slot, false);
+            let e = &mut self.entries[idx as usize];
+            e.sample = own;
+            e.flags |= SAMPLED;
+            own
+        };
+        let s = &mut self.samples[slot as usize];
+        if s.apply(vqt, now) {
+            *seq += 1;
+            s.changed_seq = *seq;
+        }
+        s
+    }
+
     fn intern_range(&mut self, low: f64, high: f64) -> u32 {
         let ranges = &mut self.eu_ranges;
         *self
@@ -424,12 +559,6 @@ impl SourceTable {
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
         self.entries
             .get(key.index() as usize)
-            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
-    }
-
-    pub fn get_mut(&mut self, key: SourceKey) -> Option<&mut SourceEntry> {
-        self.entries
-            .get_mut(key.index() as usize)
             .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
     }
 
@@ -641,11 +770,13 @@ impl SourceTable {
         if self.entries[idx as usize].flags & ENUMERATED != 0 {
             self.enum_texts.remove(&idx);
         }
+        let e = &self.entries[idx as usize];
+        self.release_sample(e.sample, e.has_sample());
         let e = &mut self.entries[idx as usize];
         self.index.remove(e.key_hash, idx);
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
-        e.value = CachedValue::EMPTY;
+        e.sample = u32::MAX;
         e.set_rates(RateSet::Empty);
         e.flags = 0;
         e.generation = e.generation.wrapping_add(1);
@@ -893,14 +1024,181 @@ mod tests {
         assert_eq!(t.keys.text.len(), text + 10);
     }
 
+    fn vqt(v: f64, t: i64) -> Vqt {
+        Vqt {
+            value: Value::R8(v),
+            quality: Quality::GOOD,
+            timestamp: Timestamp(t),
+        }
+    }
+
+    /// Entries created at the same time share one initial state until their first sample,
+    /// which gets a slot of its own; the shared state goes with its last entry.
+    #[test]
+    fn an_entry_gets_a_sample_of_its_own_at_its_first() {
+        let mut t = SourceTable::default();
+        let (a, b) = (
+            t.find_or_insert(&r8_def("A".into()), Timestamp(7)).unwrap(),
+            t.find_or_insert(&r8_def("B".into()), Timestamp(7)).unwrap(),
+        );
+        let c = t.find_or_insert(&r8_def("C".into()), Timestamp(8)).unwrap();
+        assert_eq!(t.samples.len(), 2, "one initial state per creation time");
+        for (i, at) in [(a, 7), (b, 7), (c, 8)] {
+            let e = &t.entries[i as usize];
+            assert!(!e.has_sample());
+            let s = t.sample(e);
+            assert_eq!(
+                (
+                    &s.value,
+                    s.quality,
+                    s.timestamp,
+                    s.refreshed_at,
+                    s.changed_seq
+                ),
+                (
+                    &CachedValue::EMPTY,
+                    Quality::BAD_WAITING_FOR_INITIAL_DATA,
+                    Timestamp(at),
+                    NEVER,
+                    0
+                )
+            );
+        }
+        let mut seq = 10;
+        let s = t.apply(a, vqt(1.5, 3), Timestamp(9), &mut seq);
+        assert_eq!(
+            (
+                &s.value,
+                s.quality,
+                s.timestamp,
+                s.refreshed_at,
+                s.changed_seq
+            ),
+            (
+                &CachedValue::from_value(Value::R8(1.5)),
+                Quality::GOOD,
+                Timestamp(3),
+                Timestamp(9),
+                11
+            )
+        );
+        assert!(t.entries[a as usize].has_sample());
+        assert!(
+            !t.entries[b as usize].has_sample(),
+            "b keeps the shared state"
+        );
+        assert_eq!(t.sample(&t.entries[b as usize]).timestamp, Timestamp(7));
+        // The same sample again: no change, no count.
+        t.apply(a, vqt(1.5, 4), Timestamp(10), &mut seq);
+        assert_eq!(
+            (seq, t.sample(&t.entries[a as usize]).changed_seq),
+            (11, 11)
+        );
+        // b's first sample: the shared state of time 7 has no entry left and is freed.
+        t.apply(b, vqt(2.0, 5), Timestamp(10), &mut seq);
+        assert_eq!(t.free_samples.len(), 1);
+        assert_eq!(t.samples[t.free_samples[0] as usize].refs, 0);
+        // A new entry at time 8 shares c's state; at 11 one is made (in the freed slot).
+        let d = t.find_or_insert(&r8_def("D".into()), Timestamp(8)).unwrap();
+        assert_eq!(t.entries[d as usize].sample, t.entries[c as usize].sample);
+        let e = t
+            .find_or_insert(&r8_def("E".into()), Timestamp(11))
+            .unwrap();
+        assert!(t.free_samples.is_empty());
+        assert_eq!(t.sample(&t.entries[e as usize]).timestamp, Timestamp(11));
+        assert_eq!(t.samples.len(), 4);
+    }
+
+    /// A constant has its sample from the start; freed entries give their samples back
+    /// and a re-used entry starts again without a value.
+    #[test]
+    fn freed_entries_free_their_samples() {
+        let mut t = SourceTable::default();
+        let k = t
+            .find_or_insert(
+                &ItemDef {
+                    constant: Some(Value::I4(5)),
+                    ..r8_def("K".into())
+                },
+                Timestamp(1),
+            )
+            .unwrap();
+        let e = &t.entries[k as usize];
+        assert!(e.has_sample() && e.is_constant());
+        let s = t.sample(e);
+        assert_eq!(
+            (s.value.to_value(), s.quality, s.refreshed_at),
+            (
+                Value::I4(5),
+                Quality::GOOD.with_limit(Quality::LIMIT_CONST),
+                Timestamp(1)
+            )
+        );
+        let x = t.find_or_insert(&r8_def("X".into()), Timestamp(1)).unwrap();
+        let y = t.find_or_insert(&r8_def("Y".into()), Timestamp(1)).unwrap();
+        t.apply(x, vqt(3.0, 2), Timestamp(2), &mut 0);
+        for i in [k, x, y] {
+            t.add_ref(i);
+            t.release(i);
+        }
+        t.flush(&mut VecDeque::new());
+        assert_eq!(t.live(), 0);
+        assert_eq!(t.free_samples.len(), t.samples.len(), "every sample free");
+        assert!(t
+            .samples
+            .iter()
+            .all(|s| s.value == CachedValue::EMPTY && s.refs == 0));
+        let freed = &t.entries[x as usize];
+        assert!(!freed.has_sample());
+        assert_eq!(t.sample(freed).refreshed_at, NEVER);
+        // The slot of X again, for Z: no value until its first sample.
+        let z = t.find_or_insert(&r8_def("Z".into()), Timestamp(3)).unwrap();
+        let e = &t.entries[z as usize];
+        assert!(!e.has_sample());
+        assert_eq!(
+            (t.sample(e).quality, t.sample(e).timestamp),
+            (Quality::BAD_WAITING_FOR_INITIAL_DATA, Timestamp(3))
+        );
+        assert_eq!(t.samples.len(), 3, "no new slot");
+    }
+
+    /// The samples grow one per live entry, not by doubling, as entries get their first
+    /// sample one by one.
+    #[test]
+    fn samples_grow_to_the_live_entries() {
+        let mut t = SourceTable::default();
+        let n = 5000u32;
+        for i in 0..n {
+            t.batch_left((n - i) as usize);
+            t.find_or_insert(&r8_def(format!("K{i}")), Timestamp(0))
+                .unwrap();
+        }
+        t.batch_left(0);
+        let mut seq = 0;
+        for i in 0..n {
+            t.apply(i, vqt(f64::from(i), 1), Timestamp(1), &mut seq);
+        }
+        assert_eq!(t.samples.len() - t.free_samples.len(), n as usize);
+        assert!(
+            t.samples.capacity() <= n as usize + 16,
+            "{}",
+            t.samples.capacity()
+        );
+    }
+
     #[test]
     fn entries_stay_small() {
         assert!(
-            std::mem::size_of::<SourceEntry>() <= 88,
+            std::mem::size_of::<SourceEntry>() <= 48,
             "{}",
             std::mem::size_of::<SourceEntry>()
         );
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
+        assert!(
+            std::mem::size_of::<Sample>() <= 48,
+            "{}",
+            std::mem::size_of::<Sample>()
+        );
     }
 
     #[test]

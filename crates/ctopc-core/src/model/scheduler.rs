@@ -277,11 +277,12 @@ impl Engine {
                     }
                 }
             }
+            let s = sources.sample(e);
             if it.flags & SENT != 0
-                && (e.changed_seq <= scanned
-                    || (e.quality == it.last_quality
+                && (s.changed_seq <= scanned
+                    || (s.quality == it.last_quality
                         && !value_changed(
-                            &e.value,
+                            &s.value,
                             &it.last,
                             band(it.item_deadband(), group_deadband, sources.analog_range(e)),
                         )))
@@ -290,14 +291,14 @@ impl Engine {
             }
             items.push(item_value(
                 it.client,
-                &e.value,
-                e.quality,
-                e.timestamp,
+                &s.value,
+                s.quality,
+                s.timestamp,
                 it.req_type,
                 locale,
             ));
-            it.last = e.value.clone();
-            it.last_quality = e.quality;
+            it.last = s.value.clone();
+            it.last_quality = s.quality;
             it.flags |= SENT;
         }
         if held == 0 {
