@@ -25,7 +25,7 @@ use super::cache::CachedValue;
 use super::deadband::{band, value_changed};
 use super::engine::{Engine, GroupHandle};
 use super::events::ItemValue;
-use super::item::{ACTIVE, BUFFERED, SENT};
+use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Quality, Timestamp};
@@ -169,10 +169,11 @@ impl Engine {
             if it.source != source || it.flags & BUFFERED == 0 {
                 return false;
             }
+            let sampling = ItemOpts::sampling(&g.opts, it);
             if !ticking
                 || it.flags & (ACTIVE | SENT) != (ACTIVE | SENT)
-                || it.sampling == 0
-                || it.sampling >= rate
+                || sampling == 0
+                || sampling >= rate
             {
                 return true;
             }
@@ -185,7 +186,7 @@ impl Engine {
                 && !value_changed(
                     &s.value,
                     ref_value,
-                    band(it.item_deadband(), group_deadband, analog),
+                    band(ItemOpts::deadband(&g.opts, it), group_deadband, analog),
                 )
             {
                 return true;

@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 use super::deadband::{band, value_changed};
 use super::engine::Engine;
 use super::events::{master_codes, DataChange, DataChangeKind, Event};
-use super::item::{ACTIVE, BUFFERED, SENT};
+use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Timestamp};
@@ -284,7 +284,11 @@ impl Engine {
                         && !value_changed(
                             &s.value,
                             &it.last,
-                            band(it.item_deadband(), group_deadband, sources.analog_range(e)),
+                            band(
+                                ItemOpts::deadband(&g.opts, it),
+                                group_deadband,
+                                sources.analog_range(e),
+                            ),
                         )))
             {
                 continue;
