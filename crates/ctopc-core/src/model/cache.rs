@@ -293,8 +293,10 @@ pub(crate) struct SourceTable {
     /// created at the same time share.
     initial: u32,
     /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
-    /// that many when the entries must grow, rather than a quarter more.
+    /// that many when the entries must grow, rather than a quarter more; and their item IDs'
+    /// bytes, for the key text.
     batch_left: usize,
+    batch_keys: usize,
 }
 
 impl Default for SourceTable {
@@ -316,6 +318,7 @@ impl Default for SourceTable {
             free_samples: Vec::new(),
             initial: u32::MAX,
             batch_left: 0,
+            batch_keys: 0,
         }
     }
 }
@@ -325,10 +328,12 @@ impl SourceTable {
         self.live
     }
 
-    /// Says how many items of an AddItems call are left, this one included (0 after the
-    /// call): at most that many new entries are coming.
-    pub fn batch_left(&mut self, n: usize) {
+    /// Says how many items of an AddItems call are left, this one included, and their item
+    /// IDs' bytes (0 after the call): at most that many new entries are coming, with about
+    /// that many bytes of keys.
+    pub fn batch_left(&mut self, n: usize, key_bytes: usize) {
         self.batch_left = n;
+        self.batch_keys = key_bytes;
     }
 
     /// An entry's key.
@@ -352,9 +357,21 @@ impl SourceTable {
         if !fits(self.keys.text.len()) {
             return None;
         }
-        let at = self.keys.text.len() as u32;
-        self.keys.text.push_str(key);
-        Some(at)
+        let text = &mut self.keys.text;
+        let len = text.len();
+        if len + key.len() > text.capacity() {
+            // As the entries: by the rest of a large AddItems (its item IDs' bytes, which
+            // are the keys' unless aliases), else by a quarter, not double.
+            let quarter = (len / 4).max(4096);
+            let grow = if self.batch_keys >= quarter {
+                self.batch_keys
+            } else {
+                quarter
+            };
+            text.reserve_exact(grow.max(key.len()));
+        }
+        text.push_str(key);
+        Some(len as u32)
     }
 
     /// Rebuilds the key text from the live entries' keys.
@@ -976,20 +993,26 @@ mod tests {
         assert!(matches!(t.eu_info(d), EuInfo::None));
     }
 
-    /// The entries of a large AddItems take the room they need, no more; small calls
-    /// grow the table by a quarter (at least 1,024).
+    /// The entries and keys of a large AddItems take the room they need, no more; small
+    /// calls grow the entries by a quarter (at least 1,024) and the keys by a quarter (at
+    /// least 4,096 bytes).
     #[test]
     fn a_large_call_reserves_its_entries_exactly() {
         let def = |i: u32| r8_def(format!("K{i}"));
         let mut t = SourceTable::default();
+        let mut bytes: usize = (0..5000).map(|i| def(i).source_key.len()).sum();
+        let total = bytes;
         for i in 0..5000 {
-            t.batch_left(5000 - i as usize);
+            t.batch_left(5000 - i as usize, bytes);
+            bytes -= def(i).source_key.len();
             t.find_or_insert(&def(i), Timestamp(0)).unwrap();
         }
-        t.batch_left(0);
+        t.batch_left(0, 0);
         assert_eq!(t.entries.capacity(), 5000);
+        assert_eq!((t.keys.text.len(), t.keys.text.capacity()), (total, total));
         t.find_or_insert(&def(5000), Timestamp(0)).unwrap();
         assert_eq!(t.entries.capacity(), 5000 + 1250);
+        assert_eq!(t.keys.text.capacity(), total + total / 4);
     }
 
     /// The keys live in one text; freed keys are dropped from it when they are most of
@@ -1169,11 +1192,11 @@ mod tests {
         let mut t = SourceTable::default();
         let n = 5000u32;
         for i in 0..n {
-            t.batch_left((n - i) as usize);
+            t.batch_left((n - i) as usize, 0);
             t.find_or_insert(&r8_def(format!("K{i}")), Timestamp(0))
                 .unwrap();
         }
-        t.batch_left(0);
+        t.batch_left(0, 0);
         let mut seq = 0;
         for i in 0..n {
             t.apply(i, vqt(f64::from(i), 1), Timestamp(1), &mut seq);

@@ -305,8 +305,10 @@ impl Engine {
             g.items.reserve_exact(items.len());
         }
         let mut out = Vec::with_capacity(items.len());
+        let mut key_bytes: usize = items.iter().map(|d| d.item_id.len()).sum();
         for (i, d) in items.iter().enumerate() {
-            self.sources.batch_left(items.len() - i);
+            self.sources.batch_left(items.len() - i, key_bytes);
+            key_bytes -= d.item_id.len();
             let def = match self.resolve(d) {
                 Ok(def) => def,
                 Err(e) => {
@@ -359,7 +361,7 @@ impl Engine {
             g.items.push(it);
             out.push(Ok(result));
         }
-        self.sources.batch_left(0);
+        self.sources.batch_left(0, 0);
         Ok(out)
     }
 
