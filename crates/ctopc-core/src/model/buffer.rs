@@ -19,6 +19,7 @@
 //! empty the buffers. Disabling buffering, removing the item or the group drops its
 //! buffer. CloneGroup does not copy the buffer setting.
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 
 use super::cache::CachedValue;
@@ -181,11 +182,13 @@ impl Engine {
             let (ref_value, ref_quality) = buf
                 .samples
                 .back()
-                .map_or((&it.last, it.last_quality), |(v, q, _)| (v, *q));
+                .map_or((it.last(&g.lasts), it.last_quality), |(v, q, _)| {
+                    (Cow::Borrowed(v), *q)
+                });
             if s.quality == ref_quality
                 && !value_changed(
                     &s.value,
-                    ref_value,
+                    &ref_value,
                     band(ItemOpts::deadband(&g.opts, it), group_deadband, analog),
                 )
             {

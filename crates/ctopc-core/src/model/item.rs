@@ -1,6 +1,7 @@
 //! Items in groups: IOPCItemMgt, IOPCItemDeadbandMgt, IOPCItemSamplingMgt (its buffering
 //! half is `model/buffer.rs`).
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -66,13 +67,16 @@ pub(crate) const BUFFERED: u8 = 64;
 /// The item sampling rate is set (IOPCItemSamplingMgt).
 pub(crate) const SAMPLING: u8 = 128;
 
-/// An item in a group: 40 bytes, no strings (the item ID and access path are interned;
-/// its sampling rate and deadband, rarely set, are in [`ItemOpts`]). Checked by
-/// `group_items_stay_small` below.
+/// [`GroupItem::last_vt`] of a string or array value, which is in `Group::lasts`.
+const SHARED_LAST: VarType = VarType(u16::MAX);
+
+/// An item in a group: 32 bytes, no strings (the item ID and access path are interned;
+/// its sampling rate and deadband, rarely set, are in [`ItemOpts`]; a string or array
+/// value last sent is in `Group::lasts`). Checked by `group_items_stay_small` below.
 #[derive(Debug, Clone)]
 pub(crate) struct GroupItem {
-    /// The value last sent to the group.
-    pub last: CachedValue,
+    /// The value last sent to the group ([`GroupItem::last`]): a number's bits ...
+    last_bits: u64,
     pub handle: u32,
     pub client: u32,
     /// Cache entry index.
@@ -80,13 +84,70 @@ pub(crate) struct GroupItem {
     /// Access path id, or alias name id with [`ALIAS`].
     pub name: u32,
     pub req_type: VarType,
+    /// ... and its type, or [`SHARED_LAST`].
+    last_vt: VarType,
     pub last_quality: Quality,
     pub flags: u8,
 }
 
 impl GroupItem {
+    /// A new item: nothing sent yet.
+    pub fn new(handle: u32, client: u32, source: u32, name: u32, req_type: VarType) -> Self {
+        GroupItem {
+            last_bits: 0,
+            handle,
+            client,
+            source,
+            name,
+            req_type,
+            last_vt: VarType::EMPTY,
+            last_quality: Quality::BAD,
+            flags: 0,
+        }
+    }
+
     pub fn active(&self) -> bool {
         self.flags & ACTIVE != 0
+    }
+
+    /// The value last sent to the group (meaningful with [`SENT`]), given the group's
+    /// `lasts`.
+    pub fn last<'a>(&self, lasts: &'a IntMap<u32, CachedValue>) -> Cow<'a, CachedValue> {
+        if self.last_vt != SHARED_LAST {
+            return Cow::Owned(CachedValue::Num {
+                vt: self.last_vt,
+                bits: self.last_bits,
+            });
+        }
+        lasts
+            .get(&self.handle)
+            .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+    }
+
+    /// Records the value and quality sent to the group.
+    pub fn set_last(&mut self, lasts: &mut IntMap<u32, CachedValue>, v: CachedValue, q: Quality) {
+        self.last_quality = q;
+        match v {
+            CachedValue::Num { vt, bits } => {
+                if self.last_vt == SHARED_LAST {
+                    lasts.remove(&self.handle);
+                }
+                (self.last_vt, self.last_bits) = (vt, bits);
+            }
+            shared @ CachedValue::Shared(_) => {
+                (self.last_vt, self.last_bits) = (SHARED_LAST, 0);
+                lasts.insert(self.handle, shared);
+            }
+        }
+    }
+
+    /// Forgets the value last sent (the item leaves the group, or is copied to another
+    /// under a new handle: `lasts` is then the old group's).
+    pub fn forget_last(&mut self, lasts: &mut IntMap<u32, CachedValue>) {
+        if self.last_vt == SHARED_LAST {
+            lasts.remove(&self.handle);
+        }
+        (self.last_vt, self.last_bits) = (VarType::EMPTY, 0);
     }
 }
 
@@ -340,16 +401,8 @@ impl Engine {
                 canonical_type: e.canonical,
                 access_rights: u32::from(e.access),
             };
-            let mut it = GroupItem {
-                last: CachedValue::EMPTY,
-                handle,
-                client: d.client_handle,
-                source: src,
-                name,
-                req_type: d.requested_type,
-                last_quality: Quality::BAD,
-                flags: alias | if d.active { ACTIVE } else { 0 },
-            };
+            let mut it = GroupItem::new(handle, d.client_handle, src, name, d.requested_type);
+            it.flags = alias | if d.active { ACTIVE } else { 0 };
             let Engine {
                 groups, sources, ..
             } = self;
@@ -415,6 +468,7 @@ impl Engine {
                 let sampling = ItemOpts::sampling(&g.opts, it);
                 Self::sync_sub(sources, false, rate, sampling, it);
                 it.flags |= REMOVED;
+                it.forget_last(&mut g.lasts);
                 g.drop_buffer(h);
                 g.opts.remove(&h);
                 removed.push(i);
@@ -757,15 +811,44 @@ mod tests {
 
     fn item(handle: u32) -> GroupItem {
         GroupItem {
-            last: CachedValue::EMPTY,
-            handle,
-            client: 0,
-            source: 0,
-            name: 0,
-            req_type: VarType::EMPTY,
-            last_quality: Quality::BAD,
             flags: ACTIVE,
+            ..GroupItem::new(handle, 0, 0, 0, VarType::EMPTY)
         }
+    }
+
+    /// Numbers sent last stay in the item, strings and arrays go to the group's map (and
+    /// leave it when a number follows or the item goes).
+    #[test]
+    fn the_last_value_sent_is_a_number_in_the_item_or_shared_in_the_map() {
+        let mut lasts = IntMap::default();
+        let (mut a, mut b) = (item(1), item(2));
+        assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
+        let text = CachedValue::from_value(crate::Value::Bstr("x".into()));
+        let num = CachedValue::from_value(crate::Value::R8(2.5));
+        a.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        b.set_last(&mut lasts, num.clone(), Quality::BAD);
+        assert_eq!((&*a.last(&lasts), a.last_quality), (&text, Quality::GOOD));
+        assert_eq!((&*b.last(&lasts), b.last_quality), (&num, Quality::BAD));
+        assert!(matches!(a.last(&lasts), Cow::Borrowed(_)));
+        assert_eq!(lasts.len(), 1);
+        a.set_last(&mut lasts, num.clone(), Quality::GOOD);
+        assert_eq!(*a.last(&lasts), num);
+        assert!(lasts.is_empty());
+        a.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        b.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        a.forget_last(&mut lasts);
+        assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
+        assert_eq!((lasts.len(), &*b.last(&lasts)), (1, &text));
+        for v in [
+            crate::Value::I2(-3),
+            crate::Value::Bool(true),
+            crate::Value::Empty,
+        ] {
+            let v = CachedValue::from_value(v);
+            b.set_last(&mut lasts, v.clone(), Quality::GOOD);
+            assert_eq!(*b.last(&lasts), v);
+        }
+        assert!(lasts.is_empty());
     }
 
     /// An item's options are in the side table while either is set, and only then.
@@ -807,6 +890,6 @@ mod tests {
 
     #[test]
     fn group_items_stay_small() {
-        assert_eq!(std::mem::size_of::<GroupItem>(), 40);
+        assert_eq!(std::mem::size_of::<GroupItem>(), 32);
     }
 }

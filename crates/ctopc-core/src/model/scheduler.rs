@@ -271,8 +271,7 @@ impl Engine {
                         if let Some((v, q)) =
                             buf.drain_into(&mut items, it.client, it.req_type, locale)
                         {
-                            it.last = v;
-                            it.last_quality = q;
+                            it.set_last(&mut g.lasts, v, q);
                         }
                     }
                 }
@@ -283,7 +282,7 @@ impl Engine {
                     || (s.quality == it.last_quality
                         && !value_changed(
                             &s.value,
-                            &it.last,
+                            &it.last(&g.lasts),
                             band(
                                 ItemOpts::deadband(&g.opts, it),
                                 group_deadband,
@@ -301,8 +300,7 @@ impl Engine {
                 it.req_type,
                 locale,
             ));
-            it.last = s.value.clone();
-            it.last_quality = s.quality;
+            it.set_last(&mut g.lasts, s.value.clone(), s.quality);
             it.flags |= SENT;
         }
         if held == 0 {

@@ -610,8 +610,7 @@ impl Engine {
                                 (&s.out, g.find(s.item))
                             {
                                 let it = &mut g.items[i];
-                                it.last = value.clone();
-                                it.last_quality = *quality;
+                                it.set_last(&mut g.lasts, value.clone(), *quality);
                                 it.flags |= SENT;
                             }
                         }
