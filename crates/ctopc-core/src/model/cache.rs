@@ -134,10 +134,12 @@ pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// The entry has a sample of its own in `SourceTable::samples` (the data source delivered
-/// one, a device read did, or the item is a constant); without it, `sample` names the
-/// shared initial state of the entries created at the same time.
-pub(crate) const SAMPLED: u8 = 64;
+/// The entry has a sample slot of its own in `SourceTable::samples`: made when it is first
+/// subscribed (so that a subscription's samples lie in the order of its entries, as the
+/// scans read them) or gets a sample otherwise (a device read), or at once for a constant;
+/// without it, `sample` names the shared initial state of the entries created at the same
+/// time.
+pub(crate) const OWN_SAMPLE: u8 = 64;
 
 /// One source item in the cache (48 bytes; its key is in [`SourceTable`]'s key text and
 /// its sample in [`SourceTable`]'s samples, no allocation of its own).
@@ -196,6 +198,12 @@ impl Sample {
         }
     }
 
+    /// The data source has delivered a sample (or a device read did, or the item is a
+    /// constant).
+    pub fn has_value(&self) -> bool {
+        self.refreshed_at != NEVER
+    }
+
     /// Stores a sample; true when value or quality changed.
     fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
         let quality_changed = self.quality != vqt.quality;
@@ -239,10 +247,9 @@ impl SourceEntry {
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
-    /// The data source has delivered a sample (or a device read did, or the item is a
-    /// constant).
-    pub fn has_sample(&self) -> bool {
-        self.flags & SAMPLED != 0
+    /// See [`OWN_SAMPLE`].
+    pub fn has_own_sample(&self) -> bool {
+        self.flags & OWN_SAMPLE != 0
     }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
@@ -407,7 +414,7 @@ impl SourceTable {
                     refreshed_at: now,
                     ..Sample::initial(now)
                 });
-                (sample, LIVE | CONSTANT | SAMPLED)
+                (sample, LIVE | CONSTANT | OWN_SAMPLE)
             }
             None => (self.share_initial(now), LIVE),
         };
@@ -531,24 +538,29 @@ impl SourceTable {
         self.samples.get(e.sample as usize).unwrap_or(&FREED)
     }
 
-    /// Stores a sample of the live entry `idx` (its first gets a slot of its own); when
-    /// value or quality changed, counts `seq` up and records it as the entry's change.
-    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) -> &Sample {
+    /// The sample slot of the live entry `idx`, made its own first if it shares the
+    /// initial state.
+    fn own_sample(&mut self, idx: u32) -> u32 {
         let e = &self.entries[idx as usize];
-        let (slot, own) = (e.sample, e.has_sample());
-        let slot = if own {
-            slot
-        } else {
-            let own = self.alloc_sample(Sample {
-                refs: 0,
-                ..self.samples[slot as usize].clone()
-            });
-            self.release_sample(slot, false);
-            let e = &mut self.entries[idx as usize];
-            e.sample = own;
-            e.flags |= SAMPLED;
-            own
-        };
+        if e.has_own_sample() {
+            return e.sample;
+        }
+        let shared = e.sample;
+        let own = self.alloc_sample(Sample {
+            refs: 0,
+            ..self.samples[shared as usize].clone()
+        });
+        self.release_sample(shared, false);
+        let e = &mut self.entries[idx as usize];
+        e.sample = own;
+        e.flags |= OWN_SAMPLE;
+        own
+    }
+
+    /// Stores a sample of the live entry `idx`; when value or quality changed, counts `seq`
+    /// up and records it as the entry's change.
+    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) -> &Sample {
+        let slot = self.own_sample(idx);
         let s = &mut self.samples[slot as usize];
         if s.apply(vqt, now) {
             *seq += 1;
@@ -621,8 +633,10 @@ impl SourceTable {
         }
     }
 
-    /// Counts a subscriber of `idx` at `rate`.
+    /// Counts a subscriber of `idx` at `rate` (the first gives the entry its own sample
+    /// slot, see [`OWN_SAMPLE`]).
     pub fn add_rate(&mut self, idx: u32, rate: u32) {
+        self.own_sample(idx);
         let e = &mut self.entries[idx as usize];
         let set = match e.rates() {
             RateSet::Empty => RateSet::One { rate, count: 1 },
@@ -788,7 +802,7 @@ impl SourceTable {
             self.enum_texts.remove(&idx);
         }
         let e = &self.entries[idx as usize];
-        self.release_sample(e.sample, e.has_sample());
+        self.release_sample(e.sample, e.has_own_sample());
         let e = &mut self.entries[idx as usize];
         self.index.remove(e.key_hash, idx);
         self.keys.garbage += e.key_len as usize;
@@ -1068,8 +1082,9 @@ mod tests {
         assert_eq!(t.samples.len(), 2, "one initial state per creation time");
         for (i, at) in [(a, 7), (b, 7), (c, 8)] {
             let e = &t.entries[i as usize];
-            assert!(!e.has_sample());
+            assert!(!e.has_own_sample());
             let s = t.sample(e);
+            assert!(!s.has_value());
             assert_eq!(
                 (
                     &s.value,
@@ -1105,9 +1120,9 @@ mod tests {
                 11
             )
         );
-        assert!(t.entries[a as usize].has_sample());
+        assert!(t.entries[a as usize].has_own_sample());
         assert!(
-            !t.entries[b as usize].has_sample(),
+            !t.entries[b as usize].has_own_sample(),
             "b keeps the shared state"
         );
         assert_eq!(t.sample(&t.entries[b as usize]).timestamp, Timestamp(7));
@@ -1147,7 +1162,7 @@ mod tests {
             )
             .unwrap();
         let e = &t.entries[k as usize];
-        assert!(e.has_sample() && e.is_constant());
+        assert!(e.has_own_sample() && e.is_constant());
         let s = t.sample(e);
         assert_eq!(
             (s.value.to_value(), s.quality, s.refreshed_at),
@@ -1172,17 +1187,53 @@ mod tests {
             .iter()
             .all(|s| s.value == CachedValue::EMPTY && s.refs == 0));
         let freed = &t.entries[x as usize];
-        assert!(!freed.has_sample());
+        assert!(!freed.has_own_sample());
         assert_eq!(t.sample(freed).refreshed_at, NEVER);
         // The slot of X again, for Z: no value until its first sample.
         let z = t.find_or_insert(&r8_def("Z".into()), Timestamp(3)).unwrap();
         let e = &t.entries[z as usize];
-        assert!(!e.has_sample());
+        assert!(!e.has_own_sample());
         assert_eq!(
             (t.sample(e).quality, t.sample(e).timestamp),
             (Quality::BAD_WAITING_FOR_INITIAL_DATA, Timestamp(3))
         );
         assert_eq!(t.samples.len(), 3, "no new slot");
+    }
+
+    /// A subscribed entry has its own sample slot before its first sample, in the order of
+    /// subscription (the order of the entries a scan reads), still without a value.
+    #[test]
+    fn subscribing_gives_an_entry_its_own_sample_slot_in_order() {
+        let mut t = SourceTable::default();
+        let idx: Vec<u32> = (0..10)
+            .map(|i| {
+                t.find_or_insert(&r8_def(format!("K{i}")), Timestamp(5))
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(t.samples.len(), 1, "one shared initial state");
+        for &i in &idx {
+            t.add_rate(i, 1000);
+        }
+        t.add_rate(idx[0], 500);
+        let slots: Vec<u32> = idx.iter().map(|&i| t.entries[i as usize].sample).collect();
+        assert!(slots.windows(2).all(|w| w[0] + 1 == w[1]), "{slots:?}");
+        assert_eq!(t.free_samples.len(), 1, "the shared state is free");
+        for &i in &idx {
+            let e = &t.entries[i as usize];
+            assert!(e.has_own_sample());
+            let s = t.sample(e);
+            assert!(!s.has_value());
+            assert_eq!(
+                (s.quality, s.timestamp),
+                (Quality::BAD_WAITING_FOR_INITIAL_DATA, Timestamp(5))
+            );
+        }
+        // The first sample goes into that slot.
+        let slot = t.entries[idx[3] as usize].sample;
+        t.apply(idx[3], vqt(1.0, 6), Timestamp(6), &mut 0);
+        assert_eq!(t.entries[idx[3] as usize].sample, slot);
+        assert!(t.sample(&t.entries[idx[3] as usize]).has_value());
     }
 
     /// The samples grow one per live entry, not by doubling, as entries get their first

@@ -255,7 +255,8 @@ impl Engine {
                 continue;
             }
             let e = &sources.entries[it.source as usize];
-            if it.flags & SENT == 0 && holding && !e.has_sample() {
+            let s = sources.sample(e);
+            if it.flags & SENT == 0 && holding && !s.has_value() {
                 held += 1;
                 continue;
             }
@@ -276,7 +277,6 @@ impl Engine {
                     }
                 }
             }
-            let s = sources.sample(e);
             if it.flags & SENT != 0
                 && (s.changed_seq <= scanned
                     || (s.quality == it.last_quality
