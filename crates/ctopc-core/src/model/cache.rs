@@ -141,7 +141,7 @@ pub(crate) const MANY_RATES: u8 = 32;
 /// time.
 pub(crate) const OWN_SAMPLE: u8 = 64;
 
-/// One source item in the cache (48 bytes; its key is in [`SourceTable`]'s key text and
+/// One source item in the cache (44 bytes; its key is in [`SourceTable`]'s key text and
 /// its sample in [`SourceTable`]'s samples, no allocation of its own).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
@@ -161,8 +161,6 @@ pub(crate) struct SourceEntry {
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
-    /// [`key_hash`] of (channel, key), for the index.
-    pub key_hash: u32,
     /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
     eu_range: u32,
     pub canonical: VarType,
@@ -401,7 +399,7 @@ impl SourceTable {
         let (entries, text) = (&self.entries, &self.keys.text);
         if let Some(idx) = self.index.find(hash, |i| {
             let e = &entries[i as usize];
-            e.key_hash == hash && e.channel == channel && Self::key_in(text, e) == def.source_key
+            e.channel == channel && Self::key_in(text, e) == def.source_key
         }) {
             return Ok(idx);
         }
@@ -439,7 +437,6 @@ impl SourceTable {
             generation: 0,
             refs: 0,
             channel,
-            key_hash: hash,
             eu_range,
             canonical: def.canonical_type,
             access: (def.access_rights & (OPC_READABLE | OPC_WRITEABLE)) as u8,
@@ -475,9 +472,14 @@ impl SourceTable {
         if let EuInfo::Enumerated(texts) = &def.eu {
             self.enum_texts.insert(idx, texts.clone());
         }
-        let entries = &self.entries;
-        self.index
-            .insert(hash, idx, |i| entries[i as usize].key_hash);
+        let (entries, text) = (&self.entries, &self.keys.text);
+        let rehash = |i: u32| {
+            let e = &entries[i as usize];
+            key_hash(e.channel, Self::key_in(text, e))
+        };
+        // Growing the index hashes every key again: once for the rest of a large AddItems.
+        self.index.reserve_if_full(self.batch_left, rehash);
+        self.index.insert(hash, idx, rehash);
         self.live += 1;
         Ok(idx)
     }
@@ -804,7 +806,8 @@ impl SourceTable {
         let e = &self.entries[idx as usize];
         self.release_sample(e.sample, e.has_own_sample());
         let e = &mut self.entries[idx as usize];
-        self.index.remove(e.key_hash, idx);
+        self.index
+            .remove(key_hash(e.channel, Self::key_in(&self.keys.text, e)), idx);
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
         e.sample = u32::MAX;
@@ -840,8 +843,8 @@ fn key_hash(channel: u32, key: &str) -> u32 {
 /// The index from a source item's 32-bit hash to its entry index: a
 /// `hashbrown::HashTable<u32>` (the SwissTable under std's HashMap), 4 bytes and one
 /// control byte per bucket. Keys are compared through the entries themselves, so no string
-/// is stored twice; the table keeps no hashes, so growing it asks `rehash` of
-/// [`SourceIndex::insert`] (the entries keep theirs: [`SourceEntry::key_hash`]).
+/// is stored twice; neither the table nor the entries keep hashes, so growing it asks
+/// `rehash` of [`SourceIndex::insert`] (which hashes the entries' keys again).
 #[derive(Default)]
 pub(crate) struct SourceIndex {
     table: HashTable<u32>,
@@ -863,6 +866,13 @@ impl SourceIndex {
     pub fn insert(&mut self, hash: u32, idx: u32, rehash: impl Fn(u32) -> u32) {
         self.table
             .insert_unique(wide(hash), idx, |&i| wide(rehash(i)));
+    }
+
+    /// Makes room for `n` more when the table is full (the next insert would grow it).
+    pub fn reserve_if_full(&mut self, n: usize, rehash: impl Fn(u32) -> u32) {
+        if n > 1 && self.table.len() == self.table.capacity() {
+            self.table.reserve(n, |&i| wide(rehash(i)));
+        }
     }
 
     pub fn remove(&mut self, hash: u32, idx: u32) {
@@ -890,6 +900,7 @@ mod tests {
             for (k, insert) in ops {
                 if insert && !model.contains_key(&k) {
                     let keys: HashMap<u32, u32> = model.iter().map(|(k, i)| (*i, *k)).collect();
+                    index.reserve_if_full(k as usize % 5, |i| hash(keys[&i]));
                     index.insert(hash(k), next, |i| hash(keys[&i]));
                     model.insert(k, next);
                     next += 1;
@@ -1263,7 +1274,7 @@ mod tests {
     #[test]
     fn entries_stay_small() {
         assert!(
-            std::mem::size_of::<SourceEntry>() <= 48,
+            std::mem::size_of::<SourceEntry>() <= 44,
             "{}",
             std::mem::size_of::<SourceEntry>()
         );
