@@ -195,7 +195,7 @@ impl Engine {
                 return true;
             }
             buf.samples
-                .push_back((s.value.clone(), s.quality, s.timestamp));
+                .push_back((CachedValue::clone(&s.value), s.quality, s.timestamp));
             g.buffered += 1;
             if buf.samples.len() > ITEM_BUFFER_SAMPLES || g.buffered > GROUP_BUFFER_SAMPLES {
                 buf.samples.pop_front();

@@ -3,11 +3,12 @@
 //! rates, what the backend was last told).
 
 use hashbrown::HashTable;
+use std::borrow::Cow;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
-use super::util::Interner;
+use super::util::{IntMap, Interner};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
@@ -168,17 +169,23 @@ pub(crate) struct SourceEntry {
     pub flags: u8,
 }
 
-/// What the cache holds of an entry's value (48 bytes), apart from the entry: an item that
-/// is never sampled (in inactive groups only) costs no sample of its own (issue 16).
+/// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
+const SHARED_VALUE: VarType = VarType(u16::MAX);
+
+/// What the cache holds of an entry's value (40 bytes), apart from the entry: an item that
+/// is never subscribed nor read (in inactive groups only) costs no sample of its own
+/// (issue 16). A number is in the sample (type and bits), a string or array in
+/// `SourceTable::shared` by sample slot; [`SourceTable::sample`] gives both as a
+/// [`SampleRef`].
 #[derive(Debug, Clone)]
 pub(crate) struct Sample {
-    pub value: CachedValue,
-    pub timestamp: Timestamp,
-    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
-    pub refreshed_at: Timestamp,
-    /// `Engine::change_seq` when value or quality last changed.
-    pub changed_seq: u64,
-    pub quality: Quality,
+    bits: u64,
+    timestamp: Timestamp,
+    refreshed_at: Timestamp,
+    changed_seq: u64,
+    /// The number's type, or [`SHARED_VALUE`].
+    vt: VarType,
+    quality: Quality,
     /// A shared initial state: the entries referring to it (0 for an entry's own sample).
     refs: u32,
 }
@@ -187,32 +194,34 @@ impl Sample {
     /// The state of an entry before its first sample, created at `now`.
     const fn initial(now: Timestamp) -> Self {
         Sample {
-            value: CachedValue::EMPTY,
+            bits: 0,
             timestamp: now,
             refreshed_at: NEVER,
             changed_seq: 0,
+            vt: VarType::EMPTY,
             quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
             refs: 0,
         }
     }
+}
 
+/// An entry's sample as read ([`SourceTable::sample`]).
+#[derive(Debug)]
+pub(crate) struct SampleRef<'a> {
+    pub value: Cow<'a, CachedValue>,
+    pub timestamp: Timestamp,
+    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
+    pub refreshed_at: Timestamp,
+    /// `Engine::change_seq` when value or quality last changed.
+    pub changed_seq: u64,
+    pub quality: Quality,
+}
+
+impl SampleRef<'_> {
     /// The data source has delivered a sample (or a device read did, or the item is a
     /// constant).
     pub fn has_value(&self) -> bool {
         self.refreshed_at != NEVER
-    }
-
-    /// Stores a sample; true when value or quality changed.
-    fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
-        let quality_changed = self.quality != vqt.quality;
-        let value_changed = !self.value.same_as(&vqt.value);
-        if value_changed {
-            self.value = CachedValue::from_value(vqt.value);
-        }
-        self.quality = vqt.quality;
-        self.timestamp = vqt.timestamp;
-        self.refreshed_at = now;
-        quality_changed || value_changed
     }
 }
 
@@ -294,6 +303,8 @@ pub(crate) struct SourceTable {
     /// The entries' samples ([`SourceEntry::sample`]), with the free slots ...
     samples: Vec<Sample>,
     free_samples: Vec<u32>,
+    /// The string and array values of the samples, by sample slot.
+    shared: IntMap<u32, CachedValue>,
     /// ... and the shared initial state last created (`u32::MAX`: none), which the entries
     /// created at the same time share.
     initial: u32,
@@ -321,6 +332,7 @@ impl Default for SourceTable {
             eu_range_ids: HashMap::new(),
             samples: Vec::new(),
             free_samples: Vec::new(),
+            shared: IntMap::default(),
             initial: u32::MAX,
             batch_left: 0,
             batch_keys: 0,
@@ -407,11 +419,11 @@ impl SourceTable {
         let (sample, mut flags) = match &def.constant {
             Some(v) => {
                 let sample = self.alloc_sample(Sample {
-                    value: CachedValue::from_value(v.clone()),
                     quality: Quality::GOOD.with_limit(Quality::LIMIT_CONST),
                     refreshed_at: now,
                     ..Sample::initial(now)
                 });
+                self.put_value(sample, CachedValue::from_value(v.clone()));
                 (sample, LIVE | CONSTANT | OWN_SAMPLE)
             }
             None => (self.share_initial(now), LIVE),
@@ -529,15 +541,56 @@ impl SourceTable {
                 self.initial = u32::MAX;
             }
         }
+        if s.vt == SHARED_VALUE {
+            self.shared.remove(&slot);
+        }
         *s = Sample::initial(NEVER);
         self.free_samples.push(slot);
     }
 
+    /// Stores the value of the sample in `slot`.
+    fn put_value(&mut self, slot: u32, v: CachedValue) {
+        let s = &mut self.samples[slot as usize];
+        match v {
+            CachedValue::Num { vt, bits } => {
+                if s.vt == SHARED_VALUE {
+                    self.shared.remove(&slot);
+                }
+                (s.vt, s.bits) = (vt, bits);
+            }
+            shared @ CachedValue::Shared(_) => {
+                (s.vt, s.bits) = (SHARED_VALUE, 0);
+                self.shared.insert(slot, shared);
+            }
+        }
+    }
+
+    fn sample_at(&self, slot: u32) -> SampleRef<'_> {
+        static FREED: Sample = Sample::initial(NEVER);
+        let s = self.samples.get(slot as usize).unwrap_or(&FREED);
+        let value = if s.vt == SHARED_VALUE {
+            self.shared
+                .get(&slot)
+                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+        } else {
+            Cow::Owned(CachedValue::Num {
+                vt: s.vt,
+                bits: s.bits,
+            })
+        };
+        SampleRef {
+            value,
+            timestamp: s.timestamp,
+            refreshed_at: s.refreshed_at,
+            changed_seq: s.changed_seq,
+            quality: s.quality,
+        }
+    }
+
     /// The sample of an entry (the shared initial state before its first; a freed entry
     /// has none: an empty one).
-    pub fn sample(&self, e: &SourceEntry) -> &Sample {
-        static FREED: Sample = Sample::initial(NEVER);
-        self.samples.get(e.sample as usize).unwrap_or(&FREED)
+    pub fn sample(&self, e: &SourceEntry) -> SampleRef<'_> {
+        self.sample_at(e.sample)
     }
 
     /// The sample slot of the live entry `idx`, made its own first if it shares the
@@ -561,14 +614,40 @@ impl SourceTable {
 
     /// Stores a sample of the live entry `idx`; when value or quality changed, counts `seq`
     /// up and records it as the entry's change.
-    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) -> &Sample {
+    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) {
         let slot = self.own_sample(idx);
         let s = &mut self.samples[slot as usize];
-        if s.apply(vqt, now) {
+        let quality_changed = s.quality != vqt.quality;
+        let value_changed = match num_bits(&vqt.value) {
+            Some((vt, bits)) => {
+                let changed = (s.vt, s.bits) != (vt, bits);
+                if changed && s.vt == SHARED_VALUE {
+                    self.shared.remove(&slot);
+                }
+                (s.vt, s.bits) = (vt, bits);
+                changed
+            }
+            None => {
+                let same = s.vt == SHARED_VALUE
+                    && self
+                        .shared
+                        .get(&slot)
+                        .is_some_and(|old| old.same_as(&vqt.value));
+                if !same {
+                    (s.vt, s.bits) = (SHARED_VALUE, 0);
+                    self.shared
+                        .insert(slot, CachedValue::Shared(Arc::new(vqt.value)));
+                }
+                !same
+            }
+        };
+        s.quality = vqt.quality;
+        s.timestamp = vqt.timestamp;
+        s.refreshed_at = now;
+        if quality_changed || value_changed {
             *seq += 1;
             s.changed_seq = *seq;
         }
-        s
     }
 
     fn intern_range(&mut self, low: f64, high: f64) -> u32 {
@@ -1098,7 +1177,7 @@ mod tests {
             assert!(!s.has_value());
             assert_eq!(
                 (
-                    &s.value,
+                    &*s.value,
                     s.quality,
                     s.timestamp,
                     s.refreshed_at,
@@ -1114,10 +1193,11 @@ mod tests {
             );
         }
         let mut seq = 10;
-        let s = t.apply(a, vqt(1.5, 3), Timestamp(9), &mut seq);
+        t.apply(a, vqt(1.5, 3), Timestamp(9), &mut seq);
+        let s = t.sample(&t.entries[a as usize]);
         assert_eq!(
             (
-                &s.value,
+                &*s.value,
                 s.quality,
                 s.timestamp,
                 s.refreshed_at,
@@ -1196,7 +1276,8 @@ mod tests {
         assert!(t
             .samples
             .iter()
-            .all(|s| s.value == CachedValue::EMPTY && s.refs == 0));
+            .all(|s| s.vt == VarType::EMPTY && s.refs == 0));
+        assert!(t.shared.is_empty());
         let freed = &t.entries[x as usize];
         assert!(!freed.has_own_sample());
         assert_eq!(t.sample(freed).refreshed_at, NEVER);
@@ -1247,6 +1328,56 @@ mod tests {
         assert!(t.sample(&t.entries[idx[3] as usize]).has_value());
     }
 
+    /// Numbers are in the sample, strings and arrays in the table's map by slot, which
+    /// they leave when a number follows or the entry goes; equal strings are no change.
+    #[test]
+    fn string_samples_are_kept_apart_from_the_sample() {
+        let mut t = SourceTable::default();
+        let x = t.find_or_insert(&r8_def("X".into()), Timestamp(0)).unwrap();
+        let k = t
+            .find_or_insert(
+                &ItemDef {
+                    constant: Some(Value::Bstr("c".into())),
+                    ..r8_def("K".into())
+                },
+                Timestamp(0),
+            )
+            .unwrap();
+        assert_eq!(
+            t.sample(&t.entries[k as usize]).value.to_value(),
+            Value::Bstr("c".into())
+        );
+        assert_eq!(t.shared.len(), 1);
+        let text = |v: &str| Vqt {
+            value: Value::Bstr(v.into()),
+            ..vqt(0.0, 1)
+        };
+        let mut seq = 0;
+        t.apply(x, text("a"), Timestamp(1), &mut seq);
+        let s = t.sample(&t.entries[x as usize]);
+        assert_eq!(
+            (s.value.to_value(), s.changed_seq),
+            (Value::Bstr("a".into()), 1)
+        );
+        assert_eq!(t.shared.len(), 2);
+        t.apply(x, text("a"), Timestamp(2), &mut seq);
+        assert_eq!(seq, 1, "an equal string is no change");
+        t.apply(x, vqt(2.0, 3), Timestamp(3), &mut seq);
+        assert_eq!(t.shared.len(), 1, "a number follows");
+        assert_eq!(
+            t.sample(&t.entries[x as usize]).value.to_value(),
+            Value::R8(2.0)
+        );
+        t.apply(x, text("b"), Timestamp(4), &mut seq);
+        assert_eq!((seq, t.shared.len()), (3, 2));
+        for i in [x, k] {
+            t.add_ref(i);
+            t.release(i);
+        }
+        t.flush(&mut VecDeque::new());
+        assert!(t.shared.is_empty());
+    }
+
     /// The samples grow one per live entry, not by doubling, as entries get their first
     /// sample one by one.
     #[test]
@@ -1280,7 +1411,7 @@ mod tests {
         );
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
         assert!(
-            std::mem::size_of::<Sample>() <= 48,
+            std::mem::size_of::<Sample>() <= 40,
             "{}",
             std::mem::size_of::<Sample>()
         );

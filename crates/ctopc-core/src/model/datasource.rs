@@ -180,11 +180,13 @@ impl Engine {
                     let key = SourceKey::new(slot.source, slot.source_gen);
                     match self.sources.get(key) {
                         Some(e) if !e.is_constant() => {
+                            self.sources
+                                .apply(key.index(), vqt, now, &mut self.change_seq);
                             let s = self
                                 .sources
-                                .apply(key.index(), vqt, now, &mut self.change_seq);
+                                .sample(&self.sources.entries[slot.source as usize]);
                             SlotOut::Raw {
-                                value: s.value.clone(),
+                                value: s.value.into_owned(),
                                 quality: s.quality,
                                 timestamp: s.timestamp,
                             }

@@ -300,7 +300,7 @@ impl Engine {
                 it.req_type,
                 locale,
             ));
-            it.set_last(&mut g.lasts, s.value.clone(), s.quality);
+            it.set_last(&mut g.lasts, s.value.into_owned(), s.quality);
             it.flags |= SENT;
         }
         if held == 0 {

@@ -397,7 +397,7 @@ impl Engine {
                 quality = Quality::BAD_OUT_OF_SERVICE;
             }
             slot.out = SlotOut::Raw {
-                value: s.value.clone(),
+                value: s.value.into_owned(),
                 quality,
                 timestamp: s.timestamp,
             };
@@ -887,7 +887,7 @@ impl Engine {
                     || (max_age != 0 && fresh(s.refreshed_at, now, max_age))
                 {
                     slot.out = SlotOut::Raw {
-                        value: s.value.clone(),
+                        value: s.value.into_owned(),
                         quality: s.quality,
                         timestamp: s.timestamp,
                     };
