@@ -149,7 +149,7 @@ pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`SAMPLED`], else the
+    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`OWN_SAMPLE`], else the
     /// shared initial state (no value yet).
     sample: u32,
     /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
