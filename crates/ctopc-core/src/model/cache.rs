@@ -132,7 +132,7 @@ pub(crate) const DIRTY: u8 = 4;
 pub(crate) const ANALOG: u8 = 8;
 /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
 pub(crate) const ENUMERATED: u8 = 16;
-/// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
+/// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
 /// The entry has a sample slot of its own in `SourceTable::samples`: made when it is first
@@ -142,8 +142,9 @@ pub(crate) const MANY_RATES: u8 = 32;
 /// time.
 pub(crate) const OWN_SAMPLE: u8 = 64;
 
-/// One source item in the cache (44 bytes; its key is in [`SourceTable`]'s key text and
-/// its sample in [`SourceTable`]'s samples, no allocation of its own).
+/// One source item in the cache (32 bytes; its key is in [`SourceTable`]'s key text and
+/// its sample and subscription state in [`SourceTable`]'s samples, no allocation of its
+/// own).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
@@ -152,12 +153,6 @@ pub(crate) struct SourceEntry {
     /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`OWN_SAMPLE`], else the
     /// shared initial state (no value yet).
     sample: u32,
-    /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
-    /// [`MANY_RATES`] an index into the side table.
-    sub_rate: u32,
-    sub_count: u32,
-    /// The sampling rate the backend was last told (0: not subscribed).
-    pub announced_rate: u32,
     pub generation: u32,
     /// Group items referring to this entry.
     pub refs: u32,
@@ -172,9 +167,9 @@ pub(crate) struct SourceEntry {
 /// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
 const SHARED_VALUE: VarType = VarType(u16::MAX);
 
-/// What the cache holds of an entry's value (40 bytes), apart from the entry: an item that
-/// is never subscribed nor read (in inactive groups only) costs no sample of its own
-/// (issue 16). A number is in the sample (type and bits), a string or array in
+/// What the cache holds of an entry's value and subscription (48 bytes), apart from the
+/// entry: an item that is never subscribed nor read (in inactive groups only) costs no
+/// sample of its own (issue 16). A number is in the sample (type and bits), a string or array in
 /// `SourceTable::shared` by sample slot; [`SourceTable::sample`] gives both as a
 /// [`SampleRef`].
 #[derive(Debug, Clone)]
@@ -186,8 +181,13 @@ pub(crate) struct Sample {
     /// The number's type, or [`SHARED_VALUE`].
     vt: VarType,
     quality: Quality,
-    /// A shared initial state: the entries referring to it (0 for an entry's own sample).
+    /// A shared initial state: the entries referring to it. An entry's own sample: with
+    /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
+    /// (this), or with [`MANY_RATES`] an index into the side table.
     refs: u32,
+    sub_rate: u32,
+    /// The sampling rate the backend was last told (0: not subscribed).
+    announced_rate: u32,
 }
 
 impl Sample {
@@ -201,6 +201,8 @@ impl Sample {
             vt: VarType::EMPTY,
             quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
             refs: 0,
+            sub_rate: 0,
+            announced_rate: 0,
         }
     }
 }
@@ -226,31 +228,6 @@ impl SampleRef<'_> {
 }
 
 impl SourceEntry {
-    pub fn rates(&self) -> RateSet {
-        if self.flags & MANY_RATES != 0 {
-            RateSet::Many(self.sub_rate)
-        } else if self.sub_count == 0 {
-            RateSet::Empty
-        } else {
-            RateSet::One {
-                rate: self.sub_rate,
-                count: self.sub_count,
-            }
-        }
-    }
-
-    fn set_rates(&mut self, r: RateSet) {
-        self.flags &= !MANY_RATES;
-        (self.sub_rate, self.sub_count) = match r {
-            RateSet::Empty => (0, 0),
-            RateSet::One { rate, count } => (rate, count),
-            RateSet::Many(slot) => {
-                self.flags |= MANY_RATES;
-                (slot, 0)
-            }
-        };
-    }
-
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
@@ -443,9 +420,6 @@ impl SourceTable {
             key_at,
             key_len: def.source_key.len() as u32,
             sample,
-            sub_rate: 0,
-            sub_count: 0,
-            announced_rate: 0,
             generation: 0,
             refs: 0,
             channel,
@@ -714,12 +688,59 @@ impl SourceTable {
         }
     }
 
+    /// The subscribers' rates of `idx` (only an entry with its own sample has any).
+    pub fn rates(&self, idx: u32) -> RateSet {
+        let e = &self.entries[idx as usize];
+        if !e.has_own_sample() {
+            return RateSet::Empty;
+        }
+        let s = &self.samples[e.sample as usize];
+        if e.flags & MANY_RATES != 0 {
+            RateSet::Many(s.sub_rate)
+        } else if s.refs == 0 {
+            RateSet::Empty
+        } else {
+            RateSet::One {
+                rate: s.sub_rate,
+                count: s.refs,
+            }
+        }
+    }
+
+    /// Sets the rates of `idx`, which has its own sample unless `r` is empty.
+    fn set_rates(&mut self, idx: u32, r: RateSet) {
+        let e = &mut self.entries[idx as usize];
+        e.flags &= !MANY_RATES;
+        if !e.has_own_sample() {
+            debug_assert_eq!(r, RateSet::Empty);
+            return;
+        }
+        let s = &mut self.samples[e.sample as usize];
+        (s.sub_rate, s.refs) = match r {
+            RateSet::Empty => (0, 0),
+            RateSet::One { rate, count } => (rate, count),
+            RateSet::Many(slot) => {
+                e.flags |= MANY_RATES;
+                (slot, 0)
+            }
+        };
+    }
+
+    /// The sampling rate the backend was last told for `idx` (0: not subscribed).
+    pub fn announced_rate(&self, idx: u32) -> u32 {
+        let e = &self.entries[idx as usize];
+        if e.has_own_sample() {
+            self.samples[e.sample as usize].announced_rate
+        } else {
+            0
+        }
+    }
+
     /// Counts a subscriber of `idx` at `rate` (the first gives the entry its own sample
     /// slot, see [`OWN_SAMPLE`]).
     pub fn add_rate(&mut self, idx: u32, rate: u32) {
         self.own_sample(idx);
-        let e = &mut self.entries[idx as usize];
-        let set = match e.rates() {
+        let set = match self.rates(idx) {
             RateSet::Empty => RateSet::One { rate, count: 1 },
             RateSet::One { rate: r, count } if r == rate => RateSet::One {
                 rate,
@@ -748,14 +769,13 @@ impl SourceTable {
                 RateSet::Many(slot)
             }
         };
-        self.entries[idx as usize].set_rates(set);
+        self.set_rates(idx, set);
         self.mark_dirty(idx);
     }
 
     /// Removes a subscriber of `idx` counted at `rate`.
     pub fn remove_rate(&mut self, idx: u32, rate: u32) {
-        let e = &mut self.entries[idx as usize];
-        let set = match e.rates() {
+        let set = match self.rates(idx) {
             RateSet::Empty => RateSet::Empty,
             RateSet::One { rate: r, count } if r == rate => {
                 if count > 1 {
@@ -792,13 +812,13 @@ impl SourceTable {
                 }
             }
         };
-        self.entries[idx as usize].set_rates(set);
+        self.set_rates(idx, set);
         self.mark_dirty(idx);
     }
 
     /// The fastest rate any subscriber of `idx` asks for, 0 when nobody subscribes.
     pub fn fastest(&self, idx: u32) -> u32 {
-        match self.entries[idx as usize].rates() {
+        match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { rate, .. } => rate,
             RateSet::Many(slot) => self.many_rates[slot as usize]
@@ -811,7 +831,7 @@ impl SourceTable {
 
     /// The number of subscribers of `idx`.
     pub fn subscribers(&self, idx: u32) -> u32 {
-        match self.entries[idx as usize].rates() {
+        match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { count, .. } => count,
             RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(_, c)| *c).sum(),
@@ -842,24 +862,24 @@ impl SourceTable {
             if e.flags & LIVE == 0 {
                 continue;
             }
-            if want != e.announced_rate {
+            let announced = self.announced_rate(idx);
+            if want != announced {
+                // One of them is not 0: the entry has (had) subscribers, so its own sample.
+                let e = &self.entries[idx as usize];
                 let key = SourceKey::new(idx, e.generation);
-                if e.announced_rate == 0 {
-                    e.announced_rate = want;
+                self.samples[e.sample as usize].announced_rate = want;
+                if announced == 0 {
                     subscribe.push(Subscription {
                         item: self.source_item(idx),
                         sampling_rate_ms: want,
                     });
                 } else if want == 0 {
-                    e.announced_rate = 0;
                     unsubscribe.push(key);
                 } else {
-                    e.announced_rate = want;
                     set_rate.push((key, want));
                 }
             }
-            let e = &self.entries[idx as usize];
-            if e.refs == 0 && e.announced_rate == 0 {
+            if self.entries[idx as usize].refs == 0 && self.announced_rate(idx) == 0 {
                 self.free_entry(idx);
             }
         }
@@ -890,7 +910,6 @@ impl SourceTable {
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
         e.sample = u32::MAX;
-        e.set_rates(RateSet::Empty);
         e.flags = 0;
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
@@ -1022,7 +1041,7 @@ mod tests {
         t.remove_rate(i, 1000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (5000, 1));
         assert_eq!(
-            t.entries[i as usize].rates(),
+            t.rates(i),
             RateSet::One {
                 rate: 5000,
                 count: 1
@@ -1030,6 +1049,51 @@ mod tests {
         );
         t.remove_rate(i, 5000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
+    }
+
+    /// The subscription state (rates, what the backend was told) is in the entry's own
+    /// sample, made at the first subscriber and kept until the entry goes.
+    #[test]
+    fn subscription_state_is_in_the_entrys_own_sample() {
+        let mut t = SourceTable::default();
+        let i = t.find_or_insert(&r8_def("X".into()), Timestamp(0)).unwrap();
+        t.add_ref(i);
+        assert!(!t.entries[i as usize].has_own_sample());
+        assert_eq!((t.rates(i), t.announced_rate(i)), (RateSet::Empty, 0));
+        t.add_rate(i, 1000);
+        t.add_rate(i, 500);
+        assert!(t.entries[i as usize].has_own_sample());
+        let mut out = VecDeque::new();
+        t.flush(&mut out);
+        assert!(
+            matches!(&out[0], SourceRequest::Subscribe(v) if v[0].sampling_rate_ms == 500),
+            "{out:?}"
+        );
+        assert_eq!(t.announced_rate(i), 500);
+        t.remove_rate(i, 500);
+        assert_eq!(
+            t.rates(i),
+            RateSet::One {
+                rate: 1000,
+                count: 1
+            }
+        );
+        out.clear();
+        t.flush(&mut out);
+        assert!(matches!(&out[0], SourceRequest::SetSamplingRate(v) if v[0].1 == 1000));
+        t.remove_rate(i, 1000);
+        out.clear();
+        t.flush(&mut out);
+        assert!(matches!(&out[0], SourceRequest::Unsubscribe(_)));
+        assert_eq!(
+            (t.rates(i), t.announced_rate(i), t.live()),
+            (RateSet::Empty, 0, 1)
+        );
+        assert!(t.entries[i as usize].has_own_sample());
+        t.release(i);
+        t.flush(&mut out);
+        assert_eq!(t.live(), 0);
+        assert_eq!(t.free_samples.len(), t.samples.len());
     }
 
     #[test]
@@ -1405,13 +1469,13 @@ mod tests {
     #[test]
     fn entries_stay_small() {
         assert!(
-            std::mem::size_of::<SourceEntry>() <= 44,
+            std::mem::size_of::<SourceEntry>() <= 32,
             "{}",
             std::mem::size_of::<SourceEntry>()
         );
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
         assert!(
-            std::mem::size_of::<Sample>() <= 40,
+            std::mem::size_of::<Sample>() <= 48,
             "{}",
             std::mem::size_of::<Sample>()
         );
