@@ -850,6 +850,81 @@ fn item_deadband_set_get_clear_follow_deadbandmgt() {
     );
 }
 
+/// Item sampling rates and deadbands are kept apart from the items: each is set and
+/// cleared on its own, goes with its item, is copied by CloneGroup to the new handles and
+/// does not come back when the item is added again; the rate still counts at the source.
+#[test]
+fn item_sampling_rates_and_deadbands_follow_their_items() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 5000, 0.0);
+    let h = sim.items(g, &["A1", "A2"]);
+    let rate = |sim: &Sim, g, h| sim.e.get_item_sampling_rate(g, &[h]).unwrap()[0];
+    let band = |sim: &Sim, g, h| sim.e.get_item_deadband(g, &[h]).unwrap()[0];
+    sim.e.set_item_sampling_rate(g, &[(h[0], 1000)]).unwrap();
+    sim.e
+        .set_item_deadband(g, &[(h[0], 5.0), (h[1], 7.0)])
+        .unwrap();
+    sim.pump();
+    assert_eq!(sim.subscribed["A1"], 1000);
+    assert_eq!(
+        (rate(&sim, g, h[0]), band(&sim, g, h[0])),
+        (Ok(1000), Ok(5.0))
+    );
+    assert_eq!(
+        (rate(&sim, g, h[1]), band(&sim, g, h[1])),
+        (Err(OpcError::RateNotSet), Ok(7.0))
+    );
+    // Clearing the deadband keeps the rate, and the other way round.
+    sim.e.clear_item_deadband(g, &[h[0]]).unwrap();
+    assert_eq!(
+        (rate(&sim, g, h[0]), band(&sim, g, h[0])),
+        (Ok(1000), Err(OpcError::DeadbandNotSet))
+    );
+    sim.e.set_item_deadband(g, &[(h[0], 6.0)]).unwrap();
+    assert_eq!(
+        sim.e.clear_item_sampling_rate(g, &[h[1]]).unwrap(),
+        vec![Err(OpcError::RateNotSet)]
+    );
+    let c = sim.e.clone_group(sim.now, g, "copy").unwrap();
+    let ch = sim
+        .e
+        .item_attributes(c)
+        .unwrap()
+        .iter()
+        .map(|a| a.server_handle)
+        .collect::<Vec<_>>();
+    assert_eq!(
+        (rate(&sim, c, ch[0]), band(&sim, c, ch[0])),
+        (Ok(1000), Ok(6.0))
+    );
+    assert_eq!(
+        (rate(&sim, c, ch[1]), band(&sim, c, ch[1])),
+        (Err(OpcError::RateNotSet), Ok(7.0))
+    );
+    sim.e.clear_item_sampling_rate(g, &[h[0]]).unwrap();
+    sim.pump();
+    assert_eq!(sim.subscribed["A1"], 5000);
+    assert_eq!(
+        (rate(&sim, g, h[0]), band(&sim, g, h[0])),
+        (Err(OpcError::RateNotSet), Ok(6.0))
+    );
+    assert_eq!(rate(&sim, c, ch[0]), Ok(1000), "the clone keeps its own");
+    // Removed and added again: nothing set.
+    sim.e.set_item_sampling_rate(g, &[(h[1], 2000)]).unwrap();
+    sim.e.remove_items(sim.now, g, &h).unwrap();
+    sim.pump();
+    let h = sim.items(g, &["A1", "A2"]);
+    for &h in &h {
+        assert_eq!(
+            (rate(&sim, g, h), band(&sim, g, h)),
+            (Err(OpcError::RateNotSet), Err(OpcError::DeadbandNotSet))
+        );
+    }
+    sim.pump();
+    assert_eq!((sim.subscribed["A1"], sim.subscribed["A2"]), (5000, 5000));
+}
+
 #[test]
 fn sampling_rate_set_get_clear_and_the_buffer_setting() {
     let mut sim = Sim::new();

@@ -217,6 +217,78 @@ fn read_max_age_of_never_sampled_item_goes_to_the_device() {
     );
 }
 
+/// Items of an inactive group are never sampled: reads from the cache give the state at
+/// AddItems (no value, waiting quality, the time they were added) until a device read
+/// puts a value into the cache, which MaxAge reads then use; a removed and re-added item
+/// starts again.
+#[test]
+fn inactive_items_have_no_sample_until_a_device_read() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let inactive = SetGroupState {
+        active: Some(false),
+        ..Default::default()
+    };
+    sim.e.set_group_state(sim.now, g, &inactive).unwrap();
+    let added = sim.now;
+    let h = sim.items(g, &["A1", "A2"]);
+    sim.advance(500);
+    let r = ready(sim.e.read(sim.now, g, DataSource::Cache, &h).unwrap());
+    for x in &r {
+        let x = x.as_ref().unwrap();
+        assert_eq!(
+            (&x.value, x.quality, x.timestamp),
+            (&Value::Empty, Quality::BAD_OUT_OF_SERVICE, added)
+        );
+    }
+    let cached = |sim: &mut Sim, h: u32| {
+        let r = ready(
+            sim.e
+                .read_max_age(sim.now, g, &[(h, MAX_AGE_CACHE)])
+                .unwrap(),
+        );
+        let x = r[0].clone().unwrap();
+        (x.value, x.quality, x.timestamp)
+    };
+    assert_eq!(
+        cached(&mut sim, h[0]),
+        (Value::Empty, Quality::BAD_WAITING_FOR_INITIAL_DATA, added)
+    );
+    let id = pending(sim.e.read(sim.now, g, DataSource::Device, &h[..1]).unwrap());
+    let (req, _) = sim.take_read();
+    let sampled = sim.now;
+    sim.e
+        .handle_source_read_result(sim.now, req, vec![good(11.0, sampled)]);
+    let Some(SyncResult::Read(r)) = sim.e.take_sync_result(id) else {
+        panic!()
+    };
+    assert_eq!(r[0].as_ref().unwrap().value, Value::R8(11.0));
+    sim.advance(1000);
+    let r = ready(sim.e.read_max_age(sim.now, g, &[(h[0], 5000)]).unwrap());
+    let x = r[0].as_ref().unwrap();
+    assert_eq!(
+        (&x.value, x.quality, x.timestamp),
+        (&Value::R8(11.0), Quality::GOOD, sampled),
+        "fresh enough: from the cache"
+    );
+    assert_eq!(
+        cached(&mut sim, h[1]),
+        (Value::Empty, Quality::BAD_WAITING_FOR_INITIAL_DATA, added),
+        "A2 still has none"
+    );
+    pending(sim.e.read_max_age(sim.now, g, &[(h[1], 60_000)]).unwrap());
+    // Removed (the cache entry goes) and added again: no value.
+    sim.e.remove_items(sim.now, g, &h).unwrap();
+    sim.tick();
+    let again = sim.now;
+    let h = sim.items(g, &["A1"]);
+    assert_eq!(
+        cached(&mut sim, h[0]),
+        (Value::Empty, Quality::BAD_WAITING_FOR_INITIAL_DATA, again)
+    );
+}
+
 #[test]
 fn write_rejects_read_only_and_converts_to_canonical() {
     let mut sim = Sim::new();

@@ -379,6 +379,56 @@ fn non_analog_items_report_any_change_despite_deadband() {
     );
 }
 
+/// The last value sent of a string item (kept apart from the item): equal strings are no
+/// change, a number after a string and a string after a number are; a removed and re-added
+/// item and a clone's items report their value afresh.
+#[test]
+fn string_values_sent_last_follow_their_items() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let h = sim.items(g, &["S1", "S2"]);
+    let text = |t: &str| Value::Bstr(t.into());
+    sim.push("S1", text("a"), Quality::GOOD);
+    sim.push("S2", text("b"), Quality::GOOD);
+    sim.tick();
+    assert_eq!(
+        values(&sim.data_changes()[0]),
+        vec![(100, text("a")), (101, text("b"))]
+    );
+    let step = |sim: &mut Sim, id: &str, v: Value| {
+        sim.push(id, v, Quality::GOOD);
+        sim.advance(1000);
+        sim.data_changes().first().map(values).unwrap_or_default()
+    };
+    assert_eq!(step(&mut sim, "S2", text("b")), vec![]);
+    assert_eq!(
+        step(&mut sim, "S2", Value::I4(1)),
+        vec![(101, Value::I4(1))]
+    );
+    assert_eq!(step(&mut sim, "S2", Value::I4(1)), vec![]);
+    assert_eq!(step(&mut sim, "S2", text("c")), vec![(101, text("c"))]);
+    assert_eq!(step(&mut sim, "S2", text("c")), vec![]);
+    sim.e.remove_items(sim.now, g, &h[..1]).unwrap();
+    sim.items(g, &["S1"]);
+    assert_eq!(step(&mut sim, "S1", text("a")), vec![(100, text("a"))]);
+    assert_eq!(step(&mut sim, "S1", text("a")), vec![]);
+    let c = sim.e.clone_group(sim.now, g, "copy").unwrap();
+    sim.e.set_callback_connected(sim.now, c, true).unwrap();
+    let active = SetGroupState {
+        active: Some(true),
+        ..Default::default()
+    };
+    sim.e.set_group_state(sim.now, c, &active).unwrap();
+    sim.advance(1000);
+    let dc = sim.data_changes();
+    assert_eq!(dc.len(), 1, "the clone only");
+    let mut v = values(&dc[0]);
+    v.sort_by_key(|(c, _)| *c);
+    assert_eq!(v, vec![(100, text("a")), (101, text("c"))]);
+    assert_eq!(step(&mut sim, "S2", text("c")), vec![]);
+}
+
 #[test]
 fn inactive_items_are_not_reported_and_reactivated_items_are_resent() {
     let mut sim = Sim::new();

@@ -19,13 +19,14 @@
 //! empty the buffers. Disabling buffering, removing the item or the group drops its
 //! buffer. CloneGroup does not copy the buffer setting.
 
+use std::borrow::Cow;
 use std::collections::VecDeque;
 
 use super::cache::CachedValue;
 use super::deadband::{band, value_changed};
 use super::engine::{Engine, GroupHandle};
 use super::events::ItemValue;
-use super::item::{ACTIVE, BUFFERED, SENT};
+use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Quality, Timestamp};
@@ -151,6 +152,7 @@ impl Engine {
         };
         let e = &sources.entries[source as usize];
         let analog = sources.analog_range(e);
+        let s = sources.sample(e);
         refs.retain(|&(gh, h)| {
             let Some(&slot) = group_slots.get(&gh) else {
                 return false;
@@ -168,10 +170,11 @@ impl Engine {
             if it.source != source || it.flags & BUFFERED == 0 {
                 return false;
             }
+            let sampling = ItemOpts::sampling(&g.opts, it);
             if !ticking
                 || it.flags & (ACTIVE | SENT) != (ACTIVE | SENT)
-                || it.sampling == 0
-                || it.sampling >= rate
+                || sampling == 0
+                || sampling >= rate
             {
                 return true;
             }
@@ -179,18 +182,20 @@ impl Engine {
             let (ref_value, ref_quality) = buf
                 .samples
                 .back()
-                .map_or((&it.last, it.last_quality), |(v, q, _)| (v, *q));
-            if e.quality == ref_quality
+                .map_or((it.last(&g.lasts), it.last_quality), |(v, q, _)| {
+                    (Cow::Borrowed(v), *q)
+                });
+            if s.quality == ref_quality
                 && !value_changed(
-                    &e.value,
-                    ref_value,
-                    band(it.item_deadband(), group_deadband, analog),
+                    &s.value,
+                    &ref_value,
+                    band(ItemOpts::deadband(&g.opts, it), group_deadband, analog),
                 )
             {
                 return true;
             }
             buf.samples
-                .push_back((e.value.clone(), e.quality, e.timestamp));
+                .push_back((CachedValue::clone(&s.value), s.quality, s.timestamp));
             g.buffered += 1;
             if buf.samples.len() > ITEM_BUFFER_SAMPLES || g.buffered > GROUP_BUFFER_SAMPLES {
                 buf.samples.pop_front();

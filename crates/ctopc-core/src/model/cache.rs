@@ -3,11 +3,12 @@
 //! rates, what the backend was last told).
 
 use hashbrown::HashTable;
+use std::borrow::Cow;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
-use super::util::Interner;
+use super::util::{IntMap, Interner};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
@@ -131,74 +132,108 @@ pub(crate) const DIRTY: u8 = 4;
 pub(crate) const ANALOG: u8 = 8;
 /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
 pub(crate) const ENUMERATED: u8 = 16;
-/// The rate set spilled: `sub_rate` is a `SourceTable::many_rates` index.
+/// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates` index.
 pub(crate) const MANY_RATES: u8 = 32;
 
-/// One source item in the cache (88 bytes; its key is in [`SourceTable`]'s key text, no
-/// allocation of its own).
+/// The entry has a sample slot of its own in `SourceTable::samples`: made when it is first
+/// subscribed (so that a subscription's samples lie in the order of its entries, as the
+/// scans read them) or gets a sample otherwise (a device read), or at once for a constant;
+/// without it, `sample` names the shared initial state of the entries created at the same
+/// time.
+pub(crate) const OWN_SAMPLE: u8 = 64;
+
+/// One source item in the cache (32 bytes; its key is in [`SourceTable`]'s key text and
+/// its sample and subscription state in [`SourceTable`]'s samples, no allocation of its
+/// own).
 #[derive(Debug)]
 pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    pub value: CachedValue,
-    pub timestamp: Timestamp,
-    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
-    pub refreshed_at: Timestamp,
-    /// `Engine::change_seq` when value or quality last changed.
-    pub changed_seq: u64,
-    /// The subscribers' rates ([`SourceEntry::rates`]): one rate and its count, or with
-    /// [`MANY_RATES`] an index into the side table.
-    sub_rate: u32,
-    sub_count: u32,
-    /// The sampling rate the backend was last told (0: not subscribed).
-    pub announced_rate: u32,
+    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`OWN_SAMPLE`], else the
+    /// shared initial state (no value yet).
+    sample: u32,
     pub generation: u32,
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
-    /// [`key_hash`] of (channel, key), for the index (it takes what was padding).
-    pub key_hash: u32,
     /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
     eu_range: u32,
-    pub quality: Quality,
     pub canonical: VarType,
     pub access: u8,
     pub flags: u8,
 }
 
-impl SourceEntry {
-    pub fn rates(&self) -> RateSet {
-        if self.flags & MANY_RATES != 0 {
-            RateSet::Many(self.sub_rate)
-        } else if self.sub_count == 0 {
-            RateSet::Empty
-        } else {
-            RateSet::One {
-                rate: self.sub_rate,
-                count: self.sub_count,
-            }
+/// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
+const SHARED_VALUE: VarType = VarType(u16::MAX);
+
+/// What the cache holds of an entry's value and subscription (48 bytes), apart from the
+/// entry: an item that is never subscribed nor read (in inactive groups only) costs no
+/// sample of its own (issue 16). A number is in the sample (type and bits), a string or array in
+/// `SourceTable::shared` by sample slot; [`SourceTable::sample`] gives both as a
+/// [`SampleRef`].
+#[derive(Debug, Clone)]
+pub(crate) struct Sample {
+    bits: u64,
+    timestamp: Timestamp,
+    refreshed_at: Timestamp,
+    changed_seq: u64,
+    /// The number's type, or [`SHARED_VALUE`].
+    vt: VarType,
+    quality: Quality,
+    /// A shared initial state: the entries referring to it. An entry's own sample: with
+    /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
+    /// (this), or with [`MANY_RATES`] an index into the side table.
+    refs: u32,
+    sub_rate: u32,
+    /// The sampling rate the backend was last told (0: not subscribed).
+    announced_rate: u32,
+}
+
+impl Sample {
+    /// The state of an entry before its first sample, created at `now`.
+    const fn initial(now: Timestamp) -> Self {
+        Sample {
+            bits: 0,
+            timestamp: now,
+            refreshed_at: NEVER,
+            changed_seq: 0,
+            vt: VarType::EMPTY,
+            quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
+            refs: 0,
+            sub_rate: 0,
+            announced_rate: 0,
         }
     }
+}
 
-    fn set_rates(&mut self, r: RateSet) {
-        self.flags &= !MANY_RATES;
-        (self.sub_rate, self.sub_count) = match r {
-            RateSet::Empty => (0, 0),
-            RateSet::One { rate, count } => (rate, count),
-            RateSet::Many(slot) => {
-                self.flags |= MANY_RATES;
-                (slot, 0)
-            }
-        };
+/// An entry's sample as read ([`SourceTable::sample`]).
+#[derive(Debug)]
+pub(crate) struct SampleRef<'a> {
+    pub value: Cow<'a, CachedValue>,
+    pub timestamp: Timestamp,
+    /// When the source last delivered a sample (for MaxAge); [`NEVER`] before the first.
+    pub refreshed_at: Timestamp,
+    /// `Engine::change_seq` when value or quality last changed.
+    pub changed_seq: u64,
+    pub quality: Quality,
+}
+
+impl SampleRef<'_> {
+    /// The data source has delivered a sample (or a device read did, or the item is a
+    /// constant).
+    pub fn has_value(&self) -> bool {
+        self.refreshed_at != NEVER
     }
+}
 
+impl SourceEntry {
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
-    /// The data source has delivered a sample (or the item is a constant).
-    pub fn has_sample(&self) -> bool {
-        self.refreshed_at != NEVER
+    /// See [`OWN_SAMPLE`].
+    pub fn has_own_sample(&self) -> bool {
+        self.flags & OWN_SAMPLE != 0
     }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
@@ -209,19 +244,6 @@ impl SourceEntry {
     }
     pub fn writable(&self) -> bool {
         u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
-    }
-
-    /// Stores a sample; true when value or quality changed.
-    pub fn apply(&mut self, vqt: Vqt, now: Timestamp) -> bool {
-        let quality_changed = self.quality != vqt.quality;
-        let value_changed = !self.value.same_as(&vqt.value);
-        if value_changed {
-            self.value = CachedValue::from_value(vqt.value);
-        }
-        self.quality = vqt.quality;
-        self.timestamp = vqt.timestamp;
-        self.refreshed_at = now;
-        quality_changed || value_changed
     }
 }
 
@@ -235,7 +257,6 @@ struct KeyText {
 }
 
 /// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
-#[derive(Default)]
 pub(crate) struct SourceTable {
     pub entries: Vec<SourceEntry>,
     keys: KeyText,
@@ -256,9 +277,44 @@ pub(crate) struct SourceTable {
     /// from the configuration, not from clients.
     eu_ranges: Vec<(f64, f64)>,
     eu_range_ids: HashMap<(u64, u64), u32>,
+    /// The entries' samples ([`SourceEntry::sample`]), with the free slots ...
+    samples: Vec<Sample>,
+    free_samples: Vec<u32>,
+    /// The string and array values of the samples, by sample slot.
+    shared: IntMap<u32, CachedValue>,
+    /// ... and the shared initial state last created (`u32::MAX`: none), which the entries
+    /// created at the same time share.
+    initial: u32,
     /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
-    /// that many when the entries must grow, rather than a quarter more.
+    /// that many when the entries must grow, rather than a quarter more; and their item IDs'
+    /// bytes, for the key text.
     batch_left: usize,
+    batch_keys: usize,
+}
+
+impl Default for SourceTable {
+    fn default() -> Self {
+        SourceTable {
+            entries: Vec::new(),
+            keys: KeyText::default(),
+            free: Vec::new(),
+            index: SourceIndex::default(),
+            paths: Interner::default(),
+            dirty: Vec::new(),
+            live: 0,
+            many_rates: Vec::new(),
+            free_many: Vec::new(),
+            enum_texts: HashMap::new(),
+            eu_ranges: Vec::new(),
+            eu_range_ids: HashMap::new(),
+            samples: Vec::new(),
+            free_samples: Vec::new(),
+            shared: IntMap::default(),
+            initial: u32::MAX,
+            batch_left: 0,
+            batch_keys: 0,
+        }
+    }
 }
 
 impl SourceTable {
@@ -266,10 +322,12 @@ impl SourceTable {
         self.live
     }
 
-    /// Says how many items of an AddItems call are left, this one included (0 after the
-    /// call): at most that many new entries are coming.
-    pub fn batch_left(&mut self, n: usize) {
+    /// Says how many items of an AddItems call are left, this one included, and their item
+    /// IDs' bytes (0 after the call): at most that many new entries are coming, with about
+    /// that many bytes of keys.
+    pub fn batch_left(&mut self, n: usize, key_bytes: usize) {
         self.batch_left = n;
+        self.batch_keys = key_bytes;
     }
 
     /// An entry's key.
@@ -293,9 +351,21 @@ impl SourceTable {
         if !fits(self.keys.text.len()) {
             return None;
         }
-        let at = self.keys.text.len() as u32;
-        self.keys.text.push_str(key);
-        Some(at)
+        let text = &mut self.keys.text;
+        let len = text.len();
+        if len + key.len() > text.capacity() {
+            // As the entries: by the rest of a large AddItems (its item IDs' bytes, which
+            // are the keys' unless aliases), else by a quarter, not double.
+            let quarter = (len / 4).max(4096);
+            let grow = if self.batch_keys >= quarter {
+                self.batch_keys
+            } else {
+                quarter
+            };
+            text.reserve_exact(grow.max(key.len()));
+        }
+        text.push_str(key);
+        Some(len as u32)
     }
 
     /// Rebuilds the key text from the live entries' keys.
@@ -318,24 +388,22 @@ impl SourceTable {
         let (entries, text) = (&self.entries, &self.keys.text);
         if let Some(idx) = self.index.find(hash, |i| {
             let e = &entries[i as usize];
-            e.key_hash == hash && e.channel == channel && Self::key_in(text, e) == def.source_key
+            e.channel == channel && Self::key_in(text, e) == def.source_key
         }) {
             return Ok(idx);
         }
         let key_at = self.add_key(&def.source_key).ok_or(OpcError::OutOfMemory)?;
-        let (value, quality, refreshed_at, mut flags) = match &def.constant {
-            Some(v) => (
-                CachedValue::from_value(v.clone()),
-                Quality::GOOD.with_limit(Quality::LIMIT_CONST),
-                now,
-                LIVE | CONSTANT,
-            ),
-            None => (
-                CachedValue::EMPTY,
-                Quality::BAD_WAITING_FOR_INITIAL_DATA,
-                NEVER,
-                LIVE,
-            ),
+        let (sample, mut flags) = match &def.constant {
+            Some(v) => {
+                let sample = self.alloc_sample(Sample {
+                    quality: Quality::GOOD.with_limit(Quality::LIMIT_CONST),
+                    refreshed_at: now,
+                    ..Sample::initial(now)
+                });
+                self.put_value(sample, CachedValue::from_value(v.clone()));
+                (sample, LIVE | CONSTANT | OWN_SAMPLE)
+            }
+            None => (self.share_initial(now), LIVE),
         };
         let eu_range = match &def.eu {
             EuInfo::Analog { low, high } => {
@@ -351,19 +419,11 @@ impl SourceTable {
         let entry = SourceEntry {
             key_at,
             key_len: def.source_key.len() as u32,
-            value,
-            timestamp: now,
-            refreshed_at,
-            changed_seq: 0,
-            sub_rate: 0,
-            sub_count: 0,
-            announced_rate: 0,
+            sample,
             generation: 0,
             refs: 0,
             channel,
-            key_hash: hash,
             eu_range,
-            quality,
             canonical: def.canonical_type,
             access: (def.access_rights & (OPC_READABLE | OPC_WRITEABLE)) as u8,
             flags,
@@ -398,11 +458,170 @@ impl SourceTable {
         if let EuInfo::Enumerated(texts) = &def.eu {
             self.enum_texts.insert(idx, texts.clone());
         }
-        let entries = &self.entries;
-        self.index
-            .insert(hash, idx, |i| entries[i as usize].key_hash);
+        let (entries, text) = (&self.entries, &self.keys.text);
+        let rehash = |i: u32| {
+            let e = &entries[i as usize];
+            key_hash(e.channel, Self::key_in(text, e))
+        };
+        // Growing the index hashes every key again: once for the rest of a large AddItems.
+        self.index.reserve_if_full(self.batch_left, rehash);
+        self.index.insert(hash, idx, rehash);
         self.live += 1;
         Ok(idx)
+    }
+
+    /// A free sample slot holding `sample`. The samples grow by a quarter (at least
+    /// 1,024) but not past one per live entry while they can help it: most entries get
+    /// their first sample one by one, after the AddItems that made them.
+    fn alloc_sample(&mut self, sample: Sample) -> u32 {
+        if let Some(slot) = self.free_samples.pop() {
+            self.samples[slot as usize] = sample;
+            return slot;
+        }
+        let len = self.samples.len();
+        if len == self.samples.capacity() {
+            let quarter = (len / 4).max(1024);
+            let room = (self.live + 16).saturating_sub(len).max(64);
+            self.samples.reserve_exact(quarter.min(room));
+        }
+        self.samples.push(sample);
+        len as u32
+    }
+
+    /// The shared initial state for an entry created at `now` (one more entry refers to it).
+    fn share_initial(&mut self, now: Timestamp) -> u32 {
+        if let Some(s) = self.samples.get_mut(self.initial as usize) {
+            if s.refs > 0 && s.timestamp == now {
+                s.refs += 1;
+                return self.initial;
+            }
+        }
+        self.initial = self.alloc_sample(Sample {
+            refs: 1,
+            ..Sample::initial(now)
+        });
+        self.initial
+    }
+
+    /// Lets go of an entry's sample: its own, or one reference to a shared initial state.
+    fn release_sample(&mut self, slot: u32, own: bool) {
+        let s = &mut self.samples[slot as usize];
+        if !own {
+            s.refs -= 1;
+            if s.refs > 0 {
+                return;
+            }
+            if self.initial == slot {
+                self.initial = u32::MAX;
+            }
+        }
+        if s.vt == SHARED_VALUE {
+            self.shared.remove(&slot);
+        }
+        *s = Sample::initial(NEVER);
+        self.free_samples.push(slot);
+    }
+
+    /// Stores the value of the sample in `slot`.
+    fn put_value(&mut self, slot: u32, v: CachedValue) {
+        let s = &mut self.samples[slot as usize];
+        match v {
+            CachedValue::Num { vt, bits } => {
+                if s.vt == SHARED_VALUE {
+                    self.shared.remove(&slot);
+                }
+                (s.vt, s.bits) = (vt, bits);
+            }
+            shared @ CachedValue::Shared(_) => {
+                (s.vt, s.bits) = (SHARED_VALUE, 0);
+                self.shared.insert(slot, shared);
+            }
+        }
+    }
+
+    fn sample_at(&self, slot: u32) -> SampleRef<'_> {
+        static FREED: Sample = Sample::initial(NEVER);
+        let s = self.samples.get(slot as usize).unwrap_or(&FREED);
+        let value = if s.vt == SHARED_VALUE {
+            self.shared
+                .get(&slot)
+                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+        } else {
+            Cow::Owned(CachedValue::Num {
+                vt: s.vt,
+                bits: s.bits,
+            })
+        };
+        SampleRef {
+            value,
+            timestamp: s.timestamp,
+            refreshed_at: s.refreshed_at,
+            changed_seq: s.changed_seq,
+            quality: s.quality,
+        }
+    }
+
+    /// The sample of an entry (the shared initial state before its first; a freed entry
+    /// has none: an empty one).
+    pub fn sample(&self, e: &SourceEntry) -> SampleRef<'_> {
+        self.sample_at(e.sample)
+    }
+
+    /// The sample slot of the live entry `idx`, made its own first if it shares the
+    /// initial state.
+    fn own_sample(&mut self, idx: u32) -> u32 {
+        let e = &self.entries[idx as usize];
+        if e.has_own_sample() {
+            return e.sample;
+        }
+        let shared = e.sample;
+        let own = self.alloc_sample(Sample {
+            refs: 0,
+            ..self.samples[shared as usize].clone()
+        });
+        self.release_sample(shared, false);
+        let e = &mut self.entries[idx as usize];
+        e.sample = own;
+        e.flags |= OWN_SAMPLE;
+        own
+    }
+
+    /// Stores a sample of the live entry `idx`; when value or quality changed, counts `seq`
+    /// up and records it as the entry's change.
+    pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) {
+        let slot = self.own_sample(idx);
+        let s = &mut self.samples[slot as usize];
+        let quality_changed = s.quality != vqt.quality;
+        let value_changed = match num_bits(&vqt.value) {
+            Some((vt, bits)) => {
+                let changed = (s.vt, s.bits) != (vt, bits);
+                if changed && s.vt == SHARED_VALUE {
+                    self.shared.remove(&slot);
+                }
+                (s.vt, s.bits) = (vt, bits);
+                changed
+            }
+            None => {
+                let same = s.vt == SHARED_VALUE
+                    && self
+                        .shared
+                        .get(&slot)
+                        .is_some_and(|old| old.same_as(&vqt.value));
+                if !same {
+                    (s.vt, s.bits) = (SHARED_VALUE, 0);
+                    self.shared
+                        .insert(slot, CachedValue::Shared(Arc::new(vqt.value)));
+                }
+                !same
+            }
+        };
+        s.quality = vqt.quality;
+        s.timestamp = vqt.timestamp;
+        s.refreshed_at = now;
+        if quality_changed || value_changed {
+            *seq += 1;
+            s.changed_seq = *seq;
+        }
     }
 
     fn intern_range(&mut self, low: f64, high: f64) -> u32 {
@@ -424,12 +643,6 @@ impl SourceTable {
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
         self.entries
             .get(key.index() as usize)
-            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
-    }
-
-    pub fn get_mut(&mut self, key: SourceKey) -> Option<&mut SourceEntry> {
-        self.entries
-            .get_mut(key.index() as usize)
             .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
     }
 
@@ -475,10 +688,59 @@ impl SourceTable {
         }
     }
 
-    /// Counts a subscriber of `idx` at `rate`.
-    pub fn add_rate(&mut self, idx: u32, rate: u32) {
+    /// The subscribers' rates of `idx` (only an entry with its own sample has any).
+    pub fn rates(&self, idx: u32) -> RateSet {
+        let e = &self.entries[idx as usize];
+        if !e.has_own_sample() {
+            return RateSet::Empty;
+        }
+        let s = &self.samples[e.sample as usize];
+        if e.flags & MANY_RATES != 0 {
+            RateSet::Many(s.sub_rate)
+        } else if s.refs == 0 {
+            RateSet::Empty
+        } else {
+            RateSet::One {
+                rate: s.sub_rate,
+                count: s.refs,
+            }
+        }
+    }
+
+    /// Sets the rates of `idx`, which has its own sample unless `r` is empty.
+    fn set_rates(&mut self, idx: u32, r: RateSet) {
         let e = &mut self.entries[idx as usize];
-        let set = match e.rates() {
+        e.flags &= !MANY_RATES;
+        if !e.has_own_sample() {
+            debug_assert_eq!(r, RateSet::Empty);
+            return;
+        }
+        let s = &mut self.samples[e.sample as usize];
+        (s.sub_rate, s.refs) = match r {
+            RateSet::Empty => (0, 0),
+            RateSet::One { rate, count } => (rate, count),
+            RateSet::Many(slot) => {
+                e.flags |= MANY_RATES;
+                (slot, 0)
+            }
+        };
+    }
+
+    /// The sampling rate the backend was last told for `idx` (0: not subscribed).
+    pub fn announced_rate(&self, idx: u32) -> u32 {
+        let e = &self.entries[idx as usize];
+        if e.has_own_sample() {
+            self.samples[e.sample as usize].announced_rate
+        } else {
+            0
+        }
+    }
+
+    /// Counts a subscriber of `idx` at `rate` (the first gives the entry its own sample
+    /// slot, see [`OWN_SAMPLE`]).
+    pub fn add_rate(&mut self, idx: u32, rate: u32) {
+        self.own_sample(idx);
+        let set = match self.rates(idx) {
             RateSet::Empty => RateSet::One { rate, count: 1 },
             RateSet::One { rate: r, count } if r == rate => RateSet::One {
                 rate,
@@ -507,14 +769,13 @@ impl SourceTable {
                 RateSet::Many(slot)
             }
         };
-        self.entries[idx as usize].set_rates(set);
+        self.set_rates(idx, set);
         self.mark_dirty(idx);
     }
 
     /// Removes a subscriber of `idx` counted at `rate`.
     pub fn remove_rate(&mut self, idx: u32, rate: u32) {
-        let e = &mut self.entries[idx as usize];
-        let set = match e.rates() {
+        let set = match self.rates(idx) {
             RateSet::Empty => RateSet::Empty,
             RateSet::One { rate: r, count } if r == rate => {
                 if count > 1 {
@@ -551,13 +812,13 @@ impl SourceTable {
                 }
             }
         };
-        self.entries[idx as usize].set_rates(set);
+        self.set_rates(idx, set);
         self.mark_dirty(idx);
     }
 
     /// The fastest rate any subscriber of `idx` asks for, 0 when nobody subscribes.
     pub fn fastest(&self, idx: u32) -> u32 {
-        match self.entries[idx as usize].rates() {
+        match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { rate, .. } => rate,
             RateSet::Many(slot) => self.many_rates[slot as usize]
@@ -570,7 +831,7 @@ impl SourceTable {
 
     /// The number of subscribers of `idx`.
     pub fn subscribers(&self, idx: u32) -> u32 {
-        match self.entries[idx as usize].rates() {
+        match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { count, .. } => count,
             RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(_, c)| *c).sum(),
@@ -601,24 +862,24 @@ impl SourceTable {
             if e.flags & LIVE == 0 {
                 continue;
             }
-            if want != e.announced_rate {
+            let announced = self.announced_rate(idx);
+            if want != announced {
+                // One of them is not 0: the entry has (had) subscribers, so its own sample.
+                let e = &self.entries[idx as usize];
                 let key = SourceKey::new(idx, e.generation);
-                if e.announced_rate == 0 {
-                    e.announced_rate = want;
+                self.samples[e.sample as usize].announced_rate = want;
+                if announced == 0 {
                     subscribe.push(Subscription {
                         item: self.source_item(idx),
                         sampling_rate_ms: want,
                     });
                 } else if want == 0 {
-                    e.announced_rate = 0;
                     unsubscribe.push(key);
                 } else {
-                    e.announced_rate = want;
                     set_rate.push((key, want));
                 }
             }
-            let e = &self.entries[idx as usize];
-            if e.refs == 0 && e.announced_rate == 0 {
+            if self.entries[idx as usize].refs == 0 && self.announced_rate(idx) == 0 {
                 self.free_entry(idx);
             }
         }
@@ -641,12 +902,14 @@ impl SourceTable {
         if self.entries[idx as usize].flags & ENUMERATED != 0 {
             self.enum_texts.remove(&idx);
         }
+        let e = &self.entries[idx as usize];
+        self.release_sample(e.sample, e.has_own_sample());
         let e = &mut self.entries[idx as usize];
-        self.index.remove(e.key_hash, idx);
+        self.index
+            .remove(key_hash(e.channel, Self::key_in(&self.keys.text, e)), idx);
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
-        e.value = CachedValue::EMPTY;
-        e.set_rates(RateSet::Empty);
+        e.sample = u32::MAX;
         e.flags = 0;
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
@@ -678,8 +941,8 @@ fn key_hash(channel: u32, key: &str) -> u32 {
 /// The index from a source item's 32-bit hash to its entry index: a
 /// `hashbrown::HashTable<u32>` (the SwissTable under std's HashMap), 4 bytes and one
 /// control byte per bucket. Keys are compared through the entries themselves, so no string
-/// is stored twice; the table keeps no hashes, so growing it asks `rehash` of
-/// [`SourceIndex::insert`] (the entries keep theirs: [`SourceEntry::key_hash`]).
+/// is stored twice; neither the table nor the entries keep hashes, so growing it asks
+/// `rehash` of [`SourceIndex::insert`] (which hashes the entries' keys again).
 #[derive(Default)]
 pub(crate) struct SourceIndex {
     table: HashTable<u32>,
@@ -701,6 +964,13 @@ impl SourceIndex {
     pub fn insert(&mut self, hash: u32, idx: u32, rehash: impl Fn(u32) -> u32) {
         self.table
             .insert_unique(wide(hash), idx, |&i| wide(rehash(i)));
+    }
+
+    /// Makes room for `n` more when the table is full (the next insert would grow it).
+    pub fn reserve_if_full(&mut self, n: usize, rehash: impl Fn(u32) -> u32) {
+        if n > 1 && self.table.len() == self.table.capacity() {
+            self.table.reserve(n, |&i| wide(rehash(i)));
+        }
     }
 
     pub fn remove(&mut self, hash: u32, idx: u32) {
@@ -728,6 +998,7 @@ mod tests {
             for (k, insert) in ops {
                 if insert && !model.contains_key(&k) {
                     let keys: HashMap<u32, u32> = model.iter().map(|(k, i)| (*i, *k)).collect();
+                    index.reserve_if_full(k as usize % 5, |i| hash(keys[&i]));
                     index.insert(hash(k), next, |i| hash(keys[&i]));
                     model.insert(k, next);
                     next += 1;
@@ -770,7 +1041,7 @@ mod tests {
         t.remove_rate(i, 1000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (5000, 1));
         assert_eq!(
-            t.entries[i as usize].rates(),
+            t.rates(i),
             RateSet::One {
                 rate: 5000,
                 count: 1
@@ -778,6 +1049,51 @@ mod tests {
         );
         t.remove_rate(i, 5000);
         assert_eq!((t.fastest(i), t.subscribers(i)), (0, 0));
+    }
+
+    /// The subscription state (rates, what the backend was told) is in the entry's own
+    /// sample, made at the first subscriber and kept until the entry goes.
+    #[test]
+    fn subscription_state_is_in_the_entrys_own_sample() {
+        let mut t = SourceTable::default();
+        let i = t.find_or_insert(&r8_def("X".into()), Timestamp(0)).unwrap();
+        t.add_ref(i);
+        assert!(!t.entries[i as usize].has_own_sample());
+        assert_eq!((t.rates(i), t.announced_rate(i)), (RateSet::Empty, 0));
+        t.add_rate(i, 1000);
+        t.add_rate(i, 500);
+        assert!(t.entries[i as usize].has_own_sample());
+        let mut out = VecDeque::new();
+        t.flush(&mut out);
+        assert!(
+            matches!(&out[0], SourceRequest::Subscribe(v) if v[0].sampling_rate_ms == 500),
+            "{out:?}"
+        );
+        assert_eq!(t.announced_rate(i), 500);
+        t.remove_rate(i, 500);
+        assert_eq!(
+            t.rates(i),
+            RateSet::One {
+                rate: 1000,
+                count: 1
+            }
+        );
+        out.clear();
+        t.flush(&mut out);
+        assert!(matches!(&out[0], SourceRequest::SetSamplingRate(v) if v[0].1 == 1000));
+        t.remove_rate(i, 1000);
+        out.clear();
+        t.flush(&mut out);
+        assert!(matches!(&out[0], SourceRequest::Unsubscribe(_)));
+        assert_eq!(
+            (t.rates(i), t.announced_rate(i), t.live()),
+            (RateSet::Empty, 0, 1)
+        );
+        assert!(t.entries[i as usize].has_own_sample());
+        t.release(i);
+        t.flush(&mut out);
+        assert_eq!(t.live(), 0);
+        assert_eq!(t.free_samples.len(), t.samples.len());
     }
 
     #[test]
@@ -845,20 +1161,26 @@ mod tests {
         assert!(matches!(t.eu_info(d), EuInfo::None));
     }
 
-    /// The entries of a large AddItems take the room they need, no more; small calls
-    /// grow the table by a quarter (at least 1,024).
+    /// The entries and keys of a large AddItems take the room they need, no more; small
+    /// calls grow the entries by a quarter (at least 1,024) and the keys by a quarter (at
+    /// least 4,096 bytes).
     #[test]
     fn a_large_call_reserves_its_entries_exactly() {
         let def = |i: u32| r8_def(format!("K{i}"));
         let mut t = SourceTable::default();
+        let mut bytes: usize = (0..5000).map(|i| def(i).source_key.len()).sum();
+        let total = bytes;
         for i in 0..5000 {
-            t.batch_left(5000 - i as usize);
+            t.batch_left(5000 - i as usize, bytes);
+            bytes -= def(i).source_key.len();
             t.find_or_insert(&def(i), Timestamp(0)).unwrap();
         }
-        t.batch_left(0);
+        t.batch_left(0, 0);
         assert_eq!(t.entries.capacity(), 5000);
+        assert_eq!((t.keys.text.len(), t.keys.text.capacity()), (total, total));
         t.find_or_insert(&def(5000), Timestamp(0)).unwrap();
         assert_eq!(t.entries.capacity(), 5000 + 1250);
+        assert_eq!(t.keys.text.capacity(), total + total / 4);
     }
 
     /// The keys live in one text; freed keys are dropped from it when they are most of
@@ -893,14 +1215,270 @@ mod tests {
         assert_eq!(t.keys.text.len(), text + 10);
     }
 
+    fn vqt(v: f64, t: i64) -> Vqt {
+        Vqt {
+            value: Value::R8(v),
+            quality: Quality::GOOD,
+            timestamp: Timestamp(t),
+        }
+    }
+
+    /// Entries created at the same time share one initial state until their first sample,
+    /// which gets a slot of its own; the shared state goes with its last entry.
+    #[test]
+    fn an_entry_gets_a_sample_of_its_own_at_its_first() {
+        let mut t = SourceTable::default();
+        let (a, b) = (
+            t.find_or_insert(&r8_def("A".into()), Timestamp(7)).unwrap(),
+            t.find_or_insert(&r8_def("B".into()), Timestamp(7)).unwrap(),
+        );
+        let c = t.find_or_insert(&r8_def("C".into()), Timestamp(8)).unwrap();
+        assert_eq!(t.samples.len(), 2, "one initial state per creation time");
+        for (i, at) in [(a, 7), (b, 7), (c, 8)] {
+            let e = &t.entries[i as usize];
+            assert!(!e.has_own_sample());
+            let s = t.sample(e);
+            assert!(!s.has_value());
+            assert_eq!(
+                (
+                    &*s.value,
+                    s.quality,
+                    s.timestamp,
+                    s.refreshed_at,
+                    s.changed_seq
+                ),
+                (
+                    &CachedValue::EMPTY,
+                    Quality::BAD_WAITING_FOR_INITIAL_DATA,
+                    Timestamp(at),
+                    NEVER,
+                    0
+                )
+            );
+        }
+        let mut seq = 10;
+        t.apply(a, vqt(1.5, 3), Timestamp(9), &mut seq);
+        let s = t.sample(&t.entries[a as usize]);
+        assert_eq!(
+            (
+                &*s.value,
+                s.quality,
+                s.timestamp,
+                s.refreshed_at,
+                s.changed_seq
+            ),
+            (
+                &CachedValue::from_value(Value::R8(1.5)),
+                Quality::GOOD,
+                Timestamp(3),
+                Timestamp(9),
+                11
+            )
+        );
+        assert!(t.entries[a as usize].has_own_sample());
+        assert!(
+            !t.entries[b as usize].has_own_sample(),
+            "b keeps the shared state"
+        );
+        assert_eq!(t.sample(&t.entries[b as usize]).timestamp, Timestamp(7));
+        // The same sample again: no change, no count.
+        t.apply(a, vqt(1.5, 4), Timestamp(10), &mut seq);
+        assert_eq!(
+            (seq, t.sample(&t.entries[a as usize]).changed_seq),
+            (11, 11)
+        );
+        // b's first sample: the shared state of time 7 has no entry left and is freed.
+        t.apply(b, vqt(2.0, 5), Timestamp(10), &mut seq);
+        assert_eq!(t.free_samples.len(), 1);
+        assert_eq!(t.samples[t.free_samples[0] as usize].refs, 0);
+        // A new entry at time 8 shares c's state; at 11 one is made (in the freed slot).
+        let d = t.find_or_insert(&r8_def("D".into()), Timestamp(8)).unwrap();
+        assert_eq!(t.entries[d as usize].sample, t.entries[c as usize].sample);
+        let e = t
+            .find_or_insert(&r8_def("E".into()), Timestamp(11))
+            .unwrap();
+        assert!(t.free_samples.is_empty());
+        assert_eq!(t.sample(&t.entries[e as usize]).timestamp, Timestamp(11));
+        assert_eq!(t.samples.len(), 4);
+    }
+
+    /// A constant has its sample from the start; freed entries give their samples back
+    /// and a re-used entry starts again without a value.
+    #[test]
+    fn freed_entries_free_their_samples() {
+        let mut t = SourceTable::default();
+        let k = t
+            .find_or_insert(
+                &ItemDef {
+                    constant: Some(Value::I4(5)),
+                    ..r8_def("K".into())
+                },
+                Timestamp(1),
+            )
+            .unwrap();
+        let e = &t.entries[k as usize];
+        assert!(e.has_own_sample() && e.is_constant());
+        let s = t.sample(e);
+        assert_eq!(
+            (s.value.to_value(), s.quality, s.refreshed_at),
+            (
+                Value::I4(5),
+                Quality::GOOD.with_limit(Quality::LIMIT_CONST),
+                Timestamp(1)
+            )
+        );
+        let x = t.find_or_insert(&r8_def("X".into()), Timestamp(1)).unwrap();
+        let y = t.find_or_insert(&r8_def("Y".into()), Timestamp(1)).unwrap();
+        t.apply(x, vqt(3.0, 2), Timestamp(2), &mut 0);
+        for i in [k, x, y] {
+            t.add_ref(i);
+            t.release(i);
+        }
+        t.flush(&mut VecDeque::new());
+        assert_eq!(t.live(), 0);
+        assert_eq!(t.free_samples.len(), t.samples.len(), "every sample free");
+        assert!(t
+            .samples
+            .iter()
+            .all(|s| s.vt == VarType::EMPTY && s.refs == 0));
+        assert!(t.shared.is_empty());
+        let freed = &t.entries[x as usize];
+        assert!(!freed.has_own_sample());
+        assert_eq!(t.sample(freed).refreshed_at, NEVER);
+        // The slot of X again, for Z: no value until its first sample.
+        let z = t.find_or_insert(&r8_def("Z".into()), Timestamp(3)).unwrap();
+        let e = &t.entries[z as usize];
+        assert!(!e.has_own_sample());
+        assert_eq!(
+            (t.sample(e).quality, t.sample(e).timestamp),
+            (Quality::BAD_WAITING_FOR_INITIAL_DATA, Timestamp(3))
+        );
+        assert_eq!(t.samples.len(), 3, "no new slot");
+    }
+
+    /// A subscribed entry has its own sample slot before its first sample, in the order of
+    /// subscription (the order of the entries a scan reads), still without a value.
+    #[test]
+    fn subscribing_gives_an_entry_its_own_sample_slot_in_order() {
+        let mut t = SourceTable::default();
+        let idx: Vec<u32> = (0..10)
+            .map(|i| {
+                t.find_or_insert(&r8_def(format!("K{i}")), Timestamp(5))
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(t.samples.len(), 1, "one shared initial state");
+        for &i in &idx {
+            t.add_rate(i, 1000);
+        }
+        t.add_rate(idx[0], 500);
+        let slots: Vec<u32> = idx.iter().map(|&i| t.entries[i as usize].sample).collect();
+        assert!(slots.windows(2).all(|w| w[0] + 1 == w[1]), "{slots:?}");
+        assert_eq!(t.free_samples.len(), 1, "the shared state is free");
+        for &i in &idx {
+            let e = &t.entries[i as usize];
+            assert!(e.has_own_sample());
+            let s = t.sample(e);
+            assert!(!s.has_value());
+            assert_eq!(
+                (s.quality, s.timestamp),
+                (Quality::BAD_WAITING_FOR_INITIAL_DATA, Timestamp(5))
+            );
+        }
+        // The first sample goes into that slot.
+        let slot = t.entries[idx[3] as usize].sample;
+        t.apply(idx[3], vqt(1.0, 6), Timestamp(6), &mut 0);
+        assert_eq!(t.entries[idx[3] as usize].sample, slot);
+        assert!(t.sample(&t.entries[idx[3] as usize]).has_value());
+    }
+
+    /// Numbers are in the sample, strings and arrays in the table's map by slot, which
+    /// they leave when a number follows or the entry goes; equal strings are no change.
+    #[test]
+    fn string_samples_are_kept_apart_from_the_sample() {
+        let mut t = SourceTable::default();
+        let x = t.find_or_insert(&r8_def("X".into()), Timestamp(0)).unwrap();
+        let k = t
+            .find_or_insert(
+                &ItemDef {
+                    constant: Some(Value::Bstr("c".into())),
+                    ..r8_def("K".into())
+                },
+                Timestamp(0),
+            )
+            .unwrap();
+        assert_eq!(
+            t.sample(&t.entries[k as usize]).value.to_value(),
+            Value::Bstr("c".into())
+        );
+        assert_eq!(t.shared.len(), 1);
+        let text = |v: &str| Vqt {
+            value: Value::Bstr(v.into()),
+            ..vqt(0.0, 1)
+        };
+        let mut seq = 0;
+        t.apply(x, text("a"), Timestamp(1), &mut seq);
+        let s = t.sample(&t.entries[x as usize]);
+        assert_eq!(
+            (s.value.to_value(), s.changed_seq),
+            (Value::Bstr("a".into()), 1)
+        );
+        assert_eq!(t.shared.len(), 2);
+        t.apply(x, text("a"), Timestamp(2), &mut seq);
+        assert_eq!(seq, 1, "an equal string is no change");
+        t.apply(x, vqt(2.0, 3), Timestamp(3), &mut seq);
+        assert_eq!(t.shared.len(), 1, "a number follows");
+        assert_eq!(
+            t.sample(&t.entries[x as usize]).value.to_value(),
+            Value::R8(2.0)
+        );
+        t.apply(x, text("b"), Timestamp(4), &mut seq);
+        assert_eq!((seq, t.shared.len()), (3, 2));
+        for i in [x, k] {
+            t.add_ref(i);
+            t.release(i);
+        }
+        t.flush(&mut VecDeque::new());
+        assert!(t.shared.is_empty());
+    }
+
+    /// The samples grow one per live entry, not by doubling, as entries get their first
+    /// sample one by one.
+    #[test]
+    fn samples_grow_to_the_live_entries() {
+        let mut t = SourceTable::default();
+        let n = 5000u32;
+        for i in 0..n {
+            t.batch_left((n - i) as usize, 0);
+            t.find_or_insert(&r8_def(format!("K{i}")), Timestamp(0))
+                .unwrap();
+        }
+        t.batch_left(0, 0);
+        let mut seq = 0;
+        for i in 0..n {
+            t.apply(i, vqt(f64::from(i), 1), Timestamp(1), &mut seq);
+        }
+        assert_eq!(t.samples.len() - t.free_samples.len(), n as usize);
+        assert!(
+            t.samples.capacity() <= n as usize + 16,
+            "{}",
+            t.samples.capacity()
+        );
+    }
+
     #[test]
     fn entries_stay_small() {
         assert!(
-            std::mem::size_of::<SourceEntry>() <= 88,
+            std::mem::size_of::<SourceEntry>() <= 32,
             "{}",
             std::mem::size_of::<SourceEntry>()
         );
         assert_eq!(std::mem::size_of::<CachedValue>(), 16);
+        assert!(
+            std::mem::size_of::<Sample>() <= 48,
+            "{}",
+            std::mem::size_of::<Sample>()
+        );
     }
 
     #[test]

@@ -131,16 +131,12 @@ impl Engine {
         I: IntoIterator<Item = (SourceKey, Vqt)>,
     {
         for (key, vqt) in updates {
-            let Some(e) = self.sources.get_mut(key) else {
-                continue;
-            };
-            if e.is_constant() {
-                continue;
+            match self.sources.get(key) {
+                Some(e) if !e.is_constant() => {}
+                _ => continue,
             }
-            if e.apply(vqt, now) {
-                self.change_seq += 1;
-                e.changed_seq = self.change_seq;
-            }
+            self.sources
+                .apply(key.index(), vqt, now, &mut self.change_seq);
             if !self.buffer_refs.is_empty() {
                 self.buffer_sample(key.index());
             }
@@ -185,16 +181,17 @@ impl Engine {
                 Err(e) => SlotOut::Err(e),
                 Ok(vqt) => {
                     let key = SourceKey::new(slot.source, slot.source_gen);
-                    match self.sources.get_mut(key) {
+                    match self.sources.get(key) {
                         Some(e) if !e.is_constant() => {
-                            if e.apply(vqt, now) {
-                                self.change_seq += 1;
-                                e.changed_seq = self.change_seq;
-                            }
+                            self.sources
+                                .apply(key.index(), vqt, now, &mut self.change_seq);
+                            let s = self
+                                .sources
+                                .sample(&self.sources.entries[slot.source as usize]);
                             SlotOut::Raw {
-                                value: e.value.clone(),
-                                quality: e.quality,
-                                timestamp: e.timestamp,
+                                value: s.value.into_owned(),
+                                quality: s.quality,
+                                timestamp: s.timestamp,
                             }
                         }
                         _ => SlotOut::Raw {

@@ -8,7 +8,7 @@ use super::cache::SourceTable;
 use super::datasource::SourceRequest;
 use super::events::Event;
 use super::group::Group;
-use super::item::{GroupItem, NameTable, SUBSCRIBED};
+use super::item::{GroupItem, ItemOpts, NameTable, SUBSCRIBED};
 use super::scheduler::Scheduler;
 use super::transactions::Txns;
 use super::util::IntMap;
@@ -340,20 +340,18 @@ impl Engine {
     // ---- subscriptions ---------------------------------------------------------------
 
     /// Brings one item's subscription in line with its state: subscribed while the item is
-    /// active in an active, live group and not constant.
+    /// active in an active, live group and not constant; at its item sampling rate
+    /// (`sampling`, [`ItemOpts::sampling`]) if set, else the group's.
     pub(crate) fn sync_sub(
         sources: &mut SourceTable,
         group_on: bool,
         group_rate: u32,
+        sampling: u32,
         it: &mut GroupItem,
     ) {
         let want = group_on && it.active() && !sources.entries[it.source as usize].is_constant();
         let has = it.flags & SUBSCRIBED != 0;
-        let rate = if it.sampling != 0 {
-            it.sampling
-        } else {
-            group_rate
-        };
+        let rate = if sampling != 0 { sampling } else { group_rate };
         if want && !has {
             sources.add_rate(it.source, rate);
             it.flags |= SUBSCRIBED;
@@ -372,7 +370,8 @@ impl Engine {
         let on = g.active && !g.deleted;
         let rate = g.update_rate;
         for it in &mut g.items {
-            Self::sync_sub(sources, on, rate, it);
+            let sampling = ItemOpts::sampling(&g.opts, it);
+            Self::sync_sub(sources, on, rate, sampling, it);
         }
     }
 

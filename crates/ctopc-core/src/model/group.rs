@@ -2,9 +2,10 @@
 //! connection state the COM layer reports (callback advised, COM references).
 
 use super::buffer::ItemBuffer;
+use super::cache::CachedValue;
 use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle, SessionHandle};
-use super::item::{GroupItem, ALIAS, BUFFERED, REMOVED, SENT, SUBSCRIBED};
+use super::item::{GroupItem, ItemOpts, ALIAS, BUFFERED, REMOVED, SENT, SUBSCRIBED};
 use super::util::IntMap;
 use super::Revised;
 use crate::{OpcError, Timestamp};
@@ -132,6 +133,10 @@ pub(crate) struct Group {
     /// Buffered samples of items with buffering on, by server handle (`model/buffer.rs`)
     /// ...
     pub buffers: IntMap<u32, ItemBuffer>,
+    /// The item sampling rates and deadbands of the items that have one, by server handle.
+    pub opts: IntMap<u32, ItemOpts>,
+    /// The string and array values last sent, by server handle ([`GroupItem::last`]).
+    pub lasts: IntMap<u32, CachedValue>,
     /// ... and how many they hold together.
     pub buffered: usize,
 }
@@ -286,6 +291,8 @@ impl Engine {
             first_sample_until: None,
             first_sample_ready: false,
             buffers: IntMap::default(),
+            opts: IntMap::default(),
+            lasts: IntMap::default(),
             buffered: 0,
         };
         self.insert_group(group);
@@ -358,6 +365,8 @@ impl Engine {
                 self.release_item_refs(it);
             }
             let g = self.group_mut(slot);
+            g.opts = IntMap::default();
+            g.lasts = IntMap::default();
             let (session, name) = (g.session, std::mem::take(&mut g.name));
             if let Some(s) = self.sessions.get_mut(&session.0) {
                 if s.names.get(&name) == Some(&handle) {
@@ -483,7 +492,7 @@ impl Engine {
             if r.value != old {
                 g.update_rate = r.value;
                 for it in &g.items {
-                    if it.sampling == 0 {
+                    if ItemOpts::sampling(&g.opts, it) == 0 {
                         Self::move_rate(sources, it, old, r.value);
                     }
                 }
@@ -603,15 +612,24 @@ impl Engine {
             first_sample_until: None,
             first_sample_ready: false,
             buffers: IntMap::default(),
+            opts: IntMap::default(),
+            lasts: IntMap::default(),
             buffered: 0,
         };
         let items: Vec<GroupItem> = src.items.clone();
+        let opts = src.opts.clone();
         for mut it in items {
+            // Nothing is sent to the clone yet (no SENT): its last value does not count.
+            it.forget_last(&mut IntMap::default());
+            let old = it.handle;
             it.handle = Self::alloc_item_handle(
                 &mut self.next_item_handle,
                 &clone.items,
                 &mut clone.sorted,
             );
+            if let Some(&o) = opts.get(&old) {
+                clone.opts.insert(it.handle, o);
+            }
             it.flags &= !(SENT | SUBSCRIBED | BUFFERED);
             self.sources.add_ref(it.source);
             if it.flags & ALIAS != 0 {

@@ -1,6 +1,7 @@
 //! Items in groups: IOPCItemMgt, IOPCItemDeadbandMgt, IOPCItemSamplingMgt (its buffering
 //! half is `model/buffer.rs`).
 
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -63,34 +64,152 @@ pub(crate) const DEADBAND: u8 = 16;
 pub(crate) const REMOVED: u8 = 32;
 /// Buffering is enabled (IOPCItemSamplingMgt::SetItemBufferEnable, `model/buffer.rs`).
 pub(crate) const BUFFERED: u8 = 64;
+/// The item sampling rate is set (IOPCItemSamplingMgt).
+pub(crate) const SAMPLING: u8 = 128;
 
-/// An item in a group: 48 bytes, no strings (the item ID and access path are interned).
-/// Checked by `group_items_stay_small` below.
+/// [`GroupItem::last_vt`] of a string or array value, which is in `Group::lasts`.
+const SHARED_LAST: VarType = VarType(u16::MAX);
+
+/// An item in a group: 32 bytes, no strings (the item ID and access path are interned;
+/// its sampling rate and deadband, rarely set, are in [`ItemOpts`]; a string or array
+/// value last sent is in `Group::lasts`). Checked by `group_items_stay_small` below.
 #[derive(Debug, Clone)]
 pub(crate) struct GroupItem {
-    /// The value last sent to the group.
-    pub last: CachedValue,
+    /// The value last sent to the group ([`GroupItem::last`]): a number's bits ...
+    last_bits: u64,
     pub handle: u32,
     pub client: u32,
     /// Cache entry index.
     pub source: u32,
     /// Access path id, or alias name id with [`ALIAS`].
     pub name: u32,
-    /// Item sampling rate in ms, 0 when not set.
-    pub sampling: u32,
-    /// Item deadband with [`DEADBAND`].
-    pub deadband: f32,
     pub req_type: VarType,
+    /// ... and its type, or [`SHARED_LAST`].
+    last_vt: VarType,
     pub last_quality: Quality,
     pub flags: u8,
 }
 
 impl GroupItem {
+    /// A new item: nothing sent yet.
+    pub fn new(handle: u32, client: u32, source: u32, name: u32, req_type: VarType) -> Self {
+        GroupItem {
+            last_bits: 0,
+            handle,
+            client,
+            source,
+            name,
+            req_type,
+            last_vt: VarType::EMPTY,
+            last_quality: Quality::BAD,
+            flags: 0,
+        }
+    }
+
     pub fn active(&self) -> bool {
         self.flags & ACTIVE != 0
     }
-    pub fn item_deadband(&self) -> Option<f32> {
-        (self.flags & DEADBAND != 0).then_some(self.deadband)
+
+    /// The value last sent to the group (meaningful with [`SENT`]), given the group's
+    /// `lasts`.
+    pub fn last<'a>(&self, lasts: &'a IntMap<u32, CachedValue>) -> Cow<'a, CachedValue> {
+        if self.last_vt != SHARED_LAST {
+            return Cow::Owned(CachedValue::Num {
+                vt: self.last_vt,
+                bits: self.last_bits,
+            });
+        }
+        lasts
+            .get(&self.handle)
+            .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+    }
+
+    /// Records the value and quality sent to the group.
+    pub fn set_last(&mut self, lasts: &mut IntMap<u32, CachedValue>, v: CachedValue, q: Quality) {
+        self.last_quality = q;
+        match v {
+            CachedValue::Num { vt, bits } => {
+                if self.last_vt == SHARED_LAST {
+                    lasts.remove(&self.handle);
+                }
+                (self.last_vt, self.last_bits) = (vt, bits);
+            }
+            shared @ CachedValue::Shared(_) => {
+                (self.last_vt, self.last_bits) = (SHARED_LAST, 0);
+                lasts.insert(self.handle, shared);
+            }
+        }
+    }
+
+    /// Forgets the value last sent (the item leaves the group, or is copied to another
+    /// under a new handle: `lasts` is then the old group's).
+    pub fn forget_last(&mut self, lasts: &mut IntMap<u32, CachedValue>) {
+        if self.last_vt == SHARED_LAST {
+            lasts.remove(&self.handle);
+        }
+        (self.last_vt, self.last_bits) = (VarType::EMPTY, 0);
+    }
+}
+
+/// The item sampling rate and item deadband of a group's items that have one set
+/// (`Group::opts`, by server handle; [`SAMPLING`] and [`DEADBAND`] say which is set). Few
+/// items have one, so they are kept out of [`GroupItem`] (issue 16).
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+pub(crate) struct ItemOpts {
+    /// In ms, with [`SAMPLING`].
+    pub sampling: u32,
+    /// In percent, with [`DEADBAND`].
+    pub deadband: f32,
+}
+
+impl ItemOpts {
+    /// The item sampling rate of `it`, 0 when not set.
+    pub fn sampling(opts: &IntMap<u32, ItemOpts>, it: &GroupItem) -> u32 {
+        if it.flags & SAMPLING == 0 {
+            return 0;
+        }
+        opts.get(&it.handle).map_or(0, |o| o.sampling)
+    }
+
+    /// The item deadband of `it`, if set.
+    pub fn deadband(opts: &IntMap<u32, ItemOpts>, it: &GroupItem) -> Option<f32> {
+        if it.flags & DEADBAND == 0 {
+            return None;
+        }
+        opts.get(&it.handle).map(|o| o.deadband)
+    }
+
+    /// Sets (`Some`) or clears the item sampling rate of `it`.
+    pub fn set_sampling(opts: &mut IntMap<u32, ItemOpts>, it: &mut GroupItem, rate: Option<u32>) {
+        Self::update(opts, it, SAMPLING, rate.is_some(), |o| {
+            o.sampling = rate.unwrap_or(0);
+        });
+    }
+
+    /// Sets (`Some`) or clears the item deadband of `it`.
+    pub fn set_deadband(opts: &mut IntMap<u32, ItemOpts>, it: &mut GroupItem, band: Option<f32>) {
+        Self::update(opts, it, DEADBAND, band.is_some(), |o| {
+            o.deadband = band.unwrap_or(0.0);
+        });
+    }
+
+    fn update(
+        opts: &mut IntMap<u32, ItemOpts>,
+        it: &mut GroupItem,
+        flag: u8,
+        set: bool,
+        f: impl FnOnce(&mut ItemOpts),
+    ) {
+        if set {
+            it.flags |= flag;
+        } else {
+            it.flags &= !flag;
+        }
+        if it.flags & (SAMPLING | DEADBAND) == 0 {
+            opts.remove(&it.handle);
+        } else {
+            f(opts.entry(it.handle).or_default());
+        }
     }
 }
 
@@ -247,8 +366,10 @@ impl Engine {
             g.items.reserve_exact(items.len());
         }
         let mut out = Vec::with_capacity(items.len());
+        let mut key_bytes: usize = items.iter().map(|d| d.item_id.len()).sum();
         for (i, d) in items.iter().enumerate() {
-            self.sources.batch_left(items.len() - i);
+            self.sources.batch_left(items.len() - i, key_bytes);
+            key_bytes -= d.item_id.len();
             let def = match self.resolve(d) {
                 Ok(def) => def,
                 Err(e) => {
@@ -280,30 +401,20 @@ impl Engine {
                 canonical_type: e.canonical,
                 access_rights: u32::from(e.access),
             };
-            let mut it = GroupItem {
-                last: CachedValue::EMPTY,
-                handle,
-                client: d.client_handle,
-                source: src,
-                name,
-                sampling: 0,
-                deadband: 0.0,
-                req_type: d.requested_type,
-                last_quality: Quality::BAD,
-                flags: alias | if d.active { ACTIVE } else { 0 },
-            };
+            let mut it = GroupItem::new(handle, d.client_handle, src, name, d.requested_type);
+            it.flags = alias | if d.active { ACTIVE } else { 0 };
             let Engine {
                 groups, sources, ..
             } = self;
             let g = groups[slot].as_mut().expect("group");
-            Self::sync_sub(sources, g.active, g.update_rate, &mut it);
+            Self::sync_sub(sources, g.active, g.update_rate, 0, &mut it);
             if d.active {
                 g.needs_scan = true;
             }
             g.items.push(it);
             out.push(Ok(result));
         }
-        self.sources.batch_left(0);
+        self.sources.batch_left(0, 0);
         Ok(out)
     }
 
@@ -354,9 +465,12 @@ impl Engine {
                     continue;
                 };
                 let it = &mut g.items[i];
-                Self::sync_sub(sources, false, rate, it);
+                let sampling = ItemOpts::sampling(&g.opts, it);
+                Self::sync_sub(sources, false, rate, sampling, it);
                 it.flags |= REMOVED;
+                it.forget_last(&mut g.lasts);
                 g.drop_buffer(h);
+                g.opts.remove(&h);
                 removed.push(i);
                 out.push(Ok(()));
             }
@@ -406,7 +520,8 @@ impl Engine {
                     it.flags &= !ACTIVE;
                 }
                 it.flags &= !SENT;
-                Self::sync_sub(sources, on, rate, it);
+                let sampling = ItemOpts::sampling(&g.opts, it);
+                Self::sync_sub(sources, on, rate, sampling, it);
                 g.drop_buffer(h);
                 if active {
                     g.needs_scan = true;
@@ -532,8 +647,7 @@ impl Engine {
             } else if !sources.entries[it.source as usize].is_analog() {
                 Err(OpcError::DeadbandNotSupported)
             } else {
-                it.deadband = arg.1;
-                it.flags |= DEADBAND;
+                ItemOpts::set_deadband(&mut g.opts, it, Some(arg.1));
                 g.rescan_all();
                 Ok(())
             }
@@ -559,7 +673,7 @@ impl Engine {
                 if !self.sources.entries[it.source as usize].is_analog() {
                     return Err(OpcError::DeadbandNotSupported);
                 }
-                it.item_deadband().ok_or(OpcError::DeadbandNotSet)
+                ItemOpts::deadband(&g.opts, it).ok_or(OpcError::DeadbandNotSet)
             })
             .collect())
     }
@@ -578,8 +692,7 @@ impl Engine {
             } else if it.flags & DEADBAND == 0 {
                 Err(OpcError::DeadbandNotSet)
             } else {
-                it.flags &= !DEADBAND;
-                it.deadband = 0.0;
+                ItemOpts::set_deadband(&mut g.opts, it, None);
                 g.rescan_all();
                 Ok(())
             }
@@ -619,9 +732,10 @@ impl Engine {
                 let i = g.find(h).ok_or(OpcError::InvalidHandle)?;
                 let it = &mut g.items[i];
                 let value = requested.max(min);
-                let old = if it.sampling != 0 { it.sampling } else { rate };
+                let sampling = ItemOpts::sampling(&g.opts, it);
+                let old = if sampling != 0 { sampling } else { rate };
                 Self::move_rate(sources, it, old, value);
-                it.sampling = value;
+                ItemOpts::set_sampling(&mut g.opts, it, Some(value));
                 Ok(Revised {
                     value,
                     revised: value != requested,
@@ -644,10 +758,9 @@ impl Engine {
             .iter()
             .map(|&h| {
                 let it = &g.items[g.find(h).ok_or(OpcError::InvalidHandle)?];
-                if it.sampling == 0 {
-                    Err(OpcError::RateNotSet)
-                } else {
-                    Ok(it.sampling)
+                match ItemOpts::sampling(&g.opts, it) {
+                    0 => Err(OpcError::RateNotSet),
+                    sampling => Ok(sampling),
                 }
             })
             .collect())
@@ -680,11 +793,12 @@ impl Engine {
             .map(|&h| {
                 let i = g.find(h).ok_or(OpcError::InvalidHandle)?;
                 let it = &mut g.items[i];
-                if it.sampling == 0 {
+                let sampling = ItemOpts::sampling(&g.opts, it);
+                if sampling == 0 {
                     return Err(OpcError::RateNotSet);
                 }
-                Self::move_rate(sources, it, it.sampling, rate);
-                it.sampling = 0;
+                Self::move_rate(sources, it, sampling, rate);
+                ItemOpts::set_sampling(&mut g.opts, it, None);
                 Ok(())
             })
             .collect())
@@ -693,8 +807,89 @@ impl Engine {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
+    fn item(handle: u32) -> GroupItem {
+        GroupItem {
+            flags: ACTIVE,
+            ..GroupItem::new(handle, 0, 0, 0, VarType::EMPTY)
+        }
+    }
+
+    /// Numbers sent last stay in the item, strings and arrays go to the group's map (and
+    /// leave it when a number follows or the item goes).
+    #[test]
+    fn the_last_value_sent_is_a_number_in_the_item_or_shared_in_the_map() {
+        let mut lasts = IntMap::default();
+        let (mut a, mut b) = (item(1), item(2));
+        assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
+        let text = CachedValue::from_value(crate::Value::Bstr("x".into()));
+        let num = CachedValue::from_value(crate::Value::R8(2.5));
+        a.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        b.set_last(&mut lasts, num.clone(), Quality::BAD);
+        assert_eq!((&*a.last(&lasts), a.last_quality), (&text, Quality::GOOD));
+        assert_eq!((&*b.last(&lasts), b.last_quality), (&num, Quality::BAD));
+        assert!(matches!(a.last(&lasts), Cow::Borrowed(_)));
+        assert_eq!(lasts.len(), 1);
+        a.set_last(&mut lasts, num.clone(), Quality::GOOD);
+        assert_eq!(*a.last(&lasts), num);
+        assert!(lasts.is_empty());
+        a.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        b.set_last(&mut lasts, text.clone(), Quality::GOOD);
+        a.forget_last(&mut lasts);
+        assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
+        assert_eq!((lasts.len(), &*b.last(&lasts)), (1, &text));
+        for v in [
+            crate::Value::I2(-3),
+            crate::Value::Bool(true),
+            crate::Value::Empty,
+        ] {
+            let v = CachedValue::from_value(v);
+            b.set_last(&mut lasts, v.clone(), Quality::GOOD);
+            assert_eq!(*b.last(&lasts), v);
+        }
+        assert!(lasts.is_empty());
+    }
+
+    /// An item's options are in the side table while either is set, and only then.
+    #[test]
+    fn item_opts_are_kept_while_one_is_set() {
+        let mut opts = IntMap::default();
+        let (mut a, b) = (item(1), item(2));
+        assert_eq!(ItemOpts::sampling(&opts, &a), 0);
+        assert_eq!(ItemOpts::deadband(&opts, &a), None);
+        ItemOpts::set_sampling(&mut opts, &mut a, Some(250));
+        ItemOpts::set_deadband(&mut opts, &mut a, Some(2.5));
+        assert_eq!(a.flags, ACTIVE | SAMPLING | DEADBAND);
+        assert_eq!(
+            (ItemOpts::sampling(&opts, &a), ItemOpts::deadband(&opts, &a)),
+            (250, Some(2.5))
+        );
+        assert_eq!(
+            (ItemOpts::sampling(&opts, &b), ItemOpts::deadband(&opts, &b)),
+            (0, None)
+        );
+        ItemOpts::set_sampling(&mut opts, &mut a, None);
+        assert_eq!(
+            (ItemOpts::sampling(&opts, &a), ItemOpts::deadband(&opts, &a)),
+            (0, Some(2.5))
+        );
+        assert_eq!(opts.len(), 1);
+        ItemOpts::set_deadband(&mut opts, &mut a, None);
+        assert!(opts.is_empty());
+        assert_eq!(a.flags, ACTIVE);
+        ItemOpts::set_deadband(&mut opts, &mut a, Some(1.0));
+        assert_eq!(
+            opts[&1],
+            ItemOpts {
+                sampling: 0,
+                deadband: 1.0
+            }
+        );
+    }
+
     #[test]
     fn group_items_stay_small() {
-        assert_eq!(std::mem::size_of::<super::GroupItem>(), 48);
+        assert_eq!(std::mem::size_of::<GroupItem>(), 32);
     }
 }

@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 use super::deadband::{band, value_changed};
 use super::engine::Engine;
 use super::events::{master_codes, DataChange, DataChangeKind, Event};
-use super::item::{ACTIVE, BUFFERED, SENT};
+use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Timestamp};
@@ -255,7 +255,8 @@ impl Engine {
                 continue;
             }
             let e = &sources.entries[it.source as usize];
-            if it.flags & SENT == 0 && holding && !e.has_sample() {
+            let s = sources.sample(e);
+            if it.flags & SENT == 0 && holding && !s.has_value() {
                 held += 1;
                 continue;
             }
@@ -271,33 +272,35 @@ impl Engine {
                         if let Some((v, q)) =
                             buf.drain_into(&mut items, it.client, it.req_type, locale)
                         {
-                            it.last = v;
-                            it.last_quality = q;
+                            it.set_last(&mut g.lasts, v, q);
                         }
                     }
                 }
             }
             if it.flags & SENT != 0
-                && (e.changed_seq <= scanned
-                    || (e.quality == it.last_quality
+                && (s.changed_seq <= scanned
+                    || (s.quality == it.last_quality
                         && !value_changed(
-                            &e.value,
-                            &it.last,
-                            band(it.item_deadband(), group_deadband, sources.analog_range(e)),
+                            &s.value,
+                            &it.last(&g.lasts),
+                            band(
+                                ItemOpts::deadband(&g.opts, it),
+                                group_deadband,
+                                sources.analog_range(e),
+                            ),
                         )))
             {
                 continue;
             }
             items.push(item_value(
                 it.client,
-                &e.value,
-                e.quality,
-                e.timestamp,
+                &s.value,
+                s.quality,
+                s.timestamp,
                 it.req_type,
                 locale,
             ));
-            it.last = e.value.clone();
-            it.last_quality = e.quality;
+            it.set_last(&mut g.lasts, s.value.into_owned(), s.quality);
             it.flags |= SENT;
         }
         if held == 0 {

@@ -387,18 +387,19 @@ impl Engine {
             ReadMode::MaxAge(age) => {
                 e.is_constant()
                     || age == MAX_AGE_CACHE
-                    || (age != 0 && fresh(e.refreshed_at, now, age))
+                    || (age != 0 && fresh(self.sources.sample(e).refreshed_at, now, age))
             }
         };
         if from_cache {
-            let mut quality = e.quality;
+            let s = self.sources.sample(e);
+            let mut quality = s.quality;
             if matches!(mode, ReadMode::Cache) && (!g.active || !it.active()) {
                 quality = Quality::BAD_OUT_OF_SERVICE;
             }
             slot.out = SlotOut::Raw {
-                value: e.value.clone(),
+                value: s.value.into_owned(),
                 quality,
-                timestamp: e.timestamp,
+                timestamp: s.timestamp,
             };
         }
         slot
@@ -609,8 +610,7 @@ impl Engine {
                                 (&s.out, g.find(s.item))
                             {
                                 let it = &mut g.items[i];
-                                it.last = value.clone();
-                                it.last_quality = *quality;
+                                it.set_last(&mut g.lasts, value.clone(), *quality);
                                 it.flags |= SENT;
                             }
                         }
@@ -879,16 +879,17 @@ impl Engine {
             let mut slot = self.item_io_slot(now, id);
             if slot.source != u32::MAX {
                 let e = &self.sources.entries[slot.source as usize];
+                let s = self.sources.sample(e);
                 if !e.readable() {
                     slot.out = SlotOut::Err(OpcError::BadRights);
                 } else if e.is_constant()
                     || max_age == MAX_AGE_CACHE
-                    || (max_age != 0 && fresh(e.refreshed_at, now, max_age))
+                    || (max_age != 0 && fresh(s.refreshed_at, now, max_age))
                 {
                     slot.out = SlotOut::Raw {
-                        value: e.value.clone(),
-                        quality: e.quality,
-                        timestamp: e.timestamp,
+                        value: s.value.into_owned(),
+                        quality: s.quality,
+                        timestamp: s.timestamp,
                     };
                 }
             }
