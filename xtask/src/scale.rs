@@ -142,7 +142,10 @@ pub struct Stacks {
 /// with their resident memory. Wine keeps about 1 MB of each resident whatever the
 /// reserve (measured: 976 KB in every thread of opcdiag.exe, 2 MiB reserve, as in the
 /// server's), so a phase that starts threads grows by that much per thread, none of it
-/// the server's data.
+/// the server's data. The threads a client's phases add are Wine's RPC I/O threads, one
+/// per client connection (`/proc/PID/task/*/comm`: `wine_rpcrt4_io`; 8 of them in the
+/// server while one `opcdiag subscribe` runs, besides `main`, `driver`, `callbacks-1`,
+/// the log writer and Wine's RPC listener).
 pub fn thread_stacks(smaps: &str, reserve_kb: u64) -> Stacks {
     let mut count = 0;
     let mut rss_kb = 0u64;
