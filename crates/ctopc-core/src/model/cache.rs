@@ -1016,6 +1016,19 @@ mod tests {
         }
     }
 
+    /// A sample's fields, to compare in one assertion.
+    fn sample_fields<'s>(
+        s: &'s SampleRef<'_>,
+    ) -> (&'s CachedValue, Quality, Timestamp, Timestamp, u64) {
+        (
+            &s.value,
+            s.quality,
+            s.timestamp,
+            s.refreshed_at,
+            s.changed_seq,
+        )
+    }
+
     /// A plain R8 item of `key` on channel `*`, readable and writable, no EU.
     fn r8_def(source_key: String) -> ItemDef {
         ItemDef {
@@ -1240,13 +1253,7 @@ mod tests {
             let s = t.sample(e);
             assert!(!s.has_value());
             assert_eq!(
-                (
-                    &*s.value,
-                    s.quality,
-                    s.timestamp,
-                    s.refreshed_at,
-                    s.changed_seq
-                ),
+                sample_fields(&s),
                 (
                     &CachedValue::EMPTY,
                     Quality::BAD_WAITING_FOR_INITIAL_DATA,
@@ -1260,13 +1267,7 @@ mod tests {
         t.apply(a, vqt(1.5, 3), Timestamp(9), &mut seq);
         let s = t.sample(&t.entries[a as usize]);
         assert_eq!(
-            (
-                &*s.value,
-                s.quality,
-                s.timestamp,
-                s.refreshed_at,
-                s.changed_seq
-            ),
+            sample_fields(&s),
             (
                 &CachedValue::from_value(Value::R8(1.5)),
                 Quality::GOOD,
