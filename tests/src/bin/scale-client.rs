@@ -3,7 +3,8 @@
 //! on its stdout, measures the server from outside (VmRSS of ServerCTOPC.exe) and writes
 //! one line on its stdin to go on to the next stage.
 //!
-//! `scale-client [--items N] [--active] [--rate MS] [--ids-from-browse | --synthetic N]`
+//! `scale-client [--items N] [--active] [--rate MS] [--ids-from-browse | --synthetic N]
+//! [--no-warm-up]`
 //!
 //! - `--items N` (default 1000): the items of the one group, all added in ONE AddItems.
 //! - `--active`: the client subscribes after adding the items: it advises
@@ -22,7 +23,13 @@
 //! Stages, each one line on stdout, then one line read from stdin before the next:
 //!
 //! 1. `ready connected <ms>`: CoCreateInstance of `ServerCTOPC.App` in the MTA and
-//!    SetClientName (the browse of `--ids-from-browse` follows, its time on stderr);
+//!    SetClientName (the browse of `--ids-from-browse` follows, its time on stderr), then
+//!    the warm-up (not with `--no-warm-up`): the calls of the later stages once, with one
+//!    item in a group of its own, removed again. Under Wine the server's side of each
+//!    interface a client calls through is a connection with an I/O thread of its own
+//!    (`wine_rpcrt4_io`), which keeps about 1 MB resident and stays for the client's
+//!    life: a cost per client, which the warm-up pays before the measured stages, so that
+//!    they show what the items cost (the runner shows the thread stacks of each stage);
 //! 2. `ready added <N> items <ms> ms errors <E>`: AddGroup and AddItems of the N;
 //! 3. with `--active`: Advise and SetState(active); `ready subscribed first-callback <ms>
 //!    ms values <V>` once the OnDataChange calls since then have covered every item (V: the values they
@@ -73,6 +80,7 @@ mod scale {
         active: bool,
         rate: u32,
         synthetic: Option<usize>,
+        warm_up: bool,
         stage_timeout: Duration,
         input_timeout: Duration,
     }
@@ -84,6 +92,7 @@ mod scale {
                 active: false,
                 rate: 1000,
                 synthetic: None,
+                warm_up: true,
                 stage_timeout: Duration::from_secs(600),
                 input_timeout: Duration::from_secs(7200),
             };
@@ -98,6 +107,7 @@ mod scale {
                 match a.as_str() {
                     "--items" => o.items = number("--items")? as usize,
                     "--active" => o.active = true,
+                    "--no-warm-up" => o.warm_up = false,
                     "--rate" => o.rate = number("--rate")? as u32,
                     "--ids-from-browse" => o.synthetic = None,
                     "--synthetic" => o.synthetic = Some(number("--synthetic")?.max(1) as usize),
@@ -390,6 +400,53 @@ mod scale {
         }
     }
 
+    /// The later stages' calls once, with item `id` in a group of its own, removed again
+    /// (see the module doc: the connections they open are the client's, not the items').
+    fn warm_up(server: &Server, id: &str, o: &Options) -> Result<(), String> {
+        let spec = GroupSpec {
+            active: false,
+            rate_ms: o.rate,
+            ..GroupSpec::new("warm-up")
+        };
+        let g = server
+            .add_group(&spec)
+            .map_err(|e| format!("warm-up AddGroup: {e}"))?;
+        let group = OpcGroup::from_unknown(g.object).map_err(|e| e.to_string())?;
+        let (_, added) = group
+            .add_items(&[ItemDef::new(id, 0)])
+            .map_err(|e| format!("warm-up AddItems: {e}"))?;
+        let handles: Vec<u32> = added
+            .iter()
+            .filter(|a| a.error.is_ok())
+            .map(|a| a.server_handle)
+            .collect();
+        if o.active {
+            let sink: IOPCDataCallback = Sink(Coverage::new(1)).into();
+            let cookie = ctopc_com::client::advise_data_callback(&group.unknown, &sink)
+                .map_err(|e| format!("warm-up Advise: {e}"))?;
+            for active in [true, false] {
+                let _ = group
+                    .set_state(&GroupStateChange {
+                        active: Some(active),
+                        ..GroupStateChange::default()
+                    })
+                    .map_err(|e| format!("warm-up SetState: {e}"))?;
+            }
+            ctopc_com::client::unadvise_data_callback(&group.unknown, cookie)
+                .map_err(|e| format!("warm-up Unadvise: {e}"))?;
+        }
+        if !handles.is_empty() {
+            let _ = group
+                .remove_items(&handles)
+                .map_err(|e| format!("warm-up RemoveItems: {e}"))?;
+        }
+        drop(group);
+        let _ = server
+            .remove_group(g.server_handle, true)
+            .map_err(|e| format!("warm-up RemoveGroup: {e}"))?;
+        Ok(())
+    }
+
     pub fn run(o: &Options) -> ExitCode {
         let watchdog = Watchdog::start();
         let input = Input {
@@ -444,6 +501,9 @@ mod scale {
     ) -> Result<(), Stop> {
         let fail = |stage: &'static str| move |e: String| Stop::Failed(stage, e);
         let ids = item_ids(&held.server, o).map_err(fail("connected"))?;
+        if let Some(id) = ids.first().filter(|_| o.warm_up) {
+            warm_up(&held.server, id, o).map_err(fail("connected"))?;
+        }
         watchdog.disarm();
         ready(&format!("connected {connected_ms}"));
         input.next("connected")?;
