@@ -405,6 +405,28 @@ mod tests {
         let e = build(&files, "0.1.0", &dir.join("stage"), &dir.join("t.msi")).unwrap_err();
         assert!(e.contains("lacks OpcServerList.exe, opc_ps.dll"), "{e}");
     }
+
+    #[test]
+    fn a_failure_with_nothing_printed_is_a_start_failure() {
+        use wine_test::{silent_start_failure, subscriber_output};
+        assert!(silent_start_failure(1, ""));
+        assert!(silent_start_failure(1, " \n"));
+        assert!(!silent_start_failure(0, ""), "a success");
+        assert!(!silent_start_failure(124, ""), "timeout's own code");
+        assert!(!silent_start_failure(
+            1,
+            "opcdiag: error: CoCreateInstance failed"
+        ));
+        assert_eq!(
+            subscriber_output("opcdiag subscribe (X64): exit status: 1\n"),
+            ""
+        );
+        assert_eq!(
+            subscriber_output("opcdiag subscribe (X64): exit status: 1\nSubscribed"),
+            "Subscribed"
+        );
+        assert_eq!(subscriber_output("one line"), "");
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -451,6 +473,26 @@ mod wine_test {
         fn lap(&self, what: &str) {
             println!("msi-test: [{:>4} s] {what}", self.0.elapsed().as_secs());
         }
+    }
+
+    /// Starts of an opcdiag tried at most, the first included.
+    const START_TRIES: u32 = 3;
+
+    /// Whether a program under Wine ended with a failure having printed nothing: opcdiag
+    /// prints a line on every failure (`opcdiag: error: ...` on stderr), so it did not
+    /// run. Wine ends a process that fails in its own start-up so (its messages are off
+    /// with `WINEDEBUG=-all`), as it answers ERROR_INTERNAL_ERROR to CreateProcess for
+    /// one inside Wine (`tests/src/start.rs`): the msi-test of a clean-clone CI failed
+    /// once on it, a subscriber after the upgrade with exit 1 and no output. 124 is
+    /// `timeout`'s own, not a start failure.
+    pub(crate) fn silent_start_failure(code: i32, out: &str) -> bool {
+        code != 0 && code != 124 && out.trim().is_empty()
+    }
+
+    /// What a failed [`Subscriber::finish`] printed: its error without the first line
+    /// (`opcdiag subscribe (..): exit status: N`), which is ours.
+    pub(crate) fn subscriber_output(err: &str) -> &str {
+        err.split_once('\n').map_or("", |(_, rest)| rest)
     }
 
     /// A background `opcdiag subscribe`: its stdout lines arrive on `rx`.
@@ -624,7 +666,18 @@ mod wine_test {
 
         fn opcdiag(&self, arch: Arch, args: &[&str]) -> Result<String, String> {
             let exe = opcdiag_exe(arch);
-            let (code, out) = self.run(arch, exe, args, 120);
+            let mut tries = 1;
+            let (code, out) = loop {
+                let (code, out) = self.run(arch, exe, args, 120);
+                if !silent_start_failure(code, &out) || tries == START_TRIES {
+                    break (code, out);
+                }
+                tries += 1;
+                println!(
+                    "msi-test: {arch:?} opcdiag {} ended with exit {code} having printed nothing (Wine's start failure); try {tries} of {START_TRIES}",
+                    args.join(" ")
+                );
+            };
             if code == 0 {
                 Ok(out)
             } else {
@@ -632,10 +685,31 @@ mod wine_test {
             }
         }
 
-        /// `opcdiag subscribe` in the background, once the subscription is made.
+        /// `opcdiag subscribe` in the background, once the subscription is made; started
+        /// again when it ended having printed nothing ([`silent_start_failure`]).
         fn subscriber(&self, arch: Arch, args: &[&str]) -> Result<Subscriber, String> {
-            let err = self.dir.join(format!("subscribe-{arch:?}.stderr"));
-            let err = std::fs::File::create(&err).map_err(|e| format!("{}: {e}", err.display()))?;
+            let mut tries = 1;
+            loop {
+                match self.subscriber_once(arch, args) {
+                    Err((e, true)) if tries < START_TRIES => {
+                        tries += 1;
+                        println!(
+                            "msi-test: {arch:?} opcdiag subscribe ended having printed nothing (Wine's start failure: {}); try {tries} of {START_TRIES}",
+                            e.trim()
+                        );
+                    }
+                    r => return r.map_err(|(e, _)| e),
+                }
+            }
+        }
+
+        /// One start of [`Self::subscriber`]; on failure the error and whether the program
+        /// printed nothing, on stdout or stderr.
+        fn subscriber_once(&self, arch: Arch, args: &[&str]) -> Result<Subscriber, (String, bool)> {
+            let err_path = self.dir.join(format!("subscribe-{arch:?}.stderr"));
+            let err = err_path.clone();
+            let err = std::fs::File::create(&err)
+                .map_err(|e| (format!("{}: {e}", err.display()), false))?;
             let mut c = Command::new("timeout");
             self.env(&mut c);
             c.arg("180")
@@ -645,8 +719,13 @@ mod wine_test {
                 .stdin(Stdio::null())
                 .stdout(Stdio::piped())
                 .stderr(err);
-            let mut child = c.spawn().map_err(|e| format!("cannot start wine: {e}"))?;
-            let stdout = child.stdout.take().ok_or("opcdiag subscribe: no stdout")?;
+            let mut child = c
+                .spawn()
+                .map_err(|e| (format!("cannot start wine: {e}"), false))?;
+            let stdout = child
+                .stdout
+                .take()
+                .ok_or(("opcdiag subscribe: no stdout".to_owned(), false))?;
             let (tx, rx) = mpsc::channel();
             std::thread::spawn(move || {
                 for line in std::io::BufReader::new(stdout)
@@ -665,14 +744,19 @@ mod wine_test {
                 lines: Vec::new(),
             };
             if sub.wait_for("Subscribed to", Duration::from_secs(120)) {
-                Ok(sub)
-            } else {
-                sub.finish(Duration::from_secs(5)).and_then(|out| {
-                    Err(format!(
-                        "opcdiag subscribe ({arch:?}) did not subscribe:\n{out}"
-                    ))
-                })
+                return Ok(sub);
             }
+            let (code, out) = match sub.finish(Duration::from_secs(5)) {
+                Ok(out) => (0, out),
+                Err(e) => (1, e),
+            };
+            let stderr = std::fs::read_to_string(&err_path).unwrap_or_default();
+            let silent = code != 0
+                && silent_start_failure(code, &format!("{}{stderr}", subscriber_output(&out)));
+            Err((
+                format!("opcdiag subscribe ({arch:?}) did not subscribe:\n{out}\n{stderr}"),
+                silent,
+            ))
         }
 
         /// A client of each bitness: status, a write of the demo set point, a read of it
