@@ -25,16 +25,12 @@ use asix_model::{parse_config, AsixNamespace, ChannelDatabase, BASIC_CHANNEL};
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
-fn live() -> isize {
-    let s = GLOBAL.stats();
-    s.bytes_allocated as isize - s.bytes_deallocated as isize
-}
+// The live heap, resident memory and CPU readers asix-net's benches share.
+#[path = "../../asix-net/benches/support/mod.rs"]
+mod support;
 
-fn statm_resident() -> usize {
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| s.split_whitespace().nth(1)?.parse::<usize>().ok())
-        .map_or(0, |pages| pages * 4096)
+fn live() -> isize {
+    support::live(GLOBAL)
 }
 
 fn peak_resident() -> usize {
@@ -45,20 +41,6 @@ fn peak_resident() -> usize {
             l.split_whitespace().nth(1)?.parse::<usize>().ok()
         })
         .map_or(0, |kb| kb * 1024)
-}
-
-/// The process's CPU time (user + system, `/proc/self/stat`, 100 ticks a second): on a
-/// shared machine the wall time overstates the work.
-fn cpu_seconds() -> f64 {
-    std::fs::read_to_string("/proc/self/stat")
-        .ok()
-        .and_then(|s| {
-            let rest = &s[s.rfind(')')? + 2..];
-            let f: Vec<&str> = rest.split_whitespace().collect();
-            let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-            Some(ticks / 100.0)
-        })
-        .unwrap_or(0.0)
 }
 
 fn median<T: Copy + PartialOrd>(mut v: Vec<T>) -> T {
@@ -81,7 +63,7 @@ struct Run {
 fn run_once(zez: &Path) -> (Run, usize) {
     let ini = format!("[Channel:*]\nItemsDatabase = {}\n", zez.display());
     let (cfg, _) = parse_config(ini.as_bytes(), "bench.ini").expect("config");
-    let (heap0, rss0, cpu0) = (live(), statm_resident(), cpu_seconds());
+    let (heap0, rss0, cpu0) = (live(), support::resident(), support::cpu_seconds());
     let t0 = Instant::now();
     let (ns, _warnings) = AsixNamespace::load(cfg);
     let load = t0.elapsed();
@@ -94,7 +76,7 @@ fn run_once(zez: &Path) -> (Run, usize) {
     let space = build_address_space(&ns).expect("address space");
     let tree = t1.elapsed();
     let heap2 = live();
-    let resident = statm_resident() as isize - rss0 as isize;
+    let resident = support::resident() - rss0;
     assert!(space.len() > count, "{} nodes", space.len());
     (
         Run {
@@ -104,7 +86,7 @@ fn run_once(zez: &Path) -> (Run, usize) {
             heap_tree: heap2 - heap1,
             resident,
             peak: peak_resident() as isize,
-            cpu: cpu_seconds() - cpu0,
+            cpu: support::cpu_seconds() - cpu0,
         },
         count,
     )

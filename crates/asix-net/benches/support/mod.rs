@@ -1,6 +1,7 @@
 //! What asix-net's benches measure about their own process: the live heap of the counting
 //! global allocator each bench declares, the resident memory and the CPU time (Linux's
 //! `/proc`; 0 where it is not there). `mod support;` in a bench; a bench uses what it needs.
+//! asix-model's `vardb` bench includes this file too (`#[path]`).
 #![allow(dead_code)]
 
 use stats_alloc::StatsAlloc;
