@@ -381,23 +381,33 @@ mod scale {
             let Some((group, handle)) = self.group.take() else {
                 return Ok(());
             };
-            if let Some(cookie) = self.advise.take() {
-                ctopc_com::client::unadvise_data_callback(&group.unknown, cookie)
-                    .map_err(|e| format!("Unadvise: {e}"))?;
-            }
-            if !self.handles.is_empty() {
-                let _ = group
-                    .remove_items(&self.handles)
-                    .map_err(|e| format!("RemoveItems: {e}"))?;
-                self.handles = Vec::new();
-            }
-            drop(group);
-            let _ = self
-                .server
-                .remove_group(handle, true)
-                .map_err(|e| format!("RemoveGroup: {e}"))?;
-            Ok(())
+            let handles = std::mem::take(&mut self.handles);
+            remove_group(&self.server, group, handle, &handles, self.advise.take())
         }
+    }
+
+    /// Unadvise (with a cookie), RemoveItems of `handles` (if any) and RemoveGroup.
+    fn remove_group(
+        server: &Server,
+        group: OpcGroup,
+        handle: u32,
+        handles: &[u32],
+        advise: Option<u32>,
+    ) -> Result<(), String> {
+        if let Some(cookie) = advise {
+            ctopc_com::client::unadvise_data_callback(&group.unknown, cookie)
+                .map_err(|e| format!("Unadvise: {e}"))?;
+        }
+        if !handles.is_empty() {
+            let _ = group
+                .remove_items(handles)
+                .map_err(|e| format!("RemoveItems: {e}"))?;
+        }
+        drop(group);
+        let _ = server
+            .remove_group(handle, true)
+            .map_err(|e| format!("RemoveGroup: {e}"))?;
+        Ok(())
     }
 
     /// The later stages' calls once, with item `id` in a group of its own, removed again
@@ -420,10 +430,13 @@ mod scale {
             .filter(|a| a.error.is_ok())
             .map(|a| a.server_handle)
             .collect();
+        let mut advise = None;
         if o.active {
             let sink: IOPCDataCallback = Sink(Coverage::new(1)).into();
-            let cookie = ctopc_com::client::advise_data_callback(&group.unknown, &sink)
-                .map_err(|e| format!("warm-up Advise: {e}"))?;
+            advise = Some(
+                ctopc_com::client::advise_data_callback(&group.unknown, &sink)
+                    .map_err(|e| format!("warm-up Advise: {e}"))?,
+            );
             for active in [true, false] {
                 let _ = group
                     .set_state(&GroupStateChange {
@@ -432,19 +445,9 @@ mod scale {
                     })
                     .map_err(|e| format!("warm-up SetState: {e}"))?;
             }
-            ctopc_com::client::unadvise_data_callback(&group.unknown, cookie)
-                .map_err(|e| format!("warm-up Unadvise: {e}"))?;
         }
-        if !handles.is_empty() {
-            let _ = group
-                .remove_items(&handles)
-                .map_err(|e| format!("warm-up RemoveItems: {e}"))?;
-        }
-        drop(group);
-        let _ = server
-            .remove_group(g.server_handle, true)
-            .map_err(|e| format!("warm-up RemoveGroup: {e}"))?;
-        Ok(())
+        remove_group(server, group, g.server_handle, &handles, advise)
+            .map_err(|e| format!("warm-up {e}"))
     }
 
     pub fn run(o: &Options) -> ExitCode {
