@@ -768,7 +768,6 @@ mod wine_test {
         /// shows a process's Windows command line in /proc; other prefixes' servers are
         /// told apart by WINEPREFIX).
         fn servers_running(&self) -> Vec<String> {
-            let want = format!("WINEPREFIX={}", self.pfx.display());
             let mut out = Vec::new();
             for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
                 let p = e.path();
@@ -778,7 +777,7 @@ mod wine_test {
                     continue;
                 }
                 let env = std::fs::read(p.join("environ")).unwrap_or_default();
-                if env.split(|b| *b == 0).any(|v| v == want.as_bytes()) {
+                if crate::soak::environ_names_prefix(&env, &self.pfx) {
                     out.push(cmd.trim().to_owned());
                 }
             }
