@@ -27,8 +27,8 @@
 //!   its first callbacks covered every item and five more seconds − RSS after its
 //!   AddItems (no subscription before its stage 3: `scale-client --active`). Each client
 //!   first makes the measured stages' calls once with one item (its warm-up), so that the
-//!   connections Wine's RPC opens per interface a client uses, each with a thread whose
-//!   stack keeps ~1 MB resident, are the client's before the measurement; the thread
+//!   connections Wine's RPC opens for a client's calls, each with a thread whose stack
+//!   keeps ~1 MB resident, are the client's before the measurement; the thread
 //!   stacks of each phase are still shown apart ([`thread_stacks`]);
 //! - **soak** (once, the largest size, after the runs): that active subscription for
 //!   `--soak-minutes`, a stdin line a second (`ready tick ...`), RSS sampled every 10 s;

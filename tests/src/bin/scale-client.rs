@@ -25,10 +25,10 @@
 //! 1. `ready connected <ms>`: CoCreateInstance of `ServerCTOPC.App` in the MTA and
 //!    SetClientName (the browse of `--ids-from-browse` follows, its time on stderr), then
 //!    the warm-up (not with `--no-warm-up`): the calls of the later stages once, with one
-//!    item in a group of its own, removed again. Under Wine the server's side of each
-//!    interface a client calls through is a connection with an I/O thread of its own
+//!    item in a group of its own, removed again. Under Wine the server serves a client's
+//!    calls through several connections, each with an I/O thread of its own
 //!    (`wine_rpcrt4_io`), which keeps about 1 MB resident and stays for the client's
-//!    life: a cost per client, which the warm-up pays before the measured stages, so that
+//!    life (they start as the client makes new kinds of calls): a cost per client, which the warm-up pays before the measured stages, so that
 //!    they show what the items cost (the runner shows the thread stacks of each stage);
 //! 2. `ready added <N> items <ms> ms errors <E>`: AddGroup and AddItems of the N;
 //! 3. with `--active`: Advise and SetState(active); `ready subscribed first-callback <ms>
