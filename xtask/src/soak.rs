@@ -512,7 +512,7 @@ pub fn capture_backtraces(
 /// Writes a stall report to `dir/stall-<unix time>.txt`: `what`, the Linux threads of
 /// `linux_pids` and winedbg backtraces of every thread of the processes of `pfx` whose
 /// name `ours` accepts, the frames of `exes` resolved (the prefix still runs). Its path.
-/// Also the e2e runs' stall guard (`guard.rs`).
+/// Also the e2e runs' stall guard (`wine/guard.rs`).
 pub fn capture(
     dir: &Path,
     pfx: &Path,

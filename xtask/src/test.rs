@@ -25,13 +25,14 @@
 //!    subscribe, the server browser), upgrade with `SERVICE=1`, uninstall, each in a
 //!    fresh prefix of its own (copies of `target/wine/msi-template`).
 //!
-//! Steps 6 and 7 run one test binary at a time under the stall guard (`guard.rs`): a
+//! Steps 6 and 7 run one test binary at a time under the stall guard (`wine/guard.rs`): a
 //! binary silent for 4 minutes gets a backtrace report, then runs once more.
 //! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::arch::Arch;
-use crate::{build, fuzz, guard, setup, util, wine};
+use crate::wine::{self, guard};
+use crate::{build, fuzz, setup, util};
 use std::time::Duration;
 
 /// The whole end-to-end run may not take longer than this.
@@ -65,7 +66,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
-        println!("test: end-to-end tests under Wine (one binary at a time, guard.rs)");
+        println!("test: end-to-end tests under Wine (one binary at a time, wine/guard.rs)");
         let units = units_64()?;
         let plan = guard::Plan {
             target: setup::TARGET,
@@ -304,7 +305,7 @@ fn static_checks(native_only: bool) -> Result<(), String> {
 
 /// `cargo xtask e2e [ARGS...]`: the Windows build, registration in the project's prefix,
 /// then `cargo test --release --target x86_64-pc-windows-gnu ARGS -- --test-threads=1`
-/// under Wine and the stall guard (`guard.rs`; a stall is reported, not run again)
+/// under Wine and the stall guard (`wine/guard.rs`; a stall is reported, not run again)
 /// (default ARGS: each test binary of `-p ctopc-com` and `-p e2e-tests` in turn), e.g.
 /// `cargo xtask e2e -p e2e-tests --test group_io` or `cargo xtask e2e -p ctopc-com`.
 /// Arguments after a `--` go to the test binaries (a name filter, say). For working on

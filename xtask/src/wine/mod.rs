@@ -1,11 +1,15 @@
 //! The project's own Wine prefix under target/wine/prefix, and helpers for prefixes of
 //! their own (the demo's).
+//!
+//! [`guard`] is the stall guard of the end-to-end runs.
 
 use crate::arch::Arch;
 use crate::util;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
+
+pub mod guard;
 
 pub const WINESERVER: &str = "/usr/lib/wine/wineserver";
 
