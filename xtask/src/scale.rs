@@ -37,7 +37,7 @@
 //! Prints every measurement and then, per size, medians of the runs beside the
 //! baseline's. Never fails on figures; fails when a phase cannot be measured.
 
-use crate::{bench, build, setup, soak, util, wine};
+use crate::{build, setup, soak, util, wine};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -1003,7 +1003,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-    bench::register(&pfx, &artifacts)?;
+    wine::register_in(&pfx, &artifacts.proxy, &artifacts.server)?;
     println!(
         "scale: prefix {}, sizes {:?}, {} runs, {} items",
         pfx.display(),

@@ -79,6 +79,22 @@ pub fn wineserver_in(pfx: &Path, arg: &str, limit: Duration) {
     );
 }
 
+/// Registers the 64-bit proxy/stub DLL `proxy` (regsvr32) and the server `server`
+/// (`/RegServer`) in the prefix `pfx` (a prefix of the benchmarks' own: `bench`, `bench
+/// --scale`).
+pub fn register_in(pfx: &Path, proxy: &Path, server: &Path) -> Result<(), String> {
+    let limit = Duration::from_secs(120);
+    let status = util::run_with_timeout(wine_in(pfx, "regsvr32").arg("/s").arg(proxy), limit)?;
+    if !status.success() {
+        return Err(format!("regsvr32 {} failed: {status}", proxy.display()));
+    }
+    let status = util::run_with_timeout(wine_in(pfx, server).arg("/RegServer"), limit)?;
+    if !status.success() {
+        return Err(format!("{} /RegServer failed: {status}", server.display()));
+    }
+    Ok(())
+}
+
 /// The bcryptprimitives shim `setup` builds for `arch` (xtask/shim): 64-bit in
 /// target/wine, 32-bit in target/wine/x86.
 pub fn shim(arch: Arch) -> PathBuf {
