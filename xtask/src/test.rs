@@ -27,11 +27,14 @@
 //!
 //! Steps 6 and 7 run one test binary at a time under the stall guard (`wine/guard.rs`): a
 //! binary silent for 4 minutes gets a backtrace report, then runs once more.
+//! The run's last line counts the Wine trouble it forgave (`wine/forgiven.rs`), also when
+//! it failed: `forgiven: 0 SIGKILL-after-ok, 0 stall rerun, 0 CreateProcess-1359 retry,
+//! 0 opcdiag retry`, under one line per forgiveness.
 //! Steps 5 to 7 always end every Wine process of the prefix and run with timeouts.
 //! `--native` stops after step 3 and skips the Windows clippy.
 
 use crate::arch::Arch;
-use crate::wine::{self, guard};
+use crate::wine::{self, forgiven, guard};
 use crate::{build, fuzz, setup, util};
 use std::time::Duration;
 
@@ -39,6 +42,11 @@ use std::time::Duration;
 const E2E_LIMIT: Duration = Duration::from_secs(25 * 60);
 
 pub fn run(args: &[String]) -> Result<(), String> {
+    let ledger = forgiven::Ledger::begin(&forgiven::path())?;
+    ledger.end(run_all(args))
+}
+
+fn run_all(args: &[String]) -> Result<(), String> {
     let native_only = args.iter().any(|a| a == "--native");
     setup::run(&[])?;
     static_checks(native_only)?;
@@ -74,7 +82,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
             limit: E2E_LIMIT,
             retries: 1,
         };
-        let mut stalls = guard::run_units(&plan, &units)?.stalls;
+        guard::run_units(&plan, &units)?;
         let [client64, client32] = background.clients()?;
         thirdparty_client(Arch::X64, &client64)?;
         println!(
@@ -88,10 +96,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
             target: Arch::X86.target(),
             ..plan
         };
-        stalls.extend(guard::run_units(&plan, &units)?.stalls);
-        for s in &stalls {
-            println!("test: STALL retried once (see its report): {s}");
-        }
+        guard::run_units(&plan, &units)?;
         thirdparty_client(Arch::X86, &client32)
     })();
     wine::kill_all();
@@ -311,8 +316,14 @@ fn static_checks(native_only: bool) -> Result<(), String> {
 /// Arguments after a `--` go to the test binaries (a name filter, say). For working on
 /// one part; `cargo xtask test` stays the one command that runs everything.
 /// `--x86` first runs the tests as a 32-bit client instead (default: the [`E2E_32`]
-/// files), e.g. `cargo xtask e2e --x86 -p e2e-tests --test group_io`.
+/// files), e.g. `cargo xtask e2e --x86 -p e2e-tests --test group_io`. Ends, as `test`
+/// does, with the count of the Wine trouble forgiven (`wine/forgiven.rs`).
 pub fn e2e(args: &[String]) -> Result<(), String> {
+    let ledger = forgiven::Ledger::begin(&forgiven::path())?;
+    ledger.end(e2e_only(args))
+}
+
+fn e2e_only(args: &[String]) -> Result<(), String> {
     let x86 = args.first().is_some_and(|a| a == "--x86");
     let args = if x86 { &args[1..] } else { args };
     setup::run(&[])?;
@@ -348,7 +359,7 @@ pub fn e2e(args: &[String]) -> Result<(), String> {
             // marshal_strings (32-bit client) talks to the 64-bit marshal probe.
             build::e2e_bin("marshal-probe")?;
         }
-        guard::run_units(&plan, &units).map(|_| ())
+        guard::run_units(&plan, &units)
     })();
     wine::kill_all();
     result

@@ -9,8 +9,9 @@
 //! processes of ours (the server and the test binary) and the Linux threads' wait channels
 //! go to `target/stall/stall-<unix time>.txt` (the soak's capture, `soak::capture`), the
 //! path and the stalled test are printed, the prefix's processes are ended, and that
-//! binary runs **once more**; a second stall, or any failure, fails the run. The summary at
-//! the end names each stall and its report, so a retried stall is never silent.
+//! binary runs **once more**; a second stall, or any failure, fails the run. Each rerun is
+//! counted in the run's log of forgiven Wine trouble ([`forgiven`]) with its report, so
+//! that the run's last line counts it and the lines above it name each stall.
 //!
 //! Why a retry: the one stall seen in CI (2026-12-02, 32-bit `group_async`, after 1500 s
 //! of silence) matches Wine 8's combase deadlock of `docs/limits.md` (a last release
@@ -18,6 +19,7 @@
 //! input of ours controls. A retry keeps one such stall from failing a 25-minute run while
 //! the report keeps the evidence.
 
+use super::forgiven::{self, Kind};
 use crate::{soak, util, wine};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -293,12 +295,6 @@ fn on_stall(unit: &Unit, last_line: &str, mut child: std::process::Child) -> Str
     report
 }
 
-/// What a guarded run saw: the stalls (each retried once) with their reports.
-#[derive(Debug, Default)]
-pub struct Summary {
-    pub stalls: Vec<String>,
-}
-
 /// How [`run_units`] runs its units.
 pub struct Plan<'a> {
     pub target: &'a str,
@@ -311,10 +307,11 @@ pub struct Plan<'a> {
 }
 
 /// Runs each of `units` (`cargo test --release --target TARGET <unit> -- --test-threads=1
-/// TEST_ARGS`) in turn, running a stalled one again up to `retries` times.
+/// TEST_ARGS`) in turn, running a stalled one again up to `retries` times (each rerun
+/// counted: [`Kind::StallRerun`]).
 /// Fails at the first failure, a stall beyond the retries, or when the whole run passes
 /// `limit`.
-pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
+pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<(), String> {
     let Plan {
         target,
         test_args,
@@ -338,7 +335,6 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
     };
     // One build of every binary first, so that no build counts as a test's silence.
     util::run(&mut command(&["--no-run"], None))?;
-    let mut summary = Summary::default();
     for unit in units {
         let mut tries = 0;
         loop {
@@ -371,19 +367,19 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<Summary, String> {
                 }
                 Outcome::Stalled { last_line } => {
                     let report = on_stall(unit, &last_line, child);
-                    summary.stalls.push(report.clone());
                     if tries > retries {
                         return Err(format!(
                             "end-to-end tests ({target}): {} stalled ({tries} of {tries} runs): {report}",
                             unit.label
                         ));
                     }
+                    forgiven::record(Kind::StallRerun, &report);
                     println!("guard: running {} once more", unit.label);
                 }
             }
         }
     }
-    Ok(summary)
+    Ok(())
 }
 
 #[cfg(test)]

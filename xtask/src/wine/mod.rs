@@ -1,7 +1,11 @@
 //! The project's own Wine prefix under target/wine/prefix, and helpers for prefixes of
 //! their own (the demo's).
 //!
-//! [`guard`] is the stall guard of the end-to-end runs.
+//! The harness's tolerance of Wine's own trouble lives here too: [`guard`] (the stall
+//! guard of the end-to-end runs, which runs a stalled binary once more), [`start`] (an
+//! opcdiag that Wine failed to start is started again) and [`forgiven`], the count of
+//! every forgiveness of a run, printed as its last line (with `xtask/wine-run.sh`'s
+//! SIGKILL-after-ok and `tests/src/start.rs`'s CreateProcess retries).
 
 use crate::arch::Arch;
 use crate::util;
@@ -9,7 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
+pub mod forgiven;
 pub mod guard;
+pub mod start;
 
 pub const WINESERVER: &str = "/usr/lib/wine/wineserver";
 
