@@ -5,9 +5,7 @@
 //! process's start-up and, when the child ended before it finished and left exit code 0,
 //! answers `STATUS_INTERNAL_ERROR`. None of the started program has run then (its `main`
 //! is not reached), so the start is tried again: at most [`TRIES`] times, each retry
-//! printed on stderr. Any other error, and the third 1359, is returned as it is. The clean-
-//! clone CI of 9f3e8fb failed once on it (`opcdiag.exe` in `tests/opcdiag.rs`), after
-//! 1,237 tests had passed at both bitnesses in the two runs before.
+//! printed on stderr. Any other error, and the third 1359, is returned as it is.
 //!
 //! The file is also compiled into the COM crate's in-process tests
 //! (`crates/ctopc-com/tests/common/mod.rs`, by `#[path]`), which start their own test
