@@ -58,6 +58,8 @@ pub const FILES: &[&str] = &[
     "docs/deployment.md",
     "docs/variable-database.md",
     "docs/asix-net-protocol.md",
+    "docs/configuration.md",
+    "docs/operations.md",
     "demo/wytwornia_kwasu/atrybuty.csv",
     "demo/wytwornia_kwasu/wytwornia_kwasu.zez",
 ];
