@@ -7,9 +7,7 @@
 //! is not reached), so the start is tried again: at most [`TRIES`] times, each retry
 //! printed on stderr and counted in the log of forgiven Wine trouble that `cargo xtask
 //! test` names in [`FORGIVEN_LOG`] (`xtask/src/wine/forgiven.rs` prints the count as the
-//! run's last line). Any other error, and the third 1359, is returned as it is. The clean-
-//! clone CI of 9f3e8fb failed once on it (`opcdiag.exe` in `tests/opcdiag.rs`), after
-//! 1,237 tests had passed at both bitnesses in the two runs before.
+//! run's last line). Any other error, and the third 1359, is returned as it is.
 //!
 //! The file is also compiled into the COM crate's in-process tests
 //! (`crates/ctopc-com/tests/common/mod.rs`, by `#[path]`), which start their own test

@@ -1,4 +1,4 @@
-//! The `_Diagnostics` branch end to end (issue 18, item 2): while a second client works
+//! The `_Diagnostics` branch end to end: while a second client works
 //! (SetClientName, a group, items, a subscription), the observing client browses the
 //! branch every way (BrowseOPCItemIDs branch/leaf/flat, ChangeBrowsePosition down into a
 //! client's branch and back up, GetItemID, IOPCBrowse::Browse), reads the items and finds

@@ -468,8 +468,8 @@ fn write_failures_reach_the_client_per_item() {
             (p.h[1], Value::R8(1e300)),          // does not fit R4
             (p.h[2], Value::I4(70_000)),         // does not fit UI1
             (p.h[1], Value::Bstr("abc".into())), // not a number
-            (p.h[1], Value::Bstr("5".into())),   // numeric text converts (issue 15)
-            (p.h[1], Value::Bool(true)),         // TRUE is 1 (issue 15)
+            (p.h[1], Value::Bstr("5".into())),   // numeric text converts
+            (p.h[1], Value::Bool(true)),         // TRUE is 1
             (p.h[1], Value::Date(45_000.0)),     // a date is no process value
             (p.h[1], Value::Empty),              // nothing
             (0, Value::R4(1.0)),                 // invalid handle

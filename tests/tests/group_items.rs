@@ -481,7 +481,7 @@ fn item_sampling_rate_and_buffering() {
         (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
     );
 
-    // Buffering (issue 14): enabling and disabling succeed per item; Get reads it back.
+    // Buffering: enabling and disabling succeed per item; Get reads it back.
     let (hr, errs) = g
         .set_item_buffer_enable(&[(h[0], true), (h[1], false), (12345, false)])
         .unwrap();

@@ -222,7 +222,7 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
     );
     let p = s.p();
 
-    // Issue 15: the first OnDataChange carries the items' first samples, not BAD Waiting
+    // The first OnDataChange carries the items' first samples, not BAD Waiting
     // for Initial Data (0x20), also with a device that answers reads 3 s late (the
     // subscription's samples are not delayed).
     let first = p

@@ -1,4 +1,4 @@
-//! A hostile client (issue 19): counts 0 and huge, NULLs the proxy lets through, invalid
+//! A hostile client: counts 0 and huge, NULLs the proxy lets through, invalid
 //! and foreign handles, 64 Ki-unit and invalid UTF-16 texts, every VARTYPE requested and
 //! written, nested arrays, bogus continuation points, sinks that fail or sleep, and a
 //! client process that exits without releasing. Every COM call runs under a watchdog
@@ -615,9 +615,9 @@ fn z_a_client_that_exits_without_releasing_leaves_the_server_answering() {
         String::from_utf8_lossy(&child.stderr)
     );
     assert_answers(&server, "a client that exited without releasing");
-    // The one hang of the issue: AddItems with a 64 Ki access path of lone surrogates on a
-    // server holding a crashed client's session, tried repeatedly while the server's
-    // callbacks to the dead sink fail.
+    // The combination that must not hang: AddItems with a 64 Ki access path of lone
+    // surrogates on a server holding a crashed client's session, tried repeatedly while
+    // the server's callbacks to the dead sink fail.
     let (g, _) = group(&server, "");
     let id = utf16(SETPOINT);
     let lone = lone_surrogates(HUGE);

@@ -1,4 +1,4 @@
-//! Item buffering end to end (issue 14 item 3, IOPCItemSamplingMgt::SetItemBufferEnable):
+//! Item buffering end to end (IOPCItemSamplingMgt::SetItemBufferEnable):
 //! the server started with a configuration of the test's own (`SERVERCTOPC_INI`, the
 //! embedded demo with `MinUpdateRate = 100`), a 1000 ms group, its tank level sampled at
 //! 100 ms with buffering on: an OnDataChange carries several samples of that one item,

@@ -1,4 +1,4 @@
-//! The write audit end to end (issue 18, item 3): every kind of write reaches the server's
+//! The write audit end to end: every kind of write reaches the server's
 //! log file as one `write ...` line (target `audit`, on by default: `AuditWrites = tak`)
 //! with the client's name, the group, the item, the value (quality and timestamp when
 //! given) and the per-item result; an asynchronous write's final result follows in a

@@ -1,4 +1,4 @@
-//! The metrics endpoint end to end (issue 18, item 4): a server of the test's own
+//! The metrics endpoint end to end: a server of the test's own
 //! (`SERVERCTOPC_INI`) with `MetricsAddress = 127.0.0.1:<port>` answers an HTTP GET of
 //! `/metrics` from the test (Wine's sockets are the host's) with the Prometheus text of
 //! what a working client did: clients, groups, items, callbacks and values sent, writes,

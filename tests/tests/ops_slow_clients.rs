@@ -1,4 +1,4 @@
-//! Slow and hung callback clients end to end (issue 18, item 5): a server of the test's
+//! Slow and hung callback clients end to end: a server of the test's
 //! own (`SERVERCTOPC_INI`) with `CallbackTimeout = 500` and `CallbackFailures = 2`; a
 //! client whose OnDataChange sleeps far longer than the timeout loses its callback
 //! connection (the connection point lists none) with a WARN in the server's log, the

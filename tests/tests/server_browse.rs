@@ -155,7 +155,7 @@ fn flat_listing_and_filters() {
         .browse_item_ids(OPC_LEAF, "kw_a000", VT_R4_U16, OPC_READABLE)
         .unwrap();
     assert_eq!(leaves, ["KW_A000"]);
-    // The access-rights and data-type filters (DA 2.05a; issue 15: they were ignored).
+    // The access-rights and data-type filters (DA 2.05a).
     // Z101's variables are read-only R4s.
     assert_eq!(
         server

@@ -1,4 +1,4 @@
-//! The server browser as an NT service (issue 14 item 1, for remote clients, as the OPC
+//! The server browser as an NT service (for remote clients, as the OPC
 //! Foundation's OpcEnum runs): `OpcServerList.exe /Service` installs the service
 //! `OpcServerList` (on demand, as LocalService) with AppID LocalService, COM starts it when
 //! a client creates `OPC.ServerList.1`, it serves until stopped, and `/UnregServer` removes

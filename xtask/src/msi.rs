@@ -1,4 +1,4 @@
-//! The MSI installer (issue 17): `target/dist/ServerCTOPC-<version>-x64.msi`, built by
+//! The MSI installer: `target/dist/ServerCTOPC-<version>-x64.msi`, built by
 //! `cargo xtask dist` with Debian's `wixl` from the template `installer/ServerCTOPC.wxs.in`.
 //!
 //! The server's registration is declarative (Registry table rows), generated from the
@@ -23,12 +23,9 @@
 //! hold it while each bitness's opcdiag runs status, write, read back (from the device)
 //! and servers, and must see the first value and both writes; the server's command line
 //! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
-//! Measured on the 2-core machine with 7 engineers building (seven runs): the three MSIs
-//! 26 to 38 s (27 s at once, as now), the template 33 to 65 s when missing, each prefix
-//! copy 3 to 37 s (1.3 GB, the disk is shared), broken package 7 to 19 s, install 4 to
-//! 12 s, each client check 15 to 28 s, upgrade 6 to 16 s, uninstall 5 to 11 s: 110 s
-//! with the template kept and the Windows build up to date, 165 s from a clean
-//! target/wine (as in CI); before this layout, 250 s of Wine alone.
+//! The three MSIs are built at once; a prefix copy is 1.3 GB. The time of each step, as
+//! measured: docs/benchmarks.md (about 2 minutes with the template kept and the Windows
+//! build up to date, about 3 from a clean target/wine, as in CI).
 //!
 //! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
@@ -61,6 +58,8 @@ pub const FILES: &[&str] = &[
     "docs/deployment.md",
     "docs/variable-database.md",
     "docs/asix-net-protocol.md",
+    "docs/configuration.md",
+    "docs/operations.md",
     "demo/wytwornia_kwasu/atrybuty.csv",
     "demo/wytwornia_kwasu/wytwornia_kwasu.zez",
 ];
@@ -460,7 +459,7 @@ mod wine_test {
         }
     }
 
-    /// Prints each step with the seconds since the start (the figures in the module doc).
+    /// Prints each step with the seconds since the start (docs/benchmarks.md lists a run's).
     struct Clock(Instant);
 
     impl Clock {
@@ -924,8 +923,8 @@ mod wine_test {
         if tpl.exists() && !(tpl.join("system.reg").is_file() && wine::has_wow64(&tpl)) {
             std::fs::remove_dir_all(&tpl).map_err(|e| format!("{}: {e}", tpl.display()))?;
         }
-        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when a
-        // worktree's target/ predates the 32-bit one (ensure_prefix only copies them).
+        // The prefix gets the bcryptprimitives shims of both bitnesses: build them when
+        // target/ lacks one (ensure_prefix only copies them).
         for arch in Arch::ALL {
             crate::setup::build_shim(arch)?;
         }

@@ -1,5 +1,5 @@
 //! `cargo xtask bench --scale`: ServerCTOPC with a synthetic database of 100,000 and
-//! 1,000,000 variables under Wine (issue 16; not in CI).
+//! 1,000,000 variables under Wine (not in CI).
 //!
 //! Options: `--sizes 100000,1000000`, `--runs 3`, `--items 100000`, `--soak-minutes 10`,
 //! `--only <phase>` (`load`, `browse`, `items`, `soak`; may be repeated).

@@ -108,10 +108,10 @@ fn run_all(args: &[String]) -> Result<(), String> {
 
 /// The steps `run` starts in the background after the Windows build, each logging to a
 /// file (printed when it is joined) so that the foreground's output stays readable.
-/// Measured (issue 19, 2026-12-02, 2 cores, load 6-8, beside a soak): the msi-test 247 s
-/// (template made), the third-party client's clean builds 244 s (64-bit) and 141 s
-/// (32-bit): about 10 minutes that ran in turn before, now hidden behind the end-to-end
-/// tests (whose own time they lengthen by their CPU share).
+/// Together they are about 10 minutes of work (the msi-test and the third-party client's
+/// clean builds at both bitnesses; docs/benchmarks.md), which made in turn would add to
+/// the run; beside the end-to-end tests, which mostly wait on Wine, they lengthen those
+/// only by their CPU share.
 struct Background {
     /// The third-party client built for 64-bit, then 32-bit: the two exes.
     clients: Option<std::thread::JoinHandle<Result<[std::path::PathBuf; 2], String>>>,

@@ -1,8 +1,8 @@
 //! Tidy: the code rules of ARCHITECTURE.md that no compiler lint can say.
 //!
-//! Most rules are lints now, checked by `cargo clippy -- -D warnings` in `cargo xtask
-//! test`, with their levels in the `[lints]` tables of the manifests and their settings in
-//! `clippy.toml`; this test had text scanners for them, which the lints replaced:
+//! Most rules are lints, checked by `cargo clippy -- -D warnings` in `cargo xtask test`,
+//! with their levels in the `[lints]` tables of the manifests and their settings in
+//! `clippy.toml`:
 //! - `unsafe` only in crates/ctopc-com and the end-to-end tests (tests/, which pass
 //!   deliberately invalid raw pointers and hold the marshal probe in tests/src/probe):
 //!   rustc's `unsafe_code = "forbid"` (`[workspace.lints.rust]`), relaxed only in the

@@ -426,8 +426,8 @@ fn walk<'a, E>(
 }
 
 /// Variable `i` of `db`, decoded for one resolution and not kept: [`VarDatabase::find_public`]
-/// keeps every variable it decodes (about 1.2 KB each), so resolving through it made every
-/// item a client ever added cost that much for the life of the server (issue 16).
+/// keeps every variable it decodes (about 1.2 KB each), so resolving through it would make
+/// every item a client ever added cost that much for the life of the server.
 fn decoded(db: &VarDatabase, i: usize) -> Variable {
     db.variables.view(i).decode()
 }
@@ -659,8 +659,8 @@ mod tests {
     use ctopc_core::properties::{lookup_item_ids, static_properties, PropertyContext};
     use ctopc_core::Lang;
 
-    /// The namespace of the property tests that were in the COM crate: `V` (alias `A`)
-    /// and some of its attribute items.
+    /// The namespace of the property tests: `V` (alias `A`) and some of its attribute
+    /// items.
     fn fake(item_id: &str) -> OpcResult<ItemDef> {
         let var = |key: &str| ItemDef {
             source_key: key.into(),

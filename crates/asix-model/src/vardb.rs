@@ -5,7 +5,7 @@
 //! All logic is in the pure `parse_*` functions and [`VarDatabase::build`];
 //! [`load_database_file`] only reads the files.
 //!
-//! Layout (issue 16: large plants have up to a million variables). No `String` per cell
+//! Layout (large plants have up to a million variables). No `String` per cell
 //! or per map key:
 //! - every cell of the table is text in one `CellTable`, row after row, with a `u8` end
 //!   per cell relative to its row (17 columns: 17 B; `u16` ends aside for a row of more
@@ -189,7 +189,7 @@ pub fn parse_csv(text: &str, sep: char) -> Result<Vec<CsvRecord>, (usize, String
 ///
 /// Reads bytes, not chars: every byte that means something (the separator's first byte,
 /// `"`, CR, LF) is ASCII or starts a char, so the text between two of them is copied as
-/// one slice (issue 16: a million rows are read at start).
+/// one slice (a large plant's million rows are read at start).
 pub fn for_each_csv_record(
     text: &str,
     sep: char,
@@ -1207,7 +1207,7 @@ impl PartialEq for NameIndex {
 
 /// A loaded, validated variable database, with aliases applied.
 ///
-/// Layout (issue 16): one [`CellTable`] holds every cell as text with a `u8` end per
+/// Layout: one [`CellTable`] holds every cell as text with a `u8` end per
 /// cell (rows of up to 255 bytes) and a `u32` start per row; the name index (`Name`; the
 /// public name's is another in alias mode only) is a hash table of `u32` row indexes that
 /// compare names in that table; the tree holds `u32` indexes. For a row of 17 cells of
@@ -1630,8 +1630,8 @@ pub fn load_database_file(
 }
 
 #[cfg(test)]
-/// The char-by-char reader [`for_each_csv_record`] replaced, kept as the reference its
-/// tests compare with.
+/// A char-by-char reader, the plain reference that [`for_each_csv_record`]'s tests
+/// compare the byte reader with.
 ///
 /// [`parse_csv`] streaming: calls `record(line, fields)` for each record as it is read,
 /// with one reused buffer; an error of `record` stops the reading and is returned.
@@ -2002,7 +2002,7 @@ X
             prop_assert_eq!(has_control(&s), s.chars().any(char::is_control));
         }
 
-        /// The byte reader reads every text as the char reader it replaced did: the same
+        /// The byte reader reads every text as the char-by-char reference does: the same
         /// records, lines and errors (separators of one and more bytes, quotes, line
         /// breaks, blanks ASCII and not, non-ASCII text).
         #[test]

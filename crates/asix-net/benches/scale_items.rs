@@ -18,7 +18,7 @@
 //!    with `data_change_delivered`) before the next: the growth over those cycles.
 //!
 //! These are the server-side shares of the figures `scale-client` measures from outside
-//! under Wine (issue 16); the rest is the COM transport and Wine's heap.
+//! under Wine; the rest is the COM transport and Wine's heap.
 
 use std::sync::Arc;
 

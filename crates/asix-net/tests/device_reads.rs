@@ -1,4 +1,4 @@
-//! Issue 16 item 4: a device read of many items is one request to the data source per
+//! A device read of many items is one request to the data source per
 //! call (per part of the source: one in the simulation, one per asix channel on the
 //! network), never one per item or per variable. The engine and the asix adapter
 //! (`AsixBackend`) over a counting fake source, with a synthetic database of 10,000

@@ -7,7 +7,7 @@
 //! Why: windows-rs' generated vtable shims of these interfaces (`IConnectionPoint_Impl`
 //! and the others) turn methods with one out-parameter into `fn(..) -> Result<T>` and
 //! write the result through the caller's pointer **without a NULL check** (a NULL
-//! out-parameter crashed the server), and leave it as it was on failure (COM wants NULL).
+//! out-parameter would crash the server), and leave it as it was on failure (COM wants NULL).
 //! Here every out-parameter is a raw pointer and every method returns its raw HRESULT, so
 //! the checks are ours: out-parameters are cleared first (`abi::clear_outs`), a NULL one
 //! is E_POINTER (these methods' contracts name it), and they are filled on success only.

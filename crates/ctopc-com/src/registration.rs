@@ -2,7 +2,7 @@
 //! and values ([`ServerRegistration::keys`]) and of the trees to delete
 //! ([`ServerRegistration::trees`]), computed without Windows and tested natively.
 //! `registry.rs` applies them with the Win32 registry calls (`/RegServer`, `/Service`,
-//! `/UnregServer`); an installer (issue 17, MSI) can generate its Registry table from the
+//! `/UnregServer`); the MSI (`xtask/src/msi.rs`) generates its Registry table from the
 //! same list.
 //!
 //! Every key is written in **both registry views** ([`View::Reg64`] with

@@ -603,8 +603,8 @@ mod tests {
             decode_nested(limits::MAX_VARIANT_DEPTH + 1),
             Err(OpcError::BadType)
         );
-        // The stack overflow: 10,000 levels answer at once, on a test thread's
-        // stack.
+        // Deep enough to overflow a thread's stack if decoded by recursion: 10,000 levels
+        // answer at once, on a test thread's stack.
         let t = std::time::Instant::now();
         assert_eq!(decode_nested(10_000), Err(OpcError::BadType));
         assert!(t.elapsed() < std::time::Duration::from_secs(5));

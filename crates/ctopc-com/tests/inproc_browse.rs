@@ -267,7 +267,7 @@ fn browse_opc_item_ids_success() {
     );
     assert_eq!(names(OPC_LEAF, "*[12]", 0).1, ["KW_A001", "KW_A002"]);
     assert_eq!(names(OPC_LEAF, "nic*", 0), (S_FALSE, vec![]));
-    // The access-rights filter applies (issue 15): Z101's variables are read-only.
+    // The access-rights filter applies: Z101's variables are read-only.
     assert_eq!(names(OPC_LEAF, "", OPC_WRITEABLE), (S_FALSE, vec![]));
     assert_eq!(change(&a, OPC_BROWSE_TO, ""), S_OK);
     let (_, writable) = names(OPC_FLAT, "", OPC_WRITEABLE);

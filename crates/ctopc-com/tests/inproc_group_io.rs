@@ -988,7 +988,7 @@ fn cancel2_ends_a_transaction_with_on_cancel_complete_or_fails_once_it_completed
     eprintln!("Cancel2: {cancelled} of 20 cancelled before completion");
 }
 
-/// WriteVQT of a VT_EMPTY value with a quality or a timestamp (issue 15): OPC_E_NOTSUPPORTED
+/// WriteVQT of a VT_EMPTY value with a quality or a timestamp: OPC_E_NOTSUPPORTED
 /// per item (DA 3.0: "the server does not support the requested combination (which could be
 /// a single quantity such as just timestamp)"); VT_EMPTY alone is OPC_E_BADTYPE; a VARIANT
 /// that decodes to no value keeps its decoding error (OPC_E_BADTYPE) even with a quality;

@@ -523,7 +523,7 @@ fn write_text(io: &IOPCItemIO, text: &str) -> HRESULT {
 }
 
 /// IOPCItemIO has no group: WriteVQT converts text in the LCID the client set on this
-/// server object with IOPCCommon::SetLocaleID (issue 15), per server object; a refused
+/// server object with IOPCCommon::SetLocaleID, per server object; a refused
 /// SetLocaleID changes nothing.
 #[test]
 fn item_io_write_vqt_converts_text_in_the_server_objects_locale() {

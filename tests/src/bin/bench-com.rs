@@ -550,7 +550,7 @@ mod bench {
     /// `--loop read|write N`: only repeats one call N times (10,000 demo items from cache,
     /// or 10,000 writes), for a profiler attached to the processes; prints the median.
     /// After `read` it also prints the median cache read of 10 to 10,000 items, which shows
-    /// the per-item cost of the transport (linear under Wine, see the README).
+    /// the per-item cost of the transport (linear under Wine, see docs/benchmarks.md).
     fn profile_loop(what: &str, n: usize) -> Res<()> {
         let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
         let main = Server::connect(PROGID).map_err(err("connect"))?;
@@ -759,8 +759,8 @@ mod bench {
         }
 
         // Reads of 10,000 and of 80,000 items: the demo variables repeated, in an active
-        // group; the device read beside the cache read of the same call (issue 16's goal:
-        // at most 20 % more). The 10,000-item group stays for the transport figure below.
+        // group; the device read beside the cache read of the same call (the goal: at
+        // most 20 % more). The 10,000-item group stays for the transport figure below.
         let mut kept = None;
         for (n, cache_what, device_what, cache_goal) in [
             (

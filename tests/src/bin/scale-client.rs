@@ -1,4 +1,4 @@
-//! scale-client.exe: one client of the scale measurements (issue 16), under Wine. A runner
+//! scale-client.exe: one client of the scale measurements, under Wine. A runner
 //! (`cargo xtask bench --scale`, or a script) starts it, reads one `ready` line per stage
 //! on its stdout, measures the server from outside (VmRSS of ServerCTOPC.exe) and writes
 //! one line on its stdin to go on to the next stage.

@@ -13,11 +13,11 @@
 //! counted in the run's log of forgiven Wine trouble ([`forgiven`]) with its report, so
 //! that the run's last line counts it and the lines above it name each stall.
 //!
-//! Why a retry: the one stall seen in CI (2026-12-02, 32-bit `group_async`, after 1500 s
-//! of silence) matches Wine 8's combase deadlock of `docs/limits.md` (a last release
-//! unregistering an interface while a call on it marshals another), a Wine bug that no
-//! input of ours controls. A retry keeps one such stall from failing a 25-minute run while
-//! the report keeps the evidence.
+//! Why a retry: a stall of a test binary (in CI: 32-bit `group_async`, 1500 s silent)
+//! matches Wine 8's combase deadlock of `docs/limits.md` (a last release unregistering an
+//! interface while a call on it marshals another), a Wine bug that no input of ours
+//! controls. A retry keeps one such stall from failing a 25-minute run while the report
+//! keeps the evidence.
 
 use super::forgiven::{self, Kind};
 use crate::{soak, util, wine};

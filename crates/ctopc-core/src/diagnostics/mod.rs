@@ -1,4 +1,4 @@
-//! The `_Diagnostics` branch of the address space (issue 18, item 2): items any OPC client
+//! The `_Diagnostics` branch of the address space: items any OPC client
 //! can browse, read and subscribe that show what the server is doing. Pure: the model of
 //! the branch (its names, types, descriptions), the values of one counters snapshot, and
 //! the wrappers that put the branch beside the real address space.

@@ -169,7 +169,7 @@ const SHARED_VALUE: VarType = VarType(u16::MAX);
 
 /// What the cache holds of an entry's value and subscription (48 bytes), apart from the
 /// entry: an item that is never subscribed nor read (in inactive groups only) costs no
-/// sample of its own (issue 16). A number is in the sample (type and bits), a string or array in
+/// sample of its own. A number is in the sample (type and bits), a string or array in
 /// `SourceTable::shared` by sample slot; [`SourceTable::sample`] gives both as a
 /// [`SampleRef`].
 #[derive(Debug, Clone)]
@@ -248,7 +248,7 @@ impl SourceEntry {
 }
 
 /// The keys of the cache's entries one after another in one string, so that a key costs
-/// its bytes and no allocation (issue 16). A freed entry's key is garbage until garbage is
+/// its bytes and no allocation. A freed entry's key is garbage until garbage is
 /// most of the text; then the text is rebuilt from the live entries' keys.
 #[derive(Default)]
 struct KeyText {
@@ -442,7 +442,7 @@ impl SourceTable {
                     // Grow by a quarter, not double: the entries are most of the memory of
                     // a large configuration, and doubling would leave up to half unused;
                     // by the rest of a large AddItems at once, so that the entries of one
-                    // large call take what they need and no more (issue 16).
+                    // large call take what they need and no more.
                     let quarter = (self.entries.len() / 4).max(1024);
                     let grow = if self.batch_left >= quarter {
                         self.batch_left

@@ -153,7 +153,7 @@ impl GroupItem {
 
 /// The item sampling rate and item deadband of a group's items that have one set
 /// (`Group::opts`, by server handle; [`SAMPLING`] and [`DEADBAND`] say which is set). Few
-/// items have one, so they are kept out of [`GroupItem`] (issue 16).
+/// items have one, so they are kept out of [`GroupItem`].
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub(crate) struct ItemOpts {
     /// In ms, with [`SAMPLING`].
