@@ -1,4 +1,4 @@
-//! The COM layer's clock: the current UTC time, today's local date, and FILETIME.
+//! The COM layer's clock: FILETIME, today's local date, and the runtime's current UTC time.
 
 use ctopc_core::Timestamp;
 use windows::Win32::Foundation::FILETIME;
@@ -12,13 +12,7 @@ pub fn filetime(t: Timestamp) -> FILETIME {
     }
 }
 
-/// The current UTC time (the only clock read of the COM layer's data path).
-pub fn now() -> Timestamp {
-    let since = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap_or_default();
-    Timestamp::from_unix_micros(since.as_micros())
-}
+pub use ctopc_runtime::clock::now;
 
 /// Today's local date (year, month, day), for the names of the log files.
 pub fn local_date() -> (i32, u32, u32) {

@@ -56,6 +56,11 @@ impl<I: Interface + Clone> SinkSlot<I> {
     pub fn is_connected(&self) -> bool {
         self.lock().is_some()
     }
+    /// The current connection: its cookie and a new reference to its sink (call it
+    /// without holding any lock).
+    pub fn connection(&self) -> Option<(u32, I)> {
+        self.lock().as_ref().map(|(c, s)| (*c, s.clone()))
+    }
     /// The cookie of the current connection.
     pub fn cookie(&self) -> Option<u32> {
         self.lock().as_ref().map(|(c, _)| *c)

@@ -15,11 +15,11 @@
 use crate::group::Registry;
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
 use crate::lifetime::Lifetime;
-use crate::runtime::Runtime;
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::model::EngineConfig;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::Lang;
+use ctopc_runtime::Runtime;
 use std::sync::Arc;
 
 /// What the server binary hands the COM host to serve: the namespace and what the COM

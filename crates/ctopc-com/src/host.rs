@@ -10,13 +10,7 @@ use crate::context::{Context, Setup};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
 use crate::registration;
 use crate::registry::{self, ServerRegistration};
-use crate::runtime::Runtime;
 use crate::server;
-use ctopc_core::diagnostics::backend::DiagBackend;
-use ctopc_core::diagnostics::{Board, DiagNamespace, Sampler};
-use ctopc_core::model::Engine;
-use ctopc_core::namespace::Namespace;
-use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -116,8 +110,8 @@ pub fn unregister() -> windows::core::Result<()> {
 }
 
 /// Makes the data source (the server binary decides: the in-process simulation or the
-/// asix network client). Gets the waker to call when data arrives.
-pub type MakeBackend<'a> = dyn FnOnce(Arc<dyn Wake>) -> Result<Box<dyn Backend>, String> + 'a;
+/// asix network client).
+pub use ctopc_runtime::MakeBackend;
 
 /// The default language: the configured one, else Polish on Polish Windows, else English.
 fn default_lang(configured: Option<Lang>) -> Lang {
@@ -246,32 +240,22 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
             engine_config.source_timeout_ms
         );
     }
-    // The `_Diagnostics` branch beside the real namespace and backend
-    // (`ctopc_core::diagnostics`): both read the board the runtime publishes on.
-    let board = Arc::new(Board::new());
-    let sampler = Sampler::new(address_space.filter_case());
-    let namespace: Arc<dyn Namespace> = Arc::new(DiagNamespace::new(namespace, Arc::clone(&board)));
-    let engine = Engine::new(engine_config, Arc::clone(&namespace));
-    let mut simulation = false;
-    let for_backend = Arc::clone(&board);
-    let rt = Runtime::start(engine, (board, sampler), |wake| {
-        let backend = make_backend(wake)?;
-        simulation = backend.is_simulation();
-        Ok(Box::new(DiagBackend::new(backend, for_backend)))
-    })?;
-    rt.ops.configure(&ops);
-    if let Some(address) = &ops.metrics_address {
-        crate::metrics_http::start(&rt, address);
-    }
-    if !ops.audit_writes {
-        tracing::info!("write audit off (AuditWrites)");
-    }
+    // The `_Diagnostics` branch beside the real namespace and backend, the operations
+    // settings and the metrics endpoint: the runtime's, as for every front end.
+    let started = ctopc_runtime::start(
+        namespace,
+        address_space.filter_case(),
+        engine_config,
+        &ops,
+        crate::callbacks::thread_hook,
+        make_backend,
+    )?;
     let ctx = Context {
-        runtime: rt,
+        runtime: started.runtime,
         address_space,
         default_lang: default_lang(default_language),
-        namespace,
-        state: Context::state_for(no_config_reason.as_deref(), simulation),
+        namespace: started.namespace,
+        state: Context::state_for(no_config_reason.as_deref(), started.simulation),
         no_config_reason,
         lifetime: Lifetime::new(),
         groups: Default::default(),

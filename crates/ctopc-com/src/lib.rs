@@ -8,6 +8,8 @@
 
 #[cfg(windows)]
 pub mod abi;
+#[cfg(windows)]
+pub mod callbacks;
 pub mod catalog;
 #[cfg(windows)]
 pub mod client;
@@ -33,15 +35,9 @@ pub mod host;
 pub mod interfaces;
 #[cfg(windows)]
 pub mod lifetime;
-#[cfg(windows)]
-pub mod metrics_http;
-#[cfg(windows)]
-pub mod ops;
 pub mod registration;
 #[cfg(windows)]
 pub mod registry;
-#[cfg(windows)]
-pub mod runtime;
 #[cfg(windows)]
 pub mod server;
 #[cfg(windows)]

@@ -37,6 +37,7 @@ mod props;
 mod shutdown;
 
 use crate::abi::{self, write_out, OutArray, TaskMem};
+use crate::callbacks::ShutdownSink;
 use crate::clock;
 use crate::comdef::RawConnectionPointContainer;
 use crate::connpoint::SinkSlot;
@@ -95,7 +96,8 @@ pub fn class_factory(ctx: &Arc<Context>) -> windows::Win32::System::Com::IClassF
 pub fn create_instance(ctx: &Arc<Context>) -> windows::core::Result<IUnknown> {
     let handle = ctx.runtime.open_session();
     let shutdown = Arc::new(SinkSlot::<IOPCShutdown>::default());
-    ctx.runtime.set_shutdown_sink(handle, Arc::clone(&shutdown));
+    ctx.runtime
+        .set_session_sink(handle, Arc::new(ShutdownSink(Arc::clone(&shutdown))));
     let server = OpcServer {
         ctx: Arc::clone(ctx),
         handle,
@@ -209,7 +211,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
     unsafe fn SetClientName(&self, name: PCWSTR) -> windows::core::Result<()> {
         // SAFETY: `name` is this method's [in, string] parameter.
         let name = unsafe { abi::in_string(name, limits::CLIENT_NAME) }?;
-        self.ctx.runtime.ops.set_client_name(self.handle, &name);
+        self.ctx.runtime.clients.set_client_name(self.handle, &name);
         self.session().client_name = Some(name);
         Ok(())
     }
@@ -230,7 +232,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
         riid: *const GUID,
         unk: *mut Option<IUnknown>,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AddGroup,
         );
@@ -275,7 +277,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::GetStatus,
         );
@@ -323,7 +325,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn RemoveGroup(&self, server_group: u32, force: BOOL) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::RemoveGroup,
         );

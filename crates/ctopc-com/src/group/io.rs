@@ -32,7 +32,6 @@ use crate::abi::{
     self, in_array, item_hr, s_false_if, write_out, ComResult, OutArray, OwnedArray, TaskMem,
 };
 use crate::interfaces::*;
-use crate::runtime::SYNC_WAIT_MARGIN;
 use crate::variant;
 use crate::{clock, error};
 use ctopc_core::model::{
@@ -40,6 +39,7 @@ use ctopc_core::model::{
     SyncResult, WriteResults,
 };
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
+use ctopc_runtime::SYNC_WAIT_MARGIN;
 use std::time::Duration;
 use windows::core::{BOOL, HRESULT};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_OUTOFMEMORY, FILETIME};
@@ -252,7 +252,7 @@ impl Group_Impl {
         e: &Engine,
         items: &[(u32, ItemVqt)],
     ) -> Option<(String, Vec<Option<String>>)> {
-        if !self.ctx.runtime.ops.auditing() {
+        if !self.ctx.runtime.clients.auditing() {
             return None;
         }
         let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
@@ -275,7 +275,7 @@ impl Group_Impl {
             .map(|((h, _), id)| (id.as_deref(), Some(*h)))
             .collect();
         let values: Vec<ItemVqt> = items.iter().map(|(_, v)| v.clone()).collect();
-        let call = crate::ops::WriteCall {
+        let call = ctopc_runtime::clients::WriteCall {
             session: self.session,
             method,
             group: Some(&group),
@@ -285,7 +285,7 @@ impl Group_Impl {
         };
         self.ctx
             .runtime
-            .ops
+            .clients
             .audit_write(clock::now(), &call, results);
     }
 
@@ -452,7 +452,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::SyncRead,
         );
@@ -466,7 +466,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::SyncWrite,
         );
@@ -568,7 +568,7 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::ReadMaxAge,
         );
@@ -590,7 +590,7 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::WriteVqt,
         );
@@ -696,7 +696,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AsyncRead,
         );
@@ -712,7 +712,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AsyncWrite,
         );
@@ -732,7 +732,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         transaction: u32,
         p_cancel: *mut u32,
     ) -> windows::core::Result<()> {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::Refresh2,
         );
@@ -844,7 +844,7 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AsyncReadMaxAge,
         );
@@ -867,7 +867,7 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AsyncWriteVqt,
         );

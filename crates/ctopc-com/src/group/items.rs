@@ -171,7 +171,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         ppaddresults: *mut *mut OPCITEMRESULT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::AddItems,
         );
@@ -236,7 +236,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         phserver: *const OPCHANDLE,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::RemoveItems,
         );

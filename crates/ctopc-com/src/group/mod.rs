@@ -22,6 +22,7 @@ mod io;
 mod items;
 
 use crate::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
+use crate::callbacks::GroupSinks;
 use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl, RawDataObject};
 use crate::connpoint::{self, SinkSlot, Slot};
 use crate::context::Context;
@@ -167,7 +168,8 @@ fn create_locked(
             slot: Arc::clone(&sink),
         },
     );
-    ctx.runtime.set_group_sink(group, sink, da10);
+    ctx.runtime
+        .set_group_sink(group, Arc::new(GroupSinks { slot: sink, da10 }));
     Ok(unknown)
 }
 

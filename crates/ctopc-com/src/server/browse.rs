@@ -73,7 +73,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         access_rights_filter: u32,
         ppenum: *mut Option<IEnumString>,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::BrowseOpcItemIds,
         );
@@ -210,7 +210,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         pcount: *mut u32,
         ppelements: *mut *mut OPCBROWSEELEMENT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::Browse,
         );

@@ -3,7 +3,7 @@
 //!
 //! A read or write that needs the data source comes back from the engine as
 //! `SyncOutcome::Pending`; the calling COM thread then waits (engine unlocked) for the
-//! result, at most the engine's source timeout plus [`runtime::SYNC_WAIT_MARGIN`]. The
+//! result, at most the engine's source timeout plus [`ctopc_runtime::SYNC_WAIT_MARGIN`]. The
 //! engine itself completes such requests with ASKOM_E_NetAnswerTimeout after its source
 //! timeout, so the wait normally ends with the engine's answer; if it does not (the driver
 //! is stuck), the call abandons the request and answers ASKOM_E_NetAnswerTimeout for the
@@ -16,7 +16,6 @@ use crate::abi::{
     OwnedArray,
 };
 use crate::interfaces::*;
-use crate::runtime;
 use crate::variant;
 use ctopc_core::model::{
     ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
@@ -31,7 +30,7 @@ impl OpcServer {
     /// How long a synchronous call waits for the data source at most.
     fn sync_wait_limit(&self) -> Duration {
         let source_ms = self.ctx.runtime.lock().engine.config().source_timeout_ms;
-        Duration::from_millis(u64::from(source_ms)) + runtime::SYNC_WAIT_MARGIN
+        Duration::from_millis(u64::from(source_ms)) + ctopc_runtime::SYNC_WAIT_MARGIN
     }
 
     /// Waits for a pending synchronous operation; `None` after abandoning it on timeout.
@@ -86,14 +85,14 @@ impl OpcServer {
 
     /// The write audit's lines of an IOPCItemIO::WriteVQT (`crate::ops`).
     fn audit_item_io(&self, items: &[(&str, ItemVqt)], results: &[Result<(), OpcError>]) {
-        let ops = &self.ctx.runtime.ops;
+        let ops = &self.ctx.runtime.clients;
         if !ops.auditing() {
             return;
         }
         let keys: Vec<(Option<&str>, Option<u32>)> =
             items.iter().map(|(id, _)| (Some(*id), None)).collect();
         let values: Vec<ItemVqt> = items.iter().map(|(_, v)| v.clone()).collect();
-        let call = crate::ops::WriteCall {
+        let call = ctopc_runtime::clients::WriteCall {
             session: self.handle,
             method: "IOPCItemIO::WriteVQT",
             group: None,
@@ -159,7 +158,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pptimes: *mut *mut FILETIME,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::ItemIoRead,
         );
@@ -221,7 +220,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pvqt: *const OPCITEMVQT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = crate::ops::timed(
+        let _t = ctopc_runtime::clients::timed(
             &self.ctx.runtime.metrics,
             ctopc_core::metrics::Method::ItemIoWriteVqt,
         );

@@ -8,7 +8,7 @@
 //! addresses are served (`ctopc_core::metrics::check_address`; anything else is refused
 //! with an error in the log). The thread holds the runtime weakly and ends with it.
 
-use crate::runtime::Runtime;
+use crate::Runtime;
 use ctopc_core::metrics::{self, Gauges};
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};

@@ -1,6 +1,7 @@
-//! Operations state of one runtime: the write audit's switch and the client names it logs
-//! (IOPCCommon::SetClientName), and the watch over each client's callbacks
-//! (`ctopc_core::ops::CallbackWatch`, used by `crate::runtime`). The audit line format is
+//! What the runtime keeps of each client session: its name (IOPCCommon::SetClientName),
+//! which the write audit logs, the audit's switch, and the watch over the session's
+//! callbacks (`ctopc_core::ops::CallbackWatch` decides; [`crate::Runtime`] tells it when a
+//! callback is queued, started and finished). The audit line format is
 //! `ctopc_core::audit`'s; this module only gathers the record's parts and logs the lines
 //! under the target [`audit::TARGET`](ctopc_core::audit::TARGET).
 //!
@@ -17,7 +18,7 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Mutex;
 
 /// See the module doc.
-pub struct Ops {
+pub struct Clients {
     audit_writes: AtomicBool,
     names: Mutex<HashMap<SessionHandle, String>>,
     callback_timeout_ms: AtomicU32,
@@ -32,10 +33,10 @@ struct Watch {
     groups: BTreeSet<GroupHandle>,
 }
 
-impl Default for Ops {
+impl Default for Clients {
     fn default() -> Self {
         let c = OpsConfig::default();
-        Ops {
+        Clients {
             audit_writes: AtomicBool::new(c.audit_writes),
             names: Mutex::default(),
             callback_timeout_ms: AtomicU32::new(c.callback_timeout_ms),
@@ -59,7 +60,7 @@ pub struct WriteCall<'a> {
     pub cancel_id: Option<u32>,
 }
 
-impl Ops {
+impl Clients {
     /// Applies the configuration (at start).
     pub fn configure(&self, config: &OpsConfig) {
         self.audit_writes
@@ -98,7 +99,7 @@ impl Ops {
         })
     }
 
-    /// The watch of a session that has one (made by [`Ops::admit`]; a session that has
+    /// The watch of a session that has one (made by [`Clients::admit`]; a session that has
     /// ended has none, so that jobs its worker still runs leave nothing behind).
     fn existing<R: Default>(&self, session: SessionHandle, f: impl FnOnce(&mut Watch) -> R) -> R {
         let mut g = self.watches.lock().unwrap_or_else(|p| p.into_inner());
