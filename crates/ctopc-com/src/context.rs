@@ -55,6 +55,12 @@ pub struct Context {
 }
 
 impl Context {
+    /// The prologue of every timed COM method: the call's duration goes into the metrics
+    /// when the returned guard drops (`let _t = self.ctx.timed(Method::AddItems);`).
+    pub fn timed(&self, method: ctopc_core::metrics::Method) -> ctopc_runtime::clients::Timed<'_> {
+        ctopc_runtime::clients::timed(&self.runtime.metrics, method)
+    }
+
     /// The state the configuration and the data source imply: NOCONFIG when there is no
     /// configuration (`no_config_reason`), TEST when the backend simulates current data
     /// ([`Backend::is_simulation`](ctopc_core::source::Backend::is_simulation)), else RUNNING.

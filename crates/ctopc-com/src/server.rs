@@ -47,6 +47,7 @@ use crate::lifetime::ObjectGuard;
 use ctopc_core::diagnostics::browse::Cursor;
 use ctopc_core::lang::Lang;
 use ctopc_core::limits;
+use ctopc_core::metrics::Method;
 use ctopc_core::model::SessionHandle;
 use ctopc_core::OpcError;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -232,10 +233,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
         riid: *const GUID,
         unk: *mut Option<IUnknown>,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AddGroup,
-        );
+        let _t = self.ctx.timed(Method::AddGroup);
         let args = groups::AddGroupArgs {
             name,
             active,
@@ -277,10 +275,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn GetStatus(&self, pstatus: *mut *mut OPCSERVERSTATUS) -> windows::core::Result<()> {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::GetStatus,
-        );
+        let _t = self.ctx.timed(Method::GetStatus);
         // Cleared first (NULL), before any allocation can fail.
         // SAFETY: `pstatus` is this method's [out] parameter.
         let out = unsafe { OutArray::new(pstatus) }?;
@@ -325,10 +320,7 @@ impl IOPCServer_Impl for OpcServer_Impl {
     }
 
     unsafe fn RemoveGroup(&self, server_group: u32, force: BOOL) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::RemoveGroup,
-        );
+        let _t = self.ctx.timed(Method::RemoveGroup);
         abi::hresult(self.remove_group(server_group, force))
     }
 

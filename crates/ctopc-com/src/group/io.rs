@@ -34,6 +34,7 @@ use crate::abi::{
 use crate::interfaces::*;
 use crate::variant;
 use crate::{clock, error};
+use ctopc_core::metrics::Method;
 use ctopc_core::model::{
     AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome,
     SyncResult, WriteResults,
@@ -452,10 +453,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         pp_values: *mut *mut OPCITEMSTATE,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::SyncRead,
-        );
+        let _t = self.ctx.timed(Method::SyncRead);
         abi::hresult(self.read_impl(source, count, ph_server, pp_values, pp_errors))
     }
 
@@ -466,10 +464,7 @@ impl IOPCSyncIO_Impl for Group_Impl {
         p_values: *const VARIANT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::SyncWrite,
-        );
+        let _t = self.ctx.timed(Method::SyncWrite);
         abi::hresult(self.write_impl(count, ph_server, p_values, pp_errors))
     }
 }
@@ -568,10 +563,7 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         pp_times: *mut *mut FILETIME,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::ReadMaxAge,
-        );
+        let _t = self.ctx.timed(Method::ReadMaxAge);
         abi::hresult(self.read_max_age_impl(
             count,
             ph_server,
@@ -590,10 +582,7 @@ impl IOPCSyncIO2_Impl for Group_Impl {
         p_vqt: *const OPCITEMVQT,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::WriteVqt,
-        );
+        let _t = self.ctx.timed(Method::WriteVqt);
         abi::hresult(self.write_vqt_impl(count, ph_server, p_vqt, pp_errors))
     }
 }
@@ -696,10 +685,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AsyncRead,
-        );
+        let _t = self.ctx.timed(Method::AsyncRead);
         abi::hresult(self.async_read_impl(count, ph_server, transaction, p_cancel, pp_errors))
     }
 
@@ -712,10 +698,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AsyncWrite,
-        );
+        let _t = self.ctx.timed(Method::AsyncWrite);
         abi::hresult(self.async_write_impl(
             count,
             ph_server,
@@ -732,10 +715,7 @@ impl IOPCAsyncIO2_Impl for Group_Impl {
         transaction: u32,
         p_cancel: *mut u32,
     ) -> windows::core::Result<()> {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::Refresh2,
-        );
+        let _t = self.ctx.timed(Method::Refresh2);
         // SAFETY: the method's [out] parameter.
         unsafe { abi::clear_outs((p_cancel,)) };
         let source = data_source(source)?;
@@ -844,10 +824,7 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AsyncReadMaxAge,
-        );
+        let _t = self.ctx.timed(Method::AsyncReadMaxAge);
         abi::hresult(self.async_read_max_age_impl(
             count,
             ph_server,
@@ -867,10 +844,7 @@ impl IOPCAsyncIO3_Impl for Group_Impl {
         p_cancel: *mut u32,
         pp_errors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AsyncWriteVqt,
-        );
+        let _t = self.ctx.timed(Method::AsyncWriteVqt);
         abi::hresult(self.async_write_vqt_impl(
             count,
             ph_server,

@@ -12,6 +12,7 @@ use crate::interfaces::*;
 use crate::lifetime::ObjectGuard;
 use crate::{error, variant};
 use ctopc_core::limits::{self, TextLimit};
+use ctopc_core::metrics::Method;
 use ctopc_core::model::{ItemAttributes, ItemDefinition, ItemResult};
 use ctopc_core::namespace::EuInfo;
 use ctopc_core::value::ArrayValue;
@@ -171,10 +172,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         ppaddresults: *mut *mut OPCITEMRESULT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::AddItems,
-        );
+        let _t = self.ctx.timed(Method::AddItems);
         // SAFETY: this method's [out] parameters.
         unsafe { abi::clear_outs((ppaddresults, pperrors)) };
         let results = check!(OutArray::new(ppaddresults));
@@ -236,10 +234,7 @@ impl IOPCItemMgt_Impl for Group_Impl {
         phserver: *const OPCHANDLE,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::RemoveItems,
-        );
+        let _t = self.ctx.timed(Method::RemoveItems);
         let errors = check!(OutArray::new(pperrors));
         let handles = check!(in_array(phserver, dwcount));
         self.per_item(handles.len(), errors, |e, now, g| {

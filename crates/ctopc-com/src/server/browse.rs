@@ -30,6 +30,7 @@ use ctopc_core::browse::{
 };
 use ctopc_core::diagnostics::browse::browse;
 use ctopc_core::limits;
+use ctopc_core::metrics::Method;
 use ctopc_core::{OpcError, OpcResult};
 use std::sync::Arc;
 use windows::core::{BOOL, HRESULT, PCWSTR, PWSTR};
@@ -73,10 +74,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         access_rights_filter: u32,
         ppenum: *mut Option<IEnumString>,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::BrowseOpcItemIds,
-        );
+        let _t = self.ctx.timed(Method::BrowseOpcItemIds);
         clear(ppenum, None);
         abi::hresult((|| {
             nonnull(ppenum)?;
@@ -210,10 +208,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
         pcount: *mut u32,
         ppelements: *mut *mut OPCBROWSEELEMENT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::Browse,
-        );
+        let _t = self.ctx.timed(Method::Browse);
         clear_outs((pmore, pcount, ppelements));
         abi::hresult((|| {
             nonnull(pcontinuation_point)?;

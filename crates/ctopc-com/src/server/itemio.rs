@@ -17,6 +17,7 @@ use crate::abi::{
 };
 use crate::interfaces::*;
 use crate::variant;
+use ctopc_core::metrics::Method;
 use ctopc_core::model::{
     ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
 };
@@ -158,10 +159,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pptimes: *mut *mut FILETIME,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::ItemIoRead,
-        );
+        let _t = self.ctx.timed(Method::ItemIoRead);
         clear_outs((ppvalues, ppqualities, pptimes, pperrors));
         abi::hresult((|| {
             nonnull(ppvalues)?;
@@ -220,10 +218,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
         pvqt: *const OPCITEMVQT,
         pperrors: *mut *mut HRESULT,
     ) -> HRESULT {
-        let _t = ctopc_runtime::clients::timed(
-            &self.ctx.runtime.metrics,
-            ctopc_core::metrics::Method::ItemIoWriteVqt,
-        );
+        let _t = self.ctx.timed(Method::ItemIoWriteVqt);
         clear(pperrors, std::ptr::null_mut());
         abi::hresult((|| {
             nonnull(pperrors)?;
