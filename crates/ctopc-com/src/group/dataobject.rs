@@ -34,7 +34,7 @@ use ctopc_core::stream::{self, DataFormat, StreamItem};
 use ctopc_core::OpcError;
 use std::collections::HashMap;
 use std::ffi::c_void;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use windows::core::{IUnknown, Interface, BOOL, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{
@@ -125,6 +125,9 @@ pub struct Da10Sinks {
     data: u16,
     data_time: u16,
     write: u16,
+    /// Set at the group's first DA 1.0a advise or IOPCAsyncIO transaction: until then
+    /// every event is IOPCDataCallback's, and routing it takes no lock.
+    used: AtomicBool,
     state: Mutex<State>,
 }
 
@@ -142,6 +145,7 @@ impl Default for Da10Sinks {
             data: clipboard_format(FORMAT_DATA),
             data_time: clipboard_format(FORMAT_DATATIME),
             write: clipboard_format(FORMAT_WRITECOMPLETE),
+            used: AtomicBool::new(false),
             state: Mutex::new(State::default()),
         }
     }
@@ -193,6 +197,7 @@ impl Da10Sinks {
     /// under the engine lock, before the completion can be dispatched).
     pub fn start_txn(&self, transaction: u32, connection: u32) {
         if transaction != 0 {
+            self.used.store(true, Ordering::Release);
             self.lock().txns.insert(transaction, connection);
         }
     }
@@ -203,6 +208,7 @@ impl Da10Sinks {
     }
 
     fn advise(&self, kind: Kind, advf: u32, sink: RawAdviseSink) -> Result<u32, HRESULT> {
+        self.used.store(true, Ordering::Release);
         let mut s = self.lock();
         if s.advises.iter().any(|a| a.kind == kind) {
             return Err(CONNECT_E_ADVISELIMIT);
@@ -251,6 +257,9 @@ impl Da10Sinks {
     /// The sinks an event goes to, with their kinds: `None` when the event is not the
     /// DA 1.0a side's (it goes to IOPCDataCallback only).
     fn route(&self, event: &Event) -> Option<(u32, Vec<(Kind, RawAdviseSink)>)> {
+        if !self.used.load(Ordering::Acquire) {
+            return None;
+        }
         let mut s = self.lock();
         let cancel = event.cancel_id();
         if cancel != 0 {
