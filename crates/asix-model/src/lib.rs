@@ -29,7 +29,7 @@ pub use config::{
     DefaultLanguage, LogLevel, ServerOptions, ServerSelection, BASIC_CHANNEL,
 };
 pub use format::FormatSpec;
-pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarItem};
+pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, ItemKey, Suffix, VarItem};
 pub use namespace::{
     AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
 };
