@@ -31,7 +31,8 @@ pub use config::{
 pub use format::FormatSpec;
 pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, ItemKey, Suffix, VarItem};
 pub use namespace::{
-    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
+    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, LimitProps, LiveItem,
+    PropertyAttributes,
 };
 pub use quality_rules::{
     apply_quality_rules, apply_quality_rules_with, check_write_value, RuleDef, RuleOptions,
