@@ -24,9 +24,9 @@ use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
 use asix_model::AsixNamespace;
+use asix_model::ItemKey;
 use asix_net::backend::{AsixBackend, RawId, RawOutput, VariableSource};
 use asix_net::inproc::{InProcessSim, PlantSource};
-use asix_net::ItemKey;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::model::{
     Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SetGroupState,

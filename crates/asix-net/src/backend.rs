@@ -41,8 +41,8 @@ use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId,
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
 
-use crate::client::ItemKey;
 use crate::pipeline::{self, Resolution, Treatment};
+use asix_model::ItemKey;
 
 /// Identifies one raw device read or write of a [`VariableSource`] (chosen by the adapter).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -26,7 +26,7 @@ use asix_model::{check_write_value, Limit, RuleDef, RuleOptions, Variable};
 use ctopc_core::model::datasource::SourceItem;
 use ctopc_core::{OpcError, Quality, Value, Vqt};
 
-use crate::client::ItemKey;
+use asix_model::ItemKey;
 
 /// The attribute of the variable database naming a variable's asix channel.
 pub const CHANNEL_ATTRIBUTE: &str = "Channel";

@@ -10,9 +10,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
+use asix_model::ItemKey;
 use asix_model::{parse_config, AsixNamespace};
 use asix_net::backend::{AsixBackend, RawId, RawOutput, VariableSource};
-use asix_net::ItemKey;
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, ItemVqt,
     SourceRequest, SyncOutcome,

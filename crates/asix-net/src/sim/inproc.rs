@@ -15,9 +15,9 @@
 //! delayed.
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
-use crate::client::ItemKey;
 use crate::sim::plant::{numeric, Plant};
 use asix_model::AsixNamespace;
+use asix_model::ItemKey;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::{OpcError, Timestamp, Vqt};
 use std::collections::HashMap;

@@ -34,7 +34,8 @@ pub struct ItemResult {
     pub access_rights: u32,
 }
 
-/// OPCITEMATTRIBUTES (IEnumOPCItemAttributes).
+/// OPCITEMATTRIBUTES (IEnumOPCItemAttributes): an item as its group holds it. The values
+/// behind its item properties are [`crate::namespace::PropertyAttributes`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ItemAttributes {
     pub access_path: String,

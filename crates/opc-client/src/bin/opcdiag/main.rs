@@ -43,7 +43,13 @@ fn main() -> ExitCode {
 
 #[cfg(windows)]
 fn run(global: cli::Global, command: cli::Command) -> ExitCode {
-    match win::run(&global, command) {
+    let result = match command {
+        cli::Command::Demo { for_secs } => {
+            win::Session::connect(&global).and_then(|s| demo::run(&s, for_secs))
+        }
+        command => win::run(&global, command),
+    };
+    match result {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("opcdiag: error: {e}");

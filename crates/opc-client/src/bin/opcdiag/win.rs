@@ -71,7 +71,8 @@ pub struct Session {
     _com: ComThread,
 }
 
-/// Runs a command; `Err` is a failure to report (exit code 1).
+/// Runs a command but `demo` (main runs it through `demo::run`, which builds on this
+/// module); `Err` is a failure to report (exit code 1).
 pub fn run(global: &Global, command: Command) -> Result<u8, String> {
     if command == Command::Servers {
         return servers();
@@ -106,7 +107,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
             count,
             path,
         } => s.subscribe(&items, rate_ms, for_secs, count, &path),
-        Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
+        Command::Demo { .. } => Err("demo runs from main".into()),
         Command::Servers => servers(),
         Command::Doctor(_) => Err("doctor runs without a session".into()),
     }
