@@ -11,8 +11,8 @@
 //!   [`ThreadHook`] run first on every thread the runtime starts (COM: join the MTA).
 //! - [`clients`]: client names, the write audit and each client's callback watch
 //!   (`ctopc_core::ops::CallbackWatch` decides; this keeps it per session).
-//! - [`metrics_http`]: the metrics endpoint, the only place that knows HTTP and the
-//!   Prometheus text format.
+//! - [`metrics_http`] and [`prometheus`]: the metrics endpoint and the text it serves,
+//!   the only places that know HTTP and the Prometheus text format.
 //!
 //! No `windows` dependency and no `unsafe`: built and tested natively.
 
@@ -22,6 +22,7 @@ pub mod clients;
 pub mod clock;
 pub mod frontend;
 pub mod metrics_http;
+pub mod prometheus;
 mod runtime;
 pub mod start;
 
