@@ -9,11 +9,11 @@
 
 use ctopc_com::client::server_list::{opc_enum_guids, ServerBrowser};
 use ctopc_com::interfaces::{IOPCEnumGUID, IOPCServerList2};
-use ctopc_com::registration::{
-    self, guid_string, Key, View, CATID_OPC_DA_SERVER_10, CATID_OPC_DA_SERVER_20,
+use ctopc_com::registry;
+use ctopc_registration::{
+    self as registration, guid_string, Key, View, CATID_OPC_DA_SERVER_10, CATID_OPC_DA_SERVER_20,
     CATID_OPC_DA_SERVER_30, CLSID_SERVERCTOPC,
 };
-use ctopc_com::registry;
 use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, ComThread};
 use windows::core::GUID;

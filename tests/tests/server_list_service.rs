@@ -8,7 +8,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use ctopc_com::client::server_list::ServerBrowser;
-use ctopc_com::registration::{
+use ctopc_registration::{
     guid_string, APPID_SERVER_LIST, CATID_OPC_DA_SERVER_20, CLSID_SERVERCTOPC,
 };
 use e2e_tests::start::StartRetrying;

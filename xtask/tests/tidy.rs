@@ -14,8 +14,8 @@
 //! - no `windows::core::Error::new` outside `ctopc_com::error` (it aborts under Wine):
 //!   clippy's `disallowed_methods` (clippy.toml).
 //!
-//! What is left: the core has no `windows` dependency (a manifest, not code), and the lint
-//! configuration itself is in place (a member that set `[lints]` of its own, or dropped
+//! What is left: the core and the registration data have no `windows` dependency (a
+//! manifest, not code), and the lint configuration itself is in place (a member that set `[lints]` of its own, or dropped
 //! it, would silently escape every rule above).
 
 use std::path::{Path, PathBuf};
@@ -71,6 +71,18 @@ fn the_core_forbids_unsafe_and_does_not_depend_on_windows() {
 }
 
 #[test]
+fn the_registration_data_does_not_depend_on_windows() {
+    let manifest = read("crates/registration/Cargo.toml");
+    assert!(
+        !manifest
+            .lines()
+            .any(|l| l.trim_start().starts_with("windows")),
+        "ctopc-registration must not depend on windows crates"
+    );
+    assert_eq!(table(&manifest, "lints"), ["workspace = true"]);
+}
+
+#[test]
 fn the_workspace_lints_forbid_unsafe_and_deny_the_com_rules() {
     let manifest = read("Cargo.toml");
     assert!(table(&manifest, "workspace.lints.rust").contains(&r#"unsafe_code = "forbid""#.into()));
@@ -93,6 +105,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
     let inheriting = [
         "crates/ctopc-core",
         "crates/asix-model",
+        "crates/registration",
         "crates/asix-net",
         "crates/server",
         "crates/opc-client",

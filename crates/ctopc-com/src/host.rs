@@ -8,7 +8,6 @@
 
 use crate::context::{Context, Setup};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
-use crate::registration;
 use crate::registry::{self, ServerRegistration};
 use crate::runtime::Runtime;
 use crate::server;
@@ -18,6 +17,7 @@ use ctopc_core::model::Engine;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::source::{Backend, Wake};
 use ctopc_core::Lang;
+use ctopc_registration as registration;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -33,7 +33,7 @@ use windows::Win32::System::Console::SetConsoleCtrlHandler;
 
 /// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
 pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(registration::CLSID_SERVERCTOPC);
-pub use crate::registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
+pub use ctopc_registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
 /// How long a server started by COM waits for its first client before it exits.
 pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 /// How long the server stays up after its last client has gone, so that a client

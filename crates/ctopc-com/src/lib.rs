@@ -2,13 +2,11 @@
 //! objects over `ctopc-core`, registration and the server host. Every `unsafe` block of
 //! the project is in this crate, each with a `// SAFETY:` comment.
 //!
-//! Everything but [`registration`] is Windows-only; `registration` (the registry entries
-//! as data) is plain Rust, compiled and tested on every host, so that it can be tested
-//! natively and reused by an installer build.
+//! Windows-only; the registry entries it writes are data of the portable crate
+//! `ctopc-registration` (crates/registration), tested natively and read by the MSI build.
 
 #[cfg(windows)]
 pub mod abi;
-pub mod catalog;
 #[cfg(windows)]
 pub mod client;
 #[cfg(windows)]
@@ -37,7 +35,6 @@ pub mod lifetime;
 pub mod metrics_http;
 #[cfg(windows)]
 pub mod ops;
-pub mod registration;
 #[cfg(windows)]
 pub mod registry;
 #[cfg(windows)]

@@ -1,10 +1,10 @@
 //! Registration of an out-of-process COM server: applies the keys and tree deletions that
-//! [`crate::registration`] computes (CLSID with LocalServer32, AppID, Implemented
+//! [`ctopc_registration`] computes (CLSID with LocalServer32, AppID, Implemented
 //! Categories and the category definitions, ProgID with CurVer and the version-dependent
 //! ProgID, the legacy `HKCR\<ProgID>\OPC` key), in both registry views.
 //! Both directions are idempotent; unregistering what is not there succeeds.
 
-pub use crate::registration::{Category, Key, ServerRegistration, View};
+pub use ctopc_registration::{Category, Key, ServerRegistration, View};
 use windows::core::{GUID, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{ERROR_FILE_NOT_FOUND, ERROR_SUCCESS, WIN32_ERROR};
 use windows::Win32::System::Registry::{
@@ -14,7 +14,7 @@ use windows::Win32::System::Registry::{
 };
 
 pub fn guid_string(g: &GUID) -> String {
-    crate::registration::guid_string(g.to_u128())
+    ctopc_registration::guid_string(g.to_u128())
 }
 
 fn view_flag(view: View) -> REG_SAM_FLAGS {
@@ -150,7 +150,7 @@ pub fn delete_trees(trees: &[(View, String)]) -> windows::core::Result<()> {
 #[cfg(test)]
 mod tests {
     use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
-    use crate::registration::{CATID_OPC_DA_SERVER_20, CATID_OPC_DA_SERVER_30};
+    use ctopc_registration::{CATID_OPC_DA_SERVER_20, CATID_OPC_DA_SERVER_30};
     use windows::core::GUID;
 
     #[test]

@@ -2,7 +2,8 @@
 //! `OpcServerList.exe` (crate `crates/serverlist`): `IOPCServerList` and `IOPCServerList2`
 //! over every OPC server of the machine, read from **both registry views**
 //! (`HKCR\CLSID\{..}\Implemented Categories` with `KEY_WOW64_64KEY` and
-//! `KEY_WOW64_32KEY`), merged and filtered by the plain-Rust [`crate::catalog`].
+//! `KEY_WOW64_32KEY`), merged and filtered by the plain-Rust
+//! [`ctopc_registration::catalog`].
 //!
 //! Registration ([`register`], [`unregister`]) never replaces a server browser that is
 //! not ours (the OPC Foundation's OpcEnum): the keys are `registration::server_list`,
@@ -15,7 +16,6 @@
 //! is listed at once).
 
 use crate::abi::{self, ComResult};
-use crate::catalog::{self, parse_guid, Catalog, ClassEntry};
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
@@ -28,11 +28,12 @@ use crate::interfaces::{
     IOPCServerList_Impl,
 };
 use crate::lifetime::{ExitReason, Lifetime, ObjectGuard, StopSignal};
-use crate::registration::{self, View, VIEWS};
 use crate::registry;
 use crate::service;
 use ctopc_core::limits::TextLimit;
 use ctopc_core::OpcError;
+use ctopc_registration::catalog::{self, parse_guid, Catalog, ClassEntry};
+use ctopc_registration::{self as registration, View, VIEWS};
 use std::sync::Arc;
 use windows::core::{implement, IUnknown, Interface, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{

@@ -4,7 +4,7 @@
 
 use super::take_wstr;
 use crate::interfaces::{IOPCEnumGUID, IOPCServerList, IOPCServerList2};
-use crate::registration::CLSID_OPC_SERVER_LIST;
+use ctopc_registration::CLSID_OPC_SERVER_LIST;
 use windows::core::{Interface, GUID, HSTRING, PWSTR};
 use windows::Win32::Foundation::S_OK;
 use windows::Win32::System::Com::{

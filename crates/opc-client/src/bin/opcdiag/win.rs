@@ -116,7 +116,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
 /// component categories manager.
 fn servers() -> Result<u8, String> {
     use ctopc_com::client::server_list::{classes_by_category_manager, ServerBrowser};
-    use ctopc_com::registration::{guid_string, VIEWS};
+    use ctopc_registration::{guid_string, VIEWS};
     use windows::core::GUID;
     let _com = ComThread::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
     let categories = [
