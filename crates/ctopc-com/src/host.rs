@@ -8,9 +8,9 @@
 
 use crate::context::{Context, Setup};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
-use crate::registry::{self, ServerRegistration};
 use crate::runtime::Runtime;
 use crate::server;
+use crate::winreg::{self, ServerRegistration};
 use ctopc_core::diagnostics::backend::DiagBackend;
 use ctopc_core::diagnostics::{Board, DiagNamespace, Sampler};
 use ctopc_core::model::Engine;
@@ -83,10 +83,10 @@ fn with_registration<R>(
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
-    with_registration(None, registry::register)??;
+    with_registration(None, winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} ({})",
-        registry::guid_string(&CLSID_SERVERCTOPC)
+        winreg::guid_string(&CLSID_SERVERCTOPC)
     );
     Ok(())
 }
@@ -98,7 +98,7 @@ pub fn register_service() -> windows::core::Result<()> {
     let exe = exe_path()?;
     crate::service::install(std::path::Path::new(&exe))
         .map_err(|e| crate::error::error(E_FAIL, &e))?;
-    with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
+    with_registration(Some(crate::service::SERVICE_NAME), winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
         crate::service::SERVICE_NAME
@@ -109,7 +109,7 @@ pub fn register_service() -> windows::core::Result<()> {
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
     let _com = ComInit::mta()?;
-    with_registration(None, registry::unregister)??;
+    with_registration(None, winreg::unregister)??;
     crate::service::uninstall().map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())

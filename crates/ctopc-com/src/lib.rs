@@ -36,8 +36,6 @@ pub mod metrics_http;
 #[cfg(windows)]
 pub mod ops;
 #[cfg(windows)]
-pub mod registry;
-#[cfg(windows)]
 pub mod runtime;
 #[cfg(windows)]
 pub mod server;
@@ -49,3 +47,5 @@ pub mod service;
 pub mod variant;
 #[cfg(windows)]
 pub mod wine_keepalive;
+#[cfg(windows)]
+pub mod winreg;

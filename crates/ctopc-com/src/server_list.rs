@@ -28,8 +28,8 @@ use crate::interfaces::{
     IOPCServerList_Impl,
 };
 use crate::lifetime::{ExitReason, Lifetime, ObjectGuard, StopSignal};
-use crate::registry;
 use crate::service;
+use crate::winreg;
 use ctopc_core::limits::TextLimit;
 use ctopc_core::OpcError;
 use ctopc_registration::catalog::{self, parse_guid, Catalog, ClassEntry};
@@ -607,14 +607,14 @@ fn register_as(service: Option<&str>) -> ComResult<()> {
         }
     }
     let keys = our_registration(service, |r| registration::server_list_keys(r, &foreign))?;
-    registry::write_keys(&keys)?;
+    winreg::write_keys(&keys)?;
     if foreign.len() == VIEWS.len() {
         println!("OpcServerList: not registered (another server browser serves both views)");
     } else {
         println!(
             "OpcServerList: registered {} ({})",
             registration::SERVER_LIST_PROGID_VERSIONED,
-            registry::guid_string(&CLSID_OPC_SERVER_LIST)
+            winreg::guid_string(&CLSID_OPC_SERVER_LIST)
         );
     }
     Ok(())
@@ -634,7 +634,7 @@ pub fn unregister() -> ComResult<()> {
     let trees = our_registration(None, |r| {
         registration::server_list_trees(r, &ours, &foreign)
     })?;
-    registry::delete_trees(&trees)?;
+    winreg::delete_trees(&trees)?;
     service::uninstall_as(&service::SERVER_LIST).map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("OpcServerList: unregistered ours");
     Ok(())

@@ -1,7 +1,7 @@
 //! What an out-of-process COM server writes into the registry, as data: the list of keys
 //! and values ([`ServerRegistration::keys`]) and of the trees to delete
 //! ([`ServerRegistration::trees`]), computed without Windows and tested natively.
-//! ctopc-com's `registry.rs` applies them with the Win32 registry calls (`/RegServer`,
+//! ctopc-com's `winreg.rs` applies them with the Win32 registry calls (`/RegServer`,
 //! `/Service`, `/UnregServer`); the MSI build (`xtask/src/msi.rs`) generates its Registry
 //! table from the same list, and `opcdiag doctor` checks the machine against it.
 //!

@@ -29,7 +29,7 @@ use ctopc_com::client::ComThread;
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::interfaces::*;
 use ctopc_com::lifetime::{Lifetime, ObjectGuard};
-use ctopc_com::registry::{self, ServerRegistration};
+use ctopc_com::winreg::{self, ServerRegistration};
 use ctopc_com::{clock, error};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
@@ -1025,10 +1025,10 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
     let _com = ComThread::mta()?;
-    with_registration(registry::register)??;
+    with_registration(winreg::register)??;
     println!(
         "marshal-probe: registered {PROGID} ({})",
-        registry::guid_string(&CLSID_MARSHAL_PROBE)
+        winreg::guid_string(&CLSID_MARSHAL_PROBE)
     );
     Ok(())
 }
@@ -1036,7 +1036,7 @@ pub fn register() -> windows::core::Result<()> {
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
     let _com = ComThread::mta()?;
-    with_registration(registry::unregister)??;
+    with_registration(winreg::unregister)??;
     println!("marshal-probe: unregistered {PROGID}");
     Ok(())
 }
