@@ -20,7 +20,7 @@ use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, connect, interfaces::*, Apartment, Server};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use windows::core::HRESULT;
@@ -38,7 +38,7 @@ fn writes() -> MutexGuard<'static, ()> {
 }
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     /// SETPOINT, MODE.

@@ -16,7 +16,7 @@ use ctopc_core::{Value, VarType};
 use e2e_tests::hostile::*;
 use e2e_tests::interfaces::*;
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{connect, ComThread, PROGID};
+use e2e_tests::{connect, Apartment, PROGID};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -181,7 +181,7 @@ fn nulls_inside_structures_fail_per_item() {
 #[test]
 fn invalid_and_foreign_handles_fail_per_item() {
     let (_com, server) = connect();
-    let (com2, other) = (ComThread::mta().unwrap(), Server::connect(PROGID).unwrap());
+    let (com2, other) = (Apartment::mta().unwrap(), Server::connect(PROGID).unwrap());
     let (mine, my_group) = group(&server, "mine");
     let (theirs, their_group) = group(&other, "theirs");
     let their_items = add(&theirs, &[SETPOINT, LEVEL]);

@@ -15,7 +15,7 @@ use ctopc_registration::{
     CATID_OPC_DA_SERVER_30, CLSID_SERVERCTOPC,
 };
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{artifact, ComThread};
+use e2e_tests::{artifact, Apartment};
 use windows::core::GUID;
 use windows::Win32::Foundation::{CO_E_CLASSSTRING, REGDB_E_CLASSNOTREG, S_FALSE, S_OK};
 
@@ -24,8 +24,8 @@ const DA20: GUID = GUID::from_u128(CATID_OPC_DA_SERVER_20);
 const DA30: GUID = GUID::from_u128(CATID_OPC_DA_SERVER_30);
 const OURS: GUID = GUID::from_u128(CLSID_SERVERCTOPC);
 
-fn browser() -> (ComThread, ServerBrowser) {
-    let com = ComThread::mta().expect("CoInitializeEx");
+fn browser() -> (Apartment, ServerBrowser) {
+    let com = Apartment::mta().expect("CoInitializeEx");
     let b = ServerBrowser::connect().expect("CoCreateInstance(OPC.ServerList.1)");
     (com, b)
 }

@@ -15,7 +15,7 @@ use windows::Win32::System::Variant::VARIANT;
 const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
 
-fn english() -> (ctopc_com::client::ComThread, Server) {
+fn english() -> (ctopc_com::apartment::Apartment, Server) {
     let (com, server) = connect();
     server.set_locale(LCID_ENGLISH_US).unwrap();
     (com, server)

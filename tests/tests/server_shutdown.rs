@@ -218,7 +218,7 @@ fn wait_exit(child: &mut std::process::Child, limit: Duration) -> Option<std::pr
 #[test]
 fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     use windows::Win32::System::Threading::CREATE_NEW_CONSOLE;
-    let _com = ctopc_com::client::ComThread::mta().unwrap();
+    let _com = ctopc_com::apartment::Apartment::mta().unwrap();
     wait_for_no_other_server();
     let since = now();
     let ini = std::env::temp_dir().join(format!("ServerCTOPC-ctrl-c-{}.ini", std::process::id()));

@@ -7,40 +7,8 @@ use std::ffi::c_void;
 use windows::core::{IUnknown, Interface, HSTRING, PWSTR};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{
-    CLSIDFromProgID, CoCreateInstance, CoInitializeEx, CoTaskMemFree, CoUninitialize,
-    CLSCTX_LOCAL_SERVER, COINIT_APARTMENTTHREADED, COINIT_MULTITHREADED,
+    CLSIDFromProgID, CoCreateInstance, CoTaskMemFree, CLSCTX_LOCAL_SERVER,
 };
-
-/// COM initialised on this thread for the lifetime of the value.
-pub struct ComThread(());
-
-impl ComThread {
-    /// Joins the multithreaded apartment. Under Wine, the first time in the process, keeps
-    /// the sinks' interfaces registered and the MTA up for the process's life
-    /// (`wine_keepalive`: Wine's combase can hang when it unregisters one).
-    pub fn mta() -> windows::core::Result<ComThread> {
-        // SAFETY: paired with CoUninitialize in Drop, on this thread.
-        unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
-        if let Err(e) = crate::wine_keepalive::keep_registered(crate::wine_keepalive::Role::Client)
-        {
-            tracing::warn!("{e}");
-        }
-        Ok(ComThread(()))
-    }
-    /// Makes this thread a single-threaded apartment (it must pump messages to get callbacks).
-    pub fn sta() -> windows::core::Result<ComThread> {
-        // SAFETY: as above.
-        unsafe { CoInitializeEx(None, COINIT_APARTMENTTHREADED).ok()? };
-        Ok(ComThread(()))
-    }
-}
-
-impl Drop for ComThread {
-    fn drop(&mut self) {
-        // SAFETY: this thread initialised COM in the constructor.
-        unsafe { CoUninitialize() };
-    }
-}
 
 /// Takes ownership of a CoTaskMem string: returns its text and frees it.
 pub fn take_wstr(p: PWSTR) -> Option<String> {
@@ -100,7 +68,7 @@ impl Server {
     /// IOPCServer and IOPCCommon.
     pub fn connect(progid: &str) -> windows::core::Result<Server> {
         let progid = HSTRING::from(progid);
-        // SAFETY: valid string; COM is initialised by the caller (ComThread).
+        // SAFETY: valid string; COM is initialised by the caller (`apartment::Apartment`).
         let clsid = unsafe { CLSIDFromProgID(&progid)? };
         // SAFETY: as above.
         let unknown: IUnknown = unsafe { CoCreateInstance(&clsid, None, CLSCTX_LOCAL_SERVER)? };

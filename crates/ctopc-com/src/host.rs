@@ -6,6 +6,7 @@
 //! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
 //! the NT service's control handler (`service::run`) trigger.
 
+use crate::apartment::Apartment;
 use crate::context::{Context, Setup};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
 use crate::runtime::Runtime;
@@ -25,9 +26,8 @@ use windows::core::{BOOL, GUID};
 use windows::Win32::Foundation::E_FAIL;
 use windows::Win32::Globalization::{GetSystemDefaultLCID, GetUserDefaultUILanguage};
 use windows::Win32::System::Com::{
-    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
-    CoUninitialize, CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE,
-    RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
+    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CLSCTX_LOCAL_SERVER,
+    EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
 };
 use windows::Win32::System::Console::SetConsoleCtrlHandler;
 
@@ -48,24 +48,6 @@ pub const REVOKE_SETTLE: Duration = Duration::from_secs(2);
 /// settle time waits for it).
 pub const REVOKED_LOG: &str = "class object revoked";
 
-/// COM initialised for the lifetime of the value (multithreaded apartment).
-pub(crate) struct ComInit;
-
-impl ComInit {
-    pub(crate) fn mta() -> windows::core::Result<ComInit> {
-        // SAFETY: paired with CoUninitialize in Drop on this thread.
-        unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
-        Ok(ComInit)
-    }
-}
-
-impl Drop for ComInit {
-    fn drop(&mut self) {
-        // SAFETY: this thread initialised COM in `mta`.
-        unsafe { CoUninitialize() };
-    }
-}
-
 pub(crate) fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
@@ -82,7 +64,7 @@ fn with_registration<R>(
 
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     with_registration(None, winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} ({})",
@@ -94,7 +76,7 @@ pub fn register() -> windows::core::Result<()> {
 /// `/Service`: the COM registration with AppID `LocalService`, and the NT service
 /// (on demand, as LocalService): COM starts the service when a client activates the server.
 pub fn register_service() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let exe = exe_path()?;
     crate::service::install(std::path::Path::new(&exe))
         .map_err(|e| crate::error::error(E_FAIL, &e))?;
@@ -108,7 +90,7 @@ pub fn register_service() -> windows::core::Result<()> {
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     with_registration(None, winreg::unregister)??;
     crate::service::uninstall().map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
@@ -335,7 +317,7 @@ pub fn serve_as(
     mode: ServeMode,
     stop: &StopSignal,
 ) -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     init_security();
     keep_registered_under_wine();
     let ctx = start(setup, make_backend).map_err(|e| {

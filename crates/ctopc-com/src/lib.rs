@@ -8,6 +8,8 @@
 #[cfg(windows)]
 pub mod abi;
 #[cfg(windows)]
+pub mod apartment;
+#[cfg(windows)]
 pub mod client;
 #[cfg(windows)]
 pub mod clock;

@@ -92,7 +92,7 @@ impl Worker {
         std::thread::Builder::new()
             .name(name)
             .spawn(move || {
-                let _com = crate::client::ComThread::mta();
+                let _com = crate::apartment::Apartment::mta();
                 while let Ok(job) = rx.recv() {
                     job();
                 }
@@ -326,7 +326,7 @@ impl Runtime {
             let spawned = std::thread::Builder::new()
                 .name("shutdown-request".into())
                 .spawn(move || {
-                    let _com = crate::client::ComThread::mta();
+                    let _com = crate::apartment::Apartment::mta();
                     let sink = sink;
                     // SAFETY: `reason` is a NUL-terminated UTF-16 string alive for the call.
                     let r = unsafe { sink.0.ShutdownRequest(PCWSTR(reason.as_ptr())) };
@@ -417,7 +417,7 @@ impl Runtime {
         let spawned = std::thread::Builder::new()
             .name(format!("drop-sinks-{}", session.0))
             .spawn(move || {
-                let _com = crate::client::ComThread::mta();
+                let _com = crate::apartment::Apartment::mta();
                 let mut lost = Vec::new();
                 for (g, slot) in slots {
                     if slot.cookie().is_some_and(|c| slot.drop_if(c)) {
@@ -550,7 +550,7 @@ impl Deliver for Queues<'_> {
 
 /// The driver thread: a step whenever woken or due, then the events to the workers.
 fn drive(rt: Weak<Runtime>, mut sampler: Sampler) {
-    let _com = crate::client::ComThread::mta();
+    let _com = crate::apartment::Apartment::mta();
     loop {
         let Some(rt) = rt.upgrade() else { return };
         if rt.stop.load(Ordering::SeqCst) {

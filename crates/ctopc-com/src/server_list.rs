@@ -16,12 +16,12 @@
 //! is listed at once).
 
 use crate::abi::{self, ComResult};
+use crate::apartment::Apartment;
 use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use crate::enums::{clone_out, next_into, Cursor};
 use crate::factory::ClassFactory;
 use crate::host::{
-    exe_path, init_security, keep_registered_under_wine, serve_class, ComInit, EXIT_LINGER,
-    STARTUP_GRACE,
+    exe_path, init_security, keep_registered_under_wine, serve_class, EXIT_LINGER, STARTUP_GRACE,
 };
 use crate::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
@@ -567,7 +567,7 @@ fn view_name(v: View) -> &'static str {
 /// ours; a view with another one (the OPC Foundation's OpcEnum) is left alone, with a
 /// message. Succeeds in both cases.
 pub fn register() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     register_as(None)
 }
 
@@ -576,7 +576,7 @@ pub fn register() -> ComResult<()> {
 /// service, which remote clients need (as the OPC Foundation's OpcEnum, a service too).
 /// Where another browser serves both views nothing is installed.
 pub fn register_service() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let foreign = registration::foreign_server_list_views(&local_servers());
     if foreign.len() == VIEWS.len() {
         println!("OpcServerList: no service installed (another server browser serves both views)");
@@ -623,7 +623,7 @@ fn register_as(service: Option<&str>) -> ComResult<()> {
 /// `/UnregServer`: removes our browser only (a view whose `{13486D51-...}` is another
 /// one's keeps it), and its NT service if `/Service` installed it.
 pub fn unregister() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let local = local_servers();
     let foreign = registration::foreign_server_list_views(&local);
     let ours: Vec<View> = local
@@ -657,7 +657,7 @@ pub fn serve_service() -> ComResult<()> {
 
 /// Serves until the last client has gone (`None`) or `stop` is triggered.
 fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     init_security();
     keep_registered_under_wine();
     let lifetime = Lifetime::new();

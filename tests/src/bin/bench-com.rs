@@ -39,7 +39,8 @@ fn main() -> std::process::ExitCode {
 
 #[cfg(windows)]
 mod bench {
-    use ctopc_com::client::{ComThread, Server};
+    use ctopc_com::apartment::Apartment;
+    use ctopc_com::client::Server;
     use ctopc_com::interfaces::*;
     use e2e_tests::io_support::*;
     use e2e_tests::PROGID;
@@ -552,7 +553,7 @@ mod bench {
     /// After `read` it also prints the median cache read of 10 to 10,000 items, which shows
     /// the per-item cost of the transport (linear under Wine, see the README).
     fn profile_loop(what: &str, n: usize) -> Res<()> {
-        let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+        let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
         let main = Server::connect(PROGID).map_err(err("connect"))?;
         let vars = demo_vars();
         let ids: Vec<String> = match what {
@@ -612,7 +613,7 @@ mod bench {
             if what == "callbacks" {
                 // N clients x --items-per-client items, 5 windows of 2 s.
                 let o = opts();
-                let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+                let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
                 let main = Server::connect(PROGID).map_err(err("connect"))?;
                 let changing = changing_vars(&main, &demo_vars())?;
                 let (rates, cbs) = throughput(n, o.items_per_client, &changing, 5, o.window)?;
@@ -626,7 +627,7 @@ mod bench {
             return profile_loop(what, n);
         }
         let o = opts();
-        let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+        let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
         println!("ServerCTOPC COM benchmark (demo plant, simulated, MinUpdateRate {RATE_MS} ms, config {}; Wine; medians of {} runs unless noted)", ini.display(), o.runs);
         let t = Instant::now();
         let main = Server::connect(PROGID).map_err(err("first CoCreateInstance"))?;

@@ -63,7 +63,8 @@ fn main() -> std::process::ExitCode {
 
 #[cfg(windows)]
 mod scale {
-    use ctopc_com::client::{ComThread, GroupSpec, GroupStateChange, ItemDef, OpcGroup, Server};
+    use ctopc_com::apartment::Apartment;
+    use ctopc_com::client::{GroupSpec, GroupStateChange, ItemDef, OpcGroup, Server};
     use ctopc_com::interfaces::*;
     use e2e_tests::PROGID;
     use std::io::{BufRead, Write};
@@ -456,7 +457,7 @@ mod scale {
             lines: stdin_lines(),
             limit: o.input_timeout,
         };
-        let Ok(_com) = ComThread::mta() else {
+        let Ok(_com) = Apartment::mta() else {
             println!("error connected CoInitializeEx failed");
             return ExitCode::FAILURE;
         };

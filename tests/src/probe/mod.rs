@@ -25,7 +25,7 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
-use ctopc_com::client::ComThread;
+use ctopc_com::apartment::Apartment;
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::interfaces::*;
 use ctopc_com::lifetime::{Lifetime, ObjectGuard};
@@ -1024,7 +1024,7 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
 
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
+    let _com = Apartment::mta()?;
     with_registration(winreg::register)??;
     println!(
         "marshal-probe: registered {PROGID} ({})",
@@ -1035,7 +1035,7 @@ pub fn register() -> windows::core::Result<()> {
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
+    let _com = Apartment::mta()?;
     with_registration(winreg::unregister)??;
     println!("marshal-probe: unregistered {PROGID}");
     Ok(())
@@ -1043,7 +1043,7 @@ pub fn unregister() -> windows::core::Result<()> {
 
 /// `-Embedding`: serve until the last client has gone (as ServerCTOPC.exe does).
 pub fn serve() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
+    let _com = Apartment::mta()?;
     ctopc_com::host::init_security();
     let factory = ClassFactory::new(Arc::clone(probe_lifetime()), create_instance);
     let cookie = ctopc_com::host::register_class(&CLSID_MARSHAL_PROBE, &factory)?;

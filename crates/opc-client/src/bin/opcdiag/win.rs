@@ -4,8 +4,9 @@
 
 use crate::cli::{Command, Global, EXIT_FAILED, EXIT_OK, EXIT_USAGE};
 use crate::text::{self, TreeLine};
+use ctopc_com::apartment::Apartment;
 use ctopc_com::client::diag::{self, DataChange};
-use ctopc_com::client::{self, ComThread, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
+use ctopc_com::client::{self, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
 use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, VarType};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
@@ -68,7 +69,7 @@ pub struct Session {
     // Declared before `_com`: released before COM is uninitialised.
     pub server: Server,
     pub progid: String,
-    _com: ComThread,
+    _com: Apartment,
 }
 
 /// Runs a command; `Err` is a failure to report (exit code 1).
@@ -118,7 +119,7 @@ fn servers() -> Result<u8, String> {
     use ctopc_com::client::server_list::{classes_by_category_manager, ServerBrowser};
     use ctopc_registration::{guid_string, VIEWS};
     use windows::core::GUID;
-    let _com = ComThread::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
+    let _com = Apartment::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
     let categories = [
         (CATID_OPCDAServer10, "1.0"),
         (CATID_OPCDAServer20, "2.0"),
@@ -189,7 +190,7 @@ fn system_text(hr: HRESULT) -> Option<String> {
 
 impl Session {
     pub fn connect(g: &Global) -> Result<Session, String> {
-        let com = ComThread::mta().map_err(|e| {
+        let com = Apartment::mta().map_err(|e| {
             format!(
                 "cannot initialise COM: {}",
                 text::hresult_text(e.code().0, system_text(e.code()).as_deref())
