@@ -17,8 +17,8 @@ pub mod server_config;
 pub mod start;
 
 pub use ctopc_com::apartment::Apartment;
-pub use ctopc_com::client::Server;
 pub use ctopc_com::interfaces;
+pub use opc_client::Server;
 use std::path::PathBuf;
 use windows::core::{IUnknown, HRESULT};
 

@@ -2,9 +2,9 @@
 #![cfg(windows)]
 
 use ctopc_com::apartment::Apartment;
-use ctopc_com::client::Server;
 use ctopc_com::clock;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
+use opc_client::Server;
 use std::time::Duration;
 use windows::core::{IUnknown, Interface, GUID, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE};

@@ -6,11 +6,11 @@
 //! operations that certainly wait for a slow device.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{Quality, Timestamp, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, Apartment, Server};
+use opc_client as client;
 use std::sync::Arc;
 use std::time::Duration;
 use windows::core::{BOOL, HRESULT};

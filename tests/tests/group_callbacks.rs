@@ -6,10 +6,10 @@
 mod group_common;
 
 use ctopc_com::apartment::Apartment;
-use ctopc_com::client::{GroupStateChange, Server};
 use ctopc_core::Value;
 use e2e_tests::{assert_alive, code, connect, connections, interfaces::*, next_connection, PROGID};
 use group_common::*;
+use opc_client::{GroupStateChange, Server};
 use std::time::{Duration, Instant};
 use windows::core::{IUnknown, Interface};
 use windows::Win32::Foundation::{S_FALSE, S_OK};

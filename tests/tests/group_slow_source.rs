@@ -20,7 +20,6 @@
 //! that later tests get a server with the default configuration.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{OpcError, Value};
@@ -30,6 +29,7 @@ use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, Apartment,
     Server,
 };
+use opc_client as client;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};

@@ -529,10 +529,10 @@ fn table_lists_every_string_output_declared_in_idl() {
 mod through_the_proxy {
     use super::*;
     use ctopc_com::apartment::Apartment;
-    use ctopc_com::client::{BrowseArgs, BrowseElement, BrowsePage, Server};
     use e2e_tests::probe::{self, client as read};
     use e2e_tests::start::StartRetrying;
     use e2e_tests::{artifact, code, interfaces::*};
+    use opc_client::{BrowseArgs, BrowseElement, BrowsePage, Server};
     use std::process::Command;
     use std::sync::OnceLock;
     use std::time::{Duration, Instant};

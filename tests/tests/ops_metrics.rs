@@ -11,11 +11,11 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{self, Server};
 use ctopc_core::Value;
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
 use e2e_tests::{other_servers, wait_for_no_other_server, Apartment, PROGID};
+use opc_client::{self as client, Server};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::sync::atomic::Ordering;

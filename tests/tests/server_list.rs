@@ -7,7 +7,6 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::server_list::{opc_enum_guids, ServerBrowser};
 use ctopc_com::interfaces::{IOPCEnumGUID, IOPCServerList2};
 use ctopc_com::winreg;
 use ctopc_registration::{
@@ -16,6 +15,7 @@ use ctopc_registration::{
 };
 use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, Apartment};
+use opc_client::server_list::{opc_enum_guids, ServerBrowser};
 use windows::core::GUID;
 use windows::Win32::Foundation::{CO_E_CLASSSTRING, REGDB_E_CLASSNOTREG, S_FALSE, S_OK};
 

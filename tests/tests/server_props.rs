@@ -4,10 +4,10 @@
 //! I2 0..1 without a unit).
 #![cfg(windows)]
 
-use ctopc_com::client::Server;
 use ctopc_com::clock::now;
 use ctopc_core::{Timestamp, Value};
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
+use opc_client::Server;
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;

@@ -1,6 +1,7 @@
 //! The COM layer of ServerCTOPC: OPC interface definitions (mirroring `idl/`), the COM
-//! objects over `ctopc-core`, registration and the server host. Every `unsafe` block of
-//! the project is in this crate, each with a `// SAFETY:` comment.
+//! objects over `ctopc-core`, registration and the server host. Most of the project's
+//! `unsafe` blocks are in this crate (the rest in the client library `opc-client` and the
+//! e2e tests), each with a `// SAFETY:` comment.
 //!
 //! Windows-only; the registry entries it writes are data of the portable crate
 //! `ctopc-registration` (crates/registration), tested natively and read by the MSI build.
@@ -9,8 +10,6 @@
 pub mod abi;
 #[cfg(windows)]
 pub mod apartment;
-#[cfg(windows)]
-pub mod client;
 #[cfg(windows)]
 pub mod clock;
 #[cfg(windows)]

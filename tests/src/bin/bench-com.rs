@@ -40,10 +40,10 @@ fn main() -> std::process::ExitCode {
 #[cfg(windows)]
 mod bench {
     use ctopc_com::apartment::Apartment;
-    use ctopc_com::client::Server;
     use ctopc_com::interfaces::*;
     use e2e_tests::io_support::*;
     use e2e_tests::PROGID;
+    use opc_client::Server;
     use std::sync::atomic::Ordering;
     use std::sync::Arc;
     use std::time::{Duration, Instant};
@@ -347,7 +347,7 @@ mod bench {
         add_all(&g, &names)?;
         let rec = Recorder::recording();
         let sink = TestSink::create(&rec);
-        ctopc_com::client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
+        opc_client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
         std::thread::sleep(Duration::from_millis(u64::from(RATE_MS) * 8));
         let updates: Vec<Vec<u32>> = rec
             .all()
@@ -507,7 +507,7 @@ mod bench {
             let g = group(&server, RATE_MS)?;
             add_all(&g, &ids)?;
             let rec = Recorder::counting();
-            ctopc_com::client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
+            opc_client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
                 .map_err(err("Advise"))?;
             recs.push(rec);
             conns.push((server, g));
@@ -784,7 +784,7 @@ mod bench {
             loop {
                 let (hr, failed) = read_raw(&sync, OPC_DS_CACHE, &handles);
                 let (_, items) =
-                    ctopc_com::client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()])
+                    opc_client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()])
                         .map_err(err("Read"))?;
                 if hr.is_ok()
                     && failed == 0

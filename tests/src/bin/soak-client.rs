@@ -64,11 +64,11 @@ fn main() -> std::process::ExitCode {
 #[cfg(windows)]
 mod soak {
     use ctopc_com::apartment::Apartment;
-    use ctopc_com::client::{self, GroupSpec, ItemDef, OpcGroup, Server};
     use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE};
     use ctopc_core::Value;
     use e2e_tests::io_support::{Recorder, TestSink};
     use e2e_tests::PROGID;
+    use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, Server};
     use std::time::{Duration, Instant};
     use windows::core::Interface;
 

@@ -16,7 +16,7 @@
 //! * Methods without string outputs return `E_NOTIMPL`. Out-parameters are all-or-nothing
 //!   and CoTaskMem-allocated, as in the real server.
 //!
-//! [`client`] and the client library `ctopc_com::client` hold safe readers of the same
+//! [`client`] and the client library `opc_client` hold safe readers of the same
 //! outputs for the test (every raw call and every CoTaskMem free of the test is there, so
 //! that the test itself has no `unsafe`).
 
@@ -1059,7 +1059,7 @@ pub fn serve() -> windows::core::Result<()> {
 // ---------------------------------------------------------------------------------------
 
 /// Safe readers of the string outputs the probe produces that the client library
-/// (`ctopc_com::client::Server`, which reads GetItemID, QueryAvailableProperties,
+/// (`opc_client::Server`, which reads GetItemID, QueryAvailableProperties,
 /// LookupItemIDs, GetProperties and Browse for the test) has no reader for: each calls one
 /// method through the given interface pointer (a proxy when the object lives in another
 /// process), copies what arrived and frees it. A string that arrived NULL is `None` (also

@@ -1,14 +1,14 @@
 //! The commands, through COM (Windows only). Every call goes through the safe client
-//! wrapper `ctopc_com::client`; errors become one line with the HRESULT, its symbol and
+//! wrapper `opc_client`; errors become one line with the HRESULT, its symbol and
 //! the server's text for it (IOPCCommon::GetErrorString), else the system's.
 
 use crate::cli::{Command, Global, EXIT_FAILED, EXIT_OK, EXIT_USAGE};
 use crate::text::{self, TreeLine};
 use ctopc_com::apartment::Apartment;
-use ctopc_com::client::diag::{self, DataChange};
-use ctopc_com::client::{self, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
 use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, VarType};
+use opc_client::diag::{self, DataChange};
+use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 use windows::core::{Interface, HRESULT};
@@ -116,8 +116,8 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
 /// `opcdiag servers`: the machine's OPC DA servers through OPC.ServerList.1, else the
 /// component categories manager.
 fn servers() -> Result<u8, String> {
-    use ctopc_com::client::server_list::{classes_by_category_manager, ServerBrowser};
     use ctopc_registration::{guid_string, VIEWS};
+    use opc_client::server_list::{classes_by_category_manager, ServerBrowser};
     use windows::core::GUID;
     let _com = Apartment::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
     let categories = [

@@ -5,7 +5,7 @@
 //! hands out is copied and freed here.
 
 use super::{take_array, take_variants, take_wstr, timestamp, ReadItem, Server};
-use crate::interfaces::*;
+use ctopc_com::interfaces::*;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::Value;
 use std::ffi::c_void;
@@ -143,8 +143,8 @@ impl WideStrings {
 }
 
 fn take_value(v: &mut VARIANT) -> Value {
-    let value = crate::variant::from_variant(v).unwrap_or(Value::Empty);
-    crate::variant::clear(v);
+    let value = ctopc_com::variant::from_variant(v).unwrap_or(Value::Empty);
+    ctopc_com::variant::clear(v);
     value
 }
 
@@ -573,7 +573,7 @@ impl Server {
         let name_filter = HSTRING::from(a.name_filter.as_str());
         let vendor_filter = HSTRING::from(a.vendor_filter.as_str());
         let mut cp = match &a.continuation_point {
-            Some(s) => crate::abi::alloc_wstr(s)?,
+            Some(s) => ctopc_com::abi::alloc_wstr(s)?,
             None => PWSTR::null(),
         };
         let mut more = BOOL(0);
@@ -696,7 +696,7 @@ impl Server {
         let mut vqts: Vec<OPCITEMVQT> = Vec::with_capacity(items.len());
         let mut result = Ok(());
         for (_, v) in items {
-            match crate::variant::to_variant(&v.value) {
+            match ctopc_com::variant::to_variant(&v.value) {
                 Ok(value) => vqts.push(OPCITEMVQT {
                     vDataValue: value,
                     bQualitySpecified: BOOL::from(v.quality.is_some()),
@@ -706,7 +706,7 @@ impl Server {
                     dwReserved: 0,
                     ftTimeStamp: v
                         .timestamp
-                        .map_or_else(FILETIME::default, crate::clock::filetime),
+                        .map_or_else(FILETIME::default, ctopc_com::clock::filetime),
                 }),
                 Err(e) => {
                     result = Err(e);
@@ -729,7 +729,7 @@ impl Server {
             Ok((hr, unsafe { take_array(errors, items.len()) }))
         });
         for v in &mut vqts {
-            crate::variant::clear(&mut v.vDataValue);
+            ctopc_com::variant::clear(&mut v.vDataValue);
         }
         call
     }

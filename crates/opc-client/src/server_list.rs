@@ -3,7 +3,7 @@
 //! the fallback where no browser is registered: used by `opcdiag servers` and the tests.
 
 use super::take_wstr;
-use crate::interfaces::{IOPCEnumGUID, IOPCServerList, IOPCServerList2};
+use ctopc_com::interfaces::{IOPCEnumGUID, IOPCServerList, IOPCServerList2};
 use ctopc_registration::CLSID_OPC_SERVER_LIST;
 use windows::core::{Interface, GUID, HSTRING, PWSTR};
 use windows::Win32::Foundation::S_OK;
