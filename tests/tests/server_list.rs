@@ -266,7 +266,7 @@ fn registration_leaves_another_server_browser_alone() {
     assert!(out.status.success(), "{out:?}");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("not ours"), "{text}");
-    let read = |v: View| ctopc_com::server_list::read_default(v, &key);
+    let read = |v: View| ctopc_com::winreg::read_default(v, &key);
     assert_eq!(read(View::Reg32).as_deref(), Some(theirs), "left alone");
     assert!(
         read(View::Reg64).is_some_and(|l| registration::is_our_server_list(&l)),
@@ -286,7 +286,7 @@ fn registering_twice_is_harmless() {
     }
     let key = registration::server_list_local_server_key();
     for v in registration::VIEWS {
-        let ls = ctopc_com::server_list::read_default(v, &key).unwrap();
+        let ls = ctopc_com::winreg::read_default(v, &key).unwrap();
         assert!(registration::is_our_server_list(&ls), "{v:?}: {ls}");
     }
 }

@@ -3,14 +3,16 @@
 //! Most rules are lints now, checked by `cargo clippy -- -D warnings` in `cargo xtask
 //! test`, with their levels in the `[lints]` tables of the manifests and their settings in
 //! `clippy.toml`; this test had text scanners for them, which the lints replaced:
-//! - `unsafe` only in crates/ctopc-com, the client library (crates/opc-client) and the
-//!   end-to-end tests (tests/, which pass deliberately invalid raw pointers and hold the
-//!   marshal probe in tests/src/probe): rustc's `unsafe_code = "forbid"`
-//!   (`[workspace.lints.rust]`), relaxed only in the `[lints]` tables of those crates;
+//! - `unsafe` only in crates/ctopc-com, the client library (crates/opc-client), the server
+//!   browser (crates/serverlist) and the end-to-end tests (tests/, which pass deliberately
+//!   invalid raw pointers and hold the marshal probe in tests/src/probe): rustc's
+//!   `unsafe_code = "forbid"` (`[workspace.lints.rust]`), relaxed only in the `[lints]`
+//!   tables of those crates;
 //! - a `// SAFETY:` comment at every unsafe block: clippy's `undocumented_unsafe_blocks`;
-//! - no `.unwrap()` / `.expect(` in ctopc-com, opc-client and tests/src/probe outside tests
-//!   (a panic would cross COM): clippy's `unwrap_used` and `expect_used` (those crates'
-//!   `[lints]`, the probe's `#![deny]`; `allow-unwrap-in-tests` in clippy.toml);
+//! - no `.unwrap()` / `.expect(` in ctopc-com, opc-client, serverlist and tests/src/probe
+//!   outside tests (a panic would cross COM): clippy's `unwrap_used` and `expect_used`
+//!   (those crates' `[lints]`, the probe's `#![deny]`; `allow-unwrap-in-tests` in
+//!   clippy.toml);
 //! - no `windows::core::Error::new` outside `ctopc_com::error` (it aborts under Wine):
 //!   clippy's `disallowed_methods` (clippy.toml).
 //!
@@ -108,10 +110,15 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/registration",
         "crates/asix-net",
         "crates/server",
-        "crates/serverlist",
         "xtask",
     ];
-    let own = ["crates/ctopc-com", "crates/opc-client", "tests", "fuzz"];
+    let own = [
+        "crates/ctopc-com",
+        "crates/opc-client",
+        "crates/serverlist",
+        "tests",
+        "fuzz",
+    ];
     let mut all: Vec<&str> = inheriting.iter().chain(&own).copied().collect();
     all.sort_unstable();
     let mut members = workspace_members(&read("Cargo.toml"));
@@ -129,11 +136,12 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         );
     }
     // Their own tables (forbid cannot be relaxed inside a crate): unsafe code allowed, the
-    // workspace's clippy lints kept; the COM crate and the client library also deny
-    // unwrap/expect.
+    // workspace's clippy lints kept; the COM crate, the client library and the server
+    // browser also deny unwrap/expect.
     for (m, extra) in [
         ("crates/ctopc-com", &["unwrap_used", "expect_used"][..]),
         ("crates/opc-client", &["unwrap_used", "expect_used"][..]),
+        ("crates/serverlist", &["unwrap_used", "expect_used"][..]),
         ("tests", &[][..]),
         ("fuzz", &[][..]),
     ] {

@@ -48,7 +48,8 @@ pub const REVOKE_SETTLE: Duration = Duration::from_secs(2);
 /// settle time waits for it).
 pub const REVOKED_LOG: &str = "class object revoked";
 
-pub(crate) fn exe_path() -> windows::core::Result<String> {
+/// The full path of this process's exe (what a server registers as its `LocalServer32`).
+pub fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())

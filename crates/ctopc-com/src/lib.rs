@@ -1,7 +1,7 @@
 //! The COM layer of ServerCTOPC: OPC interface definitions (mirroring `idl/`), the COM
 //! objects over `ctopc-core`, registration and the server host. Most of the project's
-//! `unsafe` blocks are in this crate (the rest in the client library `opc-client` and the
-//! e2e tests), each with a `// SAFETY:` comment.
+//! `unsafe` blocks are in this crate (the rest in the client library `opc-client`, the
+//! server browser `opc-server-list` and the e2e tests), each with a `// SAFETY:` comment.
 //!
 //! Windows-only; the registry entries it writes are data of the portable crate
 //! `ctopc-registration` (crates/registration), tested natively and read by the MSI build.
@@ -40,8 +40,6 @@ pub mod ops;
 pub mod runtime;
 #[cfg(windows)]
 pub mod server;
-#[cfg(windows)]
-pub mod server_list;
 #[cfg(windows)]
 pub mod service;
 #[cfg(windows)]

@@ -1,16 +1,23 @@
-//! Registration of an out-of-process COM server: applies the keys and tree deletions that
+//! The Windows registry, in both registry views. Writing: the registration of an
+//! out-of-process COM server, applying the keys and tree deletions that
 //! [`ctopc_registration`] computes (CLSID with LocalServer32, AppID, Implemented
 //! Categories and the category definitions, ProgID with CurVer and the version-dependent
-//! ProgID, the legacy `HKCR\<ProgID>\OPC` key), in both registry views.
-//! Both directions are idempotent; unregistering what is not there succeeds.
+//! ProgID, the legacy `HKCR\<ProgID>\OPC` key); both directions are idempotent,
+//! unregistering what is not there succeeds. Reading: keys and values of one view
+//! ([`RegKey`], [`key_exists`], [`read_value`], [`read_default`], [`read_machine_value`]),
+//! for the server browser and `opcdiag doctor`.
 
 pub use ctopc_registration::{Category, Key, ServerRegistration, View};
+use windows::core::PWSTR;
 use windows::core::{GUID, HSTRING, PCWSTR};
-use windows::Win32::Foundation::{ERROR_FILE_NOT_FOUND, ERROR_SUCCESS, WIN32_ERROR};
+use windows::Win32::Foundation::{
+    ERROR_FILE_NOT_FOUND, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, WIN32_ERROR,
+};
 use windows::Win32::System::Registry::{
-    RegCloseKey, RegCreateKeyExW, RegDeleteKeyExW, RegDeleteTreeW, RegOpenKeyExW, RegSetValueExW,
-    HKEY, HKEY_CLASSES_ROOT, KEY_ALL_ACCESS, KEY_WOW64_32KEY, KEY_WOW64_64KEY, KEY_WRITE,
-    REG_OPTION_NON_VOLATILE, REG_SAM_FLAGS, REG_SZ,
+    RegCloseKey, RegCreateKeyExW, RegDeleteKeyExW, RegDeleteTreeW, RegEnumKeyExW, RegGetValueW,
+    RegOpenKeyExW, RegSetValueExW, HKEY, HKEY_CLASSES_ROOT, HKEY_LOCAL_MACHINE, KEY_ALL_ACCESS,
+    KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, KEY_WRITE, REG_OPTION_NON_VOLATILE, REG_SAM_FLAGS,
+    REG_SZ, RRF_RT_REG_DWORD, RRF_RT_REG_SZ,
 };
 
 pub fn guid_string(g: &GUID) -> String {
@@ -145,6 +152,172 @@ pub fn delete_trees(trees: &[(View, String)]) -> windows::core::Result<()> {
     trees
         .iter()
         .try_for_each(|(view, path)| delete_tree(*view, path))
+}
+
+// ---------------------------------------------------------------------------------------
+// Reading, one view at a time
+
+/// An open registry key, closed on drop.
+pub struct RegKey(HKEY);
+
+impl RegKey {
+    /// `parent\path` of `view` for reading; `None` when absent (or not readable).
+    pub fn open(parent: HKEY, path: &str, view: View) -> Option<RegKey> {
+        let wpath = HSTRING::from(path);
+        let mut hkey = HKEY::default();
+        // SAFETY: valid parent handle, string and out handle for the call.
+        let err =
+            unsafe { RegOpenKeyExW(parent, &wpath, None, KEY_READ | view_flag(view), &mut hkey) };
+        (err == ERROR_SUCCESS).then_some(RegKey(hkey))
+    }
+
+    /// `self\path` of `view` for reading; `None` when absent (or not readable).
+    pub fn subkey(&self, path: &str, view: View) -> Option<RegKey> {
+        RegKey::open(self.0, path, view)
+    }
+
+    /// The names of the subkeys.
+    pub fn subkeys(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        // Key names are at most 255 characters.
+        let mut buf = [0u16; 256];
+        for index in 0u32.. {
+            let mut len = buf.len() as u32;
+            // SAFETY: `buf` has room for `len` characters; the other out-parameters are
+            // not asked for.
+            let err = unsafe {
+                RegEnumKeyExW(
+                    self.0,
+                    index,
+                    Some(PWSTR(buf.as_mut_ptr())),
+                    &mut len,
+                    None,
+                    None,
+                    None,
+                    None,
+                )
+            };
+            if err == ERROR_NO_MORE_ITEMS {
+                break;
+            }
+            if err == ERROR_SUCCESS {
+                let n = (len as usize).min(buf.len());
+                out.push(String::from_utf16_lossy(&buf[..n]));
+            } else if err != ERROR_MORE_DATA {
+                break;
+            }
+        }
+        out
+    }
+
+    /// The default (`REG_SZ`) value of the subkey `sub` (`""`: of this key).
+    pub fn default_value(&self, sub: &str) -> Option<String> {
+        self.text_value(sub, "")
+    }
+
+    /// The `REG_SZ` value `name` (`""`: the default value) of the subkey `sub`.
+    fn text_value(&self, sub: &str, name: &str) -> Option<String> {
+        let wsub = HSTRING::from(sub);
+        let wname = HSTRING::from(name);
+        let name_ptr = if name.is_empty() {
+            PCWSTR::null()
+        } else {
+            PCWSTR(wname.as_ptr())
+        };
+        let mut bytes = 0u32;
+        // SAFETY: a size query: no data buffer, `bytes` receives the size.
+        let err = unsafe {
+            RegGetValueW(
+                self.0,
+                &wsub,
+                name_ptr,
+                RRF_RT_REG_SZ,
+                None,
+                None,
+                Some(&mut bytes),
+            )
+        };
+        if err != ERROR_SUCCESS || bytes == 0 {
+            return None;
+        }
+        let mut buf = vec![0u16; (bytes as usize).div_ceil(2) + 1];
+        let mut len = (buf.len() * 2) as u32;
+        // SAFETY: `buf` has room for `len` bytes.
+        let err = unsafe {
+            RegGetValueW(
+                self.0,
+                &wsub,
+                name_ptr,
+                RRF_RT_REG_SZ,
+                None,
+                Some(buf.as_mut_ptr().cast()),
+                Some(&mut len),
+            )
+        };
+        if err != ERROR_SUCCESS {
+            return None;
+        }
+        let units = (len as usize / 2).min(buf.len());
+        let text = &buf[..units];
+        let end = text.iter().position(|&c| c == 0).unwrap_or(text.len());
+        Some(String::from_utf16_lossy(&text[..end]))
+    }
+
+    /// The `REG_DWORD` value `name` of this key.
+    fn dword_value(&self, name: &str) -> Option<u32> {
+        let wname = HSTRING::from(name);
+        let mut data = 0u32;
+        let mut len = std::mem::size_of::<u32>() as u32;
+        // SAFETY: `data` has room for the `len` bytes of a DWORD.
+        let err = unsafe {
+            RegGetValueW(
+                self.0,
+                PCWSTR::null(),
+                &wname,
+                RRF_RT_REG_DWORD,
+                None,
+                Some((&raw mut data).cast()),
+                Some(&mut len),
+            )
+        };
+        (err == ERROR_SUCCESS).then_some(data)
+    }
+}
+
+impl Drop for RegKey {
+    fn drop(&mut self) {
+        // SAFETY: the handle was opened by `open` and is closed once.
+        unsafe {
+            let _ = RegCloseKey(self.0);
+        }
+    }
+}
+
+/// Whether `HKCR\path` exists in `view` (and is readable).
+pub fn key_exists(view: View, path: &str) -> bool {
+    RegKey::open(HKEY_CLASSES_ROOT, path, view).is_some()
+}
+
+/// The `REG_SZ` value `name` (`""`: the default value) of `HKCR\path` in `view`.
+pub fn read_value(view: View, path: &str, name: &str) -> Option<String> {
+    RegKey::open(HKEY_CLASSES_ROOT, path, view)?.text_value("", name)
+}
+
+/// A value of `HKLM\path` in `view` as text: a `REG_SZ` as it is, a `REG_DWORD` in
+/// decimal (machine-wide settings such as `Software\Microsoft\Ole`, for `opcdiag doctor`).
+pub fn read_machine_value(view: View, path: &str, name: &str) -> Option<String> {
+    let key = RegKey::open(HKEY_LOCAL_MACHINE, path, view)?;
+    key.text_value("", name)
+        .or_else(|| key.dword_value(name).map(|d| d.to_string()))
+}
+
+/// The default value of `HKCR\path` in `view`.
+pub fn read_default(view: View, path: &str) -> Option<String> {
+    let (parent, leaf) = match path.rsplit_once('\\') {
+        Some((p, l)) => (RegKey::open(HKEY_CLASSES_ROOT, p, view)?, l),
+        None => (RegKey::open(HKEY_CLASSES_ROOT, path, view)?, ""),
+    };
+    parent.default_value(leaf)
 }
 
 #[cfg(test)]

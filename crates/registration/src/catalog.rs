@@ -1,9 +1,9 @@
 //! The machine's COM classes with component categories, as the server browser
-//! (`OPC.ServerList.1`, ctopc-com's `server_list.rs`) answers about them: the entries of
+//! (`OPC.ServerList.1`, crates/serverlist) answers about them: the entries of
 //! both registry views merged ([`Catalog::merge`]), the category filter of
 //! `IOPCServerList::EnumClassesOfCategories` ([`Catalog::classes_of_categories`], the rules
 //! of `ICatInformation::EnumClassesOfCategories`), the details of a class and the ProgID
-//! lookup. Plain Rust (no `windows`), compiled and tested on every host; `server_list.rs`
+//! lookup. Plain Rust (no `windows`), compiled and tested on every host; the browser
 //! reads the registry into [`ClassEntry`]s.
 
 use crate::View;

@@ -143,7 +143,7 @@ fn servers() -> Result<u8, String> {
     let registry_text = |path: String| {
         VIEWS
             .iter()
-            .find_map(|&v| ctopc_com::server_list::read_default(v, &path))
+            .find_map(|&v| ctopc_com::winreg::read_default(v, &path))
     };
     let rows: Vec<text::ServerRow> = found
         .into_iter()
