@@ -589,7 +589,8 @@ fn browse_null_pointers() {
         assert_invalid_arg_or_null_ref(hr, "szItemID");
         assert_alive(&server);
     }
-    opc_client::take_wstr(cp);
+    // SAFETY: NULL or a CoTaskMem string a failed call may have handed out, ours.
+    unsafe { opc_client::take_wstr(cp) };
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
     unsafe { opc_client::take_array(elements, count as usize) };
 }

@@ -14,14 +14,18 @@ use windows::Win32::System::Com::{
 };
 
 /// Takes ownership of a CoTaskMem string: returns its text and frees it.
-pub fn take_wstr(p: PWSTR) -> Option<String> {
+///
+/// # Safety
+/// `p` is NULL or a NUL-terminated UTF-16 string in a CoTaskMem block that the caller owns
+/// (a string out-parameter a call has just handed out), not yet freed and not used
+/// afterwards.
+pub unsafe fn take_wstr(p: PWSTR) -> Option<String> {
     if p.is_null() {
         return None;
     }
-    // SAFETY: a non-null string out-parameter is a NUL-terminated CoTaskMem UTF-16 string
-    // owned by the caller from now on; read once, then freed once.
+    // SAFETY: contract of this function: a NUL-terminated string, read once, then freed once.
     let s = unsafe { p.to_string() }.ok();
-    // SAFETY: see above.
+    // SAFETY: as above.
     unsafe { CoTaskMemFree(Some(p.0 as *const c_void)) };
     s
 }
@@ -97,7 +101,8 @@ impl Server {
         }
         // SAFETY: non-null block of one OPCSERVERSTATUS from the server.
         let s = unsafe { *p };
-        let vendor_info = take_wstr(s.szVendorInfo);
+        // SAFETY: the block's vendor string (NULL or CoTaskMem) is ours, taken once.
+        let vendor_info = unsafe { take_wstr(s.szVendorInfo) };
         // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
         unsafe { take_array(p, 1) };
         Ok(ServerStatus {
@@ -150,7 +155,8 @@ impl Server {
         let mut p = PWSTR::null();
         // SAFETY: valid out-pointer.
         unsafe { self.common.GetErrorString(code, &mut p)? };
-        Ok(take_wstr(p))
+        // SAFETY: NULL or the CoTaskMem string the call handed out, ours.
+        Ok(unsafe { take_wstr(p) })
     }
 
     /// IOPCServer::GetErrorString in `lcid`.
@@ -162,7 +168,8 @@ impl Server {
         let mut p = PWSTR::null();
         // SAFETY: valid out-pointer.
         unsafe { self.server.GetErrorString(code, lcid, &mut p)? };
-        Ok(take_wstr(p))
+        // SAFETY: NULL or the CoTaskMem string the call handed out, ours.
+        Ok(unsafe { take_wstr(p) })
     }
 }
 
@@ -866,8 +873,11 @@ impl OpcGroup {
             let slice = unsafe { std::slice::from_raw_parts_mut(p, fetched as usize) };
             for a in slice.iter_mut() {
                 out.push(ItemAttrs {
-                    access_path: take_wstr(a.szAccessPath),
-                    item_id: take_wstr(a.szItemID),
+                    // SAFETY: each element's strings are NULL or CoTaskMem, ours, taken once
+                    // (see the slice above).
+                    access_path: unsafe { take_wstr(a.szAccessPath) },
+                    // SAFETY: as above.
+                    item_id: unsafe { take_wstr(a.szItemID) },
                     active: a.bActive.as_bool(),
                     client_handle: a.hClient,
                     server_handle: a.hServer,
@@ -937,7 +947,8 @@ impl OpcGroup {
         Ok(GroupStateInfo {
             update_rate: rate,
             active: active.as_bool(),
-            name: take_wstr(name),
+            // SAFETY: NULL or the CoTaskMem name GetState handed out, ours.
+            name: unsafe { take_wstr(name) },
             time_bias: bias,
             percent_deadband: deadband,
             lcid,

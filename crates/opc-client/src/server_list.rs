@@ -125,7 +125,8 @@ impl ServerBrowser {
         if let Some(list2) = &self.list2 {
             // SAFETY: valid GUID and out-pointers; the strings are taken over below.
             let r = unsafe { list2.GetClassDetails(clsid, &mut progid, &mut user_type, &mut ver) };
-            let (p, u, v) = (take_wstr(progid), take_wstr(user_type), take_wstr(ver));
+            // SAFETY: NULL or the CoTaskMem strings the call handed out, ours, taken once.
+            let (p, u, v) = unsafe { (take_wstr(progid), take_wstr(user_type), take_wstr(ver)) };
             r?;
             return Ok(ClassDetails {
                 progid: p.unwrap_or_default(),
@@ -144,7 +145,8 @@ impl ServerBrowser {
             self.list
                 .GetClassDetails(clsid, &mut progid, &mut user_type)
         };
-        let (p, u) = (take_wstr(progid), take_wstr(user_type));
+        // SAFETY: NULL or the CoTaskMem strings the call handed out, ours, taken once.
+        let (p, u) = unsafe { (take_wstr(progid), take_wstr(user_type)) };
         r?;
         Ok(ClassDetails {
             progid: p.unwrap_or_default(),
