@@ -15,12 +15,12 @@
 //! The tests that write take one lock: they write the same setpoints.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, connect, interfaces::*, Apartment, Server};
+use opc_client as client;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use windows::core::HRESULT;
@@ -38,7 +38,7 @@ fn writes() -> MutexGuard<'static, ()> {
 }
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     /// SETPOINT, MODE.

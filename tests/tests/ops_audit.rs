@@ -6,11 +6,11 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{Quality, Timestamp, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, connect};
+use opc_client as client;
 use std::time::{Duration, Instant};
 use windows::Win32::Foundation::{S_FALSE, S_OK};
 

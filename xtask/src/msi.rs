@@ -2,7 +2,7 @@
 //! `cargo xtask dist` with Debian's `wixl` from the template `installer/ServerCTOPC.wxs.in`.
 //!
 //! The server's registration is declarative (Registry table rows), generated from the
-//! list `/RegServer` writes, `ctopc_com::registration::serverctopc(exe, service).keys()`,
+//! list `/RegServer` writes, `ctopc_registration::serverctopc(exe, service).keys()`,
 //! with the exe `[INSTALLDIR]ServerCTOPC.exe`: one Win64 component for the 64-bit view,
 //! one 32-bit component for the 32-bit view (Windows Installer writes a 32-bit
 //! component's HKLM\Software\Classes keys through Wow6432Node), so the MSI and the exe
@@ -34,7 +34,7 @@
 //! rollback removed the files, hence the 32-bit proxy/stub's registration comes first
 //! (the template says why).
 
-use ctopc_com::registration::{self, Key, View};
+use ctopc_registration::{self as registration, Key, View};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -214,13 +214,17 @@ pub const E2E_32: &[&str] = &[
     "server_shutdown",
 ];
 
-/// The 64-bit end-to-end units: the COM crate's unit and in-process tests (they only build
-/// for Windows), then the crate `tests/` (its unit tests, then each test file).
+/// The 64-bit end-to-end units: the COM crate's unit and in-process tests and the server
+/// browser's in-process tests (they only build for Windows), then the crate `tests/` (its
+/// unit tests, then each test file).
 fn units_64() -> Result<Vec<guard::Unit>, String> {
     let root = util::root();
     let mut units = vec![guard::Unit::lib("ctopc-com")];
     for t in guard::integration_tests(&root.join("crates/ctopc-com/tests"))? {
         units.push(guard::Unit::test("ctopc-com", &t));
+    }
+    for t in guard::integration_tests(&root.join("crates/serverlist/tests"))? {
+        units.push(guard::Unit::test("opc-server-list", &t));
     }
     units.push(guard::Unit::lib("e2e-tests"));
     for t in guard::integration_tests(&root.join("tests/tests"))? {

@@ -328,7 +328,9 @@ pub trait OwnsTaskMem {
 
 impl OwnsTaskMem for PWSTR {
     unsafe fn free_owned(&mut self) {
-        free_wstr(*self);
+        // SAFETY: contract of `free_owned`: a non-null string is a CoTaskMem block owned by
+        // this element alone, cleared right after.
+        unsafe { free_wstr(*self) };
         *self = PWSTR::null();
     }
 }
@@ -463,7 +465,9 @@ impl OwnedWstr {
 
 impl Drop for OwnedWstr {
     fn drop(&mut self) {
-        free_wstr(self.0);
+        // SAFETY: the string came from `alloc_wstr` and was not handed out (`into_raw`
+        // forgets the owner).
+        unsafe { free_wstr(self.0) };
     }
 }
 
@@ -551,10 +555,15 @@ pub fn alloc_wstr(s: &str) -> ComResult<PWSTR> {
     Ok(PWSTR(mem.into_raw()))
 }
 
-/// Frees a string from [`alloc_wstr`] (for error paths after a partial success).
-pub fn free_wstr(p: PWSTR) {
+/// Frees a string from [`alloc_wstr`] (for error paths after a partial success), or an
+/// `[in, out]` string a client handed in.
+///
+/// # Safety
+/// `p` is NULL or a CoTaskMem block (CoTaskMemAlloc) that the caller owns, not yet freed
+/// and not used afterwards.
+pub unsafe fn free_wstr(p: PWSTR) {
     if !p.is_null() {
-        // SAFETY: `p` came from CoTaskMemAlloc.
+        // SAFETY: contract of this function: a CoTaskMem block of the caller's, freed once.
         unsafe { CoTaskMemFree(Some(p.0.cast::<c_void>())) };
     }
 }

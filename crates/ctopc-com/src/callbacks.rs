@@ -20,7 +20,7 @@ use windows::Win32::System::Variant::VARIANT;
 /// The runtime's [`ThreadHook`](ctopc_runtime::ThreadHook) for the COM server: every
 /// thread it starts joins the multithreaded apartment (the sinks are MTA proxies).
 pub fn thread_hook() -> Box<dyn std::any::Any> {
-    Box::new(crate::client::ComThread::mta())
+    Box::new(crate::apartment::Apartment::mta())
 }
 
 /// A group's callback sinks: IOPCDataCallback's slot and the DA 1.0a connections.

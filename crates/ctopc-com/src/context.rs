@@ -1,6 +1,6 @@
 //! The context every COM object of one server works in: the runtime (engine + data source),
 //! the namespace, the browse address space, the server state, the default language, the
-//! group identity registry and the lifetime counts.
+//! group table (one identity per group) and the lifetime counts.
 //!
 //! There is no process-wide context: `host::start` makes one (`Arc<Context>`), the class
 //! factory's constructor captures it, every server object holds it and hands it to its
@@ -12,7 +12,7 @@
 //! the configuration (`crates/server/src/config.rs`) and hands over a [`Setup`] of plain
 //! values and the core's [`Namespace`] trait.
 
-use crate::group::Registry;
+use crate::group::GroupTable;
 use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
 use crate::lifetime::Lifetime;
 use ctopc_core::browse::AddressSpace;
@@ -50,8 +50,8 @@ pub struct Context {
     pub default_lang: Lang,
     /// The live objects and LockServer locks that keep this server up, and its stop request.
     pub lifetime: Arc<Lifetime>,
-    /// One COM identity per engine group (`crate::group`), one registry per runtime.
-    pub(crate) groups: Registry,
+    /// One COM identity per engine group (`crate::group`), one table per runtime.
+    pub(crate) groups: GroupTable,
 }
 
 impl Context {

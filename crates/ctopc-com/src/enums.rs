@@ -112,7 +112,7 @@ unsafe fn finish(fetched: *mut u32, got: usize, asked: u32) -> HRESULT {
 /// # Safety
 /// IEnum*::Next's contract: `rgelt` is NULL or room for `celt` elements, `fetched` NULL or
 /// writable storage for one `u32`.
-pub(crate) unsafe fn next_into<T, U>(
+pub unsafe fn next_into<T, U>(
     cursor: &Cursor<T>,
     celt: u32,
     rgelt: *mut U,
@@ -138,7 +138,7 @@ pub(crate) unsafe fn next_into<T, U>(
 ///
 /// # Safety
 /// `ppenum` is NULL or writable caller storage for one interface pointer (the `[out]`).
-pub(crate) unsafe fn clone_out<I>(ppenum: *mut Option<I>, make: impl FnOnce() -> I) -> HRESULT {
+pub unsafe fn clone_out<I>(ppenum: *mut Option<I>, make: impl FnOnce() -> I) -> HRESULT {
     if ppenum.is_null() {
         return E_POINTER;
     }

@@ -6,12 +6,13 @@
 //! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
 //! the NT service's control handler (`service::run`) trigger.
 
+use crate::apartment::Apartment;
 use crate::context::{Context, Setup};
 use crate::lifetime::{ExitReason, Lifetime, StopSignal};
-use crate::registration;
-use crate::registry::{self, ServerRegistration};
 use crate::server;
+use crate::winreg::{self, ServerRegistration};
 use ctopc_core::Lang;
+use ctopc_registration as registration;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -19,15 +20,14 @@ use windows::core::{BOOL, GUID};
 use windows::Win32::Foundation::E_FAIL;
 use windows::Win32::Globalization::{GetSystemDefaultLCID, GetUserDefaultUILanguage};
 use windows::Win32::System::Com::{
-    CoInitializeEx, CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject,
-    CoUninitialize, CLSCTX_LOCAL_SERVER, COINIT_MULTITHREADED, EOAC_NONE, REGCLS_MULTIPLEUSE,
-    RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
+    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CLSCTX_LOCAL_SERVER,
+    EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
 };
 use windows::Win32::System::Console::SetConsoleCtrlHandler;
 
 /// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
 pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(registration::CLSID_SERVERCTOPC);
-pub use crate::registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
+pub use ctopc_registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
 /// How long a server started by COM waits for its first client before it exits.
 pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
 /// How long the server stays up after its last client has gone, so that a client
@@ -42,25 +42,8 @@ pub const REVOKE_SETTLE: Duration = Duration::from_secs(2);
 /// settle time waits for it).
 pub const REVOKED_LOG: &str = "class object revoked";
 
-/// COM initialised for the lifetime of the value (multithreaded apartment).
-pub(crate) struct ComInit;
-
-impl ComInit {
-    pub(crate) fn mta() -> windows::core::Result<ComInit> {
-        // SAFETY: paired with CoUninitialize in Drop on this thread.
-        unsafe { CoInitializeEx(None, COINIT_MULTITHREADED).ok()? };
-        Ok(ComInit)
-    }
-}
-
-impl Drop for ComInit {
-    fn drop(&mut self) {
-        // SAFETY: this thread initialised COM in `mta`.
-        unsafe { CoUninitialize() };
-    }
-}
-
-pub(crate) fn exe_path() -> windows::core::Result<String> {
+/// The full path of this process's exe (what a server registers as its `LocalServer32`).
+pub fn exe_path() -> windows::core::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
     Ok(exe.to_string_lossy().into_owned())
@@ -76,11 +59,11 @@ fn with_registration<R>(
 
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
-    with_registration(None, registry::register)??;
+    let _com = Apartment::mta_without_keepalive()?;
+    with_registration(None, winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} ({})",
-        registry::guid_string(&CLSID_SERVERCTOPC)
+        winreg::guid_string(&CLSID_SERVERCTOPC)
     );
     Ok(())
 }
@@ -88,11 +71,11 @@ pub fn register() -> windows::core::Result<()> {
 /// `/Service`: the COM registration with AppID `LocalService`, and the NT service
 /// (on demand, as LocalService): COM starts the service when a client activates the server.
 pub fn register_service() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let exe = exe_path()?;
     crate::service::install(std::path::Path::new(&exe))
         .map_err(|e| crate::error::error(E_FAIL, &e))?;
-    with_registration(Some(crate::service::SERVICE_NAME), registry::register)??;
+    with_registration(Some(crate::service::SERVICE_NAME), winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
         crate::service::SERVICE_NAME
@@ -102,8 +85,8 @@ pub fn register_service() -> windows::core::Result<()> {
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
-    with_registration(None, registry::unregister)??;
+    let _com = Apartment::mta_without_keepalive()?;
+    with_registration(None, winreg::unregister)??;
     crate::service::uninstall().map_err(|e| crate::error::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
@@ -319,7 +302,7 @@ pub fn serve_as(
     mode: ServeMode,
     stop: &StopSignal,
 ) -> windows::core::Result<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     init_security();
     keep_registered_under_wine();
     let ctx = start(setup, make_backend).map_err(|e| {

@@ -1,18 +1,17 @@
 //! The COM layer of ServerCTOPC: OPC interface definitions (mirroring `idl/`), the COM
-//! objects over `ctopc-core`, registration and the server host. Every `unsafe` block of
-//! the project is in this crate, each with a `// SAFETY:` comment.
+//! objects over `ctopc-core`, registration and the server host. Most of the project's
+//! `unsafe` blocks are in this crate (the rest in the client library `opc-client`, the
+//! server browser `opc-server-list` and the e2e tests), each with a `// SAFETY:` comment.
 //!
-//! Everything but [`registration`] is Windows-only; `registration` (the registry entries
-//! as data) is plain Rust, compiled and tested on every host, so that it can be tested
-//! natively and reused by an installer build.
+//! Windows-only; the registry entries it writes are data of the portable crate
+//! `ctopc-registration` (crates/registration), tested natively and read by the MSI build.
 
 #[cfg(windows)]
 pub mod abi;
 #[cfg(windows)]
 pub mod callbacks;
-pub mod catalog;
 #[cfg(windows)]
-pub mod client;
+pub mod apartment;
 #[cfg(windows)]
 pub mod clock;
 #[cfg(windows)]
@@ -35,16 +34,13 @@ pub mod host;
 pub mod interfaces;
 #[cfg(windows)]
 pub mod lifetime;
-pub mod registration;
-#[cfg(windows)]
-pub mod registry;
 #[cfg(windows)]
 pub mod server;
-#[cfg(windows)]
-pub mod server_list;
 #[cfg(windows)]
 pub mod service;
 #[cfg(windows)]
 pub mod variant;
 #[cfg(windows)]
 pub mod wine_keepalive;
+#[cfg(windows)]
+pub mod winreg;

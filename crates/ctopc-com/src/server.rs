@@ -56,7 +56,7 @@ use windows::Win32::Foundation::E_INVALIDARG;
 
 /// OPCSERVERSTATUS.szVendorInfo, and the `Vendor` value of the legacy `OPC` key (defined
 /// with the registration, which an installer builds natively).
-pub const VENDOR_INFO: &str = crate::registration::VENDOR_INFO;
+pub const VENDOR_INFO: &str = ctopc_registration::VENDOR_INFO;
 
 struct Session {
     lcid: u32,

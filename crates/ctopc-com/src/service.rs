@@ -44,7 +44,7 @@ pub const SERVERCTOPC: ServiceSpec = ServiceSpec {
 
 /// OpcServerList.exe's service (`OPC.ServerList.1` for remote clients, as OpcEnum is).
 pub const SERVER_LIST: ServiceSpec = ServiceSpec {
-    name: crate::registration::SERVER_LIST_SERVICE_NAME,
+    name: ctopc_registration::SERVER_LIST_SERVICE_NAME,
     display_name: "ServerCTOPC OPC Server List",
     description: "OPC.ServerList.1 (OpcEnum-compatible): lists the OPC servers of this \
                   machine to local and remote OPC clients.",

@@ -107,7 +107,7 @@ pub const CLIENT_IIDS: &[GUID] = &[
 pub enum Role {
     /// [`SERVER_IIDS`] (from `host::serve_as` and the server browser's host).
     Server,
-    /// [`CLIENT_IIDS`] and the MTA kept (from `client::ComThread::mta`).
+    /// [`CLIENT_IIDS`] and the MTA kept (from `apartment::Apartment::mta`).
     Client,
 }
 
@@ -271,7 +271,7 @@ unsafe extern "system" fn release(_this: *mut c_void) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::client::ComThread;
+    use crate::apartment::Apartment;
 
     /// The IIDs of both lists are distinct within each list.
     #[test]
@@ -337,20 +337,20 @@ mod tests {
     /// and the stub buffer connects to the object), from the MTA; not from an STA.
     #[test]
     fn every_iid_marshals_from_the_mta_and_install_runs_once() {
-        let _com = ComThread::mta().expect("MTA");
+        let _com = Apartment::mta().expect("MTA");
         for (iid, r) in marshal_each(SERVER_IIDS)
             .into_iter()
             .chain(marshal_each(CLIENT_IIDS))
         {
             assert!(r.is_ok(), "{iid:?}: {r:?}");
         }
-        // ComThread::mta kept the client role already; the server role now, once.
+        // Apartment::mta kept the client role already; the server role now, once.
         assert_eq!(keep_registered(Role::Client), Ok(0));
         let expected = if under_wine() { SERVER_IIDS.len() } else { 0 };
         assert_eq!(keep_registered(Role::Server), Ok(expected));
         assert_eq!(keep_registered(Role::Server), Ok(0));
         let sta = std::thread::spawn(|| {
-            let _com = ComThread::sta().expect("STA");
+            let _com = Apartment::sta().expect("STA");
             in_mta()
         });
         assert!(!sta.join().unwrap());

@@ -10,8 +10,8 @@
 mod common;
 
 use common::*;
-use ctopc_com::client::{enum_strings, BrowseArgs};
 use ctopc_com::interfaces::*;
+use opc_client::{enum_strings, BrowseArgs};
 use std::ptr::{null, null_mut};
 use windows::Win32::Foundation::E_NOTIMPL;
 use windows::Win32::System::Com::IEnumString;

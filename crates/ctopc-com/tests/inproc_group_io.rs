@@ -80,16 +80,12 @@ impl Plant {
     }
 }
 
-fn clients(items: &[ctopc_com::client::ReadItem]) -> Vec<u32> {
+fn clients(items: &[opc_client::ReadItem]) -> Vec<u32> {
     items.iter().map(|i| i.client_handle).collect()
 }
 
 /// IOPCSyncIO::Read: (HRESULT, items with their per-item errors).
-fn read(
-    p: &Plant,
-    source: OPCDATASOURCE,
-    h: &[u32],
-) -> (HRESULT, Vec<ctopc_com::client::ReadItem>) {
+fn read(p: &Plant, source: OPCDATASOURCE, h: &[u32]) -> (HRESULT, Vec<opc_client::ReadItem>) {
     let (mut values, mut errors) = (poison::<OPCITEMSTATE>(), poison::<HRESULT>());
     // SAFETY: valid pointers.
     let hr = unsafe {

@@ -3,8 +3,8 @@
 //! [`io`] the sync and async I/O interfaces, and DA 1.0a's IOPCAsyncIO (`async1.rs`) and
 //! IDataObject ([`dataobject`]).
 //!
-//! **One COM identity per engine group**: the context's registry ([`Registry`], one per
-//! runtime, `Context::groups`) maps each engine group to a weak reference to its live COM
+//! **One COM identity per engine group**: the context's group table ([`GroupTable`], one
+//! per runtime, `Context::groups`) maps each engine group to a weak reference to its live COM
 //! object and to the object's callback slot.
 //! [`lookup_or_create`] hands out the live object or makes a new one; [`create`] always
 //! makes a new one (AddGroup, CloneGroup). Each object holds one engine reference
@@ -13,8 +13,8 @@
 //! runtime while the object lives, so that the callback workers deliver to it; dropping
 //! the object unregisters it (and disconnects a sink the client did not unadvise).
 //!
-//! Lock order: the registry, then the runtime's locks. No strong reference to a group
-//! object is ever dropped while the registry is locked (its `Drop` takes the lock).
+//! Lock order: the group table, then the runtime's locks. No strong reference to a group
+//! object is ever dropped while the group table is locked (its `Drop` takes the lock).
 
 mod async1;
 pub mod dataobject;
@@ -71,7 +71,7 @@ pub struct Group {
 }
 
 // ---------------------------------------------------------------------------------------
-// Identity registry
+// The group table: one identity per group
 // ---------------------------------------------------------------------------------------
 
 struct Entry {
@@ -83,9 +83,9 @@ struct Entry {
 
 /// The group identities of one context (`Context::groups`).
 #[derive(Default)]
-pub struct Registry(Mutex<BTreeMap<GroupHandle, Entry>>);
+pub struct GroupTable(Mutex<BTreeMap<GroupHandle, Entry>>);
 
-impl Registry {
+impl GroupTable {
     fn lock(&self) -> MutexGuard<'_, BTreeMap<GroupHandle, Entry>> {
         self.0.lock().unwrap_or_else(|p| p.into_inner())
     }

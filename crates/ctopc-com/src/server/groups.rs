@@ -43,7 +43,7 @@ use windows::Win32::System::Com::{IEnumString, IEnumUnknown};
 use windows::Win32::System::Time::{GetTimeZoneInformation, TIME_ZONE_INFORMATION};
 
 /// The COM object of an engine group: the existing one while it lives, else a new one
-/// (`crate::group`'s registry keeps one identity per group).
+/// (`crate::group`'s group table keeps one identity per group).
 fn group_object(
     ctx: &Arc<Context>,
     session: SessionHandle,

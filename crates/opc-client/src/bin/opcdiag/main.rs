@@ -4,7 +4,7 @@
 //!
 //! The command line and every formatting rule are plain Rust (`cli`, `text`: tested
 //! natively); the COM calls (`win`, `demo`) exist on Windows only and go through the safe
-//! client wrapper `ctopc_com::client`.
+//! client wrapper `opc_client`.
 
 /// `println!` that does not panic when stdout is gone (piped into `head`, say): the
 /// line is dropped and [`out::closed`] turns true, which ends a subscription.

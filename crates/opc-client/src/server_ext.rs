@@ -5,7 +5,7 @@
 //! hands out is copied and freed here.
 
 use super::{take_array, take_variants, take_wstr, timestamp, ReadItem, Server};
-use crate::interfaces::*;
+use ctopc_com::interfaces::*;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::Value;
 use std::ffi::c_void;
@@ -143,8 +143,8 @@ impl WideStrings {
 }
 
 fn take_value(v: &mut VARIANT) -> Value {
-    let value = crate::variant::from_variant(v).unwrap_or(Value::Empty);
-    crate::variant::clear(v);
+    let value = ctopc_com::variant::from_variant(v).unwrap_or(Value::Empty);
+    ctopc_com::variant::clear(v);
     value
 }
 
@@ -164,8 +164,11 @@ fn take_item_properties(p: &mut OPCITEMPROPERTIES) -> ItemProperties {
             out.properties.push(Property {
                 id: prop.dwPropertyID,
                 vt: prop.vtDataType.0,
-                description: take_wstr(prop.szDescription),
-                item_id: take_wstr(prop.szItemID),
+                // SAFETY: each element's strings are NULL or CoTaskMem, ours, taken once
+                // (see the slice above).
+                description: unsafe { take_wstr(prop.szDescription) },
+                // SAFETY: as above.
+                item_id: unsafe { take_wstr(prop.szItemID) },
                 value: take_value(&mut prop.vValue),
                 error: prop.hrErrorID,
             });
@@ -200,7 +203,12 @@ pub fn enum_strings_each(
         // celt passed); `fetched` is a valid out-pointer.
         let hr = unsafe { e.Next(&mut batch, Some(&mut fetched)) };
         let got = (fetched as usize).min(batch.len());
-        let strings: Vec<String> = batch[..got].iter().filter_map(|p| take_wstr(*p)).collect();
+        let strings: Vec<String> = batch[..got]
+            .iter()
+            // SAFETY: the `got` fetched elements are CoTaskMem strings handed out by Next,
+            // ours; each is taken once and its slot cleared below.
+            .filter_map(|p| unsafe { take_wstr(*p) })
+            .collect();
         batch[..got].fill(PWSTR::null());
         each(strings);
         hr.ok()?;
@@ -410,7 +418,8 @@ impl Server {
             self.address_space()?
                 .GetItemID(PCWSTR(s.as_ptr()), &mut p)?
         };
-        Ok(take_wstr(p))
+        // SAFETY: NULL or the CoTaskMem string the call handed out, ours.
+        Ok(unsafe { take_wstr(p) })
     }
 
     /// BrowseAccessPaths: the call's code (the enumerator is dropped).
@@ -457,7 +466,8 @@ impl Server {
         // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
         let descs: Vec<Option<String>> = unsafe { take_array(descs, n as usize) }
             .into_iter()
-            .map(take_wstr)
+            // SAFETY: its elements are NULL or CoTaskMem strings, ours, each taken once.
+            .map(|p| unsafe { take_wstr(p) })
             .collect();
         // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
         let types: Vec<VARTYPE> = unsafe { take_array(types, n as usize) };
@@ -515,7 +525,8 @@ impl Server {
         // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
         let new_ids: Vec<Option<String>> = unsafe { take_array(new_ids, ids.len()) }
             .into_iter()
-            .map(take_wstr)
+            // SAFETY: its elements are NULL or CoTaskMem strings, ours, each taken once.
+            .map(|p| unsafe { take_wstr(p) })
             .collect();
         // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
         let errors: Vec<HRESULT> = unsafe { take_array(errors, ids.len()) };
@@ -573,7 +584,7 @@ impl Server {
         let name_filter = HSTRING::from(a.name_filter.as_str());
         let vendor_filter = HSTRING::from(a.vendor_filter.as_str());
         let mut cp = match &a.continuation_point {
-            Some(s) => crate::abi::alloc_wstr(s)?,
+            Some(s) => ctopc_com::abi::alloc_wstr(s)?,
             None => PWSTR::null(),
         };
         let mut more = BOOL(0);
@@ -604,7 +615,9 @@ impl Server {
                 &mut elements,
             )
         };
-        let continuation_point = take_wstr(cp);
+        // SAFETY: NULL or the CoTaskMem continuation point the call handed out (it freed the
+        // one passed in), ours.
+        let continuation_point = unsafe { take_wstr(cp) };
         let _ = ok_or_s_false(hr)?;
         let mut out = Vec::new();
         if !elements.is_null() {
@@ -613,8 +626,11 @@ impl Server {
             let slice = unsafe { std::slice::from_raw_parts_mut(elements, count as usize) };
             for e in slice.iter_mut() {
                 out.push(BrowseElement {
-                    name: take_wstr(e.szName),
-                    item_id: take_wstr(e.szItemID),
+                    // SAFETY: each element's strings are NULL or CoTaskMem, ours, taken
+                    // once (see the slice above).
+                    name: unsafe { take_wstr(e.szName) },
+                    // SAFETY: as above.
+                    item_id: unsafe { take_wstr(e.szItemID) },
                     flags: e.dwFlagValue,
                     properties: take_item_properties(&mut e.ItemProperties),
                 });
@@ -696,7 +712,7 @@ impl Server {
         let mut vqts: Vec<OPCITEMVQT> = Vec::with_capacity(items.len());
         let mut result = Ok(());
         for (_, v) in items {
-            match crate::variant::to_variant(&v.value) {
+            match ctopc_com::variant::to_variant(&v.value) {
                 Ok(value) => vqts.push(OPCITEMVQT {
                     vDataValue: value,
                     bQualitySpecified: BOOL::from(v.quality.is_some()),
@@ -706,7 +722,7 @@ impl Server {
                     dwReserved: 0,
                     ftTimeStamp: v
                         .timestamp
-                        .map_or_else(FILETIME::default, crate::clock::filetime),
+                        .map_or_else(FILETIME::default, ctopc_com::clock::filetime),
                 }),
                 Err(e) => {
                     result = Err(e);
@@ -729,7 +745,7 @@ impl Server {
             Ok((hr, unsafe { take_array(errors, items.len()) }))
         });
         for v in &mut vqts {
-            crate::variant::clear(&mut v.vDataValue);
+            ctopc_com::variant::clear(&mut v.vDataValue);
         }
         call
     }

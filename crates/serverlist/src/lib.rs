@@ -1,8 +1,10 @@
 //! `OPC.ServerList.1`, our own server browser (OpcEnum-compatible), served by
-//! `OpcServerList.exe` (crate `crates/serverlist`): `IOPCServerList` and `IOPCServerList2`
-//! over every OPC server of the machine, read from **both registry views**
+//! `OpcServerList.exe` (`src/main.rs`): `IOPCServerList` and `IOPCServerList2` over every
+//! OPC server of the machine, read from **both registry views**
 //! (`HKCR\CLSID\{..}\Implemented Categories` with `KEY_WOW64_64KEY` and
-//! `KEY_WOW64_32KEY`), merged and filtered by the plain-Rust [`crate::catalog`].
+//! `KEY_WOW64_32KEY`, through `ctopc_com::winreg::RegKey`), merged and filtered by the
+//! plain-Rust [`ctopc_registration::catalog`]. The COM plumbing (argument toolkit,
+//! enumerator cursor, class factory, lifetime, serving, NT service) is ctopc-com's.
 //!
 //! Registration ([`register`], [`unregister`]) never replaces a server browser that is
 //! not ours (the OPC Foundation's OpcEnum): the keys are `registration::server_list`,
@@ -13,38 +15,32 @@
 //! CLSIDFromProgID `CO_E_CLASSSTRING` (what `CLSIDFromProgID` answers).
 //! The registry is read at each call (no cache: a server installed while the browser runs
 //! is listed at once).
+#![cfg(windows)]
 
-use crate::abi::{self, ComResult};
-use crate::catalog::{self, parse_guid, Catalog, ClassEntry};
-use crate::comdef::{RawEnumGUID, RawEnumGUID_Impl};
-use crate::enums::{clone_out, next_into, Cursor};
-use crate::factory::ClassFactory;
-use crate::host::{
-    exe_path, init_security, keep_registered_under_wine, serve_class, ComInit, EXIT_LINGER,
-    STARTUP_GRACE,
+use ctopc_com::abi::{self, ComResult};
+use ctopc_com::apartment::Apartment;
+use ctopc_com::comdef::{RawEnumGUID, RawEnumGUID_Impl};
+use ctopc_com::enums::{clone_out, next_into, Cursor};
+use ctopc_com::factory::ClassFactory;
+use ctopc_com::host::{
+    exe_path, init_security, keep_registered_under_wine, serve_class, EXIT_LINGER, STARTUP_GRACE,
 };
-use crate::interfaces::{
+use ctopc_com::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
     IOPCServerList_Impl,
 };
-use crate::lifetime::{ExitReason, Lifetime, ObjectGuard, StopSignal};
-use crate::registration::{self, View, VIEWS};
-use crate::registry;
-use crate::service;
+use ctopc_com::lifetime::{ExitReason, Lifetime, ObjectGuard, StopSignal};
+use ctopc_com::service;
+use ctopc_com::winreg::{self, RegKey};
 use ctopc_core::limits::TextLimit;
 use ctopc_core::OpcError;
+use ctopc_registration::catalog::{self, parse_guid, Catalog, ClassEntry};
+use ctopc_registration::{self as registration, View, VIEWS};
 use std::sync::Arc;
-use windows::core::{implement, IUnknown, Interface, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{
-    CO_E_CLASSSTRING, ERROR_MORE_DATA, ERROR_NO_MORE_ITEMS, ERROR_SUCCESS, E_FAIL, E_POINTER,
-    REGDB_E_CLASSNOTREG, S_OK,
-};
+use windows::core::{implement, IUnknown, Interface, GUID, HRESULT, PCWSTR, PWSTR};
+use windows::Win32::Foundation::{CO_E_CLASSSTRING, E_FAIL, E_POINTER, REGDB_E_CLASSNOTREG, S_OK};
 use windows::Win32::System::Com::IEnumGUID;
-use windows::Win32::System::Registry::{
-    RegCloseKey, RegEnumKeyExW, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT,
-    HKEY_LOCAL_MACHINE, KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, REG_SAM_FLAGS,
-    RRF_RT_REG_DWORD, RRF_RT_REG_SZ,
-};
+use windows::Win32::System::Registry::HKEY_CLASSES_ROOT;
 
 /// `OPC.ServerList.1`'s CLSID.
 pub const CLSID_OPC_SERVER_LIST: GUID = GUID::from_u128(registration::CLSID_OPC_SERVER_LIST);
@@ -59,179 +55,15 @@ const PROGID: TextLimit = TextLimit {
 // ---------------------------------------------------------------------------------------
 // Reading the registry, one view at a time
 
-fn view_flag(view: View) -> REG_SAM_FLAGS {
-    match view {
-        View::Reg64 => KEY_WOW64_64KEY,
-        View::Reg32 => KEY_WOW64_32KEY,
-    }
-}
-
-/// An open registry key, closed on drop.
-struct RegKey(HKEY);
-
-impl RegKey {
-    /// `parent\path` of `view` for reading; `None` when absent (or not readable).
-    fn open(parent: HKEY, path: &str, view: View) -> Option<RegKey> {
-        let wpath = HSTRING::from(path);
-        let mut hkey = HKEY::default();
-        // SAFETY: valid parent handle, string and out handle for the call.
-        let err =
-            unsafe { RegOpenKeyExW(parent, &wpath, None, KEY_READ | view_flag(view), &mut hkey) };
-        (err == ERROR_SUCCESS).then_some(RegKey(hkey))
-    }
-
-    /// The names of the subkeys.
-    fn subkeys(&self) -> Vec<String> {
-        let mut out = Vec::new();
-        // Key names are at most 255 characters.
-        let mut buf = [0u16; 256];
-        for index in 0u32.. {
-            let mut len = buf.len() as u32;
-            // SAFETY: `buf` has room for `len` characters; the other out-parameters are
-            // not asked for.
-            let err = unsafe {
-                RegEnumKeyExW(
-                    self.0,
-                    index,
-                    Some(PWSTR(buf.as_mut_ptr())),
-                    &mut len,
-                    None,
-                    None,
-                    None,
-                    None,
-                )
-            };
-            if err == ERROR_NO_MORE_ITEMS {
-                break;
-            }
-            if err == ERROR_SUCCESS {
-                let n = (len as usize).min(buf.len());
-                out.push(String::from_utf16_lossy(&buf[..n]));
-            } else if err != ERROR_MORE_DATA {
-                break;
-            }
-        }
-        out
-    }
-
-    /// The default (`REG_SZ`) value of the subkey `sub` (`""`: of this key).
-    fn default_value(&self, sub: &str) -> Option<String> {
-        self.text_value(sub, "")
-    }
-
-    /// The `REG_SZ` value `name` (`""`: the default value) of the subkey `sub`.
-    fn text_value(&self, sub: &str, name: &str) -> Option<String> {
-        let wsub = HSTRING::from(sub);
-        let wname = HSTRING::from(name);
-        let name_ptr = if name.is_empty() {
-            PCWSTR::null()
-        } else {
-            PCWSTR(wname.as_ptr())
-        };
-        let mut bytes = 0u32;
-        // SAFETY: a size query: no data buffer, `bytes` receives the size.
-        let err = unsafe {
-            RegGetValueW(
-                self.0,
-                &wsub,
-                name_ptr,
-                RRF_RT_REG_SZ,
-                None,
-                None,
-                Some(&mut bytes),
-            )
-        };
-        if err != ERROR_SUCCESS || bytes == 0 {
-            return None;
-        }
-        let mut buf = vec![0u16; (bytes as usize).div_ceil(2) + 1];
-        let mut len = (buf.len() * 2) as u32;
-        // SAFETY: `buf` has room for `len` bytes.
-        let err = unsafe {
-            RegGetValueW(
-                self.0,
-                &wsub,
-                name_ptr,
-                RRF_RT_REG_SZ,
-                None,
-                Some(buf.as_mut_ptr().cast()),
-                Some(&mut len),
-            )
-        };
-        if err != ERROR_SUCCESS {
-            return None;
-        }
-        let units = (len as usize / 2).min(buf.len());
-        let text = &buf[..units];
-        let end = text.iter().position(|&c| c == 0).unwrap_or(text.len());
-        Some(String::from_utf16_lossy(&text[..end]))
-    }
-
-    /// The `REG_DWORD` value `name` of this key.
-    fn dword_value(&self, name: &str) -> Option<u32> {
-        let wname = HSTRING::from(name);
-        let mut data = 0u32;
-        let mut len = std::mem::size_of::<u32>() as u32;
-        // SAFETY: `data` has room for the `len` bytes of a DWORD.
-        let err = unsafe {
-            RegGetValueW(
-                self.0,
-                PCWSTR::null(),
-                &wname,
-                RRF_RT_REG_DWORD,
-                None,
-                Some((&raw mut data).cast()),
-                Some(&mut len),
-            )
-        };
-        (err == ERROR_SUCCESS).then_some(data)
-    }
-}
-
-impl Drop for RegKey {
-    fn drop(&mut self) {
-        // SAFETY: the handle was opened by `open` and is closed once.
-        unsafe {
-            let _ = RegCloseKey(self.0);
-        }
-    }
-}
-
-/// Whether `HKCR\path` exists in `view` (and is readable).
-pub fn key_exists(view: View, path: &str) -> bool {
-    RegKey::open(HKEY_CLASSES_ROOT, path, view).is_some()
-}
-
-/// The `REG_SZ` value `name` (`""`: the default value) of `HKCR\path` in `view`.
-pub fn read_value(view: View, path: &str, name: &str) -> Option<String> {
-    RegKey::open(HKEY_CLASSES_ROOT, path, view)?.text_value("", name)
-}
-
-/// A value of `HKLM\path` in `view` as text: a `REG_SZ` as it is, a `REG_DWORD` in
-/// decimal (machine-wide settings such as `Software\Microsoft\Ole`, for `opcdiag doctor`).
-pub fn read_machine_value(view: View, path: &str, name: &str) -> Option<String> {
-    let key = RegKey::open(HKEY_LOCAL_MACHINE, path, view)?;
-    key.text_value("", name)
-        .or_else(|| key.dword_value(name).map(|d| d.to_string()))
-}
-
-/// The default value of `HKCR\path` in `view`.
-pub fn read_default(view: View, path: &str) -> Option<String> {
-    let (parent, leaf) = match path.rsplit_once('\\') {
-        Some((p, l)) => (RegKey::open(HKEY_CLASSES_ROOT, p, view)?, l),
-        None => (RegKey::open(HKEY_CLASSES_ROOT, path, view)?, ""),
-    };
-    parent.default_value(leaf)
-}
-
 fn categories(class: &RegKey, sub: &str, view: View) -> Vec<u128> {
-    RegKey::open(class.0, sub, view)
+    class
+        .subkey(sub, view)
         .map(|k| k.subkeys().iter().filter_map(|s| parse_guid(s)).collect())
         .unwrap_or_default()
 }
 
 fn entry(clsids: &RegKey, name: &str, clsid: u128, view: View) -> Option<ClassEntry> {
-    let class = RegKey::open(clsids.0, name, view)?;
+    let class = clsids.subkey(name, view)?;
     Some(ClassEntry {
         clsid,
         implemented: categories(&class, "Implemented Categories", view),
@@ -253,7 +85,7 @@ fn read_view(view: View) -> Vec<ClassEntry> {
         .filter_map(|name| {
             let clsid = parse_guid(name)?;
             // Most classes have no categories: look before reading the rest.
-            RegKey::open(clsids.0, &format!("{name}\\Implemented Categories"), view)?;
+            clsids.subkey(&format!("{name}\\Implemented Categories"), view)?;
             entry(&clsids, name, clsid, view)
         })
         .collect()
@@ -282,7 +114,7 @@ fn class_details(clsid: u128) -> Option<ClassEntry> {
 fn clsid_of_progid(progid: &str) -> Option<u128> {
     VIEWS
         .iter()
-        .find_map(|&v| catalog::resolve_progid(progid, |key| read_default(v, key)))
+        .find_map(|&v| catalog::resolve_progid(progid, |key| winreg::read_default(v, key)))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -408,7 +240,7 @@ impl ServerList {
         let id = unsafe { *clsid }.to_u128();
         let e = class_details(id)
             .filter(|e| e.progid.is_some())
-            .ok_or_else(|| crate::error::error(REGDB_E_CLASSNOTREG, "class not registered"))?;
+            .ok_or_else(|| ctopc_com::error::error(REGDB_E_CLASSNOTREG, "class not registered"))?;
         let progid = e.progid.unwrap_or_default();
         Ok((
             progid,
@@ -426,7 +258,7 @@ impl ServerList {
         // SAFETY: contract of this function.
         let progid = unsafe { abi::in_string(sz, PROGID) }?;
         let id = clsid_of_progid(&progid)
-            .ok_or_else(|| crate::error::error(CO_E_CLASSSTRING, "unknown ProgID"))?;
+            .ok_or_else(|| ctopc_com::error::error(CO_E_CLASSSTRING, "unknown ProgID"))?;
         // SAFETY: checked non-null above.
         unsafe { abi::write_out(out, GUID::from_u128(id)) }
     }
@@ -552,7 +384,10 @@ fn our_registration<R>(
 /// `LocalServer32` of `{13486D51-...}` in each view.
 fn local_servers() -> Vec<(View, Option<String>)> {
     let key = registration::server_list_local_server_key();
-    VIEWS.iter().map(|&v| (v, read_default(v, &key))).collect()
+    VIEWS
+        .iter()
+        .map(|&v| (v, winreg::read_default(v, &key)))
+        .collect()
 }
 
 fn view_name(v: View) -> &'static str {
@@ -566,7 +401,7 @@ fn view_name(v: View) -> &'static str {
 /// ours; a view with another one (the OPC Foundation's OpcEnum) is left alone, with a
 /// message. Succeeds in both cases.
 pub fn register() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     register_as(None)
 }
 
@@ -575,7 +410,7 @@ pub fn register() -> ComResult<()> {
 /// service, which remote clients need (as the OPC Foundation's OpcEnum, a service too).
 /// Where another browser serves both views nothing is installed.
 pub fn register_service() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let foreign = registration::foreign_server_list_views(&local_servers());
     if foreign.len() == VIEWS.len() {
         println!("OpcServerList: no service installed (another server browser serves both views)");
@@ -583,7 +418,7 @@ pub fn register_service() -> ComResult<()> {
     }
     let exe = exe_path()?;
     service::install_as(&service::SERVER_LIST, std::path::Path::new(&exe))
-        .map_err(|e| crate::error::error(E_FAIL, &e))?;
+        .map_err(|e| ctopc_com::error::error(E_FAIL, &e))?;
     register_as(Some(service::SERVER_LIST.name))?;
     println!(
         "OpcServerList: runs as the NT service {}",
@@ -606,14 +441,14 @@ fn register_as(service: Option<&str>) -> ComResult<()> {
         }
     }
     let keys = our_registration(service, |r| registration::server_list_keys(r, &foreign))?;
-    registry::write_keys(&keys)?;
+    winreg::write_keys(&keys)?;
     if foreign.len() == VIEWS.len() {
         println!("OpcServerList: not registered (another server browser serves both views)");
     } else {
         println!(
             "OpcServerList: registered {} ({})",
             registration::SERVER_LIST_PROGID_VERSIONED,
-            registry::guid_string(&CLSID_OPC_SERVER_LIST)
+            winreg::guid_string(&CLSID_OPC_SERVER_LIST)
         );
     }
     Ok(())
@@ -622,7 +457,7 @@ fn register_as(service: Option<&str>) -> ComResult<()> {
 /// `/UnregServer`: removes our browser only (a view whose `{13486D51-...}` is another
 /// one's keeps it), and its NT service if `/Service` installed it.
 pub fn unregister() -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     let local = local_servers();
     let foreign = registration::foreign_server_list_views(&local);
     let ours: Vec<View> = local
@@ -633,8 +468,9 @@ pub fn unregister() -> ComResult<()> {
     let trees = our_registration(None, |r| {
         registration::server_list_trees(r, &ours, &foreign)
     })?;
-    registry::delete_trees(&trees)?;
-    service::uninstall_as(&service::SERVER_LIST).map_err(|e| crate::error::error(E_FAIL, &e))?;
+    winreg::delete_trees(&trees)?;
+    service::uninstall_as(&service::SERVER_LIST)
+        .map_err(|e| ctopc_com::error::error(E_FAIL, &e))?;
     println!("OpcServerList: unregistered ours");
     Ok(())
 }
@@ -651,12 +487,12 @@ pub fn serve_service() -> ComResult<()> {
         &service::SERVER_LIST,
         Box::new(|stop| serve_until(Some(stop)).map_err(|e| e.message())),
     )
-    .map_err(|e| crate::error::error(E_FAIL, &e))
+    .map_err(|e| ctopc_com::error::error(E_FAIL, &e))
 }
 
 /// Serves until the last client has gone (`None`) or `stop` is triggered.
 fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
-    let _com = ComInit::mta()?;
+    let _com = Apartment::mta_without_keepalive()?;
     init_security();
     keep_registered_under_wine();
     let lifetime = Lifetime::new();

@@ -4,7 +4,7 @@
 //! server.
 
 use super::{timestamp, ReadItem};
-use crate::interfaces::*;
+use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, Value};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::Sender;
@@ -92,8 +92,8 @@ pub unsafe fn callback_items(
     (0..n)
         .map(|i| ReadItem {
             client_handle: h[i],
-            vt: crate::variant::var_type(&v[i]).0,
-            value: crate::variant::from_variant(&v[i]).unwrap_or(Value::Empty),
+            vt: ctopc_com::variant::var_type(&v[i]).0,
+            value: ctopc_com::variant::from_variant(&v[i]).unwrap_or(Value::Empty),
             quality: q[i],
             timestamp: timestamp(t[i]),
             error: e[i],

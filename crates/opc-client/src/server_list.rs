@@ -3,8 +3,8 @@
 //! the fallback where no browser is registered: used by `opcdiag servers` and the tests.
 
 use super::take_wstr;
-use crate::interfaces::{IOPCEnumGUID, IOPCServerList, IOPCServerList2};
-use crate::registration::CLSID_OPC_SERVER_LIST;
+use ctopc_com::interfaces::{IOPCEnumGUID, IOPCServerList, IOPCServerList2};
+use ctopc_registration::CLSID_OPC_SERVER_LIST;
 use windows::core::{Interface, GUID, HSTRING, PWSTR};
 use windows::Win32::Foundation::S_OK;
 use windows::Win32::System::Com::{
@@ -125,7 +125,8 @@ impl ServerBrowser {
         if let Some(list2) = &self.list2 {
             // SAFETY: valid GUID and out-pointers; the strings are taken over below.
             let r = unsafe { list2.GetClassDetails(clsid, &mut progid, &mut user_type, &mut ver) };
-            let (p, u, v) = (take_wstr(progid), take_wstr(user_type), take_wstr(ver));
+            // SAFETY: NULL or the CoTaskMem strings the call handed out, ours, taken once.
+            let (p, u, v) = unsafe { (take_wstr(progid), take_wstr(user_type), take_wstr(ver)) };
             r?;
             return Ok(ClassDetails {
                 progid: p.unwrap_or_default(),
@@ -144,7 +145,8 @@ impl ServerBrowser {
             self.list
                 .GetClassDetails(clsid, &mut progid, &mut user_type)
         };
-        let (p, u) = (take_wstr(progid), take_wstr(user_type));
+        // SAFETY: NULL or the CoTaskMem strings the call handed out, ours, taken once.
+        let (p, u) = unsafe { (take_wstr(progid), take_wstr(user_type)) };
         r?;
         Ok(ClassDetails {
             progid: p.unwrap_or_default(),

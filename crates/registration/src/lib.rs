@@ -1,9 +1,9 @@
 //! What an out-of-process COM server writes into the registry, as data: the list of keys
 //! and values ([`ServerRegistration::keys`]) and of the trees to delete
 //! ([`ServerRegistration::trees`]), computed without Windows and tested natively.
-//! `registry.rs` applies them with the Win32 registry calls (`/RegServer`, `/Service`,
-//! `/UnregServer`); the MSI (`xtask/src/msi.rs`) generates its Registry table from the
-//! same list.
+//! ctopc-com's `winreg.rs` applies them with the Win32 registry calls (`/RegServer`,
+//! `/Service`, `/UnregServer`); the MSI build (`xtask/src/msi.rs`) generates its Registry
+//! table from the same list, and `opcdiag doctor` checks the machine against it.
 //!
 //! Every key is written in **both registry views** ([`View::Reg64`] with
 //! `KEY_WOW64_64KEY`, [`View::Reg32`] with `KEY_WOW64_32KEY`): the server is 64-bit, but
@@ -14,9 +14,11 @@
 //! the same key and changes nothing.
 //!
 //! Paths are relative to `HKEY_CLASSES_ROOT` (machine-wide: `HKLM\Software\Classes`).
-//! This module is plain Rust (no `windows`), compiled on every host, unlike the rest of
-//! the crate.
+//! [`catalog`] is the server browser's view of the machine's classes, as data too. The
+//! crate is plain Rust (no `windows`), compiled and tested on every host.
 #![forbid(unsafe_code)]
+
+pub mod catalog;
 
 /// A registry view of 64-bit Windows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

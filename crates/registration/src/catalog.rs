@@ -1,13 +1,12 @@
 //! The machine's COM classes with component categories, as the server browser
-//! (`OPC.ServerList.1`, `server_list.rs`) answers about them: the entries of both registry
-//! views merged ([`Catalog::merge`]), the category filter of
+//! (`OPC.ServerList.1`, crates/serverlist) answers about them: the entries of
+//! both registry views merged ([`Catalog::merge`]), the category filter of
 //! `IOPCServerList::EnumClassesOfCategories` ([`Catalog::classes_of_categories`], the rules
 //! of `ICatInformation::EnumClassesOfCategories`), the details of a class and the ProgID
-//! lookup. Plain Rust (no `windows`), compiled and tested on every host; `server_list.rs`
+//! lookup. Plain Rust (no `windows`), compiled and tested on every host; the browser
 //! reads the registry into [`ClassEntry`]s.
-#![forbid(unsafe_code)]
 
-use crate::registration::View;
+use crate::View;
 
 /// One class of one registry view: `HKCR\CLSID\{clsid}` with its categories.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -230,7 +229,7 @@ mod tests {
             parse_guid("{63d5f432-cfe4-11d1-b2c8-0060083ba1fb}"),
             Some(DA20)
         );
-        let g = crate::registration::guid_string(0x0123_4567_89ab_cdef_0011_2233_4455_6677);
+        let g = crate::guid_string(0x0123_4567_89ab_cdef_0011_2233_4455_6677);
         assert_eq!(
             parse_guid(&g),
             Some(0x0123_4567_89ab_cdef_0011_2233_4455_6677)

@@ -1,4 +1,4 @@
-//! The server browser object (`server_list.rs`) in process, without the proxy: the
+//! The server browser object (`src/lib.rs`) in process, without the proxy: the
 //! argument checks a proxy would not let through (NULL out-parameters, a NULL category
 //! array with a count), out-parameters cleared on failure, and the enumerator's NULL
 //! checks. Listing itself is tested end to end (tests/tests/server_list.rs).
@@ -8,7 +8,7 @@
 
 use ctopc_com::interfaces::*;
 use ctopc_com::lifetime::Lifetime;
-use ctopc_com::server_list::create_instance;
+use opc_server_list::create_instance;
 use std::ptr::{null, null_mut};
 use windows::core::{Interface, GUID, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, REGDB_E_CLASSNOTREG};
