@@ -108,6 +108,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/ctopc-core",
         "crates/asix-model",
         "crates/registration",
+        "crates/runtime",
         "crates/asix-net",
         "crates/server",
         "xtask",

@@ -2,7 +2,7 @@
 //! proxy): every NULL pointer, count of 0 and enumeration value outside the IDL's reaches
 //! the server and answers its exact HRESULT, with out-parameters cleared on failure; and
 //! the success paths over the embedded demo plant. The rules are the module docs of
-//! `crates/ctopc-com/src/server.rs` and `server/browse.rs`.
+//! `crates/ctopc-com/src/da/server.rs` and `server/browse.rs`.
 #![cfg(windows)]
 // Test code (helpers included): a panic fails the test, it crosses no COM boundary.
 #![allow(clippy::unwrap_used, clippy::expect_used)]

@@ -1,7 +1,7 @@
 //! IOPCServer and IOPCCommon of the server object, in process (no proxy): every argument
 //! branch with its exact HRESULT, out-parameters cleared on failure (all or nothing), and
 //! each method's success path. The argument rules are the module doc of
-//! `crates/ctopc-com/src/server.rs`; the group rules that of `server/groups.rs`. The
+//! `crates/ctopc-com/src/da/server.rs`; the group rules that of `server/groups.rs`. The
 //! harness is `common/mod.rs`.
 #![cfg(windows)]
 // Test code (helpers included): a panic fails the test, it crosses no COM boundary.

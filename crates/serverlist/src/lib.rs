@@ -23,7 +23,7 @@ use ctopc_com::comdef::{RawEnumGUID, RawEnumGUID_Impl};
 use ctopc_com::enums::{clone_out, next_into, Cursor};
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::host::{
-    exe_path, init_security, keep_registered_under_wine, serve_class, EXIT_LINGER, STARTUP_GRACE,
+    exe_path, init_security, keep_interfaces_registered, serve_class, EXIT_LINGER, STARTUP_GRACE,
 };
 use ctopc_com::interfaces::{
     IOPCEnumGUID, IOPCEnumGUID_Impl, IOPCServerList, IOPCServerList2, IOPCServerList2_Impl,
@@ -494,7 +494,7 @@ pub fn serve_service() -> ComResult<()> {
 fn serve_until(stop: Option<StopSignal>) -> ComResult<()> {
     let _com = Apartment::mta_without_keepalive()?;
     init_security();
-    keep_registered_under_wine();
+    keep_interfaces_registered();
     let lifetime = Lifetime::new();
     let for_factory = Arc::clone(&lifetime);
     let factory = ClassFactory::new(Arc::clone(&lifetime), move || create_instance(&for_factory));

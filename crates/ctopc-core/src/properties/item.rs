@@ -1,6 +1,6 @@
 //! Which properties an item has and their values: the behaviour behind IOPCItemProperties
 //! (DA 2.05a) and the property part of IOPCBrowse (DA 3.0 GetProperties, Browse with
-//! properties). The COM layer (`ctopc-com/src/server/props.rs`) checks arguments, makes
+//! properties). The COM layer (`ctopc-com/src/da/server/props.rs`) checks arguments, makes
 //! one call here per method, does the one engine read for the live values and marshals.
 //!
 //! Which properties an item has (asix manual §6.6; the digest's §6):

@@ -12,15 +12,24 @@
 //! the configuration (`crates/server/src/config.rs`) and hands over a [`Setup`] of plain
 //! values and the core's [`Namespace`] trait.
 
-use crate::group::GroupTable;
-use crate::interfaces::{OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST};
-use crate::lifetime::Lifetime;
+use crate::com::connpoint::SinkSlot;
+use crate::com::interfaces::IOPCDataCallback;
+use crate::com::interfaces::{
+    OPCSERVERSTATE, OPC_STATUS_NOCONFIG, OPC_STATUS_RUNNING, OPC_STATUS_TEST,
+};
+use crate::com::lifetime::Lifetime;
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::model::EngineConfig;
+use ctopc_core::model::GroupHandle;
 use ctopc_core::namespace::Namespace;
 use ctopc_core::Lang;
 use ctopc_runtime::Runtime;
+use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::sync::{Mutex, MutexGuard};
+use windows::core::IUnknown;
+use windows::Win32::Globalization::{IsValidLocale, LCID_SUPPORTED};
+use windows_core::Weak;
 
 /// What the server binary hands the COM host to serve: the namespace and what the COM
 /// layer needs of the configuration, as plain values.
@@ -50,7 +59,7 @@ pub struct Context {
     pub default_lang: Lang,
     /// The live objects and LockServer locks that keep this server up, and its stop request.
     pub lifetime: Arc<Lifetime>,
-    /// One COM identity per engine group (`crate::group`), one table per runtime.
+    /// One COM identity per engine group (`crate::da::group`), one table per runtime.
     pub(crate) groups: GroupTable,
 }
 
@@ -79,5 +88,36 @@ impl Drop for Context {
     /// The last object of this server has gone: its driver thread stops (joined here).
     fn drop(&mut self) {
         self.runtime.stop_driver();
+    }
+}
+
+/// A group LCID the server accepts (see the module documentation): the one rule of
+/// IOPCServer::AddGroup and IOPCGroupStateMgt::SetState (IOPCCommon::SetLocaleID is
+/// stricter: only the languages QueryAvailableLocaleIDs lists, `Lang::from_lcid`).
+pub(crate) fn lcid_accepted(lcid: u32) -> bool {
+    // Ours: Polish, English and the default/neutral locales (whatever the default is).
+    let ours = Lang::from_lcid(lcid, Lang::English).is_some();
+    // SAFETY: plain value arguments.
+    ours || unsafe { IsValidLocale(lcid, LCID_SUPPORTED) }.as_bool()
+}
+
+// ---------------------------------------------------------------------------------------
+// The group table: one identity per group
+// ---------------------------------------------------------------------------------------
+
+pub(crate) struct Entry {
+    /// The live COM object (dead once its last reference has gone).
+    pub(crate) object: Weak<IUnknown>,
+    /// Its callback slot: identifies the entry's object in `Drop`.
+    pub(crate) slot: Arc<SinkSlot<IOPCDataCallback>>,
+}
+
+/// The group identities of one context (`Context::groups`).
+#[derive(Default)]
+pub struct GroupTable(Mutex<BTreeMap<GroupHandle, Entry>>);
+
+impl GroupTable {
+    pub(crate) fn lock(&self) -> MutexGuard<'_, BTreeMap<GroupHandle, Entry>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
     }
 }

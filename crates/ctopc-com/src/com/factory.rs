@@ -3,7 +3,7 @@
 //! captures what it needs (the server's: its `Arc<Context>`, `server::class_factory`);
 //! LockServer counts in the [`Lifetime`] it is given.
 
-use crate::lifetime::Lifetime;
+use crate::com::lifetime::Lifetime;
 use std::ffi::c_void;
 use std::sync::Arc;
 use windows::core::{implement, IUnknown, Interface, Ref, BOOL, GUID};

@@ -1,5 +1,5 @@
 //! IOPCServer's group methods: AddGroup, GetGroupByName, RemoveGroup,
-//! CreateGroupEnumerator. The group objects themselves are `crate::group`'s; one engine
+//! CreateGroupEnumerator. The group objects themselves are `crate::da::group`'s; one engine
 //! group keeps one COM identity ([`group_object`]).
 //!
 //! Choices where the specification leaves room (evidence: OPC DA 2.05a/3.0 method texts;
@@ -28,28 +28,27 @@
 //!   E_INVALIDARG.
 
 use super::OpcServer;
-use crate::abi::{self, clear, clear_outs, in_string, nonnull, put, query_out};
-use crate::context::Context;
-use crate::enums::{StringEnum, UnknownEnum};
-use crate::interfaces::*;
+use crate::com::abi::{self, clear, clear_outs, in_string, nonnull, put, query_out};
+use crate::com::enums::{StringEnum, UnknownEnum};
+use crate::com::interfaces::*;
+use crate::da::context::Context;
 use ctopc_core::limits;
 use ctopc_core::model::{GroupHandle, GroupParams, RemoveGroupOutcome, SessionHandle};
-use ctopc_core::{Lang, OpcError};
+use ctopc_core::OpcError;
 use std::sync::Arc;
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{E_NOINTERFACE, S_FALSE, S_OK};
-use windows::Win32::Globalization::{IsValidLocale, LCID_SUPPORTED};
 use windows::Win32::System::Com::{IEnumString, IEnumUnknown};
 use windows::Win32::System::Time::{GetTimeZoneInformation, TIME_ZONE_INFORMATION};
 
 /// The COM object of an engine group: the existing one while it lives, else a new one
-/// (`crate::group`'s group table keeps one identity per group).
+/// (`crate::da::group`'s group table keeps one identity per group).
 fn group_object(
     ctx: &Arc<Context>,
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
-    crate::group::lookup_or_create(ctx, session, group)
+    crate::da::group::lookup_or_create(ctx, session, group)
 }
 
 /// A new COM object for a group just added (it becomes the group's identity).
@@ -58,7 +57,7 @@ fn new_group_object(
     session: SessionHandle,
     group: GroupHandle,
 ) -> windows::core::Result<IUnknown> {
-    crate::group::create(ctx, session, group)
+    crate::da::group::create(ctx, session, group)
 }
 
 /// AddGroup's `[in]` arguments.
@@ -82,16 +81,6 @@ pub fn local_time_bias() -> i32 {
     } else {
         tz.Bias
     }
-}
-
-/// A group LCID the server accepts (see the module documentation): the one rule of
-/// IOPCServer::AddGroup and IOPCGroupStateMgt::SetState (IOPCCommon::SetLocaleID is
-/// stricter: only the languages QueryAvailableLocaleIDs lists, `Lang::from_lcid`).
-pub(crate) fn lcid_accepted(lcid: u32) -> bool {
-    // Ours: Polish, English and the default/neutral locales (whatever the default is).
-    let ours = Lang::from_lcid(lcid, Lang::English).is_some();
-    // SAFETY: plain value arguments.
-    ours || unsafe { IsValidLocale(lcid, LCID_SUPPORTED) }.as_bool()
 }
 
 impl OpcServer {
@@ -119,7 +108,7 @@ impl OpcServer {
         nonnull(riid)?;
         nonnull(ppunk)?;
         let name = in_string(a.name, limits::GROUP_NAME)?;
-        if !lcid_accepted(a.lcid) {
+        if !crate::da::context::lcid_accepted(a.lcid) {
             return Err(abi::invalid_arg());
         }
         let params = GroupParams {
@@ -135,7 +124,7 @@ impl OpcServer {
             .ctx
             .runtime
             .with_engine(|e, now| e.add_group(now, self.handle, &params))
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
         let object = match new_group_object(&self.ctx, self.handle, added.group) {
             Ok(o) => o,
             Err(e) => {
@@ -153,7 +142,10 @@ impl OpcServer {
             put(pserver, added.group.0);
             put(prevised, added.update_rate.value);
         }
-        Ok(added.update_rate.code().map_or(S_OK, crate::error::hresult))
+        Ok(added
+            .update_rate
+            .code()
+            .map_or(S_OK, crate::com::error::hresult))
     }
 
     /// # Safety
@@ -175,7 +167,7 @@ impl OpcServer {
             .lock()
             .engine
             .group_by_name(self.handle, &name)
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
         let object = group_object(&self.ctx, self.handle, group)?;
         query_out(&object, riid, ppunk)
     }
@@ -191,10 +183,10 @@ impl OpcServer {
             .with_engine(|e, now| {
                 e.remove_group(now, self.handle, GroupHandle(server_group), force.as_bool())
             })
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
         Ok(match outcome {
             RemoveGroupOutcome::Removed => S_OK,
-            RemoveGroupOutcome::InUse => crate::error::hresult(OpcError::InUse),
+            RemoveGroupOutcome::InUse => crate::com::error::hresult(OpcError::InUse),
         })
     }
 
@@ -226,7 +218,7 @@ impl OpcServer {
                 .lock()
                 .engine
                 .groups(self.handle)
-                .map_err(crate::error::to_com)?
+                .map_err(crate::com::error::to_com)?
         } else {
             Vec::new()
         };

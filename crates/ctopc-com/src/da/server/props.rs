@@ -11,13 +11,13 @@
 //! minimum update rate (the fastest rate the server obtains data at), in milliseconds.
 
 use super::{OpcServer, OpcServer_Impl};
-use crate::abi::TaskMem;
-use crate::abi::{
+use crate::com::abi::TaskMem;
+use crate::com::abi::{
     self, clear_outs, in_slice, in_string, nonnull, opt_wstr, put, s_false_if_any, OwnedArray,
     OwnedWstr,
 };
-use crate::interfaces::*;
-use crate::variant;
+use crate::com::interfaces::*;
+use crate::com::variant;
 use ctopc_core::lang::Lang;
 use ctopc_core::limits;
 use ctopc_core::model::ItemState;
@@ -56,7 +56,7 @@ impl OpcServer {
 /// property failed, else S_OK.
 pub fn item_code(r: &OpcResult<Vec<Prop>>) -> HRESULT {
     match r {
-        Err(e) => crate::error::hresult(*e),
+        Err(e) => crate::com::error::hresult(*e),
         Ok(props) if props.iter().any(|p| p.error.is_some()) => S_FALSE,
         Ok(_) => S_OK,
     }
@@ -73,7 +73,7 @@ pub fn item_properties(r: &OpcResult<Vec<Prop>>) -> windows::core::Result<OPCITE
     let mut arr = OwnedArray::<OPCITEMPROPERTY>::zeroed(props.len())?;
     for (slot, prop) in arr.as_mut_slice().iter_mut().zip(props) {
         slot.dwPropertyID = prop.id;
-        slot.hrErrorID = prop.error.map_or(S_OK, crate::error::hresult);
+        slot.hrErrorID = prop.error.map_or(S_OK, crate::com::error::hresult);
         if prop.error.is_none() {
             slot.vtDataType = VARENUM(prop.var_type.0);
             slot.szDescription = opt_wstr(Some(prop.description))?;
@@ -128,7 +128,8 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
         nonnull(pptypes)?;
         let item_id = in_string(pitem_id, limits::ITEM_ID)?;
         let cx = self.props_ctx();
-        let props = static_properties(&cx, &item_id, None, false).map_err(crate::error::to_com)?;
+        let props =
+            static_properties(&cx, &item_id, None, false).map_err(crate::com::error::to_com)?;
         let n = props.len();
         let mut ids = TaskMem::<u32>::zeroed(n)?;
         let mut types = TaskMem::<VARTYPE>::zeroed(n)?;
@@ -166,13 +167,13 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
             let ids = in_slice(pids, count)?;
             let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             let cx = self.props_ctx();
-            let mut props =
-                static_properties(&cx, &item_id, Some(ids), true).map_err(crate::error::to_com)?;
+            let mut props = static_properties(&cx, &item_id, Some(ids), true)
+                .map_err(crate::com::error::to_com)?;
             self.fill_live_values(&mut [(item_id.as_str(), &mut props)]);
             let mut data = OwnedArray::<VARIANT>::zeroed(props.len())?;
             let mut errors = TaskMem::<HRESULT>::zeroed(props.len())?;
             for (i, prop) in props.iter().enumerate() {
-                errors.as_mut_slice()[i] = prop.error.map_or(S_OK, crate::error::hresult);
+                errors.as_mut_slice()[i] = prop.error.map_or(S_OK, crate::com::error::hresult);
                 if prop.error.is_none() {
                     data.as_mut_slice()[i] = variant::to_variant(&prop.value)?;
                 }
@@ -205,7 +206,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
             let ids = in_slice(pids, count)?;
             let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             let cx = self.props_ctx();
-            let found = lookup_item_ids(&cx, &item_id, ids).map_err(crate::error::to_com)?;
+            let found = lookup_item_ids(&cx, &item_id, ids).map_err(crate::com::error::to_com)?;
             let mut new_ids = OwnedArray::<PWSTR>::zeroed(found.len())?;
             let mut errors = TaskMem::<HRESULT>::zeroed(found.len())?;
             for (i, r) in found.iter().enumerate() {
@@ -214,7 +215,7 @@ impl IOPCItemProperties_Impl for OpcServer_Impl {
                         new_ids.as_mut_slice()[i] = OwnedWstr::new(new_id)?.into_raw();
                         errors.as_mut_slice()[i] = S_OK;
                     }
-                    Err(e) => errors.as_mut_slice()[i] = crate::error::hresult(*e),
+                    Err(e) => errors.as_mut_slice()[i] = crate::com::error::hresult(*e),
                 }
             }
             let hr = s_false_if_any(errors.as_mut_slice());

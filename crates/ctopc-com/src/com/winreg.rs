@@ -35,7 +35,7 @@ fn check(err: WIN32_ERROR, what: &str) -> windows::core::Result<()> {
     if err == ERROR_SUCCESS {
         Ok(())
     } else {
-        Err(crate::error::error(
+        Err(crate::com::error::error(
             err.to_hresult(),
             &format!("registry: {what}: error {}", err.0),
         ))
@@ -322,7 +322,7 @@ pub fn read_default(view: View, path: &str) -> Option<String> {
 
 #[cfg(test)]
 mod tests {
-    use crate::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
+    use crate::com::interfaces::{CATID_OPCDAServer20, CATID_OPCDAServer30};
     use ctopc_registration::{CATID_OPC_DA_SERVER_20, CATID_OPC_DA_SERVER_30};
     use windows::core::GUID;
 

@@ -13,37 +13,36 @@
 //!   with it; E_POINTER is kept for the COM-defined methods whose contracts name it
 //!   (QueryInterface, IEnum*::Next and Clone, IConnectionPointContainer and
 //!   IConnectionPoint, which the objects implement through our own definitions in
-//!   `crate::comdef`, so that the NULL checks are ours and not windows-rs' shims'). Through the proxy a NULL `[ref]`
+//!   `crate::com::comdef`, so that the NULL checks are ours and not windows-rs' shims'). Through the proxy a NULL `[ref]`
 //!   pointer mostly never reaches the server: the proxy answers RPC_X_NULL_REF_POINTER
 //!   (Wine's proxy lets some NULL `[out]` pointers through; the stub then hands the server
 //!   storage of its own and the proxy fails on the way back). `[in, unique]` pointers
 //!   (AddGroup's pTimeBias and pPercentDeadband) may be NULL and mean "the default".
 //! - A count of 0 is E_INVALIDARG; enumeration values outside the IDL's are E_INVALIDARG.
 //! - Out-parameters are cleared first (NULL / 0, `abi::clear_outs` before any check), then
-//!   filled only after everything of the call has succeeded (`crate::abi`): all or nothing.
+//!   filled only after everything of the call has succeeded (`crate::com::abi`): all or nothing.
 //! - Per-item operations return S_FALSE when any item failed, with per-item codes.
-//! - Core errors become COM errors only through `crate::error::to_com` (the crate's one
+//! - Core errors become COM errors only through `crate::com::error::to_com` (the crate's one
 //!   mapping, shared with the group objects; its message object is made with
 //!   `CreateErrorInfo`, never with `RoOriginateErrorW`, which aborts under Wine 8), and
-//!   per-item codes through `crate::error::hresult`.
+//!   per-item codes through `crate::com::error::hresult`.
 //! - No client is called and no COM object is created while the engine lock is held
 //!   (`ctx.runtime.with_engine` sections are short, pure engine calls).
 
 mod browse;
 mod groups;
-pub(crate) use groups::lcid_accepted;
 mod itemio;
 mod props;
 mod shutdown;
 
-use crate::abi::{self, write_out, OutArray, TaskMem};
-use crate::callbacks::ShutdownSink;
-use crate::clock;
-use crate::comdef::RawConnectionPointContainer;
-use crate::connpoint::SinkSlot;
-use crate::context::Context;
-use crate::interfaces::*;
-use crate::lifetime::ObjectGuard;
+use crate::com::abi::{self, write_out, OutArray, TaskMem};
+use crate::com::clock;
+use crate::com::comdef::RawConnectionPointContainer;
+use crate::com::connpoint::SinkSlot;
+use crate::com::interfaces::*;
+use crate::com::lifetime::ObjectGuard;
+use crate::da::callbacks::ShutdownSink;
+use crate::da::context::Context;
 use ctopc_core::diagnostics::browse::Cursor;
 use ctopc_core::lang::Lang;
 use ctopc_core::limits;
@@ -87,7 +86,7 @@ pub struct OpcServer {
 /// object of that context ([`create_instance`]); LockServer counts in its lifetime.
 pub fn class_factory(ctx: &Arc<Context>) -> windows::Win32::System::Com::IClassFactory {
     let for_factory = Arc::clone(ctx);
-    crate::factory::ClassFactory::new(Arc::clone(&ctx.lifetime), move || {
+    crate::com::factory::ClassFactory::new(Arc::clone(&ctx.lifetime), move || {
         create_instance(&for_factory)
     })
 }
@@ -159,7 +158,7 @@ impl IOPCCommon_Impl for OpcServer_Impl {
         self.ctx
             .runtime
             .with_engine(|e, _| e.set_session_lcid(handle, lcid))
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
         self.session().lcid = lcid;
         Ok(())
     }

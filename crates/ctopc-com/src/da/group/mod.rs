@@ -21,19 +21,20 @@ pub mod dataobject;
 mod io;
 mod items;
 
-use crate::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
-use crate::callbacks::GroupSinks;
-use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl, RawDataObject};
-use crate::connpoint::{self, SinkSlot, Slot};
-use crate::context::Context;
-use crate::error;
-use crate::interfaces::*;
-use crate::lifetime::ObjectGuard;
+use crate::com::abi::{self, item_hr, s_false_if_any, OutArray, TaskMem};
+use crate::com::comdef::{
+    RawConnectionPointContainer, RawConnectionPointContainer_Impl, RawDataObject,
+};
+use crate::com::connpoint::{self, SinkSlot, Slot};
+use crate::com::error;
+use crate::com::interfaces::*;
+use crate::com::lifetime::ObjectGuard;
+use crate::da::context::{Context, Entry};
 use ctopc_core::limits;
 use ctopc_core::model::{Engine, GroupHandle, SessionHandle, SetGroupState};
 use ctopc_core::{OpcError, Timestamp};
 use std::collections::BTreeMap;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::Arc;
 use windows::core::{
     implement, IUnknown, IUnknownImpl, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR,
 };
@@ -68,27 +69,6 @@ pub struct Group {
     /// The connection point's view of `sink`: tells the engine about Advise/Unadvise.
     point: Arc<dyn Slot>,
     _guard: ObjectGuard,
-}
-
-// ---------------------------------------------------------------------------------------
-// The group table: one identity per group
-// ---------------------------------------------------------------------------------------
-
-struct Entry {
-    /// The live COM object (dead once its last reference has gone).
-    object: Weak<IUnknown>,
-    /// Its callback slot: identifies the entry's object in `Drop`.
-    slot: Arc<SinkSlot<IOPCDataCallback>>,
-}
-
-/// The group identities of one context (`Context::groups`).
-#[derive(Default)]
-pub struct GroupTable(Mutex<BTreeMap<GroupHandle, Entry>>);
-
-impl GroupTable {
-    fn lock(&self) -> MutexGuard<'_, BTreeMap<GroupHandle, Entry>> {
-        self.0.lock().unwrap_or_else(|p| p.into_inner())
-    }
 }
 
 /// A new COM object for the engine group `group` (AddGroup, CloneGroup): takes an engine
@@ -169,7 +149,7 @@ fn create_locked(
         },
     );
     ctx.runtime
-        .set_group_sink(group, Arc::new(GroupSinks { slot: sink, da10 }));
+        .set_group_sink(group, Arc::new(dataobject::GroupSinks { slot: sink, da10 }));
     Ok(unknown)
 }
 
@@ -208,7 +188,7 @@ impl Drop for Group {
 }
 
 // ---------------------------------------------------------------------------------------
-// The per-item shape of the group's COM methods (argument helpers: `crate::abi`)
+// The per-item shape of the group's COM methods (argument helpers: `crate::com::abi`)
 // ---------------------------------------------------------------------------------------
 
 impl Group_Impl {
@@ -356,7 +336,7 @@ impl IOPCGroupStateMgt_Impl for Group_Impl {
         }
         // The LCID rule of AddGroup (E_INVALIDARG, nothing changed).
         if let Some(lcid) = abi::in_opt(plcid) {
-            if !crate::server::lcid_accepted(lcid) {
+            if !crate::da::context::lcid_accepted(lcid) {
                 return E_INVALIDARG;
             }
         }

@@ -4,13 +4,13 @@
 //! IConnectionPoint objects, so there is no reference cycle: each FindConnectionPoint
 //! makes a small connection point that holds the container.
 //!
-//! The objects implement our own definitions of the interfaces (`crate::comdef`): NULL
+//! The objects implement our own definitions of the interfaces (`crate::com::comdef`): NULL
 //! out-parameters are E_POINTER (the contracts name it), out-parameters are cleared first
 //! and filled on success only.
 
-use crate::abi;
-use crate::comdef::{RawConnectionPoint, RawConnectionPoint_Impl};
-use crate::enums::ConnectionPointEnum;
+use crate::com::abi;
+use crate::com::comdef::{RawConnectionPoint, RawConnectionPoint_Impl};
+use crate::com::enums::ConnectionPointEnum;
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
@@ -154,7 +154,7 @@ impl ConnectionPoint {
 impl RawConnectionPoint_Impl for ConnectionPoint_Impl {
     unsafe fn GetConnectionInterface(&self, piid: *mut GUID) -> HRESULT {
         // SAFETY: `piid` is this method's [out] parameter.
-        unsafe { out_or_e_pointer(piid, self.iid) }
+        unsafe { abi::out_or_e_pointer(piid, self.iid) }
     }
 
     unsafe fn GetConnectionPointContainer(
@@ -162,7 +162,7 @@ impl RawConnectionPoint_Impl for ConnectionPoint_Impl {
         ppcpc: *mut Option<IConnectionPointContainer>,
     ) -> HRESULT {
         // SAFETY: `ppcpc` is this method's [out] interface pointer.
-        unsafe { out_or_e_pointer(ppcpc, Some(self.container.clone())) }
+        unsafe { abi::out_or_e_pointer(ppcpc, Some(self.container.clone())) }
     }
 
     unsafe fn Advise(&self, sink: *mut c_void, pdwcookie: *mut u32) -> HRESULT {
@@ -197,24 +197,11 @@ impl RawConnectionPoint_Impl for ConnectionPoint_Impl {
         if ppenum.is_null() {
             return E_POINTER;
         }
-        let e = crate::enums::ConnectionEnum::create(self.slot.connections());
+        let e = crate::com::enums::ConnectionEnum::create(self.slot.connections());
         // SAFETY: checked non-null above.
         unsafe { abi::put(ppenum, Some(e)) };
         S_OK
     }
-}
-
-/// Writes one `[out]` value of a COM-defined method: E_POINTER (nothing written) for NULL.
-///
-/// # Safety
-/// As [`abi::clear`]: `p` is NULL or writable caller storage for one `T`.
-pub unsafe fn out_or_e_pointer<T>(p: *mut T, value: T) -> HRESULT {
-    if p.is_null() {
-        return E_POINTER;
-    }
-    // SAFETY: checked non-null; contract of this function.
-    unsafe { abi::put(p, value) };
-    S_OK
 }
 
 /// IConnectionPointContainer::FindConnectionPoint for a container with the given (iid,

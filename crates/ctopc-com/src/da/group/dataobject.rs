@@ -25,16 +25,21 @@
 //! sink must not free it), which ole32's IAdviseSink proxy copies to the client.
 
 use super::Group_Impl;
-use crate::abi;
-use crate::comdef::{RawAdviseSink, RawDataObject_Impl, StgMedium};
-use crate::enums::StatDataEnum;
-use crate::error;
+use crate::com::abi;
+use crate::com::comdef::{RawAdviseSink, RawDataObject_Impl, StgMedium};
+use crate::com::connpoint::SinkSlot;
+use crate::com::enums::StatDataEnum;
+use crate::com::error;
+use crate::com::interfaces::IOPCDataCallback;
+use ctopc_core::model::GroupHandle;
 use ctopc_core::model::{DataChangeKind, Event, ItemValue};
 use ctopc_core::stream::{self, DataFormat, StreamItem};
 use ctopc_core::OpcError;
+use ctopc_runtime::{Delivery, GroupSink};
 use std::collections::HashMap;
 use std::ffi::c_void;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::Arc;
 use std::sync::{Mutex, MutexGuard};
 use windows::core::{IUnknown, Interface, BOOL, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{
@@ -529,5 +534,39 @@ impl RawDataObject_Impl for Group_Impl {
         // SAFETY: checked non-NULL; the [out] interface pointer takes the reference.
         unsafe { ppenum.write(Some(e)) };
         S_OK
+    }
+}
+
+/// A group's callback sinks: IOPCDataCallback's slot and the DA 1.0a connections.
+pub struct GroupSinks {
+    pub slot: Arc<SinkSlot<IOPCDataCallback>>,
+    pub da10: Arc<Da10Sinks>,
+}
+
+impl GroupSink for GroupSinks {
+    fn deliver(&self, group: GroupHandle, event: Event) -> Delivery {
+        match deliver(
+            &self.da10,
+            crate::da::callbacks::client_group(&event),
+            &event,
+        ) {
+            // An IOPCAsyncIO completion went to the DA 1.0a sink (IAdviseSink returns
+            // nothing: it cannot be lost).
+            Routed::Mine => Delivery {
+                called: true,
+                lost: false,
+            },
+            Routed::Shared | Routed::NotMine => {
+                crate::da::callbacks::deliver_one(group, &self.slot, event)
+            }
+        }
+    }
+
+    fn is_connected(&self) -> bool {
+        self.slot.is_connected() || self.da10.any()
+    }
+
+    fn drop_listener(&self) -> bool {
+        self.slot.cookie().is_some_and(|c| self.slot.drop_if(c))
     }
 }

@@ -28,12 +28,12 @@
 //! source as a value-quality-timestamp write.
 
 use super::Group_Impl;
-use crate::abi::{
+use crate::com::abi::{
     self, in_array, item_hr, s_false_if, write_out, ComResult, OutArray, OwnedArray, TaskMem,
 };
-use crate::interfaces::*;
-use crate::variant;
-use crate::{clock, error};
+use crate::com::interfaces::*;
+use crate::com::variant;
+use crate::com::{clock, error};
 use ctopc_core::metrics::Method;
 use ctopc_core::model::{
     AsyncStarted, DataSource, Engine, ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome,
@@ -260,7 +260,7 @@ impl Group_Impl {
         e.audit_names(self.handle, &handles).ok()
     }
 
-    /// The write audit's lines for a write of this group (`crate::ops`).
+    /// The write audit's lines for a write of this group (`ctopc_runtime::clients`).
     fn audit(
         &self,
         method: &str,

@@ -10,13 +10,13 @@
 //! items itself.
 
 use super::{OpcServer, OpcServer_Impl};
-use crate::abi::TaskMem;
-use crate::abi::{
+use crate::com::abi::TaskMem;
+use crate::com::abi::{
     self, clear, clear_outs, in_slice, item_hr, item_id_at, nonnull, put, s_false_if_any,
     OwnedArray,
 };
-use crate::interfaces::*;
-use crate::variant;
+use crate::com::interfaces::*;
+use crate::com::variant;
 use ctopc_core::metrics::Method;
 use ctopc_core::model::{
     ItemState, ItemVqt, ReadResults, SyncId, SyncOutcome, SyncResult, WriteResults,
@@ -84,7 +84,7 @@ impl OpcServer {
         results
     }
 
-    /// The write audit's lines of an IOPCItemIO::WriteVQT (`crate::ops`).
+    /// The write audit's lines of an IOPCItemIO::WriteVQT (`ctopc_runtime::clients`).
     fn audit_item_io(&self, items: &[(&str, ItemVqt)], results: &[Result<(), OpcError>]) {
         let ops = &self.ctx.runtime.clients;
         if !ops.auditing() {
@@ -101,7 +101,7 @@ impl OpcServer {
             values: &values,
             cancel_id: None,
         };
-        ops.audit_write(crate::clock::now(), &call, results);
+        ops.audit_write(crate::com::clock::now(), &call, results);
     }
 }
 
@@ -140,7 +140,7 @@ fn merge<I, T>(
 /// The item IDs of an `[in, size_is(count)] LPWSTR*` array, each checked.
 ///
 /// # Safety
-/// As [`crate::abi::in_slice`], each non-null element as [`crate::abi::item_id_at`].
+/// As [`crate::com::abi::in_slice`], each non-null element as [`crate::com::abi::item_id_at`].
 unsafe fn item_ids(
     p: *const PCWSTR,
     count: u32,
@@ -193,7 +193,7 @@ impl IOPCItemIO_Impl for OpcServer_Impl {
                         Ok(v) => {
                             values.as_mut_slice()[i] = v;
                             qualities.as_mut_slice()[i] = s.quality.0;
-                            times.as_mut_slice()[i] = crate::clock::filetime(s.timestamp);
+                            times.as_mut_slice()[i] = crate::com::clock::filetime(s.timestamp);
                         }
                         Err(e) => errors.as_mut_slice()[i] = e.code(),
                     }

@@ -6,11 +6,11 @@
 //! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
 //! the NT service's control handler (`service::run`) trigger.
 
-use crate::apartment::Apartment;
-use crate::context::{Context, Setup};
-use crate::lifetime::{ExitReason, Lifetime, StopSignal};
-use crate::server;
-use crate::winreg::{self, ServerRegistration};
+use crate::com::apartment::Apartment;
+use crate::com::lifetime::{ExitReason, Lifetime, StopSignal};
+use crate::com::winreg::{self, ServerRegistration};
+use crate::da::context::{Context, Setup};
+use crate::da::server;
 use ctopc_core::Lang;
 use ctopc_registration as registration;
 use std::path::PathBuf;
@@ -44,8 +44,9 @@ pub const REVOKED_LOG: &str = "class object revoked";
 
 /// The full path of this process's exe (what a server registers as its `LocalServer32`).
 pub fn exe_path() -> windows::core::Result<String> {
-    let exe = std::env::current_exe()
-        .map_err(|e| crate::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string()))?;
+    let exe = std::env::current_exe().map_err(|e| {
+        crate::com::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string())
+    })?;
     Ok(exe.to_string_lossy().into_owned())
 }
 
@@ -73,12 +74,12 @@ pub fn register() -> windows::core::Result<()> {
 pub fn register_service() -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     let exe = exe_path()?;
-    crate::service::install(std::path::Path::new(&exe))
-        .map_err(|e| crate::error::error(E_FAIL, &e))?;
-    with_registration(Some(crate::service::SERVICE_NAME), winreg::register)??;
+    crate::com::service::install(std::path::Path::new(&exe))
+        .map_err(|e| crate::com::error::error(E_FAIL, &e))?;
+    with_registration(Some(crate::com::service::SERVICE_NAME), winreg::register)??;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
-        crate::service::SERVICE_NAME
+        crate::com::service::SERVICE_NAME
     );
     Ok(())
 }
@@ -87,7 +88,7 @@ pub fn register_service() -> windows::core::Result<()> {
 pub fn unregister() -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     with_registration(None, winreg::unregister)??;
-    crate::service::uninstall().map_err(|e| crate::error::error(E_FAIL, &e))?;
+    crate::com::service::uninstall().map_err(|e| crate::com::error::error(E_FAIL, &e))?;
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
 }
@@ -138,13 +139,13 @@ pub fn init_security() {
     };
 }
 
-/// Under Wine: keeps every interface a server hands out registered with RPC for the
-/// process's life (`wine_keepalive`; after `init_security`, which must come before any
-/// marshal; on the main thread, in the MTA).
-pub fn keep_registered_under_wine() {
-    match crate::wine_keepalive::keep_registered(crate::wine_keepalive::Role::Server) {
+/// Keeps every interface a server hands out registered with RPC for the process's life
+/// where the platform needs it (`Apartment::keep_server_interfaces`; after
+/// `init_security`, which must come before any marshal; on the main thread, in the MTA).
+pub fn keep_interfaces_registered() {
+    match crate::com::apartment::Apartment::keep_server_interfaces() {
         Ok(0) => {}
-        Ok(n) => tracing::info!("wine keep-alive: {n} interfaces kept registered"),
+        Ok(n) => tracing::info!("keep-alive: {n} interfaces kept registered"),
         Err(e) => tracing::warn!("{e}"),
     }
 }
@@ -230,7 +231,7 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
         address_space.filter_case(),
         engine_config,
         &ops,
-        crate::callbacks::thread_hook,
+        crate::da::callbacks::thread_hook,
         make_backend,
     )?;
     let ctx = Context {
@@ -304,10 +305,10 @@ pub fn serve_as(
 ) -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     init_security();
-    keep_registered_under_wine();
+    keep_interfaces_registered();
     let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");
-        crate::error::error(E_FAIL, &e)
+        crate::com::error::error(E_FAIL, &e)
     })?;
     ctx.lifetime.stop_on(stop);
     let factory = server::class_factory(&ctx);

@@ -6,7 +6,7 @@
 //! serving function. Which service: a [`ServiceSpec`] ([`SERVERCTOPC`], [`SERVER_LIST`]);
 //! the functions without `_as` are ServerCTOPC's.
 
-use crate::lifetime::StopSignal;
+use crate::com::lifetime::StopSignal;
 use std::ffi::OsString;
 use std::path::Path;
 use std::time::Duration;

@@ -14,9 +14,9 @@
 use super::dataobject::Kind;
 use super::io::{cancel_out, data_source, errors_out, value_items, PreErrors};
 use super::Group_Impl;
-use crate::abi::{self, in_array, write_out, ComResult, OutArray};
-use crate::error;
-use crate::interfaces::*;
+use crate::com::abi::{self, in_array, write_out, ComResult, OutArray};
+use crate::com::error;
+use crate::com::interfaces::*;
 use ctopc_core::model::AsyncStarted;
 use ctopc_core::OpcError;
 use windows::core::HRESULT;

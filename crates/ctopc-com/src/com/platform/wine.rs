@@ -36,7 +36,7 @@ use windows::Win32::System::Com::{
 use windows::Win32::System::LibraryLoader::{GetModuleHandleW, GetProcAddress};
 use windows_core::{IUnknown, IUnknown_Vtbl, Interface, GUID, HRESULT};
 
-use crate::interfaces::{
+use crate::com::interfaces::{
     IEnumOPCItemAttributes, IOPCAsyncIO, IOPCAsyncIO2, IOPCAsyncIO3, IOPCBrowse,
     IOPCBrowseServerAddressSpace, IOPCCommon, IOPCDataCallback, IOPCEnumGUID, IOPCGroupStateMgt,
     IOPCGroupStateMgt2, IOPCItemDeadbandMgt, IOPCItemIO, IOPCItemMgt, IOPCItemProperties,
@@ -271,7 +271,7 @@ unsafe extern "system" fn release(_this: *mut c_void) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::apartment::Apartment;
+    use crate::com::apartment::Apartment;
 
     /// The IIDs of both lists are distinct within each list.
     #[test]

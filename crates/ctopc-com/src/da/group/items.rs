@@ -6,11 +6,11 @@
 //! can fail after items were added), and the core adds every item under one lock.
 
 use super::Group_Impl;
-use crate::abi::{self, in_array, OutArray, OwnedArray};
-use crate::enums::{check_next, Cursor};
-use crate::interfaces::*;
-use crate::lifetime::ObjectGuard;
-use crate::{error, variant};
+use crate::com::abi::{self, in_array, OutArray, OwnedArray};
+use crate::com::enums::{check_next, Cursor};
+use crate::com::interfaces::*;
+use crate::com::lifetime::ObjectGuard;
+use crate::com::{error, variant};
 use ctopc_core::limits::{self, TextLimit};
 use ctopc_core::metrics::Method;
 use ctopc_core::model::{ItemAttributes, ItemDefinition, ItemResult};

@@ -4,9 +4,9 @@
 //! stop) calls `ShutdownRequest(reason)` on every connected client before the server exits.
 
 use super::OpcServer_Impl;
-use crate::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl};
-use crate::connpoint::{self, Slot};
-use crate::interfaces::IOPCShutdown;
+use crate::com::comdef::{RawConnectionPointContainer, RawConnectionPointContainer_Impl};
+use crate::com::connpoint::{self, Slot};
+use crate::com::interfaces::IOPCShutdown;
 use std::sync::Arc;
 use windows::core::{IUnknownImpl, Interface, GUID, HRESULT};
 use windows::Win32::System::Com::{IConnectionPoint, IEnumConnectionPoints};

@@ -1,17 +1,17 @@
 //! The COM front end's callbacks: how an engine event reaches an OPC client. The runtime
 //! (`ctopc_runtime::Runtime`) decides when and on which thread (the client session's
-//! callback worker); this module makes the call: the DA 1.0a routing (`IAdviseSink`,
-//! `crate::group::dataobject`), the VARIANT conversion and `IOPCDataCallback`, and
+//! callback worker); this module makes the call: the VARIANT conversion and
+//! `IOPCDataCallback` ([`deliver_one`], which the group's sink calls after its DA 1.0a
+//! routing, `crate::da::group::dataobject::GroupSinks`), and
 //! `IOPCShutdown::ShutdownRequest`. Every thread the runtime starts joins the MTA first
 //! ([`thread_hook`]).
 
-use crate::connpoint::SinkSlot;
-use crate::group::dataobject::{self, Da10Sinks, Routed};
-use crate::interfaces::{IOPCDataCallback, IOPCShutdown};
-use crate::{clock, error, variant};
+use crate::com::connpoint::SinkSlot;
+use crate::com::interfaces::{IOPCDataCallback, IOPCShutdown};
+use crate::com::{clock, error, variant};
 use ctopc_core::model::{Event, GroupHandle};
 use ctopc_core::OpcError;
-use ctopc_runtime::{Delivery, GroupSink, SessionSink};
+use ctopc_runtime::{Delivery, SessionSink};
 use std::sync::Arc;
 use windows::core::{HRESULT, PCWSTR};
 use windows::Win32::Foundation::FILETIME;
@@ -20,35 +20,7 @@ use windows::Win32::System::Variant::VARIANT;
 /// The runtime's [`ThreadHook`](ctopc_runtime::ThreadHook) for the COM server: every
 /// thread it starts joins the multithreaded apartment (the sinks are MTA proxies).
 pub fn thread_hook() -> Box<dyn std::any::Any> {
-    Box::new(crate::apartment::Apartment::mta())
-}
-
-/// A group's callback sinks: IOPCDataCallback's slot and the DA 1.0a connections.
-pub struct GroupSinks {
-    pub slot: Arc<SinkSlot<IOPCDataCallback>>,
-    pub da10: Arc<Da10Sinks>,
-}
-
-impl GroupSink for GroupSinks {
-    fn deliver(&self, group: GroupHandle, event: Event) -> Delivery {
-        match dataobject::deliver(&self.da10, client_group(&event), &event) {
-            // An IOPCAsyncIO completion went to the DA 1.0a sink (IAdviseSink returns
-            // nothing: it cannot be lost).
-            Routed::Mine => Delivery {
-                called: true,
-                lost: false,
-            },
-            Routed::Shared | Routed::NotMine => deliver_one(group, &self.slot, event),
-        }
-    }
-
-    fn is_connected(&self) -> bool {
-        self.slot.is_connected() || self.da10.any()
-    }
-
-    fn drop_listener(&self) -> bool {
-        self.slot.cookie().is_some_and(|c| self.slot.drop_if(c))
-    }
+    Box::new(crate::com::apartment::Apartment::mta())
 }
 
 /// A session's IOPCShutdown connection.
@@ -80,7 +52,7 @@ pub fn is_disconnected(hr: HRESULT) -> bool {
 }
 
 /// The group's client handle an event carries.
-fn client_group(event: &Event) -> u32 {
+pub(crate) fn client_group(event: &Event) -> u32 {
     match event {
         Event::DataChange(e) => e.client_group,
         Event::ReadComplete(e) => e.client_group,
@@ -94,7 +66,11 @@ fn hr_of(e: Option<OpcError>) -> HRESULT {
 }
 
 /// Delivers one event to a group's IOPCDataCallback on the client's worker thread.
-fn deliver_one(group: GroupHandle, slot: &SinkSlot<IOPCDataCallback>, event: Event) -> Delivery {
+pub(crate) fn deliver_one(
+    group: GroupHandle,
+    slot: &SinkSlot<IOPCDataCallback>,
+    event: Event,
+) -> Delivery {
     let Some((cookie, sink)) = slot.connection() else {
         return Delivery::default();
     };

@@ -8,7 +8,7 @@
 //!   method, itself `unsafe`, passes its own parameters on with that contract. They answer
 //!   E_INVALIDARG for a NULL where OPC wants it. One argument order: pointer, then count.
 //! - **Results**: one result type, [`ComResult`] (`windows::core::Result`); whole-call
-//!   errors from the core go through [`crate::error::to_com`] (the one mapping), per-item
+//!   errors from the core go through [`crate::com::error::to_com`] (the one mapping), per-item
 //!   codes through [`item_hr`]; [`hresult`] turns a method's result into its raw HRESULT
 //!   for methods that may return S_FALSE.
 //! - **Out-parameters are cleared first**: a method's first statement is
@@ -20,16 +20,16 @@
 //!   after every allocation of the call has succeeded are the pointers written to the
 //!   caller's out-parameters (`into_raw`).
 
-use crate::error;
+use crate::com::error;
 use ctopc_core::limits::{self, TextLimit};
 use ctopc_core::OpcError;
 use std::ffi::c_void;
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{E_INVALIDARG, E_OUTOFMEMORY, S_FALSE, S_OK};
+use windows::Win32::Foundation::{E_INVALIDARG, E_OUTOFMEMORY, E_POINTER, S_FALSE, S_OK};
 use windows::Win32::System::Com::{CoTaskMemAlloc, CoTaskMemFree};
 use windows::Win32::System::Variant::VARIANT;
 
-use crate::interfaces::{
+use crate::com::interfaces::{
     OPCBROWSEELEMENT, OPCITEMATTRIBUTES, OPCITEMPROPERTIES, OPCITEMPROPERTY, OPCITEMSTATE,
 };
 
@@ -337,7 +337,7 @@ impl OwnsTaskMem for PWSTR {
 
 impl OwnsTaskMem for VARIANT {
     unsafe fn free_owned(&mut self) {
-        crate::variant::clear(self);
+        crate::com::variant::clear(self);
     }
 }
 
@@ -348,7 +348,7 @@ impl OwnsTaskMem for OPCITEMPROPERTY {
             self.szItemID.free_owned();
             self.szDescription.free_owned();
         }
-        crate::variant::clear(&mut self.vValue);
+        crate::com::variant::clear(&mut self.vValue);
     }
 }
 
@@ -363,7 +363,7 @@ impl OwnsTaskMem for OPCITEMPROPERTIES {
 
 impl OwnsTaskMem for OPCITEMSTATE {
     unsafe fn free_owned(&mut self) {
-        crate::variant::clear(&mut self.vDataValue);
+        crate::com::variant::clear(&mut self.vDataValue);
     }
 }
 
@@ -379,7 +379,7 @@ impl OwnsTaskMem for OPCITEMATTRIBUTES {
             unsafe { CoTaskMemFree(Some(self.pBlob.cast::<c_void>())) };
             self.pBlob = std::ptr::null_mut();
         }
-        crate::variant::clear(&mut self.vEUInfo);
+        crate::com::variant::clear(&mut self.vEUInfo);
     }
 }
 
@@ -566,4 +566,17 @@ pub unsafe fn free_wstr(p: PWSTR) {
         // SAFETY: contract of this function: a CoTaskMem block of the caller's, freed once.
         unsafe { CoTaskMemFree(Some(p.0.cast::<c_void>())) };
     }
+}
+
+/// Writes one `[out]` value of a COM-defined method: E_POINTER (nothing written) for NULL.
+///
+/// # Safety
+/// As [`clear`]: `p` is NULL or writable caller storage for one `T`.
+pub unsafe fn out_or_e_pointer<T>(p: *mut T, value: T) -> HRESULT {
+    if p.is_null() {
+        return E_POINTER;
+    }
+    // SAFETY: checked non-null; contract of this function.
+    unsafe { put(p, value) };
+    S_OK
 }

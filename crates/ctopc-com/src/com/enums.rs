@@ -2,17 +2,17 @@
 //! IEnumConnections, IEnumSTATDATA): the list is taken when the enumerator is created; clones share it
 //! and copy the position.
 //!
-//! They implement our own definitions of the interfaces (`crate::comdef`): `Clone` with a
+//! They implement our own definitions of the interfaces (`crate::com::comdef`): `Clone` with a
 //! NULL out-parameter is E_POINTER (windows-rs' shim wrote through it), and every
 //! out-parameter is cleared first and filled on success only.
 
-use crate::abi;
-use crate::comdef::{
+use crate::com::abi;
+use crate::com::abi::out_or_e_pointer;
+use crate::com::comdef::{
     RawEnumConnectionPoints, RawEnumConnectionPoints_Impl, RawEnumConnections,
     RawEnumConnections_Impl, RawEnumSTATDATA, RawEnumSTATDATA_Impl, RawEnumString,
     RawEnumString_Impl, RawEnumUnknown, RawEnumUnknown_Impl,
 };
-use crate::connpoint::out_or_e_pointer;
 use std::sync::{Arc, Mutex};
 use windows::core::{implement, IUnknown, HRESULT, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_POINTER, S_FALSE, S_OK};

@@ -19,11 +19,11 @@
 
 use super::props::{self, Prop};
 use super::OpcServer_Impl;
-use crate::abi::{
+use crate::com::abi::{
     self, clear, clear_outs, in_slice, in_string, nonnull, put, OwnedArray, OwnedWstr,
 };
-use crate::enums::StringEnum;
-use crate::interfaces::*;
+use crate::com::enums::StringEnum;
+use crate::com::interfaces::*;
 use ctopc_core::browse::{
     BrowseDirection, BrowseElement, BrowseFilter, BrowseRequest, BrowseResult, BrowseType,
     PropertySelection,
@@ -41,7 +41,7 @@ use windows::Win32::System::Com::IEnumString;
 fn enum_arg<T: TryFrom<u32, Error = OpcError>>(v: i32) -> windows::core::Result<T> {
     u32::try_from(v)
         .map_err(|_| abi::invalid_arg())
-        .and_then(|v| T::try_from(v).map_err(crate::error::to_com))
+        .and_then(|v| T::try_from(v).map_err(crate::com::error::to_com))
 }
 
 impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
@@ -63,7 +63,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         let diag = self.ctx.runtime.diagnostics.space();
         self.cursor()
             .change_browse_position(direction, &name, &diag)
-            .map_err(crate::error::to_com)
+            .map_err(crate::com::error::to_com)
     }
 
     unsafe fn BrowseOPCItemIDs(
@@ -94,7 +94,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
                     &*self.ctx.namespace,
                     &diag,
                 )
-                .map_err(crate::error::to_com)?;
+                .map_err(crate::com::error::to_com)?;
             let hr = if names.is_empty() { S_FALSE } else { S_OK };
             // SAFETY: checked non-null.
             unsafe { put(ppenum, Some(StringEnum::of(Arc::new(names)))) };
@@ -114,7 +114,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
         let id = self
             .cursor()
             .get_item_id(&data_id, &diag)
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
         let id = OwnedWstr::new(&id)?;
         // SAFETY: checked non-null; the only allocation has succeeded.
         unsafe { put(pitem_id, id.into_raw()) };
@@ -132,7 +132,7 @@ impl IOPCBrowseServerAddressSpace_Impl for OpcServer_Impl {
             let item_id = in_string(pitem_id, limits::ITEM_ID)?;
             self.cursor()
                 .browse_access_paths(&item_id)
-                .map_err(crate::error::to_com)?;
+                .map_err(crate::com::error::to_com)?;
             Err(E_NOTIMPL.into())
         })())
     }
@@ -230,7 +230,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
             } else {
                 // SAFETY: a non-null [in, out, string] is a NUL-terminated UTF-16 string.
                 abi::limited_wide(unsafe { incoming.as_wide() }, limits::CONTINUATION_POINT)
-                    .map_err(crate::error::to_com)?
+                    .map_err(crate::com::error::to_com)?
             };
             let ids = in_slice(pproperty_ids, property_count)?;
             let selection = PropertySelection::from_args(return_all_properties.as_bool(), ids);
@@ -276,7 +276,7 @@ impl IOPCBrowse_Impl for OpcServer_Impl {
                     })
                 }
             }
-            .map_err(crate::error::to_com)?;
+            .map_err(crate::com::error::to_com)?;
             if with_values {
                 let mut wanted: Vec<(&str, &mut Vec<Prop>)> = result
                     .elements
