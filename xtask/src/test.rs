@@ -46,12 +46,23 @@ pub fn run(args: &[String]) -> Result<(), String> {
     ledger.end(run_all(args))
 }
 
+/// Prints how long a phase of the run took (wall time), so that a run's log says where its
+/// time went.
+fn took(phase: &str, since: std::time::Instant) {
+    println!("test: {phase} took {} s", since.elapsed().as_secs());
+}
+
 fn run_all(args: &[String]) -> Result<(), String> {
+    let start = std::time::Instant::now();
     let native_only = args.iter().any(|a| a == "--native");
     setup::run(&[])?;
+    took("setup", start);
+    let t = std::time::Instant::now();
     static_checks(native_only)?;
+    took("the static checks", t);
 
     println!("test: native tests (cargo test --workspace)");
+    let t = std::time::Instant::now();
     util::run(util::cargo().args(["test", "--workspace", "--release"]))?;
     println!(
         "test: every fuzz target for {} s (stable runner)",
@@ -62,11 +73,14 @@ fn run_all(args: &[String]) -> Result<(), String> {
         "--seconds".into(),
         fuzz::CI_SECONDS.to_string(),
     ])?;
+    took("the native tests and the fuzz targets", t);
     if native_only {
         return Ok(());
     }
 
+    let t = std::time::Instant::now();
     let artifacts = build::run(&[])?;
+    took("the Windows build", t);
     // Two steps that need neither the project's prefix nor cargo's build lock run beside
     // the end-to-end tests, which mostly wait on Wine and the server: the third-party
     // client's builds (their own target dir) and the MSI test (its own prefixes).
@@ -82,7 +96,9 @@ fn run_all(args: &[String]) -> Result<(), String> {
             limit: E2E_LIMIT,
             retries: 1,
         };
+        let t = std::time::Instant::now();
         guard::run_units(&plan, &units)?;
+        took("the end-to-end tests (64-bit client)", t);
         let [client64, client32] = background.clients()?;
         thirdparty_client(Arch::X64, &client64)?;
         println!(
@@ -96,14 +112,18 @@ fn run_all(args: &[String]) -> Result<(), String> {
             target: Arch::X86.target(),
             ..plan
         };
+        let t = std::time::Instant::now();
         guard::run_units(&plan, &units)?;
+        took("the end-to-end tests (32-bit client)", t);
         thirdparty_client(Arch::X86, &client32)
     })();
     wine::kill_all();
     // Waited for whatever happened above: it ends on its own, within its timeouts.
     let msi = background.msi_test();
     result?;
-    msi
+    msi?;
+    took("the whole run", start);
+    Ok(())
 }
 
 /// The steps `run` starts in the background after the Windows build, each logging to a
