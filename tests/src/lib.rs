@@ -14,7 +14,8 @@ pub mod hostile;
 pub mod io_support;
 pub mod probe;
 pub mod server_config;
-pub mod start;
+/// Starting a process through Wine's transient start failure (`test_support::start`).
+pub use test_support::start;
 
 pub use ctopc_com::apartment::Apartment;
 pub use ctopc_com::interfaces;

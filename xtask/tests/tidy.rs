@@ -111,6 +111,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/runtime",
         "crates/asix-net",
         "crates/server",
+        "crates/test-support",
         "xtask",
     ];
     let own = [

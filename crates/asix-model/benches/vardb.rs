@@ -25,9 +25,8 @@ use asix_model::{parse_config, AsixNamespace, ChannelDatabase, BASIC_CHANNEL};
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
-// The live heap, resident memory and CPU readers asix-net's benches share.
-#[path = "../../asix-net/benches/support/mod.rs"]
-mod support;
+// The live heap, resident memory and CPU readers the benches share.
+use test_support::measure as support;
 
 fn live() -> isize {
     support::live(GLOBAL)

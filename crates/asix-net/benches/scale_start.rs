@@ -23,7 +23,7 @@ use ctopc_core::Timestamp;
 #[global_allocator]
 static GLOBAL: &stats_alloc::StatsAlloc<std::alloc::System> = &stats_alloc::INSTRUMENTED_SYSTEM;
 
-mod support;
+use test_support::measure as support;
 
 fn live() -> isize {
     support::live(GLOBAL)

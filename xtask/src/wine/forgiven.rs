@@ -9,8 +9,8 @@
 //!   libtest's final `test result: ok.` is counted as passed ([`Kind::SigkillAfterOk`]);
 //! - [`guard`](super::guard): a test binary that stalled runs once more
 //!   ([`Kind::StallRerun`]);
-//! - `tests/src/start.rs`, inside the Wine test processes: a start that Wine's
-//!   `CreateProcess` failed with `ERROR_INTERNAL_ERROR` (1359) is tried again
+//! - `crates/test-support/src/start.rs`, inside the Wine test processes: a start that
+//!   Wine's `CreateProcess` failed with `ERROR_INTERNAL_ERROR` (1359) is tried again
 //!   ([`Kind::CreateProcessRetry`]); it opens the log by its `Z:` path;
 //! - [`start`](super::start) (the msi-test's opcdiag runs): an opcdiag that failed having
 //!   printed nothing is started again ([`Kind::OpcdiagRetry`]).
@@ -48,8 +48,8 @@ impl Kind {
         Kind::OpcdiagRetry,
     ];
 
-    /// The first word of its lines in the log. `xtask/wine-run.sh` and `tests/src/start.rs`
-    /// write theirs as text: keep them equal.
+    /// The first word of its lines in the log. `xtask/wine-run.sh` and
+    /// `crates/test-support/src/start.rs` write theirs as text: keep them equal.
     pub fn tag(self) -> &'static str {
         match self {
             Kind::SigkillAfterOk => "sigkill-after-ok",
@@ -303,15 +303,15 @@ stall-retry misspelt
             "xtask/wine-run.sh does not count with the tag {}",
             Kind::SigkillAfterOk.tag()
         );
-        let start = std::fs::read_to_string(root.join("tests/src/start.rs")).unwrap();
+        let start = std::fs::read_to_string(root.join("crates/test-support/src/start.rs")).unwrap();
         assert!(
             start.contains(&format!("\"{}\"", Kind::CreateProcessRetry.tag())),
-            "tests/src/start.rs does not count with the tag {}",
+            "crates/test-support/src/start.rs does not count with the tag {}",
             Kind::CreateProcessRetry.tag()
         );
         assert!(
             start.contains(&format!("\"{ENV}\"")),
-            "tests/src/start.rs reads {ENV}"
+            "crates/test-support/src/start.rs reads {ENV}"
         );
     }
 

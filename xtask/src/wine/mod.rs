@@ -5,7 +5,7 @@
 //! guard of the end-to-end runs, which runs a stalled binary once more), [`start`] (an
 //! opcdiag that Wine failed to start is started again) and [`forgiven`], the count of
 //! every forgiveness of a run, printed as its last line (with `xtask/wine-run.sh`'s
-//! SIGKILL-after-ok and `tests/src/start.rs`'s CreateProcess retries).
+//! SIGKILL-after-ok and `crates/test-support/src/start.rs`'s CreateProcess retries).
 
 use crate::arch::Arch;
 use crate::util;

@@ -2,10 +2,10 @@
 //!
 //! Wine ends a process that fails in its own start-up with a failure code and no output
 //! (its messages are off with `WINEDEBUG=-all`), as it answers `ERROR_INTERNAL_ERROR` to
-//! `CreateProcess` for one started inside Wine (`tests/src/start.rs`). opcdiag prints a line
-//! on every failure (`opcdiag: error: ...` on stderr), so an opcdiag that failed having
-//! printed nothing did not run ([`silent_start_failure`]); [`retrying`] starts it again,
-//! [`START_TRIES`] times at most, each retry printed and counted
+//! `CreateProcess` for one started inside Wine (`crates/test-support/src/start.rs`).
+//! opcdiag prints a line on every failure (`opcdiag: error: ...` on stderr), so an opcdiag
+//! that failed having printed nothing did not run ([`silent_start_failure`]); [`retrying`]
+//! starts it again, [`START_TRIES`] times at most, each retry printed and counted
 //! ([`forgiven::Kind::OpcdiagRetry`]). The msi-test of a clean-clone CI failed once on it,
 //! a subscriber after the upgrade with exit 1 and no output.
 

@@ -23,20 +23,16 @@
 //! value that is never dereferenced) and asserts that a failed call wrote NULL/0 there.
 #![allow(dead_code, unused_imports)]
 
-/// Starting a process through Wine's transient start failure: the e2e crate's helper,
-/// compiled in here too (the file depends on `std` only).
-#[path = "../../../../tests/src/start.rs"]
-mod start;
-
 use asix_net::inproc::InProcessSim;
 use ctopc_com::context::{self, Context};
 use ctopc_com::interfaces::*;
 use ctopc_com::{host, server};
 use ctopc_core::source::Backend;
-use start::StartRetrying;
+// Starting a process through Wine's transient start failure.
 use std::cell::{Cell, RefCell};
 use std::ffi::c_void;
 use std::sync::{Arc, OnceLock, Weak};
+use test_support::start::StartRetrying;
 pub use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::System::Com::{
     CoInitializeEx, CoTaskMemFree, IClassFactory, COINIT_MULTITHREADED,

@@ -1,8 +1,6 @@
-//! What asix-net's benches measure about their own process: the live heap of the counting
-//! global allocator each bench declares, the resident memory and the CPU time (Linux's
-//! `/proc`; 0 where it is not there). `mod support;` in a bench; a bench uses what it needs.
-//! asix-model's `vardb` bench includes this file too (`#[path]`).
-#![allow(dead_code)]
+//! What a bench measures about its own process (asix-net's benches, asix-model's
+//! `vardb`): the live heap of the counting global allocator the bench declares, the
+//! resident memory and the CPU time (Linux's `/proc`; 0 where it is not there).
 
 use stats_alloc::StatsAlloc;
 use std::alloc::System;

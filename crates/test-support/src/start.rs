@@ -9,9 +9,8 @@
 //! test` names in [`FORGIVEN_LOG`] (`xtask/src/wine/forgiven.rs` prints the count as the
 //! run's last line). Any other error, and the third 1359, is returned as it is.
 //!
-//! The file is also compiled into the COM crate's in-process tests
-//! (`crates/ctopc-com/tests/common/mod.rs`, by `#[path]`), which start their own test
-//! binary as a child: it depends on `std` only.
+//! Used by the end-to-end tests (`e2e_tests::start` re-exports it) and by the COM crate's
+//! in-process tests, which start their own test binary as a child.
 
 use std::io::{self, Write as _};
 use std::process::{Child, Command, ExitStatus, Output};
