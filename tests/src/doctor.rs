@@ -10,7 +10,7 @@
 
 use crate::start::StartRetrying;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// What one opcdiag doctor run gave.
 pub struct Run {
@@ -167,19 +167,18 @@ pub fn unix_sh(dir: &str, script: &str, limit: Duration) -> (i32, String) {
         .stderr(std::process::Stdio::null())
         .spawn_retrying()
         .expect("start /bin/sh through Wine");
-    let deadline = Instant::now() + limit;
-    loop {
-        if let Ok(text) = std::fs::read_to_string(&rc) {
-            let code = text.trim().parse().unwrap_or(-1);
-            return (code, std::fs::read_to_string(&out).unwrap_or_default());
-        }
-        assert!(
-            Instant::now() < deadline,
-            "the script in {dir} did not end within {limit:?}; output so far:\n{}",
-            std::fs::read_to_string(&out).unwrap_or_default()
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    // The script writes its exit code last: wait for that file.
+    let code = test_support::wait::wait_for(limit, || std::fs::read_to_string(&rc).ok())
+        .unwrap_or_else(|| {
+            panic!(
+                "the script in {dir} did not end within {limit:?}; output so far:\n{}",
+                std::fs::read_to_string(&out).unwrap_or_default()
+            )
+        });
+    (
+        code.trim().parse().unwrap_or(-1),
+        std::fs::read_to_string(&out).unwrap_or_default(),
+    )
 }
 
 /// A broken copy of the test prefix: `target/wine/doctor-<case>`.

@@ -116,6 +116,23 @@ impl Recorder {
         }
     }
 
+    /// Waits (at most `limit`) until `n` callbacks that `pred` accepts have come: whether
+    /// they did.
+    pub fn wait_count(&self, limit: Duration, n: usize, pred: impl Fn(&Callback) -> bool) -> bool {
+        let deadline = Instant::now() + limit;
+        let mut log = self.log.lock().unwrap();
+        loop {
+            if log.iter().filter(|c| pred(c)).count() >= n {
+                return true;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            log = self.cv.wait_timeout(log, left).unwrap().0;
+        }
+    }
+
     /// Every callback so far.
     pub fn all(&self) -> Vec<Callback> {
         self.log.lock().unwrap().clone()

@@ -150,18 +150,14 @@ pub fn processes_named(exe: &str) -> Vec<u32> {
 /// away holds references of a client that died without releasing them (Wine has no DCOM
 /// ping): that is a leak in an earlier test, reported here.
 pub fn wait_for_no_other_server() {
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
-    loop {
-        let others = other_servers(0);
-        if others.is_empty() {
-            return;
-        }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "other ServerCTOPC.exe processes {others:?} still run after 60 s (a client leaked references?)"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(500));
-    }
+    let gone = test_support::wait::wait_until(std::time::Duration::from_secs(60), || {
+        other_servers(0).is_empty()
+    });
+    assert!(
+        gone,
+        "other ServerCTOPC.exe processes {:?} still run after 60 s (a client leaked references?)",
+        other_servers(0)
+    );
 }
 
 /// The next element of an IEnumConnections. (Under Wine the HRESULT of a call that returns

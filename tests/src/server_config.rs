@@ -4,7 +4,7 @@
 
 use crate::other_servers;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const DEMO_TABLE: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/atrybuty.csv");
 const DEMO_SET: &[u8] = include_bytes!("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez");
@@ -53,12 +53,5 @@ pub fn read_log(dir: &Path) -> String {
 
 /// Waits until no ServerCTOPC.exe runs; false after `limit`.
 pub fn wait_until_no_server(limit: Duration) -> bool {
-    let deadline = Instant::now() + limit;
-    while !other_servers(0).is_empty() {
-        if Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(200));
-    }
-    true
+    test_support::wait::wait_until(limit, || other_servers(0).is_empty())
 }

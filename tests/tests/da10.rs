@@ -291,6 +291,8 @@ fn dunadvise_stops_the_streams() {
     data_stream(&streams, cf_data(), 0);
     // SAFETY: a plain value.
     assert_eq!(unsafe { p.d.DUnadvise(c) }, S_OK);
+    // Time passes on purpose: 0.5 s for a stream already on its way to land, then 1.5 s
+    // (more than seven update periods of 200 ms) in which none may come.
     std::thread::sleep(Duration::from_millis(500));
     let n = streams.all().len();
     std::thread::sleep(Duration::from_millis(1500));

@@ -18,7 +18,8 @@ use e2e_tests::io_support::*;
 use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
 use e2e_tests::{wait_for_no_other_server, Apartment, PROGID};
 use opc_client::{self as client, BrowseArgs, Server};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::{wait_for, wait_until};
 use windows::Win32::Foundation::{E_FAIL, S_FALSE, S_OK};
 
 const CLIENT: &str = "Worker.HMI";
@@ -45,15 +46,12 @@ fn read_i4(server: &Server, id: &str) -> i32 {
 
 /// Waits (at most 10 s: a snapshot is taken every second) until `id` reads `want`.
 fn wait_i4(server: &Server, id: &str, want: i32) {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        let v = read_i4(server, id);
-        if v == want {
-            return;
-        }
-        assert!(Instant::now() < deadline, "{id} is {v}, not {want}");
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    let mut v = None;
+    let reached = wait_until(Duration::from_secs(10), || {
+        v = Some(read_i4(server, id));
+        v == Some(want)
+    });
+    assert!(reached, "{id} is {v:?}, not {want}");
 }
 
 fn branches(server: &Server) -> Vec<String> {
@@ -107,18 +105,19 @@ fn the_diagnostics_branch_follows_a_working_server() {
     assert_eq!(name.value, Value::Bstr(CLIENT.into()));
     assert_eq!(read_i4(&observer, &format!("{BRANCH}.Failures")), 0);
     // -1 until a snapshot follows the end of the worker's first callback.
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        match read(&observer, &format!("{BRANCH}.LastCallbackLatency")).value {
-            Value::R8(ms) if ms >= 0.0 => {
-                assert!(ms < 10_000.0, "{ms}");
-                break;
+    let latency = format!("{BRANCH}.LastCallbackLatency");
+    let ms = wait_for(Duration::from_secs(10), || {
+        match read(&observer, &latency).value {
+            Value::R8(ms) if ms >= 0.0 => Some(ms),
+            Value::R8(ms) => {
+                assert_eq!(ms, -1.0, "before the first snapshot");
+                None
             }
-            Value::R8(ms) => assert!(ms == -1.0 && Instant::now() < deadline, "{ms}"),
             other => panic!("latency {other:?}"),
         }
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    })
+    .expect("LastCallbackLatency still -1 after 10 s");
+    assert!(ms < 10_000.0, "{ms}");
     assert!(read_i4(&observer, "_Diagnostics.Server.Uptime") < 600);
     let channel = "_Diagnostics.Channels.Simulation";
     assert_eq!(read_i4(&observer, &format!("{channel}.LinkState")), 2);

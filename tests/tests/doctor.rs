@@ -13,7 +13,8 @@ use e2e_tests::start::StartRetrying;
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::wait_exit;
 
 /// The broken prefixes one at a time (each starts a wineserver and a server of its own; two
 /// cores are shared with everything else).
@@ -49,16 +50,9 @@ fn doctor_here(args: &[&str], limit: Duration) -> Run {
         let _ = err.read_to_string(&mut s);
         s
     });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            panic!("opcdiag doctor did not end within {limit:?}: it must never hang");
-        }
-        std::thread::sleep(Duration::from_millis(50));
+    let Some(status) = wait_exit(&mut child, limit).unwrap() else {
+        let _ = child.kill();
+        panic!("opcdiag doctor did not end within {limit:?}: it must never hang");
     };
     Run {
         code: status.code().unwrap_or(-1),

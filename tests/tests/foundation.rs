@@ -6,6 +6,7 @@ use ctopc_com::clock;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
 use opc_client::Server;
 use std::time::Duration;
+use test_support::wait::wait_until;
 use windows::core::{IUnknown, Interface, GUID, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE};
 use windows::Win32::System::Com::{
@@ -162,21 +163,16 @@ fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
         .unwrap()
         .start_time;
     // Every server object of this test binary is released by now (other tests ran
-    // sequentially and dropped theirs), so the process exits; a new one starts later.
-    // Each new client restarts the server's exit linger, so wait longer than it between tries.
-    let pause = ctopc_com::host::EXIT_LINGER + Duration::from_secs(2);
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
-    loop {
-        std::thread::sleep(pause);
-        let s = Server::connect(PROGID).unwrap().status().unwrap();
-        if s.start_time > first {
-            break;
-        }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "the server process did not exit after its last client left"
-        );
-    }
+    // sequentially and dropped theirs), so the process exits after its linger. Wait for
+    // the exit without connecting (a new client would restart the linger); the next
+    // client starts a new process.
+    assert!(
+        wait_until(Duration::from_secs(30), || e2e_tests::other_servers(0)
+            .is_empty()),
+        "the server process did not exit after its last client left"
+    );
+    let s = Server::connect(PROGID).unwrap().status().unwrap();
+    assert!(s.start_time > first, "a new server process: {s:?}");
 }
 
 /// A client that got the class object just before the server decided to exit (linger
@@ -206,30 +202,24 @@ fn a_client_that_creates_an_instance_right_after_the_revoke_is_served_on() {
     // The last object of this binary goes: the server lingers, then revokes its class
     // object (the class factory proxy held here does not count as a client).
     drop(server);
-    let deadline = std::time::Instant::now() + Duration::from_secs(30);
-    while count(revoked) == revoked_before {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "the server did not revoke its class object after its last client left"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    assert!(
+        wait_until(Duration::from_secs(30), || count(revoked) > revoked_before),
+        "the server did not revoke its class object after its last client left"
+    );
     // SAFETY: no aggregation; the factory is a live proxy.
     let unknown: IUnknown = unsafe { factory.CreateInstance(None) }
         .expect("CreateInstance on the class object got just before the revoke");
     let again = Server::from_unknown(unknown).unwrap();
-    // Well past the settle time: the same process still serves this client.
+    // Time passes on purpose, to well past the settle time (a second more): the process
+    // must not exit under the new object, the same one still serves this client.
     std::thread::sleep(ctopc_com::host::REVOKE_SETTLE + Duration::from_secs(1));
     let s = again.status().expect("GetStatus after the settle time");
     assert_eq!(s.start_time, first, "the same server process serves on");
-    let deadline = std::time::Instant::now() + Duration::from_secs(10);
-    while count(served_on) == served_on_before {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "the server did not log that it serves on"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    assert!(
+        wait_until(Duration::from_secs(10), || count(served_on)
+            > served_on_before),
+        "the server did not log that it serves on"
+    );
     assert_alive(&again);
 }
 
@@ -247,18 +237,11 @@ fn the_server_logs_its_start_to_the_days_log_file_in_the_install_folder() {
     assert_alive(&server);
     let (y, m, d) = ctopc_com::clock::local_date();
     let log = e2e_tests::artifact(&format!("Log/ServerCTOPC.{y:04}{m:02}{d:02}.log"));
-    // The writer thread flushes asynchronously: give it a moment.
-    let deadline = std::time::Instant::now() + Duration::from_secs(10);
-    loop {
-        let text = std::fs::read_to_string(&log).unwrap_or_default();
-        if text.contains("ServerCTOPC starting") && text.contains("configuration") {
-            break;
-        }
-        assert!(
-            std::time::Instant::now() < deadline,
-            "no start lines in {}: {text}",
-            log.display()
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    // The writer thread flushes asynchronously: wait for the lines.
+    let mut text = String::new();
+    let logged = wait_until(Duration::from_secs(10), || {
+        text = std::fs::read_to_string(&log).unwrap_or_default();
+        text.contains("ServerCTOPC starting") && text.contains("configuration")
+    });
+    assert!(logged, "no start lines in {}: {text}", log.display());
 }

@@ -350,7 +350,8 @@ fn cancel2_sends_on_cancel_complete_or_fails_once_completed() {
                     ),
                     "{c:?}"
                 );
-                // ...and no OnReadComplete for it.
+                // ...and no OnReadComplete for it: time passes on purpose (300 ms, the
+                // read completes at once otherwise) before the callbacks are counted.
                 std::thread::sleep(Duration::from_millis(300));
                 let n = p
                     .rec
@@ -392,7 +393,9 @@ fn set_enable_false_stops_subscription_callbacks_but_not_refreshes() {
     // SAFETY: plain value.
     unsafe { io.SetEnable(BOOL::from(false)) }.expect("SetEnable(FALSE)");
     assert!(!client::get_enable(&io).unwrap());
-    std::thread::sleep(Duration::from_millis(500)); // a callback already queued may still arrive
+    // Time passes on purpose: 0.5 s for a callback already queued to arrive, then 2.5 s
+    // (two and a half update periods) in which none may come.
+    std::thread::sleep(Duration::from_millis(500));
     p.rec.clear();
     std::thread::sleep(Duration::from_millis(2_500));
     let subs = p
@@ -533,10 +536,8 @@ fn subscription_callbacks_carry_changed_values_with_transaction_id_zero() {
     );
     // The temperature changes every plant tick: it is in later updates too, while the
     // setpoint, which nobody writes, is not sent again.
-    let deadline = std::time::Instant::now() + WAIT;
-    loop {
-        let updates: Vec<Vec<u32>> = p
-            .rec
+    let updates = || -> Vec<Vec<u32>> {
+        p.rec
             .all()
             .into_iter()
             .filter_map(|c| match c {
@@ -547,18 +548,18 @@ fn subscription_callbacks_carry_changed_values_with_transaction_id_zero() {
                 } => Some(clients(&items)),
                 _ => None,
             })
-            .collect();
-        if updates.len() >= 3 {
-            assert!(
-                updates[1..]
-                    .iter()
-                    .all(|u| u.contains(&3) && !u.contains(&2)),
-                "{updates:?}"
-            );
-            break;
-        }
-        assert!(std::time::Instant::now() < deadline, "{updates:?}");
-        std::thread::sleep(Duration::from_millis(200));
-    }
+            .collect()
+    };
+    let three = p.rec.wait_count(WAIT, 3, |c| {
+        matches!(c, Callback::DataChange { transaction: 0, .. })
+    });
+    assert!(three, "fewer than 3 updates: {:?}", updates());
+    let updates = updates();
+    assert!(
+        updates[1..]
+            .iter()
+            .all(|u| u.contains(&3) && !u.contains(&2)),
+        "{updates:?}"
+    );
     assert_alive(&p.server);
 }

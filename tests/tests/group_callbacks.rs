@@ -11,6 +11,7 @@ use e2e_tests::{assert_alive, code, connect, connections, interfaces::*, next_co
 use group_common::*;
 use opc_client::{GroupStateChange, Server};
 use std::time::{Duration, Instant};
+use test_support::wait::wait_until;
 use windows::core::{IUnknown, Interface};
 use windows::Win32::Foundation::{S_FALSE, S_OK};
 use windows::Win32::System::Com::IConnectionPointContainer;
@@ -132,6 +133,7 @@ fn an_inactive_group_calls_back_only_once_activated() {
     add_ok(&g, &[item("KW_A000", 1)]);
     let log = Log::new();
     let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    // Time passes on purpose: three update periods in which the group must stay quiet.
     std::thread::sleep(Duration::from_secs(3));
     assert_eq!(
         log.count(),
@@ -165,7 +167,8 @@ fn unadvise_stops_callbacks() {
     let got = log.wait(Duration::from_secs(6), 2, |_| true);
     assert!(got.len() >= 2, "{:?}", log.changes());
     unadvise(&g, cookie).unwrap();
-    // A callback already on its way may still land.
+    // Time passes on purpose: 0.7 s for a callback already on its way to land, then three
+    // keep-alive periods in which none may come.
     std::thread::sleep(Duration::from_millis(700));
     let after = log.count();
     std::thread::sleep(Duration::from_secs(3));
@@ -266,8 +269,8 @@ fn callbacks_reach_an_sta_client_that_pumps_messages() {
         add_ok(&g, &[item("KW_A000", 1)]);
         let log = Log::new();
         let cookie = advise(&g, &Sink::create(&log)).unwrap();
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while log.count() == 0 && Instant::now() < deadline {
+        // The calls into the STA come as window messages: pump them while waiting.
+        wait_until(Duration::from_secs(10), || {
             let mut msg = MSG::default();
             // SAFETY: standard message pump on this STA thread.
             unsafe {
@@ -276,8 +279,8 @@ fn callbacks_reach_an_sta_client_that_pumps_messages() {
                     DispatchMessageW(&msg);
                 }
             }
-            std::thread::sleep(Duration::from_millis(10));
-        }
+            log.count() > 0
+        });
         let changes = log.changes();
         unadvise(&g, cookie).unwrap();
         assert_alive(&server);
@@ -300,7 +303,9 @@ fn releasing_an_advised_group_is_clean() {
     let log = Log::new();
     let _cookie = advise(&g, &Sink::create(&log)).unwrap();
     log.wait(Duration::from_secs(5), 1, |_| true);
-    // Released without Unadvise: the server drops the sink with the group object.
+    // Released without Unadvise: the server drops the sink with the group object. Time
+    // passes on purpose: 1.5 s for a callback on its way to land, then two update periods
+    // in which none may come.
     drop(g);
     std::thread::sleep(Duration::from_millis(1500));
     let n = log.count();
@@ -335,6 +340,7 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     }
     let (slow, quick) = (&logs[0], &logs[1]);
     let start = Instant::now();
+    // The measurement window, on purpose: ten seconds of callbacks, then they are counted.
     std::thread::sleep(Duration::from_secs(10));
     let (slow_n, quick_n) = (slow.count(), quick.count());
     // The quick client is not held up by the slow one: about ten callbacks.
@@ -360,6 +366,7 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
     // for the group (at most two: one prepared while another travels, and the update
     // that fell due meanwhile), then one a second again.
     slow.release();
+    // A 0.7 s window, on purpose: what arrives in it is the burst.
     std::thread::sleep(Duration::from_millis(700));
     let burst = slow.count() - slow_n;
     assert!(

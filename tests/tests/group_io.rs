@@ -11,7 +11,8 @@ use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, Apartment, Server};
 use opc_client::{self as client, ReadItem};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::{wait_for, wait_until};
 use windows::core::HRESULT;
 use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
 use windows::Win32::System::Variant::{VARIANT, VT_BSTR, VT_I4, VT_R4, VT_R8};
@@ -74,19 +75,18 @@ fn plant() -> Plant {
 /// Reads from the cache until every item has GOOD quality (the first samples arrive
 /// shortly after AddItems).
 fn cache_read_good(p: &Plant, handles: &[u32]) -> Vec<ReadItem> {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
+    let mut last = None;
+    wait_for(Duration::from_secs(10), || {
         let (hr, items) =
             client::sync_read(&p.group.sync(), OPC_DS_CACHE, handles).expect("Read(CACHE)");
-        if hr == S_OK && items.iter().all(|i| i.quality & 0xC0 == GOOD) {
-            return items;
+        let good = hr == S_OK && items.iter().all(|i| i.quality & 0xC0 == GOOD);
+        if good {
+            return Some(items);
         }
-        assert!(
-            Instant::now() < deadline,
-            "cache never became good: {hr:?} {items:?}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+        last = Some((hr, items));
+        None
+    })
+    .unwrap_or_else(|| panic!("cache never became good: {last:?}"))
 }
 
 fn device_read(p: &Plant, handles: &[u32]) -> Vec<ReadItem> {
@@ -222,16 +222,17 @@ fn values_come_in_the_requested_type() {
         S_OK
     );
     for source in [OPC_DS_DEVICE, OPC_DS_CACHE] {
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let items = loop {
+        let mut last = Vec::new();
+        let items = wait_for(Duration::from_secs(10), || {
             let (hr, items) = client::sync_read(&sync, source, &h).unwrap();
             assert_eq!(hr, S_OK, "{items:?}");
             if items[1].value == Value::R8(12.25) {
-                break items;
+                return Some(items);
             }
-            assert!(Instant::now() < deadline, "{source:?}: {items:?}");
-            std::thread::sleep(Duration::from_millis(100));
-        };
+            last = items;
+            None
+        })
+        .unwrap_or_else(|| panic!("{source:?}: {last:?}"));
         assert_eq!(items[0].vt, VT_BSTR.0);
         assert_eq!(items[0].value, Value::Bstr("12.25".into()));
         assert_eq!(items[2].vt, VT_I4.0);
@@ -297,19 +298,16 @@ fn write_then_read_back_the_setpoint() {
     assert_eq!(items[0].value, Value::R4(9.0));
     assert_eq!(items[1].value, Value::UI1(2));
     // ...and the cache follows at the next update.
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while client::sync_read(&sync, OPC_DS_CACHE, &p.h[1..2])
-        .unwrap()
-        .1[0]
-        .value
-        != Value::R4(9.0)
-    {
-        assert!(
-            Instant::now() < deadline,
-            "the cache never showed the written value"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    assert!(
+        wait_until(Duration::from_secs(10), || {
+            client::sync_read(&sync, OPC_DS_CACHE, &p.h[1..2])
+                .unwrap()
+                .1[0]
+                .value
+                == Value::R4(9.0)
+        }),
+        "the cache never showed the written value"
+    );
     assert_alive(&p.server);
 }
 

@@ -313,7 +313,8 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
         }
     );
 
-    // The device's late answers (3 s after each request) change nothing.
+    // The device's late answers (3 s after each request) change nothing: time passes on
+    // purpose until they have come (3.5 s).
     std::thread::sleep(Duration::from_millis(3_500));
     assert_eq!(callbacks_of(p, 11).len(), 1, "{:?}", p.rec.all());
     assert_eq!(callbacks_of(p, 12).len(), 1, "{:?}", p.rec.all());
@@ -474,8 +475,9 @@ fn cancel2_of_operations_waiting_for_a_slow_device_sends_on_cancel_complete_only
     );
     assert!(took >= Duration::from_millis(DELAY_MS - 50), "{took:?}");
 
-    // By now every cancelled operation's device answer has come (and gone): nothing but
-    // the OnCancelComplete for any of them, and a second Cancel2 fails.
+    // Half a second more, on purpose, and every cancelled operation's device answer has
+    // come (and gone): nothing but the OnCancelComplete for any of them, and a second
+    // Cancel2 fails.
     std::thread::sleep(Duration::from_millis(500));
     for (tid, what, cancel) in &cancels {
         assert_eq!(

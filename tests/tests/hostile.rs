@@ -20,6 +20,7 @@ use opc_client::{BrowseArgs, ItemDef, OpcGroup, Server};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use test_support::wait::wait_until;
 use windows::core::{Interface, HRESULT, PCWSTR};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;
@@ -526,17 +527,14 @@ fn sinks_that_fail_or_sleep_do_not_stall_the_server() {
     }
     // The first OnDataChange comes at once (every item's first value); the sleeping sink
     // holds it 3 s: the server answers meanwhile, within a second each time.
-    let deadline = Instant::now() + Duration::from_secs(15);
-    while (failing.load(Ordering::SeqCst) == 0 || sleeping.load(Ordering::SeqCst) == 0)
-        && Instant::now() < deadline
-    {
+    wait_until(Duration::from_secs(15), || {
         bounded(
             "GetStatus while a sink sleeps",
             Duration::from_secs(5),
             || server.status().unwrap(),
         );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+        failing.load(Ordering::SeqCst) > 0 && sleeping.load(Ordering::SeqCst) > 0
+    });
     assert!(
         failing.load(Ordering::SeqCst) > 0,
         "the failing sink was called"
@@ -545,6 +543,7 @@ fn sinks_that_fail_or_sleep_do_not_stall_the_server() {
         sleeping.load(Ordering::SeqCst) > 0,
         "the sleeping sink was called"
     );
+    // On purpose, 1.5 s of the sleeping sink's 3 s: GetStatus every 0.3 s.
     for _ in 0..5 {
         bounded(
             "GetStatus while a sink sleeps",
@@ -584,10 +583,7 @@ fn hostile_child() {
     let calls = Arc::new(AtomicU32::new(0));
     let sink = RudeSink::create(Rudeness::Sleep(Duration::from_millis(1)), &calls);
     opc_client::advise_data_callback(&g.unknown, &sink).unwrap();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while calls.load(Ordering::SeqCst) == 0 && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_until(Duration::from_secs(20), || calls.load(Ordering::SeqCst) > 0);
     // Exit with every reference held (no Release, no CoUninitialize).
     std::mem::forget((g, sink, server, _com));
     std::process::exit(if calls.load(Ordering::SeqCst) > 0 {
@@ -616,8 +612,8 @@ fn z_a_client_that_exits_without_releasing_leaves_the_server_answering() {
     );
     assert_answers(&server, "a client that exited without releasing");
     // The combination that must not hang: AddItems with a 64 Ki access path of lone
-    // surrogates on a server holding a crashed client's session, tried repeatedly while
-    // the server's callbacks to the dead sink fail.
+    // surrogates on a server holding a crashed client's session, tried repeatedly (every
+    // 0.1 s, on purpose) while the server's callbacks to the dead sink fail.
     let (g, _) = group(&server, "");
     let id = utf16(SETPOINT);
     let lone = lone_surrogates(HUGE);
@@ -674,7 +670,8 @@ fn z_b_a_variant_deeper_than_the_transport_carries_leaves_the_server_answering()
         .unwrap();
     rx.recv_timeout(Duration::from_secs(120))
         .expect("the deep VARIANT is built");
-    // While the deep call is sent, unmarshalled and overflows, and after: every 2 s.
+    // While the deep call is sent, unmarshalled and overflows, and after: every 2 s, for a
+    // minute, on purpose.
     let until = Instant::now() + Duration::from_secs(60);
     while Instant::now() < until {
         assert_answers(&server, &format!("a VARIANT of {levels} levels"));

@@ -535,7 +535,8 @@ mod through_the_proxy {
     use opc_client::{BrowseArgs, BrowseElement, BrowsePage, Server};
     use std::process::Command;
     use std::sync::OnceLock;
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
+    use test_support::wait::wait_exit;
     use windows::core::{Interface, GUID, HRESULT};
     use windows::Win32::Foundation::{S_FALSE, S_OK};
     use windows::Win32::System::Com::IClientSecurity;
@@ -560,23 +561,16 @@ mod through_the_proxy {
             .arg("/RegServer")
             .spawn_retrying()
             .map_err(|e| format!("{}: {e}", exe.display()))?;
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
-                return if status.success() {
-                    Ok(())
-                } else {
-                    Err(format!("{} /RegServer: {status}", exe.display()))
-                };
-            }
-            if Instant::now() > deadline {
+        match wait_exit(&mut child, Duration::from_secs(60)).map_err(|e| e.to_string())? {
+            Some(status) if status.success() => Ok(()),
+            Some(status) => Err(format!("{} /RegServer: {status}", exe.display())),
+            None => {
                 let _ = child.kill();
-                return Err(format!(
+                Err(format!(
                     "{} /RegServer did not finish within 60 s",
                     exe.display()
-                ));
+                ))
             }
-            std::thread::sleep(Duration::from_millis(50));
         }
     }
 

@@ -7,7 +7,8 @@ use e2e_tests::own_artifact;
 use e2e_tests::start::StartRetrying;
 use std::io::Read;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::wait_exit;
 
 /// What one opcdiag run printed.
 struct Run {
@@ -60,17 +61,10 @@ fn opcdiag_with(args: &[&str], env: &[(&str, &str)], limit: Duration) -> Run {
         let _ = err.read_to_string(&mut s);
         s
     });
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().expect("wait for opcdiag") {
-            break status;
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("opcdiag {args:?} did not finish within {limit:?}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
+    let Some(status) = wait_exit(&mut child, limit).expect("wait for opcdiag") else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("opcdiag {args:?} did not finish within {limit:?}");
     };
     Run {
         code: status.code().unwrap_or(-1),

@@ -11,7 +11,8 @@ use ctopc_core::{Quality, Timestamp, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, connect};
 use opc_client as client;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::wait_for;
 use windows::Win32::Foundation::{S_FALSE, S_OK};
 
 /// Sulphur feed rate setpoint (R4 0..20 t/h, writable).
@@ -34,22 +35,21 @@ fn server_log() -> String {
 /// Waits (the log writer flushes asynchronously) until a log line contains every one of
 /// `parts`; returns it.
 fn wait_for_line(parts: &[&str]) -> String {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
+    wait_for(Duration::from_secs(10), || {
         let log = server_log();
-        if let Some(l) = log.lines().find(|l| parts.iter().all(|p| l.contains(p))) {
-            return l.to_string();
-        }
-        assert!(
-            Instant::now() < deadline,
+        let line = log.lines().find(|l| parts.iter().all(|p| l.contains(p)));
+        line.map(str::to_string)
+    })
+    .unwrap_or_else(|| {
+        panic!(
             "no log line with {parts:?}; audit lines:\n{}",
-            log.lines()
+            server_log()
+                .lines()
                 .filter(|l| l.contains("audit"))
                 .collect::<Vec<_>>()
                 .join("\n")
-        );
-        std::thread::sleep(Duration::from_millis(200));
-    }
+        )
+    })
 }
 
 #[test]

@@ -20,6 +20,7 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
+use test_support::wait::{wait_for, wait_until};
 use windows::Win32::Foundation::S_OK;
 
 /// Items of the demo plant whose simulated values change all the time.
@@ -29,19 +30,13 @@ const SETPOINT: &str = "KW_A110";
 
 /// Sends `request` to the endpoint and returns the whole answer (the server closes).
 fn http(port: u16, request: &[u8]) -> String {
-    let deadline = Instant::now() + Duration::from_secs(10);
-    let mut s = loop {
-        match TcpStream::connect(("127.0.0.1", port)) {
-            Ok(s) => break s,
-            Err(e) => {
-                assert!(
-                    Instant::now() < deadline,
-                    "cannot connect to the metrics port: {e}"
-                );
-                std::thread::sleep(Duration::from_millis(200));
-            }
-        }
-    };
+    let mut last = None;
+    let mut s = wait_for(Duration::from_secs(10), || {
+        TcpStream::connect(("127.0.0.1", port))
+            .map_err(|e| last = Some(e))
+            .ok()
+    })
+    .unwrap_or_else(|| panic!("cannot connect to the metrics port: {last:?}"));
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
     s.write_all(request).unwrap();
     let mut answer = Vec::new();
@@ -78,11 +73,13 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
     let group = group_with_items(&server, "metrics", CHANGING);
     let rec = Recorder::counting();
     client::advise_data_callback(&group.unknown, &TestSink::create(&rec)).expect("Advise");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while rec.data_changes.load(Ordering::SeqCst) == 0 {
-        assert!(Instant::now() < deadline, "no OnDataChange");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    assert!(
+        wait_until(Duration::from_secs(10), || rec
+            .data_changes
+            .load(Ordering::SeqCst)
+            > 0),
+        "no OnDataChange"
+    );
     let h = add_ok(
         &group,
         &[ItemSpec {

@@ -19,6 +19,7 @@ use opc_client::{self as client, Server};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use test_support::wait::wait_until;
 use windows::core::{implement, Interface, HRESULT};
 use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
@@ -132,15 +133,11 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
     // Its connection goes, with a warning: the first call passes its timeout (500 ms),
     // the next update would queue behind it and is refused instead: 2 failures.
     let cp = data_point(&slow_group);
-    let deadline = Instant::now() + Duration::from_secs(15);
-    while !connections(&cp).is_empty() {
-        assert!(
-            Instant::now() < deadline,
-            "the hung client's sink was not dropped; log:\n{}",
-            read_log(&dir)
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    assert!(
+        wait_until(Duration::from_secs(15), || connections(&cp).is_empty()),
+        "the hung client's sink was not dropped; log:\n{}",
+        read_log(&dir)
+    );
     let took = started.elapsed();
     eprintln!("hung client dropped after {} ms", took.as_millis());
     assert!(
@@ -164,14 +161,13 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
     // The other client was served all along and still is.
     let before = rec.data_changes.load(Ordering::SeqCst);
     assert!(before >= 1, "the other client got no callback");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while rec.data_changes.load(Ordering::SeqCst) < before + 2 {
-        assert!(
-            Instant::now() < deadline,
-            "the other client's callbacks stopped"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    assert!(
+        wait_until(Duration::from_secs(10), || rec
+            .data_changes
+            .load(Ordering::SeqCst)
+            >= before + 2),
+        "the other client's callbacks stopped"
+    );
 
     // The hung call still sleeps (nothing can interrupt it); the server did not wait.
     assert_eq!(calls.load(Ordering::SeqCst), 1);

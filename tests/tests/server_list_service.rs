@@ -13,7 +13,8 @@ use ctopc_registration::{
 use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, processes_named, Apartment};
 use opc_client::server_list::ServerBrowser;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::wait_until;
 use windows::core::{GUID, PCWSTR};
 use windows::Win32::System::Registry::{
     RegGetValueW, HKEY, HKEY_CLASSES_ROOT, HKEY_LOCAL_MACHINE, RRF_RT_REG_SZ,
@@ -96,11 +97,10 @@ fn service_state() -> Option<u32> {
 /// Waits until no browser started by COM for an earlier test lingers (an activation would
 /// reach it instead of the service).
 fn wait_for_no_browser() {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !processes_named(EXE).is_empty() {
-        assert!(Instant::now() < deadline, "an OpcServerList.exe still runs");
-        std::thread::sleep(Duration::from_millis(300));
-    }
+    assert!(
+        wait_until(Duration::from_secs(60), || processes_named(EXE).is_empty()),
+        "an OpcServerList.exe still runs"
+    );
 }
 
 #[test]
@@ -146,11 +146,11 @@ fn the_browser_service_is_installed_started_by_com_stopped_and_removed() {
         unsafe { ControlService(s.0, SERVICE_CONTROL_STOP, &mut st) }
             .expect("ControlService(STOP)");
     }
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while service_state() != Some(SERVICE_STOPPED.0) {
-        assert!(Instant::now() < deadline, "the service did not stop");
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    assert!(
+        wait_until(Duration::from_secs(20), || service_state()
+            == Some(SERVICE_STOPPED.0)),
+        "the service did not stop"
+    );
     drop(b);
     drop(com);
 

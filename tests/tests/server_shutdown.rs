@@ -22,7 +22,8 @@ use opc_client::Server;
 use std::os::windows::process::CommandExt;
 use std::sync::mpsc;
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::{wait_exit, wait_until};
 use windows::core::{implement, IUnknown, Interface, PCWSTR};
 use windows::Win32::System::Com::{
     IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints,
@@ -191,28 +192,13 @@ fn connect_to_started_server(pid: u32, since: Timestamp) -> Server {
             return server;
         }
         drop(server);
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while !other_servers(pid).is_empty() {
-            assert!(
-                Instant::now() < deadline,
-                "the other server does not exit: {:?}",
-                other_servers(pid)
-            );
-            std::thread::sleep(Duration::from_millis(200));
-        }
+        assert!(
+            wait_until(Duration::from_secs(30), || other_servers(pid).is_empty()),
+            "the other server does not exit: {:?}",
+            other_servers(pid)
+        );
     }
     panic!("COM kept connecting to another server than process {pid}");
-}
-
-fn wait_exit(child: &mut std::process::Child, limit: Duration) -> Option<std::process::ExitStatus> {
-    let deadline = Instant::now() + limit;
-    while Instant::now() < deadline {
-        if let Ok(Some(status)) = child.try_wait() {
-            return Some(status);
-        }
-        std::thread::sleep(Duration::from_millis(100));
-    }
-    None
 }
 
 #[test]
@@ -264,7 +250,9 @@ fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     };
     let reason = rx.recv_timeout(Duration::from_secs(20));
 
-    let exit = wait_exit(&mut server_process, Duration::from_secs(20));
+    let exit = wait_exit(&mut server_process, Duration::from_secs(20))
+        .ok()
+        .flatten();
     if exit.is_none() {
         let _ = server_process.kill();
     }

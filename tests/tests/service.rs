@@ -9,7 +9,8 @@
 use e2e_tests::start::StartRetrying;
 use e2e_tests::{artifact, assert_alive, connect, interfaces::*, wait_for_no_other_server};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use test_support::wait::wait_until;
 use windows::core::{implement, Interface, PCWSTR};
 use windows::Win32::System::Com::IConnectionPointContainer;
 use windows::Win32::System::Registry::{
@@ -159,21 +160,17 @@ fn the_service_is_installed_started_by_com_stopped_with_shutdown_requests_and_re
         unsafe { ControlService(s.0, SERVICE_CONTROL_STOP, &mut st) }
             .expect("ControlService(STOP)");
     }
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while got.lock().unwrap().is_empty() {
-        assert!(
-            Instant::now() < deadline,
-            "no ShutdownRequest within 20 s of the service stop"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    assert!(
+        wait_until(Duration::from_secs(20), || !got.lock().unwrap().is_empty()),
+        "no ShutdownRequest within 20 s of the service stop"
+    );
     let reasons = got.lock().unwrap().clone();
     assert!(reasons[0].contains("service"), "{reasons:?}");
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while service_state() != Some(SERVICE_STOPPED.0) {
-        assert!(Instant::now() < deadline, "the service did not stop");
-        std::thread::sleep(Duration::from_millis(200));
-    }
+    assert!(
+        wait_until(Duration::from_secs(20), || service_state()
+            == Some(SERVICE_STOPPED.0)),
+        "the service did not stop"
+    );
     drop(server);
 
     // /UnregServer removes the service and the registration, quietly, twice.

@@ -5,6 +5,8 @@
 //! (A test that checks that something does *not* happen lets time pass on purpose: that
 //! is a plain `sleep`, commented, in the test.)
 
+use std::io;
+use std::process::{Child, ExitStatus};
 use std::time::{Duration, Instant};
 
 /// The pause between two looks at a condition.
@@ -30,6 +32,11 @@ pub fn wait_for<T>(limit: Duration, mut probe: impl FnMut() -> Option<T>) -> Opt
         }
         std::thread::sleep(POLL.min(deadline - now));
     }
+}
+
+/// Waits at most `limit` for `child` to exit: its status, or `None` while it still runs.
+pub fn wait_exit(child: &mut Child, limit: Duration) -> io::Result<Option<ExitStatus>> {
+    wait_for(limit, || child.try_wait().transpose()).transpose()
 }
 
 #[cfg(test)]
@@ -72,5 +79,22 @@ mod tests {
         });
         assert_eq!(v, Some(20));
         assert_eq!(wait_for(Duration::ZERO, || None::<u8>), None);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn wait_exit_gives_the_status_or_none_while_it_runs() {
+        let mut quick = std::process::Command::new("true").spawn().unwrap();
+        let status = wait_exit(&mut quick, Duration::from_secs(60)).unwrap();
+        assert!(status.is_some_and(|s| s.success()));
+        let mut slow = std::process::Command::new("sleep")
+            .arg("60")
+            .spawn()
+            .unwrap();
+        assert!(wait_exit(&mut slow, Duration::from_millis(50))
+            .unwrap()
+            .is_none());
+        slow.kill().unwrap();
+        slow.wait().unwrap();
     }
 }

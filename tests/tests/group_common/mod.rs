@@ -139,8 +139,9 @@ pub struct Log {
     changes: Mutex<Vec<Change>>,
     cv: Condvar,
     /// While set, OnDataChange records the call and then holds it (a slow client), up to
-    /// `hold_limit`.
-    hold: std::sync::atomic::AtomicBool,
+    /// `hold_limit` or until [`Log::release`] (`released`).
+    hold: Mutex<bool>,
+    released: Condvar,
     hold_limit: Mutex<Duration>,
 }
 
@@ -161,12 +162,13 @@ impl Log {
     /// once when [`Log::release`] is called.
     pub fn hold_calls(&self, limit: Duration) {
         *self.hold_limit.lock().unwrap() = limit;
-        self.hold.store(true, std::sync::atomic::Ordering::SeqCst);
+        *self.hold.lock().unwrap() = true;
     }
 
     /// Ends [`Log::hold_calls`]: a held call returns now.
     pub fn release(&self) {
-        self.hold.store(false, std::sync::atomic::Ordering::SeqCst);
+        *self.hold.lock().unwrap() = false;
+        self.released.notify_all();
     }
 
     /// Waits at most `limit` for `n` OnDataChange calls that `pred` accepts.
@@ -232,10 +234,13 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         };
         self.0.changes.lock().unwrap().push(c);
         self.0.cv.notify_all();
-        let until = Instant::now() + *self.0.hold_limit.lock().unwrap();
-        while self.0.hold.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < until {
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        let limit = *self.0.hold_limit.lock().unwrap();
+        let held = self.0.hold.lock().unwrap();
+        let _ = self
+            .0
+            .released
+            .wait_timeout_while(held, limit, |held| *held)
+            .unwrap();
         Ok(())
     }
     unsafe fn OnReadComplete(
