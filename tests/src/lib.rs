@@ -82,20 +82,6 @@ pub fn code<T>(r: &windows::core::Result<T>) -> HRESULT {
 }
 
 /// Asserts the server still answers (after a failure path).
-/// RPC_X_NULL_REF_POINTER: what the proxy answers for a NULL `[ref]` pointer.
-pub const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
-
-/// A NULL argument through the proxy: the proxy answers RPC_X_NULL_REF_POINTER before the
-/// server sees it for most `[ref]` pointers, and Wine's lets some through to the server,
-/// which answers E_INVALIDARG; either is right out of process. The server's own answer is
-/// checked exactly by the in-process tests (`crates/ctopc-com/tests/inproc_*.rs`).
-pub fn assert_invalid_arg_or_null_ref(hr: HRESULT, what: &str) {
-    assert!(
-        hr == windows::Win32::Foundation::E_INVALIDARG || hr == RPC_X_NULL_REF_POINTER,
-        "{what}: {hr:?}"
-    );
-}
-
 pub fn assert_alive(server: &Server) {
     let status = server.status().expect("server still answers GetStatus");
     assert!(status.vendor_info.is_some());

@@ -1,8 +1,8 @@
 //! DA 1.0a end to end: the group's IDataObject and IOPCAsyncIO through the proxies (ours
 //! for IOPCAsyncIO, ole32's for IDataObject and IAdviseSink with its TYMED_HGLOBAL
 //! STGMEDIUM), driven by the project's own DA 1.0a client (`e2e_tests::da10`: an
-//! IAdviseSink that decodes each stream field by field). DAdvise of each format and its
-//! failures, Read from cache and device, Write and its write-complete stream, Refresh,
+//! IAdviseSink that decodes each stream field by field). DAdvise of each format (its
+//! failures: in process, `inproc_group_da10.rs`), Read from cache and device, Write and its write-complete stream, Refresh,
 //! Cancel, DUnadvise, and a VARIANT of every type the demo items can be read as (their
 //! canonical R4 and BSTR, and each scalar type requested at AddItems).
 #![cfg(windows)]
@@ -13,10 +13,8 @@ use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, connect, interfaces::*, Apartment, Server};
 use std::time::Duration;
 use windows::core::{Interface, HRESULT};
-use windows::Win32::Foundation::{
-    DV_E_FORMATETC, DV_E_TYMED, E_FAIL, E_INVALIDARG, OLE_E_NOCONNECTION, S_FALSE, S_OK,
-};
-use windows::Win32::System::Ole::{CONNECT_E_ADVISELIMIT, CONNECT_E_NOCONNECTION};
+use windows::Win32::Foundation::{E_FAIL, S_FALSE, S_OK};
+use windows::Win32::System::Ole::CONNECT_E_NOCONNECTION;
 use windows::Win32::System::Variant::VARIANT;
 
 const WAIT: Duration = Duration::from_secs(10);
@@ -97,24 +95,14 @@ fn the_group_answers_for_iopcasyncio_and_idataobject() {
 }
 
 #[test]
-fn dadvise_of_each_format_its_failures_and_dunadvise() {
+fn dadvise_of_each_format_and_dunadvise() {
     let p = simple();
     let (s, _) = advise_sink();
-    assert_eq!(
-        dadvise(&p.d, 1, TYMED_HGLOBAL, &s).0,
-        DV_E_FORMATETC,
-        "CF_TEXT"
-    );
-    assert_eq!(dadvise(&p.d, cf_data(), TYMED_ISTREAM, &s).0, DV_E_TYMED);
     let mut conns = Vec::new();
     for cf in [cf_data(), cf_data_time(), cf_write()] {
         let (hr, c) = dadvise(&p.d, cf, TYMED_HGLOBAL, &s);
         assert_eq!(hr, S_OK, "format {cf}");
         assert_ne!(c, 0);
-        assert_eq!(
-            dadvise(&p.d, cf, TYMED_HGLOBAL, &s).0,
-            CONNECT_E_ADVISELIMIT
-        );
         conns.push(c);
     }
     // EnumDAdvise through ole32's IEnumSTATDATA proxy: the three connections.
@@ -134,30 +122,10 @@ fn dadvise_of_each_format_its_failures_and_dunadvise() {
     }
     // SAFETY: plain values.
     unsafe {
-        assert_eq!(p.d.DUnadvise(0x7FFF_0000), OLE_E_NOCONNECTION);
         for c in &conns {
             assert_eq!(p.d.DUnadvise(*c), S_OK);
-            assert_eq!(p.d.DUnadvise(*c), OLE_E_NOCONNECTION);
         }
     }
-    assert_alive(&p.server);
-}
-
-#[test]
-fn iopcasyncio_without_the_right_connection() {
-    let p = simple();
-    let a = p.a1();
-    let (hr, t, e) = read(&a, 1, OPC_DS_CACHE, &p.h);
-    assert_eq!((hr, t, e.len()), (CONNECT_E_NOCONNECTION, 0, 0));
-    assert_eq!(refresh(&a, 1, OPC_DS_CACHE), (CONNECT_E_NOCONNECTION, 0));
-    let (s, _) = advise_sink();
-    let (_, data) = dadvise(&p.d, cf_data(), TYMED_HGLOBAL, &s);
-    let v = [VARIANT::from(1.0f32)];
-    assert_eq!(write(&a, data, &p.h[1..2], &v).0, CONNECT_E_NOCONNECTION);
-    assert_eq!(read(&a, data, OPC_DS_CACHE, &[]).0, E_INVALIDARG, "count 0");
-    assert_eq!(read(&a, data, OPCDATASOURCE(7), &p.h).0, E_INVALIDARG);
-    // SAFETY: a plain value.
-    assert_eq!(unsafe { a.Cancel(0x7FFF_0001) }.unwrap_err().code(), E_FAIL);
     assert_alive(&p.server);
 }
 

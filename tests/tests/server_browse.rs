@@ -4,13 +4,9 @@
 #![cfg(windows)]
 
 use ctopc_core::Value;
-use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
+use e2e_tests::{assert_alive, connect, interfaces::*};
 use opc_client::{BrowseArgs, Server};
-use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
-use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_NOTIMPL, S_FALSE, S_OK};
-use windows::Win32::System::Com::IEnumString;
-
-const RPC_X_BAD_STUB_DATA: HRESULT = HRESULT(0x800706F5u32 as i32);
+use windows::Win32::Foundation::{S_FALSE, S_OK};
 
 const SULPHUR: &str = "Magazyn siarki";
 const Z101: &str = "Zbiornik siarki ciekłej Z101";
@@ -81,57 +77,6 @@ fn down_up_and_item_ids() {
     assert_eq!(server.get_item_id("").unwrap().as_deref(), Some(SULPHUR));
     server.change_browse_position(OPC_BROWSE_UP, "").unwrap();
     assert_eq!(server.get_item_id("").unwrap().as_deref(), Some(""));
-    assert_eq!(
-        code(&server.change_browse_position(OPC_BROWSE_UP, "")),
-        E_FAIL,
-        "UP at the root"
-    );
-    assert_alive(&server);
-}
-
-#[test]
-fn browse_to_an_item_id_and_bad_positions() {
-    let (_com, server) = connect();
-    server
-        .change_browse_position(OPC_BROWSE_TO, Z101_ID)
-        .expect("TO Z101");
-    assert_eq!(
-        server.browse_item_ids(OPC_LEAF, "", 0, 0).unwrap().1.len(),
-        3
-    );
-    server
-        .change_browse_position(OPC_BROWSE_TO, "")
-        .expect("TO root");
-    assert_eq!(server.get_item_id("").unwrap().as_deref(), Some(""));
-    assert_eq!(
-        code(&server.change_browse_position(OPC_BROWSE_TO, "Nie ma takiej gałęzi")),
-        E_INVALIDARG
-    );
-    assert_eq!(
-        code(&server.change_browse_position(OPC_BROWSE_TO, "KW_A000")),
-        E_INVALIDARG,
-        "TO a leaf"
-    );
-    assert_eq!(
-        code(&server.change_browse_position(OPC_BROWSE_DOWN, "Nie ma")),
-        E_INVALIDARG
-    );
-    to_z101(&server);
-    assert_eq!(
-        code(&server.change_browse_position(OPC_BROWSE_DOWN, "KW_A000")),
-        E_INVALIDARG,
-        "DOWN to a leaf"
-    );
-    for d in [0, 4] {
-        let hr = code(&server.change_browse_position(OPCBROWSEDIRECTION(d), ""));
-        assert!(
-            hr == E_INVALIDARG || hr == RPC_X_BAD_STUB_DATA,
-            "direction {d}: {hr:?}"
-        );
-    }
-    // Failures leave the position where it was.
-    assert_eq!(server.get_item_id("").unwrap().as_deref(), Some(Z101_ID));
-    assert_eq!(code(&server.get_item_id("KW_A999")), E_INVALIDARG);
     assert_alive(&server);
 }
 
@@ -196,87 +141,10 @@ fn flat_listing_and_filters() {
         server.browse_item_ids(OPC_LEAF, "nic*", 0, 0).unwrap(),
         (S_FALSE, vec![])
     );
-    assert_eq!(
-        code(&server.browse_item_ids(OPC_LEAF, "[a", 0, 0)),
-        OPC_E_INVALIDFILTER
-    );
-    assert_eq!(
-        code(&server.browse_item_ids(OPC_LEAF, "", 0, 4)),
-        E_INVALIDARG,
-        "unknown rights bits"
-    );
-    for t in [0, 4] {
-        let hr = code(&server.browse_item_ids(OPCBROWSETYPE(t), "", 0, 0));
-        assert!(
-            hr == E_INVALIDARG || hr == RPC_X_BAD_STUB_DATA,
-            "type {t}: {hr:?}"
-        );
-    }
     assert_alive(&server);
 }
 
 const VT_R4_U16: u16 = 4;
-
-#[test]
-fn each_client_has_its_own_position() {
-    let (_com, a) = connect();
-    let (_com2, b) = connect();
-    to_z101(&a);
-    assert_eq!(a.get_item_id("").unwrap().as_deref(), Some(Z101_ID));
-    assert_eq!(b.get_item_id("").unwrap().as_deref(), Some(""));
-}
-
-#[test]
-fn access_paths_are_not_browsable() {
-    let (_com, server) = connect();
-    assert_eq!(code(&server.browse_access_paths("KW_A000")), E_NOTIMPL);
-    assert_alive(&server);
-}
-
-#[test]
-fn address_space_null_pointers() {
-    let (_com, server) = connect();
-    let bsas = server.address_space().unwrap();
-    // SAFETY: deliberately NULL pointers (what the test checks).
-    unsafe {
-        assert_invalid_arg_or_null_ref(
-            code(&bsas.QueryOrganization(std::ptr::null_mut())),
-            "QueryOrganization",
-        );
-        assert_alive(&server);
-        assert_invalid_arg_or_null_ref(
-            code(&bsas.ChangeBrowsePosition(OPC_BROWSE_DOWN, PCWSTR::null())),
-            "ChangeBrowsePosition",
-        );
-        assert_alive(&server);
-        let empty = HSTRING::from("");
-        let hr = bsas.BrowseOPCItemIDs(
-            OPC_BRANCH,
-            PCWSTR(empty.as_ptr()),
-            VT_EMPTY_VARTYPE,
-            0,
-            std::ptr::null_mut(),
-        );
-        assert_invalid_arg_or_null_ref(hr, "BrowseOPCItemIDs(ppIEnumString)");
-        assert_alive(&server);
-        let mut e: Option<IEnumString> = None;
-        let hr = bsas.BrowseOPCItemIDs(OPC_BRANCH, PCWSTR::null(), VT_EMPTY_VARTYPE, 0, &mut e);
-        assert_invalid_arg_or_null_ref(hr, "BrowseOPCItemIDs(szFilterCriteria)");
-        assert_alive(&server);
-        assert_invalid_arg_or_null_ref(
-            code(&bsas.GetItemID(PCWSTR(empty.as_ptr()), std::ptr::null_mut())),
-            "GetItemID(out)",
-        );
-        let mut p = PWSTR::null();
-        assert_invalid_arg_or_null_ref(
-            code(&bsas.GetItemID(PCWSTR::null(), &mut p)),
-            "GetItemID(in)",
-        );
-        assert_alive(&server);
-    }
-}
-
-const VT_EMPTY_VARTYPE: VARTYPE = windows::Win32::System::Variant::VT_EMPTY;
 
 // ---- IOPCBrowse::Browse ----------------------------------------------------------------
 
@@ -392,57 +260,6 @@ fn browse_pages_with_continuation_points() {
 }
 
 #[test]
-fn browse_errors() {
-    let (_com, server) = connect();
-    assert_eq!(
-        code(&server.browse(&BrowseArgs::all("Nie ma takiego"))),
-        OPC_E_UNKNOWNITEMID
-    );
-    assert_eq!(
-        code(&server.browse(&BrowseArgs {
-            continuation_point: Some("zły punkt".into()),
-            ..BrowseArgs::all(SULPHUR)
-        })),
-        OPC_E_INVALIDCONTINUATIONPOINT
-    );
-    // A continuation point of another branch.
-    let page = server
-        .browse(&BrowseArgs {
-            max_elements: 1,
-            ..BrowseArgs::all(SULPHUR)
-        })
-        .unwrap();
-    let cp = page.continuation_point.clone();
-    assert!(!complete(&cp));
-    assert_eq!(
-        code(&server.browse(&BrowseArgs {
-            continuation_point: cp,
-            max_elements: 1,
-            ..BrowseArgs::all("")
-        })),
-        OPC_E_INVALIDCONTINUATIONPOINT
-    );
-    assert_eq!(
-        code(&server.browse(&BrowseArgs {
-            name_filter: "[a".into(),
-            ..BrowseArgs::all("")
-        })),
-        OPC_E_INVALIDFILTER
-    );
-    for f in [0, 4] {
-        let hr = code(&server.browse(&BrowseArgs {
-            filter: f,
-            ..BrowseArgs::all("")
-        }));
-        assert!(
-            hr == E_INVALIDARG || hr == RPC_X_BAD_STUB_DATA,
-            "filter {f}: {hr:?}"
-        );
-    }
-    assert_alive(&server);
-}
-
-#[test]
 fn browse_with_all_properties_and_values() {
     let (_com, server) = connect();
     let page = server
@@ -522,75 +339,4 @@ fn browse_with_chosen_properties_without_values_and_a_bad_id() {
         .elements
         .iter()
         .all(|e| e.properties.properties.is_empty()));
-}
-
-#[test]
-fn browse_null_pointers() {
-    let (_com, server) = connect();
-    let b = server.browse_itf().unwrap();
-    let empty = HSTRING::from("");
-    let mut cp = PWSTR::null();
-    let (mut more, mut count) = (windows::core::BOOL(0), 0u32);
-    let mut elements: *mut OPCBROWSEELEMENT = std::ptr::null_mut();
-    let dummy = 0u32;
-    // SAFETY: deliberately NULL pointers, one at a time.
-    unsafe {
-        let e = PCWSTR(empty.as_ptr());
-        let f = OPC_BROWSE_FILTER_ALL;
-        let hr = b.Browse(
-            e,
-            std::ptr::null_mut(),
-            0,
-            f,
-            e,
-            e,
-            false.into(),
-            false.into(),
-            0,
-            &dummy,
-            &mut more,
-            &mut count,
-            &mut elements,
-        );
-        assert_invalid_arg_or_null_ref(hr, "pszContinuationPoint");
-        assert_alive(&server);
-        let hr = b.Browse(
-            e,
-            &mut cp,
-            0,
-            f,
-            e,
-            e,
-            false.into(),
-            false.into(),
-            0,
-            &dummy,
-            std::ptr::null_mut(),
-            &mut count,
-            &mut elements,
-        );
-        assert_invalid_arg_or_null_ref(hr, "pbMoreElements");
-        assert_alive(&server);
-        let hr = b.Browse(
-            PCWSTR::null(),
-            &mut cp,
-            0,
-            f,
-            e,
-            e,
-            false.into(),
-            false.into(),
-            0,
-            &dummy,
-            &mut more,
-            &mut count,
-            &mut elements,
-        );
-        assert_invalid_arg_or_null_ref(hr, "szItemID");
-        assert_alive(&server);
-    }
-    // SAFETY: NULL or a CoTaskMem string a failed call may have handed out, ours.
-    unsafe { opc_client::take_wstr(cp) };
-    // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    unsafe { opc_client::take_array(elements, count as usize) };
 }

@@ -15,21 +15,16 @@
 use ctopc_com::clock::now;
 use ctopc_core::Timestamp;
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{
-    assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID,
-};
+use e2e_tests::{connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID};
 use opc_client::Server;
 use std::os::windows::process::CommandExt;
 use std::sync::mpsc;
 use std::sync::Mutex;
 use std::time::Duration;
 use test_support::wait::{wait_exit, wait_until};
-use windows::core::{implement, IUnknown, Interface, PCWSTR};
+use windows::core::{implement, Interface, PCWSTR};
 use windows::Win32::System::Com::{
     IConnectionPoint, IConnectionPointContainer, IEnumConnectionPoints,
-};
-use windows::Win32::System::Ole::{
-    CONNECT_E_ADVISELIMIT, CONNECT_E_CANNOTCONNECT, CONNECT_E_NOCONNECTION,
 };
 
 /// A client's IOPCShutdown: forwards every reason to the test.
@@ -75,11 +70,6 @@ fn one_connection_point_for_iopcshutdown() {
         unsafe { cp.GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
-    assert_eq!(
-        // SAFETY: valid IID pointer.
-        code(&unsafe { cpc.FindConnectionPoint(&IID_IOPCDataCallback) }),
-        CONNECT_E_NOCONNECTION
-    );
     // SAFETY: no arguments.
     let e: IEnumConnectionPoints =
         unsafe { cpc.EnumConnectionPoints() }.expect("EnumConnectionPoints");
@@ -101,49 +91,6 @@ fn one_connection_point_for_iopcshutdown() {
         unsafe { points[0].GetConnectionInterface() }.unwrap(),
         IID_IOPCShutdown
     );
-}
-
-#[test]
-fn advise_rules_of_the_shutdown_point() {
-    let (_com, server) = connect();
-    let (s, _rx) = sink();
-    let cookie = server.advise_shutdown(&s).expect("Advise");
-    assert_ne!(cookie, 0);
-    let (s2, _rx2) = sink();
-    assert_eq!(
-        code(&server.advise_shutdown(&s2)),
-        CONNECT_E_ADVISELIMIT,
-        "one connection per point"
-    );
-    assert_eq!(
-        code(&server.unadvise_shutdown(cookie.wrapping_add(1000))),
-        CONNECT_E_NOCONNECTION
-    );
-    server.unadvise_shutdown(cookie).expect("Unadvise");
-    assert_eq!(
-        code(&server.unadvise_shutdown(cookie)),
-        CONNECT_E_NOCONNECTION,
-        "already unadvised"
-    );
-    // An object that is no IOPCShutdown cannot connect.
-    let cpc = container(&server);
-    // SAFETY: valid IID pointer.
-    let cp = unsafe { cpc.FindConnectionPoint(&IID_IOPCShutdown) }.unwrap();
-    let not_a_sink: IUnknown = server.unknown.clone();
-    assert_eq!(
-        // SAFETY: a live interface pointer.
-        code(&unsafe { cp.Advise(&not_a_sink) }),
-        CONNECT_E_CANNOTCONNECT
-    );
-    // Connect again after the unadvise; EnumConnections lists that connection's cookie.
-    let cookie = server.advise_shutdown(&s2).expect("Advise again");
-    let listed: Vec<u32> = e2e_tests::connections(&cp)
-        .into_iter()
-        .map(|(c, _)| c)
-        .collect();
-    assert_eq!(listed, [cookie]);
-    server.unadvise_shutdown(cookie).unwrap();
-    assert_alive(&server);
 }
 
 /// Connects to the server process the test started (started at or after `since`).

@@ -655,6 +655,21 @@ fn browse_rejects_a_continuation_point_it_did_not_make() {
         ..BrowseArgs::all(SULPHUR)
     });
     assert_eq!(code(&r), OPC_E_INVALIDCONTINUATIONPOINT);
+    // A continuation point of another branch.
+    let page = c
+        .browse(&BrowseArgs {
+            max_elements: 1,
+            ..BrowseArgs::all(SULPHUR)
+        })
+        .unwrap();
+    let cp = page.continuation_point.clone();
+    assert!(!cp.as_deref().unwrap_or("").is_empty(), "{cp:?}");
+    let r = c.browse(&BrowseArgs {
+        continuation_point: cp,
+        max_elements: 1,
+        ..BrowseArgs::all("")
+    });
+    assert_eq!(code(&r), OPC_E_INVALIDCONTINUATIONPOINT);
 }
 
 #[test]

@@ -392,7 +392,7 @@ fn iopcasyncio_argument_branches() {
     let mut vars = [var(&Value::R4(1.0))];
     // SAFETY: the pointers are NULL or valid for each call.
     unsafe {
-        for src in [OPCDATASOURCE(0), OPCDATASOURCE(3)] {
+        for src in [OPCDATASOURCE(0), OPCDATASOURCE(3), OPCDATASOURCE(7)] {
             let (mut t, mut e) = (POISON_U32, poison::<HRESULT>());
             assert_eq!(a.Read(c, src, 1, h.as_ptr(), &mut t, &mut e), E_INVALIDARG);
             assert!(e.is_null());

@@ -207,9 +207,19 @@ fn sync_read_from_cache_and_device_with_per_item_errors() {
         let bad = &items[1];
         assert_eq!((bad.client_handle, bad.vt, bad.quality), (0, VT_EMPTY, 0));
     }
-    // Every item invalid: S_FALSE, not a call failure.
-    let (hr, items) = read(&p, OPC_DS_CACHE, &[BAD_HANDLE]);
-    assert_eq!((hr, items[0].error), (S_FALSE, OPC_E_INVALIDHANDLE));
+    // Every item invalid (0 included): S_FALSE, not a call failure.
+    let (hr, items) = read(&p, OPC_DS_CACHE, &[BAD_HANDLE, 0]);
+    assert_eq!(hr, S_FALSE);
+    assert!(items
+        .iter()
+        .all(|i| i.error == OPC_E_INVALIDHANDLE && i.vt == VT_EMPTY));
+    // A handle of another group of the same client is invalid here.
+    let other = add_group(&p._server, "io-read-other");
+    let h_other = add_ok(&other, &[LEVEL]);
+    if !p.h.contains(&h_other[0]) {
+        let (hr, items) = read(&p, OPC_DS_CACHE, &h_other);
+        assert_eq!((hr, items[0].error), (S_FALSE, OPC_E_INVALIDHANDLE));
+    }
     // An inactive item read from the cache: BAD (out of service), not an error.
     let (hr, _) = errors_of(1, |e| {
         // SAFETY: valid pointers.
@@ -887,6 +897,23 @@ fn async_calls_without_a_sink_are_connect_e_noconnection_with_outputs_cleared() 
         hr(unsafe { a2.SetEnable(false.into()) }),
         CONNECT_E_NOCONNECTION
     );
+}
+
+#[test]
+fn async_calls_after_unadvise_are_connect_e_noconnection() {
+    let p = plant("io-unadvised", false);
+    let (cookie, _rec) = advise(&p.g);
+    // SAFETY: a plain value.
+    assert_eq!(hr(unsafe { data_point(&p.g).Unadvise(cookie) }), S_OK);
+    let (hr_, cancel, errs) = async_call(3, |c, e| {
+        // SAFETY: valid pointers.
+        unsafe { p.async2().Read(3, p.h.as_ptr(), 7, c, e) }
+    });
+    assert_eq!((hr_, cancel, errs), (CONNECT_E_NOCONNECTION, 0, vec![]));
+    let mut cancel = POISON_U32;
+    // SAFETY: a valid out-pointer.
+    let r = unsafe { p.async2().Refresh2(OPC_DS_DEVICE, 8, &mut cancel) };
+    assert_eq!((hr(r), cancel), (CONNECT_E_NOCONNECTION, 0));
 }
 
 /// A VARIANT no Value can come from (VT_NULL: OPC_E_BADTYPE when decoded).

@@ -455,10 +455,16 @@ fn handles_of_another_group_are_invalid_here() {
     let ha = add_ok(&a, &[LEVEL]);
     let (hr, errs) = errors_of(1, |e| {
         // SAFETY: valid pointers.
+        unsafe { b.item_mgt.SetActiveState(1, ha.as_ptr(), false.into(), e) }
+    });
+    assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_INVALIDHANDLE]));
+    let (hr, errs) = errors_of(1, |e| {
+        // SAFETY: valid pointers.
         unsafe { b.item_mgt.RemoveItems(1, ha.as_ptr(), e) }
     });
     assert_eq!((hr, errs), (S_FALSE, vec![OPC_E_INVALIDHANDLE]));
     assert_eq!(attributes(&a).len(), 1);
+    assert!(attributes(&a)[0].active, "group A's item is untouched");
 }
 
 // ---- CreateEnumerator and IEnumOPCItemAttributes ---------------------------------------

@@ -121,6 +121,20 @@ fn get_state_reports_what_add_group_set() {
     );
 }
 
+/// AddGroup with NULL pTimeBias and pPercentDeadband: the machine's time zone bias and no
+/// deadband.
+#[test]
+fn add_group_without_bias_and_deadband_takes_the_machine_bias_and_zero() {
+    use windows::Win32::System::Time::{GetTimeZoneInformation, TIME_ZONE_INFORMATION};
+    // GroupArgs::new passes both pointers NULL.
+    let (_s, g) = server_with_group("state-defaults");
+    let mut tz = TIME_ZONE_INFORMATION::default();
+    // SAFETY: a valid out-structure.
+    unsafe { GetTimeZoneInformation(&mut tz) };
+    let st = get_state(&iface(&g));
+    assert_eq!((st.time_bias, st.deadband), (tz.Bias, 0.0));
+}
+
 #[test]
 fn get_state_with_any_null_out_parameter_is_e_invalidarg_and_writes_nothing() {
     let (_s, g) = server_with_group("state-get-null");
@@ -226,18 +240,22 @@ fn set_state_changes_what_it_is_given_and_revises_the_rate() {
             ..before.clone()
         }
     );
-    // Below the minimum update rate (1000 ms): raised, OPC_S_UNSUPPORTEDRATE.
-    assert_eq!(
-        set_state(
-            &sm,
-            SetArgs {
-                rate: Some(10),
-                ..Default::default()
-            }
-        ),
-        (OPC_S_UNSUPPORTEDRATE, 1000)
-    );
-    assert_eq!(get_state(&sm).rate, 1000);
+    // Below the minimum update rate (1000 ms), 0 (the fastest) included: raised,
+    // OPC_S_UNSUPPORTEDRATE.
+    for rate in [10u32, 100, 0] {
+        assert_eq!(
+            set_state(
+                &sm,
+                SetArgs {
+                    rate: Some(rate),
+                    ..Default::default()
+                }
+            ),
+            (OPC_S_UNSUPPORTEDRATE, 1000),
+            "rate {rate}"
+        );
+        assert_eq!(get_state(&sm).rate, 1000);
+    }
     // Deadbands 0 and 100 are valid.
     for d in [0.0f32, 100.0] {
         let (hr, _) = set_state(

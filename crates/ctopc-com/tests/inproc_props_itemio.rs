@@ -220,6 +220,57 @@ fn get_item_properties_success_and_per_property_errors() {
     assert_eq!(values[1], Value::Empty, "VT_EMPTY for the failed property");
     assert_eq!(values[2], Value::I4(OPC_READABLE as i32));
     assert_eq!(values[3], Value::Bstr("m".into()));
+    // IDs the item has no property for: 8 (EU Info), 9999, 104 (High Instrument Range), 0.
+    let c = client();
+    let (r, v) = c
+        .get_item_properties("KW_A000", &[1, 8, 9999, 104, 0, 100])
+        .unwrap();
+    assert_eq!(r, S_FALSE);
+    assert_eq!(
+        v.iter().map(|x| x.1).collect::<Vec<_>>(),
+        [
+            S_OK,
+            OPC_E_INVALID_PID,
+            OPC_E_INVALID_PID,
+            OPC_E_INVALID_PID,
+            OPC_E_INVALID_PID,
+            S_OK
+        ]
+    );
+    assert_eq!(v[1].0, Value::Empty);
+    // KW_D000 has no unit: no EU Units property.
+    let (r, v) = c.get_item_properties("KW_D000", &[100]).unwrap();
+    assert_eq!((r, v[0].1), (S_FALSE, OPC_E_INVALID_PID));
+}
+
+/// An unknown item ID and IDs of no asix form (empty, a trailing `.`, an attribute of an
+/// attribute) fail QueryAvailableProperties, GetItemProperties and LookupItemIDs as a
+/// whole.
+#[test]
+fn properties_of_unknown_and_invalid_item_ids() {
+    let c = client();
+    for (id, want) in [
+        ("KW_A999", OPC_E_UNKNOWNITEMID),
+        ("KW_A000.", OPC_E_INVALIDITEMID),
+        ("", OPC_E_INVALIDITEMID),
+        ("KW_A000.DESC.CV", OPC_E_INVALIDITEMID),
+    ] {
+        assert_eq!(
+            code(&c.query_available_properties(id)),
+            want,
+            "QueryAvailableProperties({id:?})"
+        );
+        assert_eq!(
+            code(&c.get_item_properties(id, &[1])),
+            want,
+            "GetItemProperties({id:?})"
+        );
+        assert_eq!(
+            code(&c.lookup_item_ids(id, &[101])),
+            want,
+            "LookupItemIDs({id:?})"
+        );
+    }
 }
 
 // ---- LookupItemIDs ---------------------------------------------------------------------
@@ -431,6 +482,18 @@ fn item_io_read_success_and_per_item_errors() {
     let c = client();
     let (r, items) = c.item_read(&[("KW_A000", 0), ("KW_A000.DESC", 0)]).unwrap();
     assert_eq!(r, S_OK, "{items:?}");
+    // An empty ID and one of no asix form: OPC_E_INVALIDITEMID, VT_EMPTY.
+    let (r, items) = c
+        .item_read(&[("", 0), ("asmen.Camac.x.R8", 0), ("KW_A000", 0)])
+        .unwrap();
+    assert_eq!(r, S_FALSE);
+    assert_eq!(
+        items.iter().map(|i| i.error).collect::<Vec<_>>(),
+        [OPC_E_INVALIDITEMID, OPC_E_INVALIDITEMID, S_OK]
+    );
+    for i in &items[..2] {
+        assert_eq!((i.vt, i.value.clone()), (0, Value::Empty), "{i:?}");
+    }
 }
 
 // ---- IOPCItemIO::WriteVQT --------------------------------------------------------------
@@ -502,6 +565,15 @@ fn item_io_write_vqt_success_and_per_item_errors() {
         .item_write_vqt(&[("KW_A110", ItemVqt::value(Value::I4(7)))])
         .unwrap();
     assert_eq!((r, errors), (S_OK, vec![S_OK]));
+    // An ID of no asix form, and text that is no number (asix writes numbers only).
+    let (r, errors) = c
+        .item_write_vqt(&[
+            ("KW_A000.", ItemVqt::value(Value::R8(1.0))),
+            ("KW_A110", ItemVqt::value(Value::Bstr("abc".into()))),
+        ])
+        .unwrap();
+    assert_eq!((r, errors[0]), (S_FALSE, OPC_E_INVALIDITEMID));
+    assert!(errors[1].is_err(), "a string: {:?}", errors[1]);
 }
 
 /// One WriteVQT of the text `text` to KW_A110 through `io`; its per-item error.

@@ -185,8 +185,32 @@ fn add_group_unknown_lcid_is_invalidarg() {
     };
     assert_eq!(hr, E_INVALIDARG);
     o.assert_cleared("unknown LCID");
-    // A locale Windows knows is accepted (German), as are Polish and English.
-    for (i, lcid) in [0x0407u32, PL, EN, 0].into_iter().enumerate() {
+    for lcid in [0x0012_3456u32, 0xFFFF_FFFF, 0x7777] {
+        let mut o = AddOut::poisoned();
+        // SAFETY: valid pointers.
+        let hr = unsafe {
+            add_group_raw(
+                &s,
+                pcwstr(&name),
+                1000,
+                null(),
+                lcid,
+                &mut o.handle,
+                &mut o.revised,
+                &IUnknown::IID,
+                o.unk.as_out(),
+            )
+        };
+        assert_eq!(hr, E_INVALIDARG, "LCID {lcid:#x}");
+        o.assert_cleared("unknown LCID");
+    }
+    assert_eq!(client_of(&s).status().unwrap().group_count, 0);
+    // A locale Windows knows is accepted (German), as are Polish, any English, the neutral
+    // locale and the user's and the system's default locales.
+    for (i, lcid) in [0x0407u32, PL, EN, 0x0809, 0, 0x0400, 0x0800]
+        .into_iter()
+        .enumerate()
+    {
         let g = add_group_with(
             &s,
             &GroupArgs {
@@ -251,6 +275,7 @@ fn add_group_duplicate_name_is_opc_e_duplicatename() {
     };
     assert_eq!(hr, OPC_E_DUPLICATENAME);
     o.assert_cleared("duplicate name");
+    assert_eq!(client_of(&s).status().unwrap().group_count, 1);
     // Another client may use the same name.
     assert_eq!(add_group(&opc_server(), "dup").code, S_OK);
 }
@@ -259,7 +284,7 @@ fn add_group_duplicate_name_is_opc_e_duplicatename() {
 fn add_group_bad_deadband_is_invalidarg() {
     let s = opc_server();
     let name = wide("db");
-    for bad in [-1.0f32, 100.5, f32::NAN] {
+    for bad in [-1.0f32, -0.5, 100.5, f32::NAN] {
         let mut o = AddOut::poisoned();
         // SAFETY: valid pointers.
         let hr = unsafe {
@@ -278,6 +303,35 @@ fn add_group_bad_deadband_is_invalidarg() {
         assert_eq!(hr, E_INVALIDARG, "deadband {bad}");
         o.assert_cleared("bad deadband");
     }
+    assert_eq!(client_of(&s).status().unwrap().group_count, 0);
+}
+
+#[test]
+fn add_group_raises_rates_below_the_minimum_with_unsupportedrate() {
+    // The demo's MinUpdateRate is 1000 ms; 0 asks for the fastest rate.
+    let s = opc_server();
+    for (i, rate) in [0u32, 1, 250, 999].into_iter().enumerate() {
+        let g = add_group_with(
+            &s,
+            &GroupArgs {
+                rate_ms: rate,
+                ..GroupArgs::new(&format!("r{i}"))
+            },
+        );
+        assert_eq!(
+            (g.code, g.revised_rate),
+            (OPC_S_UNSUPPORTEDRATE, 1000),
+            "rate {rate}"
+        );
+    }
+    let g = add_group_with(
+        &s,
+        &GroupArgs {
+            rate_ms: 2500,
+            ..GroupArgs::new("slow")
+        },
+    );
+    assert_eq!((g.code, g.revised_rate), (S_OK, 2500));
 }
 
 #[test]
@@ -354,13 +408,17 @@ fn server_get_error_string_null_out_is_invalidarg() {
 #[test]
 fn server_get_error_string_unknown_lcid_is_invalidarg_and_clears_the_out() {
     let s = opc_server();
-    let mut p = PWSTR(poison());
-    assert_eq!(
-        // SAFETY: a valid out-pointer.
-        hr(unsafe { s.GetErrorString(E_FAIL, BAD_LCID, &mut p) }),
-        E_INVALIDARG
-    );
-    assert!(p.is_null(), "out-parameter not cleared");
+    // German is a locale Windows knows, but not a language of the server.
+    for (error, lcid) in [(E_FAIL, BAD_LCID), (OPC_E_INVALIDHANDLE, 0x0407)] {
+        let mut p = PWSTR(poison());
+        assert_eq!(
+            // SAFETY: a valid out-pointer.
+            hr(unsafe { s.GetErrorString(error, lcid, &mut p) }),
+            E_INVALIDARG,
+            "LCID {lcid:#x}"
+        );
+        assert!(p.is_null(), "LCID {lcid:#x}: out-parameter not cleared");
+    }
 }
 
 #[test]
@@ -420,7 +478,8 @@ fn get_group_by_name_argument_branches() {
     let (s, g) = server_with_group("byname");
     let name = wide("byname");
     let nope = wide("nope");
-    let cases: [(&str, PCWSTR, *const GUID, bool, HRESULT); 5] = [
+    let upper = wide("BYNAME");
+    let cases: [(&str, PCWSTR, *const GUID, bool, HRESULT); 6] = [
         (
             "NULL name",
             PCWSTR::null(),
@@ -439,6 +498,13 @@ fn get_group_by_name_argument_branches() {
         (
             "unknown name",
             pcwstr(&nope),
+            &IUnknown::IID,
+            false,
+            E_INVALIDARG,
+        ),
+        (
+            "the name in other case (names are case-sensitive)",
+            pcwstr(&upper),
             &IUnknown::IID,
             false,
             E_INVALIDARG,
@@ -534,7 +600,7 @@ fn get_status_success() {
 #[test]
 fn remove_group_unknown_handles_are_invalidarg() {
     let (s, g) = server_with_group("rm");
-    let (_other_server, other) = server_with_group("rm");
+    let (other_server, other) = server_with_group("rm");
     for (what, h) in [
         ("0", 0u32),
         ("never issued", 0x7FFF_FFF0),
@@ -548,6 +614,7 @@ fn remove_group_unknown_handles_are_invalidarg() {
     }
     // The group and the other client's are still there.
     assert_eq!(client_of(&s).status().unwrap().group_count, 1);
+    assert_eq!(client_of(&other_server).status().unwrap().group_count, 1);
     drop(g);
 }
 
@@ -582,6 +649,11 @@ fn remove_group_in_use_and_forced() {
         unsafe { s.RemoveGroup(g2.server_handle, true.into()) },
         S_OK
     );
+    assert_eq!(
+        client_of(&s).status().unwrap().group_count,
+        0,
+        "removed groups are not counted, referenced or not"
+    );
     let h3 = {
         let g3 = add_group(&s, "free");
         g3.server_handle
@@ -597,7 +669,7 @@ fn remove_group_in_use_and_forced() {
 #[test]
 fn create_group_enumerator_argument_branches() {
     let (s, _g) = server_with_group("en");
-    let cases: [(&str, OPCENUMSCOPE, *const GUID, bool, HRESULT); 6] = [
+    let cases: [(&str, OPCENUMSCOPE, *const GUID, bool, HRESULT); 7] = [
         ("NULL riid", OPC_ENUM_ALL, null(), false, E_INVALIDARG),
         (
             "NULL out",
@@ -623,6 +695,13 @@ fn create_group_enumerator_argument_branches() {
         (
             "scope -1",
             OPCENUMSCOPE(-1),
+            &IEnumString::IID,
+            false,
+            E_INVALIDARG,
+        ),
+        (
+            "scope 0x7FFF",
+            OPCENUMSCOPE(0x7FFF),
             &IEnumString::IID,
             false,
             E_INVALIDARG,

@@ -11,9 +11,6 @@ use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
 use windows::Win32::System::Variant::VARIANT;
 
-/// The proxy's answer to a NULL top-level [ref] pointer (the call never reaches the server).
-pub const RPC_X_NULL_REF_POINTER: HRESULT = HRESULT(0x800706F4u32 as i32);
-
 pub const VT_EMPTY: u16 = 0;
 pub const VT_I2: u16 = 2;
 pub const VT_I4: u16 = 3;
