@@ -5,6 +5,11 @@
 //! failures: in process, `inproc_group_da10.rs`), Read from cache and device, Write and its write-complete stream, Refresh,
 //! Cancel, DUnadvise, and a VARIANT of every type the demo items can be read as (their
 //! canonical R4 and BSTR, and each scalar type requested at AddItems).
+//!
+//! Spec: OPC DA 2.05a §4.3.4 IOPCAsyncIO (old) and §4.3.5 Subscription via IDataObject
+//! (old), §4.5.9 IOPCAsyncIO (Read, Write, Refresh, Cancel), §4.5.10 IDataObject (DAdvise,
+//! DUnadvise, EnumDAdvise), §4.6.3 IAdviseSink and §4.6.4 its data stream formats
+//! (OPCGROUPHEADER, OPCITEMHEADER1/2, OPCGROUPHEADERWRITE).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

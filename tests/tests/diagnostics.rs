@@ -8,6 +8,11 @@
 //!
 //! As `ops_metrics.rs`: waits until no other ServerCTOPC.exe runs and starts a server of
 //! its own (`SERVERCTOPC_INI`, the simulated demo plant), so that the counts are the test's.
+//!
+//! Spec: OPC DA 2.05a §4.4.8 IOPCBrowseServerAddressSpace, §4.4.6 IOPCItemProperties,
+//! §4.3.3 Subscription via IOPCDataCallback; OPC DA 3.0 IOPCBrowse::Browse and
+//! IOPCItemIO::Read (the `_Diagnostics` branch is the server's own address space, read
+//! through the standard interfaces).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

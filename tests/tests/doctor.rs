@@ -4,6 +4,11 @@
 //! use is never broken): the proxy/stub unregistered, the exe moved, an invalid
 //! configuration, a missing variable database, an unreachable asix server. Each is found
 //! with FAIL and its fix, and the exit code is 1.
+//!
+//! Spec: OPC DA 2.05a §5.1 Component Categories and §5.2 Registry Entries for Custom
+//! Interface (the server's and the proxy/stub's registration that doctor checks); OPC DA
+//! 2.05a §4.4.4 IOPCServer::GetStatus and §4.3.3 Subscription via IOPCDataCallback (its
+//! connection, read and callback checks).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -1,4 +1,9 @@
 //! Foundation: activation through COM, GetStatus and IOPCCommon end to end.
+//!
+//! Spec: OPC DA 2.05a §4.4.2 IUnknown (QueryInterface), §4.4.4 IOPCServer::GetStatus with
+//! §6.7.5 OPCSERVERSTATUS, §4.2.14 Localization and LocaleID; OPC Common 1.10 IOPCCommon
+//! (SetLocaleID, GetLocaleID, QueryAvailableLocaleIDs, GetErrorString, SetClientName);
+//! activation of a LocalServer32 (COM's CoCreateInstance, CoGetClassObject).
 #![cfg(windows)]
 
 use ctopc_com::apartment::Apartment;

@@ -12,6 +12,12 @@
 //!   `BAD Waiting for Initial Data`.
 //!
 //! The tests that write take one lock: they write the same setpoints.
+//!
+//! Spec: OPC DA 2.05a §4.2.13 VARIANT Data Types and Interoperability and §4.2.14
+//! Localization and LocaleID (writes converted in the group's LCID), §4.5.5
+//! IOPCSyncIO::Write, §4.5.6 IOPCAsyncIO2::Write, §4.3.3 Subscription via IOPCDataCallback
+//! (the first OnDataChange); OPC DA 3.0 IOPCSyncIO2::WriteVQT and IOPCItemIO::WriteVQT
+//! (OPCITEMVQT).
 #![cfg(windows)]
 
 use ctopc_core::model::ItemVqt;

@@ -5,6 +5,11 @@
 //! in process, `inproc_group_io.rs`). The default simulation
 //! answers at once, so Cancel2 here races the completion; group_slow_source.rs cancels
 //! operations that certainly wait for a slow device.
+//!
+//! Spec: OPC DA 2.05a §4.3.2 IOPCAsyncIO2 and §4.5.6 IOPCAsyncIO2 (Read, Write, Refresh2,
+//! Cancel2, SetEnable, GetEnable), §4.3.3 Subscription via IOPCDataCallback, §4.6.1
+//! IOPCDataCallback (OnDataChange, OnReadComplete, OnWriteComplete, OnCancelComplete); OPC
+//! DA 3.0 IOPCAsyncIO3 (ReadMaxAge, WriteVQT, RefreshMaxAge).
 #![cfg(windows)]
 
 use ctopc_core::model::ItemVqt;

@@ -1,6 +1,10 @@
 //! The group's IConnectionPointContainer and IOPCDataCallback end to end: subscription
 //! callbacks from the simulated demo plant, keep-alive callbacks, an STA client, Unadvise,
 //! the point and its enumerator through the proxy, a slow client next to a quick one.
+//!
+//! Spec: OPC DA 2.05a §4.5.7 IConnectionPointContainer (on OPCGroup), §4.3.3 Subscription
+//! via IOPCDataCallback, §4.6.1 IOPCDataCallback::OnDataChange, §4.2.10 The ACTIVE flags,
+//! Deadband and Update Rate; OPC DA 3.0 IOPCGroupStateMgt2 (keep-alive callbacks).
 #![cfg(windows)]
 
 mod group_common;

@@ -2,6 +2,10 @@
 //! plant (simulated): cache and device reads, MaxAge, writes with read-back, WriteVQT, the
 //! asix extended write, and the per-item failure codes of a write. The argument rules
 //! (counts, NULLs, sources, handles) are checked in process, `inproc_group_io.rs`.
+//!
+//! Spec: OPC DA 2.05a §4.3.1 and §4.5.5 IOPCSyncIO (Read, Write), §4.2.7 CACHE data, DEVICE
+//! data and TimeStamps, §4.2.13 VARIANT Data Types and Interoperability, §6.7.1
+//! OPCITEMSTATE, §6.8 OPC Quality flags; OPC DA 3.0 IOPCSyncIO2 (ReadMaxAge, WriteVQT).
 #![cfg(windows)]
 
 use ctopc_com::clock::now;

@@ -1,6 +1,12 @@
 //! The group's items end to end: IOPCItemMgt (AddItems, ValidateItems, RemoveItems,
 //! SetActiveState, SetClientHandles, SetDatatypes, CreateEnumerator + IEnumOPCItemAttributes),
 //! IOPCItemDeadbandMgt and IOPCItemSamplingMgt, against the embedded demo plant.
+//!
+//! Spec: OPC DA 2.05a §4.5.2 IOPCItemMgt (AddItems, ValidateItems, RemoveItems,
+//! SetActiveState, SetClientHandles, SetDatatypes, CreateEnumerator), §4.5.8
+//! IEnumOPCItemAttributes, §6.7.2 OPCITEMDEF, §6.7.3 OPCITEMRESULT, §6.7.4
+//! OPCITEMATTRIBUTES, §6.7.6 Access Rights; OPC DA 3.0 IOPCItemDeadbandMgt and
+//! IOPCItemSamplingMgt.
 #![cfg(windows)]
 
 mod group_common;

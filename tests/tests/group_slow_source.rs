@@ -18,6 +18,11 @@
 //! client's environment; the server's log, written next to the ini, proves which file it
 //! used), and at the end releases everything and waits until its server has exited, so
 //! that later tests get a server with the default configuration.
+//!
+//! Spec: OPC DA 2.05a §4.2.7 CACHE data, DEVICE data and TimeStamps, §4.5.5
+//! IOPCSyncIO::Read and Write from the device, §4.5.6 IOPCAsyncIO2::Cancel2, §4.6.1
+//! IOPCDataCallback (OnReadComplete, OnCancelComplete); OPC DA 3.0 IOPCSyncIO2::ReadMaxAge
+//! and IOPCAsyncIO3.
 #![cfg(windows)]
 
 use ctopc_com::clock::now;

@@ -1,5 +1,10 @@
 //! The group's state end to end: IOPCGroupStateMgt (GetState, SetState, SetName,
 //! CloneGroup), IOPCGroupStateMgt2 (keep-alive), the group's COM identity.
+//!
+//! Spec: OPC DA 2.05a §4.5.1 General Properties (of a group), §4.5.3 IOPCGroupStateMgt
+//! (GetState, SetState, SetName, CloneGroup), §4.4.4 IOPCServer::GetGroupByName and
+//! RemoveGroup (one COM identity per group); OPC DA 3.0 IOPCGroupStateMgt2 (SetKeepAlive,
+//! GetKeepAlive).
 #![cfg(windows)]
 
 mod group_common;

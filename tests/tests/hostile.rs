@@ -5,6 +5,11 @@
 //! (`e2e_tests::hostile::bounded`): a call that does not return in time ends the test
 //! process naming the call. After each family the server must still answer GetStatus.
 //! The limits checked are `ctopc_core::limits` (`docs/limits.md`).
+//!
+//! Spec: OPC DA 2.05a §4.2.4 Null Strings and Null Pointers, §4.2.5 Returned Arrays,
+//! §4.2.11 Errors and return codes, §4.6.1 IOPCDataCallback (sinks that fail or sleep),
+//! §6.5 Variant Data Types for OPC Data Items; OPC DA 3.0 IOPCBrowse::Browse (continuation
+//! points). The server's own limits: `docs/limits.md`.
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

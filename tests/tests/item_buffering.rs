@@ -8,6 +8,10 @@
 //!
 //! Like group_slow_source.rs, the test waits until no other ServerCTOPC.exe runs, sets
 //! `SERVERCTOPC_INI` before activating, and waits at the end until its server has exited.
+//!
+//! Spec: OPC DA 3.0 IOPCItemSamplingMgt (SetItemSamplingRate, SetItemBufferEnable) and the
+//! buffered values an OnDataChange carries (OPC DA 2.05a §4.6.1
+//! IOPCDataCallback::OnDataChange).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -17,6 +17,10 @@
 //! `table_lists_every_string_output_declared_in_idl` (native as well as under Wine)
 //! derives the list from the IDL and fails when a row is missing or stale, and when a
 //! named test does not exist in this file.
+//!
+//! Spec: OPC DA 2.05a Appendix B, the Data Access IDL, and the OPC Common 1.10 IDL: every
+//! string output they declare, carried by the proxy/stub DLL (OPC DA 2.05a §4.2.2 Ownership
+//! of memory: strings the server allocates, the client frees).
 
 /// Every string output of every interface in `idl/` (`Interface::Method(param)`, then
 /// `.member` through returned structures, as the IDL names them), with the tests that read

@@ -1,6 +1,12 @@
 //! opcdiag.exe (the diagnostic client we ship) against the test server: the embedded demo
 //! plant, simulated (state TEST). Each case runs the real executable, as a person would,
 //! and checks what it prints and its exit code.
+//!
+//! Spec: The client side of OPC Common 1.10 IOPCServerList and IOPCServerList2 (servers),
+//! OPC DA 2.05a §4.4.4 IOPCServer::GetStatus (status), OPC DA 3.0 IOPCBrowse::Browse and
+//! OPC DA 2.05a §4.4.8 IOPCBrowseServerAddressSpace (browse, the latter with
+//! OPCDIAG_BROWSE_DA2), §4.4.6 IOPCItemProperties (props), §4.5.5 IOPCSyncIO (read, write),
+//! §4.3.3 Subscription via IOPCDataCallback (subscribe).
 #![cfg(windows)]
 
 use e2e_tests::own_artifact;

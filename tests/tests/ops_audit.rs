@@ -3,6 +3,11 @@
 //! with the client's name, the group, the item, the value (quality and timestamp when
 //! given) and the per-item result; an asynchronous write's final result follows in a
 //! `write-complete` line. The line format itself is `ctopc_core::audit`'s (tested natively).
+//!
+//! Spec: OPC DA 2.05a §4.5.5 IOPCSyncIO::Write, §4.5.6 IOPCAsyncIO2::Write and §4.6.1
+//! OnWriteComplete; OPC DA 3.0 IOPCSyncIO2::WriteVQT, IOPCAsyncIO3::WriteVQT and
+//! IOPCItemIO::WriteVQT; OPC Common 1.10 IOPCCommon::SetClientName (the client named in the
+//! audit). The audit itself is the server's own (`docs/operations.md`).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -8,6 +8,10 @@
 //!
 //! As `group_slow_source.rs`: waits until no other ServerCTOPC.exe runs, sets
 //! `SERVERCTOPC_INI` before activating, and waits at the end until its server has exited.
+//!
+//! Spec: The metrics endpoint is the server's own (`docs/operations.md`); what it counts is
+//! OPC: OPC DA 2.05a §4.4.4 IOPCServer::AddGroup, §4.5.2 IOPCItemMgt::AddItems, §4.5.5
+//! IOPCSyncIO::Write, §4.3.3 Subscription via IOPCDataCallback.
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -7,6 +7,11 @@
 //!
 //! As `group_slow_source.rs`: waits until no other ServerCTOPC.exe runs, sets
 //! `SERVERCTOPC_INI` before activating, and waits at the end until its server has exited.
+//!
+//! Spec: OPC DA 2.05a §4.3.3 Subscription via IOPCDataCallback, §4.6.1
+//! IOPCDataCallback::OnDataChange and §4.5.7 IConnectionPointContainer (on OPCGroup): the
+//! connection the server drops; the callback timeout is the server's own
+//! (`docs/operations.md`).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

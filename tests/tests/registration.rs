@@ -2,6 +2,10 @@
 //! spellings, usage errors; and that this process (the suite runs as a 64-bit and as a
 //! 32-bit client, `cargo xtask test`) finds the server the ways OPC clients look for it:
 //! by category (ICatInformation::EnumClassesOfCategories, DA 2.0 and 3.0) and by ProgID.
+//!
+//! Spec: OPC DA 2.05a §5.1 Component Categories (CATID_OPCDAServer20 and 30) and §5.2
+//! Registry Entries for Custom Interface (CLSID, ProgID, version-independent ProgID,
+//! LocalServer32, AppID); COM's /RegServer and /UnregServer.
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

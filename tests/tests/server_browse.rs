@@ -1,6 +1,10 @@
 //! Browsing end to end over the embedded demo plant: IOPCBrowseServerAddressSpace (DA
 //! 2.05a, a per-client cursor) and IOPCBrowse::Browse (DA 3.0, continuation points,
 //! filters, properties).
+//!
+//! Spec: OPC DA 2.05a §4.4.8 IOPCBrowseServerAddressSpace (QueryOrganization,
+//! ChangeBrowsePosition, BrowseOPCItemIDs, GetItemID, BrowseAccessPaths); OPC DA 3.0
+//! IOPCBrowse::Browse (OPCBROWSEELEMENT, continuation points, filters, properties).
 #![cfg(windows)]
 
 use ctopc_core::Value;

@@ -1,5 +1,8 @@
 //! IOPCServer group management end to end: AddGroup, GetGroupByName, RemoveGroup,
 //! CreateGroupEnumerator (and the group count of GetStatus).
+//!
+//! Spec: OPC DA 2.05a §4.4.4 IOPCServer (AddGroup, GetGroupByName, RemoveGroup,
+//! CreateGroupEnumerator) and §6.7.5 OPCSERVERSTATUS (dwGroupCount).
 #![cfg(windows)]
 
 use e2e_tests::{assert_alive, code, connect, interfaces::*};

@@ -1,6 +1,9 @@
 //! IOPCItemIO (DA 3.0) end to end: Read with MaxAge and WriteVQT by item ID, without a
 //! group, over the simulated demo plant. (IOPCItemIO has no access path: OPC_E_UNKNOWNPATH
 //! cannot occur.)
+//!
+//! Spec: OPC DA 3.0 IOPCItemIO (Read, WriteVQT) and OPCITEMVQT; OPC DA 2.05a §4.2.7 CACHE
+//! data, DEVICE data and TimeStamps (MaxAge 0 is the device).
 #![cfg(windows)]
 
 use ctopc_com::clock::now;

@@ -4,6 +4,10 @@
 //! CLSIDFromProgID (also through a version-independent ProgID's `CurVer`), the errors for an unknown CLSID / ProgID, a server registered only in
 //! the 32-bit registry view, and /RegServer leaving another browser alone. Runs as a
 //! 64-bit and as a 32-bit client (`E2E_32`).
+//!
+//! Spec: OPC Common 1.10 IOPCServerList (EnumClassesOfCategories, GetClassDetails,
+//! CLSIDFromProgID), IOPCServerList2 and IOPCEnumGUID, as the OPC Foundation's OpcEnum
+//! serves them; OPC DA 2.05a §5.1 Component Categories (the categories listed).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -4,6 +4,9 @@
 //! a client creates `OPC.ServerList.1`, it serves until stopped, and `/UnregServer` removes
 //! it. As tests/tests/service.rs does for the server: under Wine services.exe ends with the
 //! last ordinary Wine process, so the service is controlled from this test process.
+//!
+//! Spec: OPC Common 1.10 IOPCServerList and IOPCServerList2 served from an NT service, as
+//! OpcEnum runs for remote clients (AppID LocalService).
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 

@@ -2,6 +2,10 @@
 //! GetItemProperties, LookupItemIDs) and IOPCBrowse::GetProperties, over the demo plant
 //! (KW_A000: read-only R4 level 0..8 m; KW_A110: writable R4 setpoint 0..20 t/h; KW_D000:
 //! I2 0..1 without a unit).
+//!
+//! Spec: OPC DA 2.05a §4.4.6 IOPCItemProperties (QueryAvailableProperties,
+//! GetItemProperties, LookupItemIDs) and its property IDs (1-8, 100-..., 300-...); OPC DA
+//! 3.0 IOPCBrowse::GetProperties (OPCITEMPROPERTIES).
 #![cfg(windows)]
 
 use ctopc_com::clock::now;

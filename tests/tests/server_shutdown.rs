@@ -10,6 +10,9 @@
 //! that console (a process that calls FreeConsole loses its Wine console output). Wine
 //! routes activations to the first registered server, so the test first waits until no
 //! other ServerCTOPC.exe runs (servers of earlier tests exit 3 s after their last client).
+//!
+//! Spec: OPC DA 2.05a §4.4.5 IConnectionPointContainer (on OPCServer) and §4.6.2
+//! IOPCShutdown; OPC Common 1.10 IOPCShutdown::ShutdownRequest.
 #![cfg(windows)]
 
 use ctopc_com::clock::now;

@@ -4,6 +4,10 @@
 //!
 //! Under Wine, services.exe (and every service) ends with the last ordinary Wine process,
 //! so the service is controlled from inside this test process while it is alive.
+//!
+//! Spec: OPC Common 1.10 IOPCShutdown::ShutdownRequest (OPC DA 2.05a §4.6.2) when the
+//! service stops; OPC DA 2.05a §5.2 Registry Entries for Custom Interface, with the AppID's
+//! LocalService.
 #![cfg(windows)]
 
 use e2e_tests::start::StartRetrying;
