@@ -1,44 +1,18 @@
 //! What a console OPC client (the `opcdiag` diagnostic tool) needs beyond the interface
-//! wrappers: an IOPCDataCallback sink that forwards OnDataChange into a channel, a Ctrl+C
-//! flag, and the local time zone offset for printing timestamps. Works with any OPC DA
-//! server.
+//! wrappers: a Ctrl+C flag and the local time zone offset for printing timestamps; and
+//! the copies of a callback's arrays that the sink (`crate::sink`) makes. Works with any
+//! OPC DA server.
 
 use super::{timestamp, ReadItem};
-use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, Value};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::Sender;
-use std::sync::Mutex;
-use windows::core::{implement, BOOL, HRESULT};
+use windows::core::{BOOL, HRESULT};
 use windows::Win32::Foundation::{FILETIME, SYSTEMTIME};
 use windows::Win32::System::Console::SetConsoleCtrlHandler;
 use windows::Win32::System::Time::{
     FileTimeToSystemTime, SystemTimeToFileTime, SystemTimeToTzSpecificLocalTime,
 };
 use windows::Win32::System::Variant::VARIANT;
-
-/// One OnDataChange, owned. `items[i].client_handle` is the item's client handle.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DataChange {
-    pub transaction: u32,
-    pub group: u32,
-    pub master_quality: HRESULT,
-    pub master_error: HRESULT,
-    pub items: Vec<ReadItem>,
-}
-
-/// An IOPCDataCallback that sends every OnDataChange into a channel (the other callbacks
-/// are accepted and ignored). Create it with [`data_change_sink`].
-#[implement(IOPCDataCallback)]
-struct ChangeSink {
-    tx: Mutex<Sender<DataChange>>,
-}
-
-/// A sink to advise on a group (`advise_data_callback`); changes arrive on `tx`, from
-/// whatever thread the callback comes in on. A closed receiver is not an error.
-pub fn data_change_sink(tx: Sender<DataChange>) -> IOPCDataCallback {
-    ChangeSink { tx: Mutex::new(tx) }.into()
-}
 
 /// Copies the `[in, size_is(n)]` arrays of an OnWriteComplete into (client handle, error)
 /// pairs; empty when either pointer is NULL.
@@ -62,7 +36,7 @@ pub unsafe fn write_results(n: u32, h: *const u32, e: *const HRESULT) -> Vec<(u3
 }
 
 /// Copies the `[in, size_is(n)]` arrays of an OnDataChange / OnReadComplete into owned
-/// items (for any IOPCDataCallback implementation: opcdiag's sink, the tests' sink).
+/// items (for any IOPCDataCallback implementation: [`crate::sink::RecordingSink`]).
 ///
 /// # Safety
 /// Each non-null pointer must point at `n` elements, as the stub passes them.
@@ -99,68 +73,6 @@ pub unsafe fn callback_items(
             error: e[i],
         })
         .collect()
-}
-
-impl IOPCDataCallback_Impl for ChangeSink_Impl {
-    unsafe fn OnDataChange(
-        &self,
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        n: u32,
-        h: *const u32,
-        v: *const VARIANT,
-        q: *const u16,
-        t: *const FILETIME,
-        e: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        // SAFETY: the stub passes `n`-element arrays for the duration of the call.
-        let items = unsafe { callback_items(n, h, v, q, t, e) };
-        let change = DataChange {
-            transaction,
-            group,
-            master_quality,
-            master_error,
-            items,
-        };
-        if let Ok(tx) = self.tx.lock() {
-            let _ = tx.send(change);
-        }
-        Ok(())
-    }
-
-    unsafe fn OnReadComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const VARIANT,
-        _: *const u16,
-        _: *const FILETIME,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        Ok(())
-    }
-
-    unsafe fn OnWriteComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        Ok(())
-    }
-
-    unsafe fn OnCancelComplete(&self, _: u32, _: u32) -> windows::core::Result<()> {
-        Ok(())
-    }
 }
 
 // ---- Ctrl+C -----------------------------------------------------------------------------

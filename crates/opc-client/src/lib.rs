@@ -1131,7 +1131,8 @@ pub use server_ext::{
     BrowsePage, GroupSpec, ItemProperties, NewItemId, Property, STRING_BATCH,
 };
 
-// ---- console clients (opcdiag): a data-change sink, Ctrl+C, local time -----------------
+// ---- the callback sink; console clients (opcdiag): Ctrl+C, local time -------------------
 
 pub mod diag;
 pub mod server_list;
+pub mod sink;

@@ -7,7 +7,8 @@ use crate::text::{self, TreeLine};
 use ctopc_com::apartment::Apartment;
 use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, VarType};
-use opc_client::diag::{self, DataChange};
+use opc_client::diag;
+use opc_client::sink::{Callback, Options, Recording};
 use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
@@ -886,7 +887,8 @@ impl TempGroup {
 pub struct Subscription {
     group: TempGroup,
     cookie: u32,
-    rx: Receiver<DataChange>,
+    /// Every callback of the sink (only OnDataChange comes: the group has no other I/O).
+    rx: Receiver<Callback>,
     /// The requested item IDs (client handle = index + 1).
     pub names: Vec<String>,
     /// Items AddItems refused, with the reason.
@@ -917,7 +919,12 @@ impl Subscription {
             return Err(format!("no item could be added:\n{}", reasons.join("\n")));
         }
         let (tx, rx) = mpsc::channel();
-        let sink = diag::data_change_sink(tx);
+        let sink = Recording::with(Options {
+            count_only: true,
+            forward: Some(tx),
+            ..Options::default()
+        })
+        .sink();
         let cookie = match group.unknown().and_then(|u| {
             client::advise_data_callback(u, &sink)
                 .map_err(|e| s.failed("IOPCDataCallback Advise failed", e))
@@ -967,8 +974,8 @@ impl Subscription {
                 None => Duration::from_millis(200),
             };
             match self.rx.recv_timeout(wait) {
-                Ok(change) => {
-                    for item in &change.items {
+                Ok(Callback::DataChange { items, .. }) => {
+                    for item in &items {
                         let name = self
                             .names
                             .get((item.client_handle as usize).wrapping_sub(1))
@@ -977,16 +984,24 @@ impl Subscription {
                         n += 1;
                     }
                 }
-                Err(RecvTimeoutError::Timeout) => {}
+                Ok(_) | Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => break,
             }
         }
         n
     }
 
-    /// The first OnDataChange within `timeout`, if one came.
-    pub fn first(&self, timeout: Duration) -> Option<DataChange> {
-        self.rx.recv_timeout(timeout).ok()
+    /// The items of the first OnDataChange within `timeout`, if one came.
+    pub fn first(&self, timeout: Duration) -> Option<Vec<ReadItem>> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.rx.recv_timeout(left) {
+                Ok(Callback::DataChange { items, .. }) => return Some(items),
+                Ok(_) => {}
+                Err(_) => return None,
+            }
+        }
     }
 
     /// Disconnects the sink and removes the group.

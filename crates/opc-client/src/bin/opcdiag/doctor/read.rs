@@ -327,7 +327,7 @@ fn connection_checks(global: &Global, item: Option<String>, timeout: Duration) -
         match Subscription::start(&s, &items, "", 500) {
             Ok(sub) => {
                 let c = match sub.first(Duration::from_secs(10)) {
-                    Some(change) => Check::ok("callback", format!("OnDataChange with {} item(s)", change.items.len())),
+                    Some(items) => Check::ok("callback", format!("OnDataChange with {} item(s)", items.len())),
                     None => Check::fail("callback", "no OnDataChange within 10 s", "allow the server to call back into this client (DCOM: the client's access permissions, firewall for the client program); see the server's log"),
                 };
                 sub.stop(&s);
