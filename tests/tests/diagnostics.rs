@@ -89,8 +89,8 @@ fn the_diagnostics_branch_follows_a_working_server() {
     let worker = Server::connect(PROGID).expect("connect the second client");
     worker.set_client_name(CLIENT).unwrap();
     let group = group_with_items(&worker, "work", WORKER_ITEMS);
-    let rec = Recorder::recording();
-    client::advise_data_callback(&group.unknown, &TestSink::create(&rec)).expect("Advise");
+    let rec = Recording::new();
+    client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec)).expect("Advise");
     assert!(
         rec.wait_for(Duration::from_secs(10), |c| matches!(
             c,
@@ -319,8 +319,8 @@ fn the_diagnostics_branch_follows_a_working_server() {
     assert_eq!(hr, S_OK, "{added:x?}");
     assert!(added.iter().all(|a| a.rights == OPC_READABLE), "{added:?}");
     assert_eq!(added[0].canonical, 3, "VT_I4");
-    let seen = Recorder::recording();
-    client::advise_data_callback(&diag.unknown, &TestSink::create(&seen)).expect("Advise");
+    let seen = Recording::new();
+    client::advise_data_callback(&diag.unknown, &RecordingSink::create(&seen)).expect("Advise");
     let uptime_of =
         |c: &Callback| match c {
             Callback::DataChange { items, .. } => items

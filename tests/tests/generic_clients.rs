@@ -164,8 +164,8 @@ fn async_write_write_vqt_item_io_and_the_extended_write_convert_the_same() {
     let (sp, mode) = (p.h[0], p.h[1]);
 
     // IOPCAsyncIO2::Write: call-time errors, then OnWriteComplete.
-    let rec = Recorder::recording();
-    let sink = TestSink::create(&rec);
+    let rec = Recording::new();
+    let sink = RecordingSink::create(&rec);
     let cookie = client::advise_data_callback(&p.group.unknown, &sink).expect("Advise");
     let (hr, _, errors) = client::async_write(
         &p.group.async2(),
@@ -288,8 +288,8 @@ fn write_vqt_with_an_empty_value_is_not_supported_and_qualities_keep_16_bits() {
 fn the_first_on_data_change_after_add_items_carries_real_values() {
     let (_com, server) = connect();
     let group = add_group(&server, "", true, 1000, 16).expect("AddGroup");
-    let rec = Recorder::recording();
-    let sink = TestSink::create(&rec);
+    let rec = Recording::new();
+    let sink = RecordingSink::create(&rec);
     let cookie = client::advise_data_callback(&group.unknown, &sink).expect("Advise");
     let start = Instant::now();
     // Items no other test of this file subscribes (so the cache has no sample of them).

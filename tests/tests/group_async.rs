@@ -38,7 +38,7 @@ struct Plant {
     group: TestGroup,
     /// LEVEL, SETPOINT, TEMPERATURE (client handles 1, 2, 3).
     h: Vec<u32>,
-    rec: Arc<Recorder>,
+    rec: Arc<Recording>,
 }
 
 /// A group with three items and the recording sink advised.
@@ -68,8 +68,8 @@ fn plant() -> Plant {
             },
         ],
     );
-    let rec = Recorder::recording();
-    client::advise_data_callback(&group.unknown, &TestSink::create(&rec))
+    let rec = Recording::new();
+    client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec))
         .expect("Advise(IOPCDataCallback)");
     Plant {
         _com: com,
@@ -231,8 +231,8 @@ fn refresh2_leaves_out_inactive_items_and_fails_for_an_inactive_group() {
             active: false,
         }],
     );
-    let rec = Recorder::recording();
-    client::advise_data_callback(&g2.unknown, &TestSink::create(&rec)).unwrap();
+    let rec = Recording::new();
+    client::advise_data_callback(&g2.unknown, &RecordingSink::create(&rec)).unwrap();
     assert_eq!(
         code(&client::refresh2(&g2.async2(), OPC_DS_CACHE, 313)),
         E_FAIL

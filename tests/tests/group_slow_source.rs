@@ -58,7 +58,7 @@ struct Plant {
     server: Server,
     group: TestGroup,
     h: Vec<u32>,
-    rec: Arc<Recorder>,
+    rec: Arc<Recording>,
 }
 
 struct SlowServer {
@@ -116,8 +116,8 @@ impl SlowServer {
                 },
             ],
         );
-        let rec = Recorder::recording();
-        client::advise_data_callback(&group.unknown, &TestSink::create(&rec))
+        let rec = Recording::new();
+        client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec))
             .expect("Advise(IOPCDataCallback)");
         SlowServer {
             p: Some(Plant {

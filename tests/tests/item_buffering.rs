@@ -73,8 +73,8 @@ fn a_buffered_item_carries_several_samples_oldest_first() {
     let (hr, v) = g.get_item_buffer_enable(&[h[0], h[1]]).unwrap();
     assert_eq!((hr, v), (S_OK, vec![(true, S_OK), (false, S_OK)]));
 
-    let rec = Recorder::recording();
-    client::advise_data_callback(&group.unknown, &TestSink::create(&rec))
+    let rec = Recording::new();
+    client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec))
         .expect("Advise(IOPCDataCallback)");
     // The first callback (the current values) and then a few periods.
     let several = rec.wait_for(Duration::from_secs(15), |c| match c {

@@ -129,8 +129,8 @@ fn every_kind_of_write_is_audited_with_client_item_value_and_result() {
     ]);
 
     // IOPCAsyncIO2::Write: the call's line with the cancel ID, then the completion's.
-    let rec = Recorder::recording();
-    client::advise_data_callback(&group.unknown, &TestSink::create(&rec)).expect("Advise");
+    let rec = Recording::new();
+    client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec)).expect("Advise");
     let (hr, cancel, errors) =
         client::async_write(&group.async2(), &[(h[0], Value::R8(3.5))], 4711).expect("Write");
     assert_eq!((hr, errors), (S_OK, vec![S_OK]));

@@ -22,7 +22,6 @@ use e2e_tests::{other_servers, wait_for_no_other_server, Apartment, PROGID};
 use opc_client::{self as client, Server};
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use test_support::wait::{wait_for, wait_until};
 use windows::Win32::Foundation::S_OK;
@@ -75,13 +74,10 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
     assert_eq!(other_servers(0).len(), 1, "only the test's server runs");
 
     let group = group_with_items(&server, "metrics", CHANGING);
-    let rec = Recorder::counting();
-    client::advise_data_callback(&group.unknown, &TestSink::create(&rec)).expect("Advise");
+    let rec = Recording::counting();
+    client::advise_data_callback(&group.unknown, &RecordingSink::create(&rec)).expect("Advise");
     assert!(
-        wait_until(Duration::from_secs(10), || rec
-            .data_changes
-            .load(Ordering::SeqCst)
-            > 0),
+        wait_until(Duration::from_secs(10), || rec.counts().data_changes > 0),
         "no OnDataChange"
     );
     let h = add_ok(

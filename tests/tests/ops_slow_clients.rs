@@ -1,6 +1,6 @@
 //! Slow and hung callback clients end to end: a server of the test's
 //! own (`SERVERCTOPC_INI`) with `CallbackTimeout = 500` and `CallbackFailures = 2`; a
-//! client whose OnDataChange sleeps far longer than the timeout loses its callback
+//! client whose OnDataChange takes far longer than the timeout loses its callback
 //! connection (the connection point lists none) with a WARN in the server's log, the
 //! server does not queue callbacks behind its hung call, and another client of the same
 //! server keeps getting its callbacks throughout.
@@ -21,79 +21,13 @@ use e2e_tests::{
     connections, interfaces::*, other_servers, wait_for_no_other_server, Apartment, PROGID,
 };
 use opc_client::{self as client, Server};
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use test_support::wait::wait_until;
-use windows::core::{implement, Interface, HRESULT};
-use windows::Win32::Foundation::FILETIME;
+use windows::core::Interface;
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
-use windows::Win32::System::Variant::VARIANT;
 
 /// Items of the demo plant whose simulated values change all the time.
 const CHANGING: &[&str] = &["KW_A000", "KW_A001", "KW_A002", "KW_A003"];
-
-/// A sink whose every call sleeps `delay_ms` and counts.
-#[implement(IOPCDataCallback)]
-struct SlowSink {
-    delay_ms: Arc<AtomicU64>,
-    calls: Arc<AtomicU64>,
-}
-
-impl SlowSink {
-    fn called(&self) -> windows::core::Result<()> {
-        self.calls.fetch_add(1, Ordering::SeqCst);
-        std::thread::sleep(Duration::from_millis(self.delay_ms.load(Ordering::SeqCst)));
-        Ok(())
-    }
-}
-
-impl IOPCDataCallback_Impl for SlowSink_Impl {
-    unsafe fn OnDataChange(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const VARIANT,
-        _: *const u16,
-        _: *const FILETIME,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        self.called()
-    }
-    unsafe fn OnReadComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const VARIANT,
-        _: *const u16,
-        _: *const FILETIME,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        self.called()
-    }
-    unsafe fn OnWriteComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        self.called()
-    }
-    unsafe fn OnCancelComplete(&self, _: u32, _: u32) -> windows::core::Result<()> {
-        self.called()
-    }
-}
 
 fn data_point(g: &TestGroup) -> IConnectionPoint {
     let cpc: IConnectionPointContainer = g.unknown.cast().expect("IConnectionPointContainer");
@@ -120,18 +54,15 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
 
     // The other client: a normal sink.
     let fast_group = group_with_items(&fast, "fast", CHANGING);
-    let rec = Recorder::counting();
-    client::advise_data_callback(&fast_group.unknown, &TestSink::create(&rec)).expect("Advise");
+    let rec = Recording::counting();
+    client::advise_data_callback(&fast_group.unknown, &RecordingSink::create(&rec))
+        .expect("Advise");
 
-    // The hung client: every call sleeps 5 s (ten times the timeout).
-    let delay = Arc::new(AtomicU64::new(5_000));
-    let calls = Arc::new(AtomicU64::new(0));
+    // The hung client: every call is held 5 s (ten times the timeout).
+    let calls = Recording::counting();
+    calls.hold_calls(Duration::from_secs(5));
     let slow_group = group_with_items(&slow, "slow", CHANGING);
-    let sink: IOPCDataCallback = SlowSink {
-        delay_ms: Arc::clone(&delay),
-        calls: Arc::clone(&calls),
-    }
-    .into();
+    let sink = RecordingSink::create(&calls);
     let started = Instant::now();
     client::advise_data_callback(&slow_group.unknown, &sink).expect("Advise (slow)");
 
@@ -158,24 +89,22 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
     assert!(warn.contains("client \"hung-client\""), "{warn}");
     assert!(warn.contains("500 ms"), "{warn}");
     assert_eq!(
-        calls.load(Ordering::SeqCst),
+        calls.counts().calls,
         1,
         "nothing was queued behind the hung call"
     );
 
     // The other client was served all along and still is.
-    let before = rec.data_changes.load(Ordering::SeqCst);
+    let before = rec.counts().data_changes;
     assert!(before >= 1, "the other client got no callback");
     assert!(
-        wait_until(Duration::from_secs(10), || rec
-            .data_changes
-            .load(Ordering::SeqCst)
+        wait_until(Duration::from_secs(10), || rec.counts().data_changes
             >= before + 2),
         "the other client's callbacks stopped"
     );
 
-    // The hung call still sleeps (nothing can interrupt it); the server did not wait.
-    assert_eq!(calls.load(Ordering::SeqCst), 1);
+    // The hung call is still held (nothing releases it); the server did not wait.
+    assert_eq!(calls.counts().calls, 1);
 
     drop((slow_group, fast_group, slow, fast, sink, cp));
     drop(com);

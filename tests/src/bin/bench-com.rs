@@ -44,7 +44,6 @@ mod bench {
     use e2e_tests::io_support::*;
     use e2e_tests::PROGID;
     use opc_client::Server;
-    use std::sync::atomic::Ordering;
     use std::sync::Arc;
     use std::time::{Duration, Instant};
     use windows::core::{Interface, BOOL, HRESULT, PWSTR};
@@ -345,8 +344,8 @@ mod bench {
         let g = group(server, RATE_MS)?;
         let names: Vec<String> = vars.iter().map(|v| v.name.clone()).collect();
         add_all(&g, &names)?;
-        let rec = Recorder::recording();
-        let sink = TestSink::create(&rec);
+        let rec = Recording::new();
+        let sink = RecordingSink::create(&rec);
         opc_client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
         std::thread::sleep(Duration::from_millis(u64::from(RATE_MS) * 8));
         let updates: Vec<Vec<u32>> = rec
@@ -506,24 +505,25 @@ mod bench {
             let server = Server::connect(PROGID).map_err(err("connect"))?;
             let g = group(&server, RATE_MS)?;
             add_all(&g, &ids)?;
-            let rec = Recorder::counting();
-            opc_client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
+            let rec = Recording::with(Options {
+                count_only: true,
+                trace: std::env::var_os("BENCH_TRACE").is_some(),
+                ..Options::default()
+            });
+            opc_client::advise_data_callback(&g.unknown, &RecordingSink::create(&rec))
                 .map_err(err("Advise"))?;
             recs.push(rec);
             conns.push((server, g));
             trace(&format!("client {} of {clients} subscribed", conns.len()));
         }
-        let total = |recs: &[Arc<Recorder>]| {
+        let total = |recs: &[Arc<Recording>]| {
             recs.iter()
-                .map(|r| r.data_change_items.load(Ordering::Relaxed))
+                .map(|r| r.counts().data_change_items)
                 .sum::<u64>()
         };
         // Warm-up: the first callback of each client carries every item, changed or not.
         let deadline = Instant::now() + Duration::from_secs(60);
-        while recs
-            .iter()
-            .any(|r| r.data_changes.load(Ordering::Relaxed) < 2)
-        {
+        while recs.iter().any(|r| r.counts().data_changes < 2) {
             if Instant::now() > deadline {
                 return Err("subscription callbacks did not start".into());
             }
@@ -536,10 +536,7 @@ mod bench {
             let (t1, n1) = (Instant::now(), total(&recs));
             rates.push((n1 - n0) as f64 / (t1 - t0).as_secs_f64());
         }
-        let callbacks = recs
-            .iter()
-            .map(|r| r.data_changes.load(Ordering::Relaxed) as usize)
-            .sum();
+        let callbacks = recs.iter().map(|r| r.counts().data_changes as usize).sum();
         trace("measured; disconnecting the clients");
         drop(conns);
         trace("disconnected");

@@ -66,7 +66,7 @@ mod soak {
     use ctopc_com::apartment::Apartment;
     use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE};
     use ctopc_core::Value;
-    use e2e_tests::io_support::{Recorder, TestSink};
+    use e2e_tests::io_support::{Recording, RecordingSink};
     use e2e_tests::PROGID;
     use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, Server};
     use std::time::{Duration, Instant};
@@ -273,8 +273,8 @@ mod soak {
                 .map_err(|e| format!("IOPCItemIO::Read: {e}"))?;
         }
         if calls.subscribe {
-            let rec = Recorder::recording();
-            let sink = TestSink::create(&rec);
+            let rec = Recording::new();
+            let sink = RecordingSink::create(&rec);
             let cookie = client::advise_data_callback(&group.unknown, &sink)
                 .map_err(|e| format!("Advise: {e}"))?;
             let _ = rec.wait_for(Duration::from_secs(2), |_| true);
