@@ -13,6 +13,7 @@ use ctopc_com::apartment::Apartment;
 use ctopc_core::Value;
 use e2e_tests::{assert_alive, connect, connections, interfaces::*, next_connection, PROGID};
 use group_common::*;
+use opc_client::sink::RecordingSink;
 use opc_client::{GroupStateChange, Server};
 use std::time::{Duration, Instant};
 use test_support::wait::wait_until;
@@ -41,8 +42,8 @@ fn active_items_of_an_active_group_arrive_in_on_data_change() {
             inactive("KW_A003", 3),
         ],
     );
-    let log = Log::new();
-    let sink = Sink::create(&log);
+    let log = Recording::new();
+    let sink = RecordingSink::create(&log);
     let cookie = advise(&g, &sink).unwrap();
     assert_ne!(cookie, 0);
 
@@ -82,8 +83,8 @@ fn keep_alive_callbacks_arrive_when_nothing_changes() {
     // KW_A110 is a setpoint: constant in the simulation.
     add_ok(&g, &[item("KW_A110", 5)]);
     assert_eq!(g.set_keep_alive(1000).unwrap(), (S_OK, 1000));
-    let log = Log::new();
-    let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     let initial = log.wait(Duration::from_secs(5), 1, |c| has_item(c, 5));
     assert_eq!(
         initial.len(),
@@ -118,8 +119,8 @@ fn keep_alive_with_only_inactive_items() {
     let g = add_group(&server, "cb-keepalive-inactive", true, GROUP_CLIENT);
     add_ok(&g, &[inactive("KW_A000", 1)]);
     assert_eq!(g.set_keep_alive(1000).unwrap().0, S_OK);
-    let log = Log::new();
-    let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     let keep_alives = log.wait(Duration::from_secs(6), 2, |c| c.items.is_empty());
     assert!(keep_alives.len() >= 2, "{:?}", log.changes());
     assert!(log.changes().iter().all(|c| c.items.is_empty()));
@@ -132,8 +133,8 @@ fn an_inactive_group_calls_back_only_once_activated() {
     let (_com, server) = connect();
     let g = add_group(&server, "cb-inactive", false, GROUP_CLIENT);
     add_ok(&g, &[item("KW_A000", 1)]);
-    let log = Log::new();
-    let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     // Time passes on purpose: three update periods in which the group must stay quiet.
     std::thread::sleep(Duration::from_secs(3));
     assert_eq!(
@@ -163,8 +164,8 @@ fn unadvise_stops_callbacks() {
     let g = add_group(&server, "cb-unadvise", true, GROUP_CLIENT);
     add_ok(&g, &[item("KW_A000", 1)]);
     assert_eq!(g.set_keep_alive(1000).unwrap().0, S_OK);
-    let log = Log::new();
-    let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     let got = log.wait(Duration::from_secs(6), 2, |_| true);
     assert!(got.len() >= 2, "{:?}", log.changes());
     unadvise(&g, cookie).unwrap();
@@ -181,17 +182,17 @@ fn unadvise_stops_callbacks() {
 fn the_connection_point_through_the_proxy() {
     let (_com, server) = connect();
     let g = add_group(&server, "cb-rules", true, GROUP_CLIENT);
-    let log = Log::new();
-    let cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     unadvise(&g, cookie).unwrap();
-    let other = Log::new();
-    let cookie2 = advise(&g, &Sink::create(&other)).expect("advise again after Unadvise");
+    let other = Recording::new();
+    let cookie2 = advise(&g, &RecordingSink::create(&other)).expect("advise again after Unadvise");
     assert_ne!(cookie2, 0);
     unadvise(&g, cookie2).unwrap();
     let cp = data_point(&g);
 
     // EnumConnections lists the one connection (cookie and sink), and none without it.
-    let sink = Sink::create(&other);
+    let sink = RecordingSink::create(&other);
     let cookie3 = advise(&g, &sink).unwrap();
     let listed = connections(&cp);
     assert_eq!(listed.len(), 1, "one connection");
@@ -250,8 +251,8 @@ fn callbacks_reach_an_sta_client_that_pumps_messages() {
         let server = Server::connect(PROGID).expect("connect from an STA");
         let g = add_group(&server, "cb-sta", true, GROUP_CLIENT);
         add_ok(&g, &[item("KW_A000", 1)]);
-        let log = Log::new();
-        let cookie = advise(&g, &Sink::create(&log)).unwrap();
+        let log = Recording::new();
+        let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
         // The calls into the STA come as window messages: pump them while waiting.
         wait_until(Duration::from_secs(10), || {
             let mut msg = MSG::default();
@@ -283,8 +284,8 @@ fn releasing_an_advised_group_is_clean() {
     let (_com, server) = connect();
     let g = add_group(&server, "cb-release", true, GROUP_CLIENT);
     add_ok(&g, &[item("KW_A000", 1)]);
-    let log = Log::new();
-    let _cookie = advise(&g, &Sink::create(&log)).unwrap();
+    let log = Recording::new();
+    let _cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
     log.wait(Duration::from_secs(5), 1, |_| true);
     // Released without Unadvise: the server drops the sink with the group object. Time
     // passes on purpose: 1.5 s for a callback on its way to land, then two update periods
@@ -313,11 +314,11 @@ fn a_slow_client_gets_paced_callbacks_without_a_backlog_and_does_not_stall_anoth
         let g = add_group(server, name, true, GROUP_CLIENT);
         add_ok(&g, &[item("KW_A110", 5)]);
         assert_eq!(g.set_keep_alive(1000).unwrap(), (S_OK, 1000));
-        let log = Log::new();
+        let log = Recording::new();
         if name == "cb-slow" {
             log.hold_calls(Duration::from_secs(3));
         }
-        let cookie = advise(&g, &Sink::create(&log)).unwrap();
+        let cookie = advise(&g, &RecordingSink::create(&log)).unwrap();
         logs.push(log);
         groups.push((g, cookie));
     }

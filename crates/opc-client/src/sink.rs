@@ -210,9 +210,9 @@ impl Recording {
         self.released.notify_all();
     }
 
-    /// Waits (at most `limit`) until `done`, given the kept callbacks and the counts,
-    /// answers `Some`: that answer, or `None` after `limit`.
-    fn wait<T>(
+    /// Waits (at most `limit`) until `done`, given the kept callbacks (with the time each
+    /// came) and the counts, answers `Some`: that answer, or `None` after `limit`.
+    pub fn wait_until<T>(
         &self,
         limit: Duration,
         mut done: impl FnMut(&[(Instant, Callback)], &Counts) -> Option<T>,
@@ -237,7 +237,7 @@ impl Recording {
 
     /// Waits (at most `limit`) for a callback that `pred` accepts; returns the first one.
     pub fn wait_for(&self, limit: Duration, pred: impl Fn(&Callback) -> bool) -> Option<Callback> {
-        self.wait(limit, |log, _| {
+        self.wait_until(limit, |log, _| {
             log.iter().map(|(_, c)| c).find(|c| pred(c)).cloned()
         })
     }
@@ -245,7 +245,7 @@ impl Recording {
     /// Waits (at most `limit`) until `n` callbacks that `pred` accepts have come: whether
     /// they did.
     pub fn wait_count(&self, limit: Duration, n: usize, pred: impl Fn(&Callback) -> bool) -> bool {
-        self.wait(limit, |log, _| {
+        self.wait_until(limit, |log, _| {
             (log.iter().filter(|(_, c)| pred(c)).count() >= n).then_some(())
         })
         .is_some()
@@ -253,7 +253,7 @@ impl Recording {
 
     /// Waits (at most `limit`) until `pred` accepts the counts: those counts, or `None`.
     pub fn wait_counts(&self, limit: Duration, pred: impl Fn(&Counts) -> bool) -> Option<Counts> {
-        self.wait(limit, |_, counts| pred(counts).then_some(*counts))
+        self.wait_until(limit, |_, counts| pred(counts).then_some(*counts))
     }
 
     /// Every kept callback so far, in order.

@@ -1,15 +1,14 @@
 //! Helpers shared by the group tests (group_items, group_state, group_callbacks): a group
-//! made through IOPCServer::AddGroup, and a recording IOPCDataCallback sink.
+//! made through IOPCServer::AddGroup, and the OnDataChange calls of opc-client's
+//! recording sink read as [`Change`]s.
 #![allow(dead_code)]
 
 use e2e_tests::interfaces::*;
+use opc_client::sink::Callback;
 use opc_client::{ItemDef, OpcGroup, Server};
-use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
-use windows::core::{implement, IUnknown, Interface, BOOL, HRESULT, HSTRING, PCWSTR};
-use windows::Win32::Foundation::FILETIME;
+use windows::core::{IUnknown, Interface, BOOL, HRESULT, HSTRING, PCWSTR};
 use windows::Win32::System::Com::{IConnectionPoint, IConnectionPointContainer};
-use windows::Win32::System::Variant::VARIANT;
 
 pub const VT_EMPTY: u16 = 0;
 pub const VT_I2: u16 = 2;
@@ -117,9 +116,11 @@ pub fn data_point(g: &OpcGroup) -> IConnectionPoint {
         .expect("FindConnectionPoint(IOPCDataCallback)")
 }
 
-// ---- the sink ------------------------------------------------------------------------------
+// ---- the recording ---------------------------------------------------------------------
 
-/// One OnDataChange.
+pub use opc_client::sink::Recording;
+
+/// One OnDataChange, as the group tests read it from a [`Recording`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Change {
     pub transaction: u32,
@@ -131,143 +132,63 @@ pub struct Change {
     pub at: Instant,
 }
 
-#[derive(Default)]
-pub struct Log {
-    changes: Mutex<Vec<Change>>,
-    cv: Condvar,
-    /// While set, OnDataChange records the call and then holds it (a slow client), up to
-    /// `hold_limit` or until [`Log::release`] (`released`).
-    hold: Mutex<bool>,
-    released: Condvar,
-    hold_limit: Mutex<Duration>,
+/// The OnDataChange calls of a recording, in order.
+pub trait Changes {
+    fn changes(&self) -> Vec<Change>;
+    /// How many OnDataChange calls came.
+    fn count(&self) -> usize;
+    /// Waits at most `limit` for `n` OnDataChange calls that `pred` accepts: those that
+    /// came.
+    fn wait(&self, limit: Duration, n: usize, pred: impl Fn(&Change) -> bool) -> Vec<Change>;
 }
 
-impl Log {
-    pub fn new() -> Arc<Log> {
-        Arc::new(Log::default())
-    }
-
-    pub fn changes(&self) -> Vec<Change> {
-        self.changes.lock().unwrap().clone()
-    }
-
-    pub fn count(&self) -> usize {
-        self.changes.lock().unwrap().len()
-    }
-
-    /// Makes the sink a slow client: each OnDataChange returns only after `limit`, or at
-    /// once when [`Log::release`] is called.
-    pub fn hold_calls(&self, limit: Duration) {
-        *self.hold_limit.lock().unwrap() = limit;
-        *self.hold.lock().unwrap() = true;
-    }
-
-    /// Ends [`Log::hold_calls`]: a held call returns now.
-    pub fn release(&self) {
-        *self.hold.lock().unwrap() = false;
-        self.released.notify_all();
-    }
-
-    /// Waits at most `limit` for `n` OnDataChange calls that `pred` accepts.
-    pub fn wait(&self, limit: Duration, n: usize, pred: impl Fn(&Change) -> bool) -> Vec<Change> {
-        let deadline = Instant::now() + limit;
-        let mut g = self.changes.lock().unwrap();
-        loop {
-            let found: Vec<Change> = g.iter().filter(|c| pred(c)).cloned().collect();
-            let left = deadline.saturating_duration_since(Instant::now());
-            if found.len() >= n || left.is_zero() {
-                return found;
-            }
-            g = self.cv.wait_timeout(g, left).unwrap().0;
-        }
-    }
-}
-
-#[implement(IOPCDataCallback)]
-pub struct Sink(pub Arc<Log>);
-
-impl Sink {
-    pub fn create(log: &Arc<Log>) -> IOPCDataCallback {
-        Sink(Arc::clone(log)).into()
-    }
-}
-
-impl IOPCDataCallback_Impl for Sink_Impl {
-    unsafe fn OnDataChange(
-        &self,
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        n: u32,
-        h: *const u32,
-        v: *const VARIANT,
-        q: *const u16,
-        _t: *const FILETIME,
-        e: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        let mut items = Vec::new();
-        if n > 0 && !h.is_null() && !v.is_null() && !q.is_null() && !e.is_null() {
-            for i in 0..n as usize {
-                // SAFETY: the stub passes [in, size_is(n)] arrays.
-                unsafe {
-                    items.push((
-                        *h.add(i),
-                        ctopc_com::variant::from_variant(&*v.add(i))
-                            .unwrap_or(ctopc_core::Value::Empty),
-                        *q.add(i),
-                        *e.add(i),
-                    ));
-                }
-            }
-        }
-        let c = Change {
+fn change(at: Instant, c: Callback) -> Option<Change> {
+    match c {
+        Callback::DataChange {
             transaction,
             group,
             master_quality,
             master_error,
             items,
-            at: Instant::now(),
+        } => Some(Change {
+            transaction,
+            group,
+            master_quality,
+            master_error,
+            items: items
+                .into_iter()
+                .map(|i| (i.client_handle, i.value, i.quality, i.error))
+                .collect(),
+            at,
+        }),
+        _ => None,
+    }
+}
+
+impl Changes for Recording {
+    fn changes(&self) -> Vec<Change> {
+        self.timed()
+            .into_iter()
+            .filter_map(|(at, c)| change(at, c))
+            .collect()
+    }
+
+    fn count(&self) -> usize {
+        self.changes().len()
+    }
+
+    fn wait(&self, limit: Duration, n: usize, pred: impl Fn(&Change) -> bool) -> Vec<Change> {
+        let matching = |log: &[(Instant, Callback)]| -> Vec<Change> {
+            log.iter()
+                .filter_map(|(at, c)| change(*at, c.clone()))
+                .filter(|c| pred(c))
+                .collect()
         };
-        self.0.changes.lock().unwrap().push(c);
-        self.0.cv.notify_all();
-        let limit = *self.0.hold_limit.lock().unwrap();
-        let held = self.0.hold.lock().unwrap();
-        let _ = self
-            .0
-            .released
-            .wait_timeout_while(held, limit, |held| *held)
-            .unwrap();
-        Ok(())
-    }
-    unsafe fn OnReadComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const VARIANT,
-        _: *const u16,
-        _: *const FILETIME,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        Ok(())
-    }
-    unsafe fn OnWriteComplete(
-        &self,
-        _: u32,
-        _: u32,
-        _: HRESULT,
-        _: u32,
-        _: *const u32,
-        _: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        Ok(())
-    }
-    unsafe fn OnCancelComplete(&self, _: u32, _: u32) -> windows::core::Result<()> {
-        Ok(())
+        self.wait_until(limit, |log, _| {
+            let found = matching(log);
+            (found.len() >= n).then_some(found)
+        })
+        .unwrap_or_else(|| matching(&self.timed()))
     }
 }
 
