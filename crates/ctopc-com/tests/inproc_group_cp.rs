@@ -227,12 +227,12 @@ fn advise_argument_branches_and_the_advise_limit() {
     );
     assert!(connections(&cp).is_empty(), "no connection was made");
     // A sink: a non-zero cookie; a second one: CONNECT_E_ADVISELIMIT.
-    let (sink, _rec) = Sink::create();
+    let sink = Recording::new().sink();
     let sink_unk = IUnknown::from(&sink);
     let mut first = POISON_U32;
     assert_eq!(raw_advise(&cp, sink_unk.as_raw(), &mut first), S_OK);
     assert!(first != 0 && first != POISON_U32);
-    let (other, _rec2) = Sink::create();
+    let other = Recording::new().sink();
     let other_unk = IUnknown::from(&other);
     assert_eq!(
         raw_advise(&cp, other_unk.as_raw(), &mut cookie),
@@ -346,7 +346,7 @@ fn an_in_process_sink_receives_on_data_change() {
 fn releasing_the_group_releases_a_sink_that_was_not_unadvised() {
     let s = opc_server();
     let g = add_group(&s, "cp-release");
-    let (sink, _rec) = Sink::create();
+    let sink = Recording::new().sink();
     let sink_unk = IUnknown::from(&sink);
     // SAFETY: a valid sink.
     let cookie = unsafe { data_point(&g).Advise(&sink_unk) }.expect("Advise");

@@ -47,7 +47,7 @@ struct Plant {
     g: Group,
     h: Vec<u32>,
     /// The recording sink, when advised.
-    rec: Option<Arc<Recorder>>,
+    rec: Option<Arc<Recording>>,
 }
 
 fn plant(name: &str, advise_sink: bool) -> Plant {

@@ -306,7 +306,7 @@ fn check_every_method_fails(g: &Group, h: &[u32]) {
     let cpc: IConnectionPointContainer = iface(g);
     // SAFETY: a valid IID.
     let cp = unsafe { cpc.FindConnectionPoint(&IOPCDataCallback::IID) }.expect("the point");
-    let (sink, _rec) = Sink::create();
+    let sink = Recording::new().sink();
     // SAFETY: a valid sink.
     let r = unsafe { cp.Advise(&IUnknown::from(&sink)) };
     assert_eq!(code(&r), E_FAIL, "Advise");

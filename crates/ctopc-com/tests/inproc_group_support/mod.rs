@@ -1,16 +1,14 @@
 //! Helpers of the in-process group-object tests (`inproc_group_*.rs`), over the harness in
 //! `common/mod.rs`: item definitions of the demo plant, a group with items, readers of the
-//! CoTaskMem arrays the group hands out, and a recording IOPCDataCallback sink.
+//! CoTaskMem arrays the group hands out, and the client library's recording sink.
 #![allow(dead_code, unused_imports)]
 
 use crate::common::*;
 use ctopc_com::interfaces::*;
 use opc_client::ReadItem;
 use std::ffi::c_void;
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
-use windows::core::implement;
-use windows::Win32::Foundation::FILETIME;
 use windows::Win32::System::Com::IConnectionPointContainer;
 use windows::Win32::System::Variant::{VariantClear, VARENUM, VARIANT};
 
@@ -278,180 +276,10 @@ pub fn cache_read_good(g: &Group, handles: &[u32]) -> Vec<ReadItem> {
 }
 
 // ---------------------------------------------------------------------------------------
-// A recording IOPCDataCallback
+// The recording IOPCDataCallback (opc-client's)
 // ---------------------------------------------------------------------------------------
 
-/// One call the server made on the sink.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Callback {
-    DataChange {
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        items: Vec<ReadItem>,
-    },
-    ReadComplete {
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        items: Vec<ReadItem>,
-    },
-    WriteComplete {
-        transaction: u32,
-        group: u32,
-        master_error: HRESULT,
-        items: Vec<(u32, HRESULT)>,
-    },
-    CancelComplete {
-        transaction: u32,
-        group: u32,
-    },
-}
-
-impl Callback {
-    pub fn transaction(&self) -> u32 {
-        match self {
-            Callback::DataChange { transaction, .. }
-            | Callback::ReadComplete { transaction, .. }
-            | Callback::WriteComplete { transaction, .. }
-            | Callback::CancelComplete { transaction, .. } => *transaction,
-        }
-    }
-}
-
-/// What a sink saw.
-#[derive(Default)]
-pub struct Recorder {
-    log: Mutex<Vec<Callback>>,
-    cv: Condvar,
-}
-
-impl Recorder {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Callback>> {
-        self.log.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
-    fn push(&self, cb: Callback) {
-        self.lock().push(cb);
-        self.cv.notify_all();
-    }
-
-    /// Waits (at most `limit`) for a callback that `pred` accepts; the first one.
-    pub fn wait_for(&self, limit: Duration, pred: impl Fn(&Callback) -> bool) -> Option<Callback> {
-        let deadline = Instant::now() + limit;
-        let mut log = self.lock();
-        loop {
-            if let Some(c) = log.iter().find(|c| pred(c)) {
-                return Some(c.clone());
-            }
-            let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() {
-                return None;
-            }
-            log = self
-                .cv
-                .wait_timeout(log, left)
-                .unwrap_or_else(|p| p.into_inner())
-                .0;
-        }
-    }
-
-    /// Every callback so far.
-    pub fn all(&self) -> Vec<Callback> {
-        self.lock().clone()
-    }
-}
-
-/// The tests' IOPCDataCallback (a free-threaded in-process object: the server's callback
-/// workers call it directly).
-#[implement(IOPCDataCallback)]
-pub struct Sink(pub Arc<Recorder>);
-
-impl Sink {
-    pub fn create() -> (IOPCDataCallback, Arc<Recorder>) {
-        let rec = Arc::new(Recorder::default());
-        (Sink(Arc::clone(&rec)).into(), rec)
-    }
-}
-
-impl IOPCDataCallback_Impl for Sink_Impl {
-    unsafe fn OnDataChange(
-        &self,
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        n: u32,
-        h: *const u32,
-        v: *const VARIANT,
-        q: *const u16,
-        t: *const FILETIME,
-        e: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { opc_client::diag::callback_items(n, h, v, q, t, e) };
-        self.0.push(Callback::DataChange {
-            transaction,
-            group,
-            master_quality,
-            master_error,
-            items,
-        });
-        Ok(())
-    }
-
-    unsafe fn OnReadComplete(
-        &self,
-        transaction: u32,
-        group: u32,
-        master_quality: HRESULT,
-        master_error: HRESULT,
-        n: u32,
-        h: *const u32,
-        v: *const VARIANT,
-        q: *const u16,
-        t: *const FILETIME,
-        e: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { opc_client::diag::callback_items(n, h, v, q, t, e) };
-        self.0.push(Callback::ReadComplete {
-            transaction,
-            group,
-            master_quality,
-            master_error,
-            items,
-        });
-        Ok(())
-    }
-
-    unsafe fn OnWriteComplete(
-        &self,
-        transaction: u32,
-        group: u32,
-        master_error: HRESULT,
-        n: u32,
-        h: *const u32,
-        e: *const HRESULT,
-    ) -> windows::core::Result<()> {
-        // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { opc_client::diag::write_results(n, h, e) };
-        self.0.push(Callback::WriteComplete {
-            transaction,
-            group,
-            master_error,
-            items,
-        });
-        Ok(())
-    }
-
-    unsafe fn OnCancelComplete(&self, transaction: u32, group: u32) -> windows::core::Result<()> {
-        self.0.push(Callback::CancelComplete { transaction, group });
-        Ok(())
-    }
-}
+pub use opc_client::sink::{Callback, Recording, RecordingSink};
 
 /// The group's IOPCDataCallback connection point.
 pub fn data_point(g: &Group) -> windows::Win32::System::Com::IConnectionPoint {
@@ -460,9 +288,10 @@ pub fn data_point(g: &Group) -> windows::Win32::System::Com::IConnectionPoint {
     unsafe { cpc.FindConnectionPoint(&IOPCDataCallback::IID) }.expect("FindConnectionPoint")
 }
 
-/// Advises a new recording sink on the group: (cookie, recorder).
-pub fn advise(g: &Group) -> (u32, Arc<Recorder>) {
-    let (sink, rec) = Sink::create();
+/// Advises a new recording sink on the group: (cookie, recording).
+pub fn advise(g: &Group) -> (u32, Arc<Recording>) {
+    let rec = Recording::new();
+    let sink = rec.sink();
     // SAFETY: a valid sink.
     let cookie = unsafe { data_point(g).Advise(&IUnknown::from(&sink)) }.expect("Advise");
     (cookie, rec)
