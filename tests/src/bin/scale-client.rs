@@ -66,15 +66,13 @@ mod scale {
     use ctopc_com::apartment::Apartment;
     use ctopc_com::interfaces::*;
     use e2e_tests::PROGID;
+    use opc_client::sink::{self, Recording};
     use opc_client::{GroupSpec, GroupStateChange, ItemDef, OpcGroup, Server};
     use std::io::{BufRead, Write};
     use std::process::ExitCode;
     use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
-    use std::sync::{Arc, Condvar, Mutex};
+    use std::sync::{Arc, Mutex};
     use std::time::{Duration, Instant};
-    use windows::core::{implement, HRESULT};
-    use windows::Win32::Foundation::FILETIME;
-    use windows::Win32::System::Variant::VARIANT;
 
     pub struct Options {
         items: usize,
@@ -209,129 +207,6 @@ mod scale {
         }
     }
 
-    /// What the sink saw since the Advise: OnDataChange calls, values, and which items
-    /// (client handle `i` is item `i`) at least one of them carried.
-    #[derive(Default)]
-    struct Seen {
-        callbacks: u64,
-        values: u64,
-        covered: Vec<bool>,
-        distinct: usize,
-    }
-
-    #[derive(Default)]
-    struct Coverage {
-        seen: Mutex<Seen>,
-        cv: Condvar,
-    }
-
-    impl Coverage {
-        fn new(items: usize) -> Arc<Coverage> {
-            let c = Coverage::default();
-            c.seen.lock().unwrap_or_else(|p| p.into_inner()).covered = vec![false; items];
-            Arc::new(c)
-        }
-        fn counts(&self) -> (u64, u64) {
-            let s = self.seen.lock().unwrap_or_else(|p| p.into_inner());
-            (s.callbacks, s.values)
-        }
-        /// Waits until every item was carried at least once: the values so far.
-        fn wait_all(&self, limit: Duration) -> Option<u64> {
-            let deadline = Instant::now() + limit;
-            let mut s = self.seen.lock().unwrap_or_else(|p| p.into_inner());
-            loop {
-                if s.distinct == s.covered.len() {
-                    return Some(s.values);
-                }
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    return None;
-                }
-                s = self
-                    .cv
-                    .wait_timeout(s, left)
-                    .unwrap_or_else(|p| p.into_inner())
-                    .0;
-            }
-        }
-    }
-
-    /// The client's IOPCDataCallback: counts, and marks the client handles it is given.
-    #[implement(IOPCDataCallback)]
-    struct Sink(Arc<Coverage>);
-
-    impl IOPCDataCallback_Impl for Sink_Impl {
-        unsafe fn OnDataChange(
-            &self,
-            transaction: u32,
-            _group: u32,
-            _master_quality: HRESULT,
-            _master_error: HRESULT,
-            n: u32,
-            h: *const u32,
-            _v: *const VARIANT,
-            _q: *const u16,
-            _t: *const FILETIME,
-            _e: *const HRESULT,
-        ) -> windows::core::Result<()> {
-            if transaction != 0 {
-                return Ok(());
-            }
-            let handles: &[u32] = if h.is_null() || n == 0 {
-                &[]
-            } else {
-                // SAFETY: the stub passes `n`-element arrays, valid for the call.
-                unsafe { std::slice::from_raw_parts(h, n as usize) }
-            };
-            let mut s = self.0.seen.lock().unwrap_or_else(|p| p.into_inner());
-            s.callbacks += 1;
-            s.values += u64::from(n);
-            for &c in handles {
-                if let Some(seen) = s.covered.get_mut(c as usize) {
-                    if !*seen {
-                        *seen = true;
-                        s.distinct += 1;
-                    }
-                }
-            }
-            drop(s);
-            self.0.cv.notify_all();
-            Ok(())
-        }
-
-        unsafe fn OnReadComplete(
-            &self,
-            _: u32,
-            _: u32,
-            _: HRESULT,
-            _: HRESULT,
-            _: u32,
-            _: *const u32,
-            _: *const VARIANT,
-            _: *const u16,
-            _: *const FILETIME,
-            _: *const HRESULT,
-        ) -> windows::core::Result<()> {
-            Ok(())
-        }
-
-        unsafe fn OnWriteComplete(
-            &self,
-            _: u32,
-            _: u32,
-            _: HRESULT,
-            _: u32,
-            _: *const u32,
-            _: *const HRESULT,
-        ) -> windows::core::Result<()> {
-            Ok(())
-        }
-
-        unsafe fn OnCancelComplete(&self, _: u32, _: u32) -> windows::core::Result<()> {
-            Ok(())
-        }
-    }
-
     /// The item IDs: the first `n` browsed leaves not starting with `_` (repeated when
     /// there are fewer), or the synthetic database's names.
     fn item_ids(server: &Server, o: &Options) -> Result<Vec<String>, String> {
@@ -433,7 +308,7 @@ mod scale {
             .collect();
         let mut advise = None;
         if o.active {
-            let sink: IOPCDataCallback = Sink(Coverage::new(1)).into();
+            let sink = Recording::counting().sink();
             advise = Some(
                 opc_client::advise_data_callback(&group.unknown, &sink)
                     .map_err(|e| format!("warm-up Advise: {e}"))?,
@@ -556,8 +431,14 @@ mod scale {
 
         if o.active {
             watchdog.arm("subscribed", o.stage_timeout);
-            let coverage = Coverage::new(o.items);
-            let sink: IOPCDataCallback = Sink(Arc::clone(&coverage)).into();
+            // Counts only, and which client handles (item `i` is handle `i`) the
+            // OnDataChange calls since the Advise have carried.
+            let coverage = Recording::with(sink::Options {
+                count_only: true,
+                cover: o.items,
+                ..sink::Options::default()
+            });
+            let sink = coverage.sink();
             let started = Instant::now();
             let Some((group, _)) = held.group.as_ref() else {
                 return Err(Stop::Failed("subscribed", "no group".into()));
@@ -575,14 +456,13 @@ mod scale {
                 .map_err(|e| format!("SetState(active): {e}"))
                 .map_err(fail("subscribed"))?;
             // Items whose AddItems failed are never called back: count them as covered.
-            if errors > 0 {
-                let mut s = coverage.seen.lock().unwrap_or_else(|p| p.into_inner());
-                s.distinct += errors;
-            }
-            let values = coverage.wait_all(o.stage_timeout).ok_or(Stop::Failed(
-                "subscribed",
-                "the callbacks did not cover every item in time".into(),
-            ))?;
+            let values = coverage
+                .wait_counts(o.stage_timeout, |c| c.covered + errors >= o.items)
+                .map(|c| c.data_change_items)
+                .ok_or(Stop::Failed(
+                    "subscribed",
+                    "the callbacks did not cover every item in time".into(),
+                ))?;
             watchdog.disarm();
             ready(&format!(
                 "subscribed first-callback {} ms values {values}",
@@ -593,7 +473,8 @@ mod scale {
                 if line == "remove" {
                     break;
                 }
-                let (callbacks, values) = coverage.counts();
+                let c = coverage.counts();
+                let (callbacks, values) = (c.data_changes, c.data_change_items);
                 ready(&format!("tick {callbacks} {values}"));
             }
         }
