@@ -1,7 +1,7 @@
 //! The client's IOPCDataCallback: [`RecordingSink`], a COM object over an
 //! `Arc<`[`Recording`]`>` that keeps every callback the server makes, in the order they
 //! come, and counts them. The end-to-end tests, the in-process COM tests, the benchmarks,
-//! the scale and soak clients and opcdiag all advise this one sink; its [`Options`] say
+//! the scale and soak clients and opcdiag record callbacks with this one sink; its [`Options`] say
 //! what it keeps (everything, or counts only), whether it forwards each callback into a
 //! channel, and whether it traces; [`Recording::hold_calls`] makes it a slow client.
 
