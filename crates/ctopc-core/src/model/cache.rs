@@ -7,7 +7,7 @@ use std::borrow::Cow;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
-use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
+use super::boundary::{SourceItem, SourceKey, SourceRequest, Subscription};
 use super::util::{IntMap, Interner};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
