@@ -39,6 +39,7 @@ use std::hash::Hash;
 use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
+use ctopc_core::compact::{grow_exact, Growth};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -346,12 +347,9 @@ impl<V: Eq + Hash + Clone> Vars<V> {
                 i
             }
             None => {
-                if self.rich.len() == self.rich.capacity() {
-                    // By a quarter, not double: a source that cannot peek (the network)
-                    // keeps every sampled variable's last sample here, and doubling would
-                    // leave up to half of a large subscription's room unused.
-                    self.rich.reserve_exact((self.rich.len() / 4).max(16));
-                }
+                // By a quarter: a source that cannot peek (the network) keeps every
+                // sampled variable's last sample here.
+                grow_exact(&mut self.rich, 1, Growth::quarter(16));
                 self.rich.push(st);
                 (self.rich.len() - 1) as u32
             }
@@ -433,10 +431,8 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     fn last_at(&mut self, i: u32) -> &mut Option<Vqt> {
         let i = i as usize;
         if i >= self.lasts.len() {
-            if i >= self.lasts.capacity() {
-                let grow = (i + 1 - self.lasts.len()).max(self.lasts.len() / 4).max(16);
-                self.lasts.reserve_exact(grow);
-            }
+            let need = i + 1 - self.lasts.len();
+            grow_exact(&mut self.lasts, need, Growth::quarter(16));
             self.lasts.resize(i + 1, None);
         }
         &mut self.lasts[i]
@@ -784,19 +780,15 @@ impl<S: VariableSource> AsixBackend<S> {
     fn subscribe(&mut self, now: Timestamp, subs: Vec<(SourceItem, u32)>) {
         let mut touched = Touched::new();
         let mut subscribed = Vec::with_capacity(subs.len());
-        // The slots this request reaches: grown once, by a quarter (not double: large
-        // configurations, see the engine's source table) or to exactly what a large
-        // request needs if that is more.
+        // The slots this request reaches: grown once, by a quarter or to exactly what a
+        // large request needs if that is more.
         let top = subs
             .iter()
             .map(|(item, _)| item.key.index() as usize + 1)
-            .max();
-        if let Some(top) = top.filter(|&t| t > self.slots.capacity()) {
-            let quarter = (self.slots.len() / 4).max(1024);
-            let need = top - self.slots.len();
-            self.slots
-                .reserve_exact(if need > quarter { need } else { quarter });
-        }
+            .max()
+            .unwrap_or(0);
+        let need = top.saturating_sub(self.slots.len());
+        grow_exact(&mut self.slots, need, Growth::quarter(1024));
         for (item, rate) in subs {
             let key = item.key;
             let i = key.index() as usize;

@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use super::boundary::{SourceItem, SourceKey, SourceRequest, Subscription};
 use super::util::{IntMap, Interner};
+use crate::compact::{grow_exact, Growth};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
@@ -353,17 +354,9 @@ impl SourceTable {
         }
         let text = &mut self.keys.text;
         let len = text.len();
-        if len + key.len() > text.capacity() {
-            // As the entries: by the rest of a large AddItems (its item IDs' bytes, which
-            // are the keys' unless aliases), else by a quarter, not double.
-            let quarter = (len / 4).max(4096);
-            let grow = if self.batch_keys >= quarter {
-                self.batch_keys
-            } else {
-                quarter
-            };
-            text.reserve_exact(grow.max(key.len()));
-        }
+        // As the entries: by the rest of a large AddItems (its item IDs' bytes, which are
+        // the keys' unless aliases), else by a quarter.
+        grow_exact(text, key.len(), Growth::quarter(4096).hint(self.batch_keys));
         text.push_str(key);
         Some(len as u32)
     }
@@ -438,19 +431,13 @@ impl SourceTable {
                 idx
             }
             None => {
-                if self.entries.len() == self.entries.capacity() {
-                    // Grow by a quarter, not double: the entries are most of the memory of
-                    // a large configuration, and doubling would leave up to half unused;
-                    // by the rest of a large AddItems at once, so that the entries of one
-                    // large call take what they need and no more (issue 16).
-                    let quarter = (self.entries.len() / 4).max(1024);
-                    let grow = if self.batch_left >= quarter {
-                        self.batch_left
-                    } else {
-                        quarter
-                    };
-                    self.entries.reserve_exact(grow);
-                }
+                // By a quarter, or by the rest of a large AddItems at once, so that the
+                // entries of one large call take what they need and no more.
+                grow_exact(
+                    &mut self.entries,
+                    1,
+                    Growth::quarter(1024).hint(self.batch_left),
+                );
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
             }
@@ -479,11 +466,8 @@ impl SourceTable {
             return slot;
         }
         let len = self.samples.len();
-        if len == self.samples.capacity() {
-            let quarter = (len / 4).max(1024);
-            let room = (self.live + 16).saturating_sub(len).max(64);
-            self.samples.reserve_exact(quarter.min(room));
-        }
+        let room = (self.live + 16).saturating_sub(len).max(64);
+        grow_exact(&mut self.samples, 1, Growth::quarter(1024).at_most(room));
         self.samples.push(sample);
         len as u32
     }
