@@ -39,7 +39,7 @@ use std::hash::Hash;
 use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
-use ctopc_core::compact::{grow_exact, Growth};
+use ctopc_core::compact::{grow_exact, Growth, Idx};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -265,30 +265,69 @@ struct VarState {
     last: Option<Box<Vqt>>,
 }
 
-/// Marks a [`Vars`] entry that indexes [`Vars::rich`]; an entry without it is the slot
-/// index of the variable's only item.
-const RICH: u32 = 1 << 31;
+/// A variable's entry in [`Vars::map`], in 4 bytes: the slot index of its only item (the
+/// short form), or the index of its [`VarState`] in [`Vars::rich`]. The top bit says which,
+/// so the short form takes slot indices below 2^31 (an item at a larger one goes rich).
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct VarEntry(u32);
+
+/// What a [`VarEntry`] names.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum VarAt {
+    /// The only item's slot index.
+    One(u32),
+    Rich(Idx<VarState>),
+}
+
+impl VarEntry {
+    const RICH: u32 = 1 << 31;
+
+    /// The short entry of the variable whose only item is at slot index `i`, if it fits.
+    fn one(i: u32) -> Option<Self> {
+        (i & Self::RICH == 0).then_some(VarEntry(i))
+    }
+
+    fn rich(i: Idx<VarState>) -> Self {
+        assert!(i.raw() & Self::RICH == 0, "rich variables fit 31 bits");
+        VarEntry(Self::RICH | i.raw())
+    }
+
+    fn at(self) -> VarAt {
+        if self.0 & Self::RICH == 0 {
+            VarAt::One(self.0)
+        } else {
+            VarAt::Rich(Idx::from_raw(self.0 & !Self::RICH))
+        }
+    }
+
+    fn rich_idx(self) -> Option<Idx<VarState>> {
+        match self.at() {
+            VarAt::Rich(i) => Some(i),
+            VarAt::One(_) => None,
+        }
+    }
+}
 
 /// The raw variables wanted by subscribed items. Most variables of a large subscription
 /// of the simulation are read by exactly one item, with no item's rules reading them and
 /// no sample kept: such a variable's entry is that item's slot index, 4 bytes besides the
-/// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte,
-/// where a [`VarState`] in the map cost 48 and a control byte, issue 16). The others have
-/// a [`VarState`] in `rich`, and go back to the short form once they are plain again
-/// ([`Vars::settle`]). A source that cannot peek (the network) keeps every sampled
-/// variable's last sample: a short variable's is in `lasts` at its item's slot index (48
-/// bytes, where a [`VarState`] and a boxed sample cost 88).
+/// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte;
+/// a [`VarState`] would add 40). The others have a [`VarState`] in `rich`, and go back to
+/// the short form once they are plain again ([`Vars::settle`]). A source that cannot peek
+/// (the network) keeps every sampled variable's last sample: a short variable's is in
+/// `lasts` at its item's slot index (48 bytes, where a [`VarState`] and a boxed sample
+/// would take 88).
 struct Vars<V> {
-    map: HashMap<V, u32>,
+    map: HashMap<V, VarEntry>,
     rich: Vec<VarState>,
     /// Indices of `rich` free for reuse.
-    free: Vec<u32>,
+    free: Vec<Idx<VarState>>,
     /// The last samples of short variables, at their items' slot indices; empty while none
     /// is kept (the simulation's plain variables keep none).
     lasts: Vec<Option<Vqt>>,
 }
 
-/// A variable's entry in [`Vars`].
+/// A variable's entry in [`Vars`], read.
 enum VarRef<'a> {
     /// Read by the item at this slot index, and that is all.
     One(u32),
@@ -306,11 +345,9 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     }
 
     fn get(&self, v: &V) -> Option<VarRef<'_>> {
-        let e = *self.map.get(v)?;
-        Some(if e & RICH == 0 {
-            VarRef::One(e)
-        } else {
-            VarRef::Rich(&self.rich[(e & !RICH) as usize])
+        Some(match self.map.get(v)?.at() {
+            VarAt::One(i) => VarRef::One(i),
+            VarAt::Rich(i) => VarRef::Rich(&self.rich[i]),
         })
     }
 
@@ -329,21 +366,22 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// The variable's full state, made from its short entry (`one`: the key of the item at
     /// a slot index) or anew.
     fn rich_mut(&mut self, v: &V, one: impl FnOnce(u32) -> Option<SourceKey>) -> &mut VarState {
-        let e = self.map.get(v).copied();
-        if let Some(e) = e.filter(|e| e & RICH != 0) {
-            return &mut self.rich[(e & !RICH) as usize];
-        }
+        let short = match self.map.get(v).map(|e| e.at()) {
+            Some(VarAt::Rich(i)) => return &mut self.rich[i],
+            Some(VarAt::One(i)) => Some(i),
+            None => None,
+        };
         let st = VarState {
-            items: match e.and_then(one) {
+            items: match short.and_then(one) {
                 Some(k) => Keys::One(k),
                 None => Keys::None,
             },
             rule_users: Keys::None,
-            last: e.and_then(|i| self.take_last(i)).map(Box::new),
+            last: short.and_then(|i| self.take_last(i)).map(Box::new),
         };
         let i = match self.free.pop() {
             Some(i) => {
-                self.rich[i as usize] = st;
+                self.rich[i] = st;
                 i
             }
             None => {
@@ -351,28 +389,29 @@ impl<V: Eq + Hash + Clone> Vars<V> {
                 // sampled variable's last sample here.
                 grow_exact(&mut self.rich, 1, Growth::quarter(16));
                 self.rich.push(st);
-                (self.rich.len() - 1) as u32
+                Idx::new(self.rich.len() - 1)
             }
         };
-        debug_assert!(i < RICH);
         match self.map.get_mut(v) {
-            Some(e) => *e = RICH | i,
+            Some(e) => *e = VarEntry::rich(i),
             None => {
-                self.map.insert(v.clone(), RICH | i);
+                self.map.insert(v.clone(), VarEntry::rich(i));
             }
         }
-        &mut self.rich[i as usize]
+        &mut self.rich[i]
     }
 
     /// Item `k` reads `v` (noted once).
     fn add_item(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
         match self.map.get(v) {
-            None if k.index() < RICH => {
-                self.map.insert(v.clone(), k.index());
-                return;
+            None => {
+                if let Some(e) = VarEntry::one(k.index()) {
+                    self.map.insert(v.clone(), e);
+                    return;
+                }
             }
-            Some(&e) if e & RICH == 0 && e == k.index() => return,
-            _ => {}
+            Some(e) if e.at() == VarAt::One(k.index()) => return,
+            Some(_) => {}
         }
         let st = self.rich_mut(v, one);
         if !st.items.contains(&k) {
@@ -388,36 +427,35 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// Item `k` no longer reads `v` (a variable nothing else needs keeps its entry, if it
     /// has a full state, until [`Self::remove`]).
     fn remove_item(&mut self, v: &V, k: SourceKey) {
-        let Some(&e) = self.map.get(v) else {
+        let Some(e) = self.map.get(v) else {
             return;
         };
-        if e & RICH == 0 {
-            if e == k.index() {
-                self.map.remove(v);
-                self.take_last(e);
+        match e.at() {
+            VarAt::One(i) => {
+                if i == k.index() {
+                    self.map.remove(v);
+                    self.take_last(i);
+                }
             }
-        } else {
-            self.rich[(e & !RICH) as usize].items.remove(k, false);
+            VarAt::Rich(i) => self.rich[i].items.remove(k, false),
         }
     }
 
     /// One use of `v` by item `k`'s rules less.
     fn remove_rule_user(&mut self, v: &V, k: SourceKey) {
-        if let Some(&e) = self.map.get(v) {
-            if e & RICH != 0 {
-                self.rich[(e & !RICH) as usize].rule_users.remove(k, true);
-            }
+        if let Some(i) = self.map.get(v).and_then(|e| e.rich_idx()) {
+            self.rich[i].rule_users.remove(k, true);
         }
     }
 
     /// Forgets `v`.
     fn remove(&mut self, v: &V) {
-        if let Some(e) = self.map.remove(v) {
-            if e & RICH != 0 {
-                self.free_rich(e & !RICH);
-            } else {
-                self.take_last(e);
+        match self.map.remove(v).map(VarEntry::at) {
+            Some(VarAt::Rich(i)) => self.free_rich(i),
+            Some(VarAt::One(i)) => {
+                self.take_last(i);
             }
+            None => {}
         }
     }
 
@@ -438,8 +476,8 @@ impl<V: Eq + Hash + Clone> Vars<V> {
         &mut self.lasts[i]
     }
 
-    fn free_rich(&mut self, i: u32) {
-        self.rich[i as usize] = VarState::default();
+    fn free_rich(&mut self, i: Idx<VarState>) {
+        self.rich[i] = VarState::default();
         self.free.push(i);
         if self.free.len() == self.rich.len() {
             // None left: their room goes too.
@@ -450,18 +488,18 @@ impl<V: Eq + Hash + Clone> Vars<V> {
 
     /// Keeps `last` as the variable's last sample (`Some`), or keeps none.
     fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
-        let e = self.map.get(v).copied();
-        match (last, e) {
-            (Some(vqt), Some(i)) if i & RICH == 0 => *self.last_at(i) = Some(vqt),
+        let at = self.map.get(v).map(|e| e.at());
+        match (last, at) {
+            (Some(vqt), Some(VarAt::One(i))) => *self.last_at(i) = Some(vqt),
             (Some(vqt), _) => match &mut self.rich_mut(v, one).last {
                 Some(last) => **last = vqt,
                 last @ None => *last = Some(Box::new(vqt)),
             },
-            (None, Some(i)) if i & RICH == 0 => {
+            (None, Some(VarAt::One(i))) => {
                 self.take_last(i);
             }
-            (None, Some(e)) => {
-                self.rich[(e & !RICH) as usize].last = None;
+            (None, Some(VarAt::Rich(i))) => {
+                self.rich[i].last = None;
                 self.settle(v);
             }
             (None, None) => {}
@@ -471,32 +509,31 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// Gives a variable read by one item and nothing else its short entry again (with its
     /// last sample, where short variables keep theirs already).
     fn settle(&mut self, v: &V) {
-        let Some(&e) = self.map.get(v) else {
+        let Some(i) = self.map.get(v).and_then(|e| e.rich_idx()) else {
             return;
         };
-        if e & RICH == 0 {
-            return;
-        }
-        let i = e & !RICH;
         let VarState {
             items: Keys::One(k),
             rule_users: Keys::None,
             last,
-        } = &self.rich[i as usize]
+        } = &self.rich[i]
         else {
             return;
         };
         let k = k.index();
         // A last sample moves only into room made already (a peeking source's
         // variables keep theirs only while rules read them).
-        if k >= RICH || last.is_some() && k as usize >= self.lasts.len() {
+        let Some(short) = VarEntry::one(k) else {
+            return;
+        };
+        if last.is_some() && k as usize >= self.lasts.len() {
             return;
         }
-        if let Some(last) = self.rich[i as usize].last.take() {
+        if let Some(last) = self.rich[i].last.take() {
             self.lasts[k as usize] = Some(*last);
         }
         if let Some(e) = self.map.get_mut(v) {
-            *e = k;
+            *e = short;
         }
         self.free_rich(i);
     }

@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use super::boundary::{SourceItem, SourceKey, SourceRequest, Subscription};
 use super::util::{IntMap, Interner};
-use crate::compact::{grow_exact, Growth};
+use crate::compact::{grow_exact, Growth, Idx};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
@@ -111,6 +111,13 @@ impl PartialEq for CachedValue {
     }
 }
 
+/// An analog entry's EU range, low and high (`SourceTable::eu_ranges`).
+type EuRange = (f64, f64);
+
+/// The distinct sampling rates of one source item's subscribers, with counts
+/// (`SourceTable::many_rates`).
+type RateList = Vec<(u32, u32)>;
+
 /// The sampling rates requested by the subscribers of one source item, with counts. More
 /// than one distinct rate spills into [`SourceTable`]'s side table (rare), which keeps the
 /// entry small.
@@ -122,15 +129,12 @@ pub(crate) enum RateSet {
         rate: u32,
         count: u32,
     },
-    /// Index into `SourceTable::many_rates`.
-    Many(u32),
+    Many(Idx<RateList>),
 }
 
 pub(crate) const LIVE: u8 = 1;
 pub(crate) const CONSTANT: u8 = 2;
 pub(crate) const DIRTY: u8 = 4;
-/// EU type OPC_ANALOG: `eu_range` names the range in `SourceTable::eu_ranges`.
-pub(crate) const ANALOG: u8 = 8;
 /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
 pub(crate) const ENUMERATED: u8 = 16;
 /// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates` index.
@@ -151,15 +155,15 @@ pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`OWN_SAMPLE`], else the
-    /// shared initial state (no value yet).
-    sample: u32,
+    /// The entry's [`Sample`]: its own with [`OWN_SAMPLE`], else the shared initial state
+    /// (no value yet); none once the entry is freed.
+    sample: Option<Idx<Sample>>,
     pub generation: u32,
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
-    /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
-    eu_range: u32,
+    /// EU type OPC_ANALOG: its range.
+    eu_range: Option<Idx<EuRange>>,
     pub canonical: VarType,
     pub access: u8,
     pub flags: u8,
@@ -184,7 +188,7 @@ pub(crate) struct Sample {
     quality: Quality,
     /// A shared initial state: the entries referring to it. An entry's own sample: with
     /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
-    /// (this), or with [`MANY_RATES`] an index into the side table.
+    /// (this), or with [`MANY_RATES`] the raw [`Idx`] of its list in the side table.
     refs: u32,
     sub_rate: u32,
     /// The sampling rate the backend was last told (0: not subscribed).
@@ -232,6 +236,10 @@ impl SourceEntry {
     pub fn is_constant(&self) -> bool {
         self.flags & CONSTANT != 0
     }
+    /// The sample of a live entry (its own or the shared initial state).
+    fn live_sample(&self) -> Idx<Sample> {
+        self.sample.expect("a live entry has a sample")
+    }
     /// See [`OWN_SAMPLE`].
     pub fn has_own_sample(&self) -> bool {
         self.flags & OWN_SAMPLE != 0
@@ -241,7 +249,7 @@ impl SourceEntry {
     }
     /// EU type OPC_ANALOG (percent deadband applies).
     pub fn is_analog(&self) -> bool {
-        self.flags & ANALOG != 0
+        self.eu_range.is_some()
     }
     pub fn writable(&self) -> bool {
         u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
@@ -258,6 +266,7 @@ struct KeyText {
 }
 
 /// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
+#[derive(Default)]
 pub(crate) struct SourceTable {
     pub entries: Vec<SourceEntry>,
     keys: KeyText,
@@ -269,53 +278,28 @@ pub(crate) struct SourceTable {
     dirty: Vec<u32>,
     live: usize,
     /// Rate sets with more than one distinct rate.
-    many_rates: Vec<Vec<(u32, u32)>>,
-    free_many: Vec<u32>,
+    many_rates: Vec<RateList>,
+    free_many: Vec<Idx<RateList>>,
     /// OPC_ENUMERATED texts by entry index.
     enum_texts: HashMap<u32, Vec<String>>,
     /// The distinct EU ranges of analog entries (a plant has few: interning them keeps 12
     /// bytes per entry out of the cache), by bit pattern; never shrinks, as the ranges come
     /// from the configuration, not from clients.
-    eu_ranges: Vec<(f64, f64)>,
-    eu_range_ids: HashMap<(u64, u64), u32>,
+    eu_ranges: Vec<EuRange>,
+    eu_range_ids: HashMap<(u64, u64), Idx<EuRange>>,
     /// The entries' samples ([`SourceEntry::sample`]), with the free slots ...
     samples: Vec<Sample>,
-    free_samples: Vec<u32>,
+    free_samples: Vec<Idx<Sample>>,
     /// The string and array values of the samples, by sample slot.
-    shared: IntMap<u32, CachedValue>,
-    /// ... and the shared initial state last created (`u32::MAX`: none), which the entries
-    /// created at the same time share.
-    initial: u32,
+    shared: IntMap<Idx<Sample>, CachedValue>,
+    /// ... and the shared initial state last created, which the entries created at the
+    /// same time share.
+    initial: Option<Idx<Sample>>,
     /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
     /// that many when the entries must grow, rather than a quarter more; and their item IDs'
     /// bytes, for the key text.
     batch_left: usize,
     batch_keys: usize,
-}
-
-impl Default for SourceTable {
-    fn default() -> Self {
-        SourceTable {
-            entries: Vec::new(),
-            keys: KeyText::default(),
-            free: Vec::new(),
-            index: SourceIndex::default(),
-            paths: Interner::default(),
-            dirty: Vec::new(),
-            live: 0,
-            many_rates: Vec::new(),
-            free_many: Vec::new(),
-            enum_texts: HashMap::new(),
-            eu_ranges: Vec::new(),
-            eu_range_ids: HashMap::new(),
-            samples: Vec::new(),
-            free_samples: Vec::new(),
-            shared: IntMap::default(),
-            initial: u32::MAX,
-            batch_left: 0,
-            batch_keys: 0,
-        }
-    }
 }
 
 impl SourceTable {
@@ -399,20 +383,17 @@ impl SourceTable {
             None => (self.share_initial(now), LIVE),
         };
         let eu_range = match &def.eu {
-            EuInfo::Analog { low, high } => {
-                flags |= ANALOG;
-                self.intern_range(*low, *high)
-            }
+            EuInfo::Analog { low, high } => Some(self.intern_range(*low, *high)),
             EuInfo::Enumerated(_) => {
                 flags |= ENUMERATED;
-                0
+                None
             }
-            EuInfo::None => 0,
+            EuInfo::None => None,
         };
         let entry = SourceEntry {
             key_at,
             key_len: def.source_key.len() as u32,
-            sample,
+            sample: Some(sample),
             generation: 0,
             refs: 0,
             channel,
@@ -460,43 +441,45 @@ impl SourceTable {
     /// A free sample slot holding `sample`. The samples grow by a quarter (at least
     /// 1,024) but not past one per live entry while they can help it: most entries get
     /// their first sample one by one, after the AddItems that made them.
-    fn alloc_sample(&mut self, sample: Sample) -> u32 {
+    fn alloc_sample(&mut self, sample: Sample) -> Idx<Sample> {
         if let Some(slot) = self.free_samples.pop() {
-            self.samples[slot as usize] = sample;
+            self.samples[slot] = sample;
             return slot;
         }
         let len = self.samples.len();
         let room = (self.live + 16).saturating_sub(len).max(64);
         grow_exact(&mut self.samples, 1, Growth::quarter(1024).at_most(room));
         self.samples.push(sample);
-        len as u32
+        Idx::new(len)
     }
 
     /// The shared initial state for an entry created at `now` (one more entry refers to it).
-    fn share_initial(&mut self, now: Timestamp) -> u32 {
-        if let Some(s) = self.samples.get_mut(self.initial as usize) {
+    fn share_initial(&mut self, now: Timestamp) -> Idx<Sample> {
+        if let Some(initial) = self.initial {
+            let s = &mut self.samples[initial];
             if s.refs > 0 && s.timestamp == now {
                 s.refs += 1;
-                return self.initial;
+                return initial;
             }
         }
-        self.initial = self.alloc_sample(Sample {
+        let initial = self.alloc_sample(Sample {
             refs: 1,
             ..Sample::initial(now)
         });
-        self.initial
+        self.initial = Some(initial);
+        initial
     }
 
     /// Lets go of an entry's sample: its own, or one reference to a shared initial state.
-    fn release_sample(&mut self, slot: u32, own: bool) {
-        let s = &mut self.samples[slot as usize];
+    fn release_sample(&mut self, slot: Idx<Sample>, own: bool) {
+        let s = &mut self.samples[slot];
         if !own {
             s.refs -= 1;
             if s.refs > 0 {
                 return;
             }
-            if self.initial == slot {
-                self.initial = u32::MAX;
+            if self.initial == Some(slot) {
+                self.initial = None;
             }
         }
         if s.vt == SHARED_VALUE {
@@ -507,8 +490,8 @@ impl SourceTable {
     }
 
     /// Stores the value of the sample in `slot`.
-    fn put_value(&mut self, slot: u32, v: CachedValue) {
-        let s = &mut self.samples[slot as usize];
+    fn put_value(&mut self, slot: Idx<Sample>, v: CachedValue) {
+        let s = &mut self.samples[slot];
         match v {
             CachedValue::Num { vt, bits } => {
                 if s.vt == SHARED_VALUE {
@@ -523,18 +506,18 @@ impl SourceTable {
         }
     }
 
-    fn sample_at(&self, slot: u32) -> SampleRef<'_> {
+    fn sample_at(&self, slot: Option<Idx<Sample>>) -> SampleRef<'_> {
         static FREED: Sample = Sample::initial(NEVER);
-        let s = self.samples.get(slot as usize).unwrap_or(&FREED);
-        let value = if s.vt == SHARED_VALUE {
-            self.shared
+        let s = slot.map_or(&FREED, |slot| &self.samples[slot]);
+        let value = match slot {
+            Some(slot) if s.vt == SHARED_VALUE => self
+                .shared
                 .get(&slot)
-                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
-        } else {
-            Cow::Owned(CachedValue::Num {
+                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed),
+            _ => Cow::Owned(CachedValue::Num {
                 vt: s.vt,
                 bits: s.bits,
-            })
+            }),
         };
         SampleRef {
             value,
@@ -553,19 +536,19 @@ impl SourceTable {
 
     /// The sample slot of the live entry `idx`, made its own first if it shares the
     /// initial state.
-    fn own_sample(&mut self, idx: u32) -> u32 {
+    fn own_sample(&mut self, idx: u32) -> Idx<Sample> {
         let e = &self.entries[idx as usize];
         if e.has_own_sample() {
-            return e.sample;
+            return e.live_sample();
         }
-        let shared = e.sample;
+        let shared = e.live_sample();
         let own = self.alloc_sample(Sample {
             refs: 0,
-            ..self.samples[shared as usize].clone()
+            ..self.samples[shared].clone()
         });
         self.release_sample(shared, false);
         let e = &mut self.entries[idx as usize];
-        e.sample = own;
+        e.sample = Some(own);
         e.flags |= OWN_SAMPLE;
         own
     }
@@ -574,7 +557,7 @@ impl SourceTable {
     /// up and records it as the entry's change.
     pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) {
         let slot = self.own_sample(idx);
-        let s = &mut self.samples[slot as usize];
+        let s = &mut self.samples[slot];
         let quality_changed = s.quality != vqt.quality;
         let value_changed = match num_bits(&vqt.value) {
             Some((vt, bits)) => {
@@ -608,20 +591,20 @@ impl SourceTable {
         }
     }
 
-    fn intern_range(&mut self, low: f64, high: f64) -> u32 {
+    fn intern_range(&mut self, low: f64, high: f64) -> Idx<EuRange> {
         let ranges = &mut self.eu_ranges;
         *self
             .eu_range_ids
             .entry((low.to_bits(), high.to_bits()))
             .or_insert_with(|| {
                 ranges.push((low, high));
-                (ranges.len() - 1) as u32
+                Idx::new(ranges.len() - 1)
             })
     }
 
     /// The EU range of an entry when it is analog (percent deadband applies).
     pub fn analog_range(&self, e: &SourceEntry) -> Option<(f64, f64)> {
-        e.is_analog().then(|| self.eu_ranges[e.eu_range as usize])
+        e.eu_range.map(|i| self.eu_ranges[i])
     }
 
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
@@ -678,9 +661,9 @@ impl SourceTable {
         if !e.has_own_sample() {
             return RateSet::Empty;
         }
-        let s = &self.samples[e.sample as usize];
+        let s = &self.samples[e.live_sample()];
         if e.flags & MANY_RATES != 0 {
-            RateSet::Many(s.sub_rate)
+            RateSet::Many(Idx::from_raw(s.sub_rate))
         } else if s.refs == 0 {
             RateSet::Empty
         } else {
@@ -699,13 +682,13 @@ impl SourceTable {
             debug_assert_eq!(r, RateSet::Empty);
             return;
         }
-        let s = &mut self.samples[e.sample as usize];
+        let s = &mut self.samples[e.live_sample()];
         (s.sub_rate, s.refs) = match r {
             RateSet::Empty => (0, 0),
             RateSet::One { rate, count } => (rate, count),
-            RateSet::Many(slot) => {
+            RateSet::Many(list) => {
                 e.flags |= MANY_RATES;
-                (slot, 0)
+                (list.raw(), 0)
             }
         };
     }
@@ -714,7 +697,7 @@ impl SourceTable {
     pub fn announced_rate(&self, idx: u32) -> u32 {
         let e = &self.entries[idx as usize];
         if e.has_own_sample() {
-            self.samples[e.sample as usize].announced_rate
+            self.samples[e.live_sample()].announced_rate
         } else {
             0
         }
@@ -732,25 +715,25 @@ impl SourceTable {
             },
             RateSet::One { rate: r, count } => {
                 let v = vec![(r, count), (rate, 1)];
-                let slot = match self.free_many.pop() {
-                    Some(slot) => {
-                        self.many_rates[slot as usize] = v;
-                        slot
+                let list = match self.free_many.pop() {
+                    Some(list) => {
+                        self.many_rates[list] = v;
+                        list
                     }
                     None => {
                         self.many_rates.push(v);
-                        (self.many_rates.len() - 1) as u32
+                        Idx::new(self.many_rates.len() - 1)
                     }
                 };
-                RateSet::Many(slot)
+                RateSet::Many(list)
             }
-            RateSet::Many(slot) => {
-                let v = &mut self.many_rates[slot as usize];
+            RateSet::Many(list) => {
+                let v = &mut self.many_rates[list];
                 match v.iter_mut().find(|(r, _)| *r == rate) {
                     Some((_, c)) => *c += 1,
                     None => v.push((rate, 1)),
                 }
-                RateSet::Many(slot)
+                RateSet::Many(list)
             }
         };
         self.set_rates(idx, set);
@@ -772,8 +755,8 @@ impl SourceTable {
                 }
             }
             one @ RateSet::One { .. } => one,
-            RateSet::Many(slot) => {
-                let v = &mut self.many_rates[slot as usize];
+            RateSet::Many(list) => {
+                let v = &mut self.many_rates[list];
                 if let Some(i) = v.iter().position(|(r, _)| *r == rate) {
                     v[i].1 -= 1;
                     if v[i].1 == 0 {
@@ -788,11 +771,11 @@ impl SourceTable {
                                 rate,
                                 count,
                             });
-                        self.many_rates[slot as usize] = Vec::new();
-                        self.free_many.push(slot);
+                        self.many_rates[list] = Vec::new();
+                        self.free_many.push(list);
                         set
                     }
-                    _ => RateSet::Many(slot),
+                    _ => RateSet::Many(list),
                 }
             }
         };
@@ -805,7 +788,7 @@ impl SourceTable {
         match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { rate, .. } => rate,
-            RateSet::Many(slot) => self.many_rates[slot as usize]
+            RateSet::Many(list) => self.many_rates[list]
                 .iter()
                 .map(|(r, _)| *r)
                 .min()
@@ -818,7 +801,7 @@ impl SourceTable {
         match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { count, .. } => count,
-            RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(_, c)| *c).sum(),
+            RateSet::Many(list) => self.many_rates[list].iter().map(|(_, c)| *c).sum(),
         }
     }
 
@@ -851,7 +834,7 @@ impl SourceTable {
                 // One of them is not 0: the entry has (had) subscribers, so its own sample.
                 let e = &self.entries[idx as usize];
                 let key = SourceKey::new(idx, e.generation);
-                self.samples[e.sample as usize].announced_rate = want;
+                self.samples[e.live_sample()].announced_rate = want;
                 if announced == 0 {
                     subscribe.push(Subscription {
                         item: self.source_item(idx),
@@ -887,13 +870,14 @@ impl SourceTable {
             self.enum_texts.remove(&idx);
         }
         let e = &self.entries[idx as usize];
-        self.release_sample(e.sample, e.has_own_sample());
+        self.release_sample(e.live_sample(), e.has_own_sample());
         let e = &mut self.entries[idx as usize];
         self.index
             .remove(key_hash(e.channel, Self::key_in(&self.keys.text, e)), idx);
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
-        e.sample = u32::MAX;
+        e.sample = None;
+        e.eu_range = None;
         e.flags = 0;
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
@@ -1275,7 +1259,7 @@ mod tests {
         // b's first sample: the shared state of time 7 has no entry left and is freed.
         t.apply(b, vqt(2.0, 5), Timestamp(10), &mut seq);
         assert_eq!(t.free_samples.len(), 1);
-        assert_eq!(t.samples[t.free_samples[0] as usize].refs, 0);
+        assert_eq!(t.samples[t.free_samples[0]].refs, 0);
         // A new entry at time 8 shares c's state; at 11 one is made (in the freed slot).
         let d = t.find_or_insert(&r8_def("D".into()), Timestamp(8)).unwrap();
         assert_eq!(t.entries[d as usize].sample, t.entries[c as usize].sample);
@@ -1357,7 +1341,10 @@ mod tests {
             t.add_rate(i, 1000);
         }
         t.add_rate(idx[0], 500);
-        let slots: Vec<u32> = idx.iter().map(|&i| t.entries[i as usize].sample).collect();
+        let slots: Vec<u32> = idx
+            .iter()
+            .map(|&i| t.entries[i as usize].live_sample().raw())
+            .collect();
         assert!(slots.windows(2).all(|w| w[0] + 1 == w[1]), "{slots:?}");
         assert_eq!(t.free_samples.len(), 1, "the shared state is free");
         for &i in &idx {
