@@ -132,20 +132,28 @@ pub(crate) enum RateSet {
     Many(Idx<RateList>),
 }
 
-pub(crate) const LIVE: u8 = 1;
-pub(crate) const CONSTANT: u8 = 2;
-pub(crate) const DIRTY: u8 = 4;
-/// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
-pub(crate) const ENUMERATED: u8 = 16;
-/// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates` index.
-pub(crate) const MANY_RATES: u8 = 32;
-
-/// The entry has a sample slot of its own in `SourceTable::samples`: made when it is first
-/// subscribed (so that a subscription's samples lie in the order of its entries, as the
-/// scans read them) or gets a sample otherwise (a device read), or at once for a constant;
-/// without it, `sample` names the shared initial state of the entries created at the same
-/// time.
-pub(crate) const OWN_SAMPLE: u8 = 64;
+bitflags::bitflags! {
+    /// A [`SourceEntry`]'s flags.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub(crate) struct EntryFlags: u8 {
+        /// In use (a freed entry has no flags).
+        const LIVE = 1;
+        const CONSTANT = 1 << 1;
+        /// In `SourceTable::dirty`: its subscription changed since the last flush.
+        const DIRTY = 1 << 2;
+        /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
+        const ENUMERATED = 1 << 4;
+        /// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates`
+        /// index.
+        const MANY_RATES = 1 << 5;
+        /// The entry has a sample slot of its own in `SourceTable::samples`: made when it
+        /// is first subscribed (so that a subscription's samples lie in the order of its
+        /// entries, as the scans read them) or gets a sample otherwise (a device read), or
+        /// at once for a constant; without it, `sample` names the shared initial state of
+        /// the entries created at the same time.
+        const OWN_SAMPLE = 1 << 6;
+    }
+}
 
 /// One source item in the cache (32 bytes; its key is in [`SourceTable`]'s key text and
 /// its sample and subscription state in [`SourceTable`]'s samples, no allocation of its
@@ -155,7 +163,7 @@ pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    /// The entry's [`Sample`]: its own with [`OWN_SAMPLE`], else the shared initial state
+    /// The entry's [`Sample`]: its own with [`EntryFlags::OWN_SAMPLE`], else the shared initial state
     /// (no value yet); none once the entry is freed.
     sample: Option<Idx<Sample>>,
     pub generation: u32,
@@ -166,7 +174,7 @@ pub(crate) struct SourceEntry {
     eu_range: Option<Idx<EuRange>>,
     pub canonical: VarType,
     pub access: u8,
-    pub flags: u8,
+    pub flags: EntryFlags,
 }
 
 /// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
@@ -188,7 +196,7 @@ pub(crate) struct Sample {
     quality: Quality,
     /// A shared initial state: the entries referring to it. An entry's own sample: with
     /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
-    /// (this), or with [`MANY_RATES`] the raw [`Idx`] of its list in the side table.
+    /// (this), or with [`EntryFlags::MANY_RATES`] the raw [`Idx`] of its list in the side table.
     refs: u32,
     sub_rate: u32,
     /// The sampling rate the backend was last told (0: not subscribed).
@@ -234,15 +242,15 @@ impl SampleRef<'_> {
 
 impl SourceEntry {
     pub fn is_constant(&self) -> bool {
-        self.flags & CONSTANT != 0
+        self.flags.contains(EntryFlags::CONSTANT)
     }
     /// The sample of a live entry (its own or the shared initial state).
     fn live_sample(&self) -> Idx<Sample> {
         self.sample.expect("a live entry has a sample")
     }
-    /// See [`OWN_SAMPLE`].
+    /// See [`EntryFlags::OWN_SAMPLE`].
     pub fn has_own_sample(&self) -> bool {
-        self.flags & OWN_SAMPLE != 0
+        self.flags.contains(EntryFlags::OWN_SAMPLE)
     }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
@@ -349,7 +357,11 @@ impl SourceTable {
     fn compact_keys(&mut self) {
         let live = self.keys.text.len() - self.keys.garbage;
         let mut text = String::with_capacity(live);
-        for e in self.entries.iter_mut().filter(|e| e.flags & LIVE != 0) {
+        for e in self
+            .entries
+            .iter_mut()
+            .filter(|e| e.flags.contains(EntryFlags::LIVE))
+        {
             let key = Self::key_in(&self.keys.text, e);
             e.key_at = text.len() as u32;
             text.push_str(key);
@@ -378,14 +390,17 @@ impl SourceTable {
                     ..Sample::initial(now)
                 });
                 self.put_value(sample, CachedValue::from_value(v.clone()));
-                (sample, LIVE | CONSTANT | OWN_SAMPLE)
+                (
+                    sample,
+                    EntryFlags::LIVE | EntryFlags::CONSTANT | EntryFlags::OWN_SAMPLE,
+                )
             }
-            None => (self.share_initial(now), LIVE),
+            None => (self.share_initial(now), EntryFlags::LIVE),
         };
         let eu_range = match &def.eu {
             EuInfo::Analog { low, high } => Some(self.intern_range(*low, *high)),
             EuInfo::Enumerated(_) => {
-                flags |= ENUMERATED;
+                flags |= EntryFlags::ENUMERATED;
                 None
             }
             EuInfo::None => None,
@@ -549,7 +564,7 @@ impl SourceTable {
         self.release_sample(shared, false);
         let e = &mut self.entries[idx as usize];
         e.sample = Some(own);
-        e.flags |= OWN_SAMPLE;
+        e.flags.insert(EntryFlags::OWN_SAMPLE);
         own
     }
 
@@ -610,7 +625,7 @@ impl SourceTable {
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
         self.entries
             .get(key.index() as usize)
-            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
+            .filter(|e| e.generation == key.generation() && e.flags.contains(EntryFlags::LIVE))
     }
 
     pub fn source_item(&self, idx: u32) -> SourceItem {
@@ -625,8 +640,8 @@ impl SourceTable {
 
     fn mark_dirty(&mut self, idx: u32) {
         let e = &mut self.entries[idx as usize];
-        if e.flags & DIRTY == 0 {
-            e.flags |= DIRTY;
+        if !e.flags.contains(EntryFlags::DIRTY) {
+            e.flags.insert(EntryFlags::DIRTY);
             self.dirty.push(idx);
         }
     }
@@ -648,7 +663,7 @@ impl SourceTable {
         let e = &self.entries[idx as usize];
         if let Some((low, high)) = self.analog_range(e) {
             EuInfo::Analog { low, high }
-        } else if e.flags & ENUMERATED != 0 {
+        } else if e.flags.contains(EntryFlags::ENUMERATED) {
             EuInfo::Enumerated(self.enum_texts.get(&idx).cloned().unwrap_or_default())
         } else {
             EuInfo::None
@@ -662,7 +677,7 @@ impl SourceTable {
             return RateSet::Empty;
         }
         let s = &self.samples[e.live_sample()];
-        if e.flags & MANY_RATES != 0 {
+        if e.flags.contains(EntryFlags::MANY_RATES) {
             RateSet::Many(Idx::from_raw(s.sub_rate))
         } else if s.refs == 0 {
             RateSet::Empty
@@ -677,7 +692,7 @@ impl SourceTable {
     /// Sets the rates of `idx`, which has its own sample unless `r` is empty.
     fn set_rates(&mut self, idx: u32, r: RateSet) {
         let e = &mut self.entries[idx as usize];
-        e.flags &= !MANY_RATES;
+        e.flags.remove(EntryFlags::MANY_RATES);
         if !e.has_own_sample() {
             debug_assert_eq!(r, RateSet::Empty);
             return;
@@ -687,7 +702,7 @@ impl SourceTable {
             RateSet::Empty => (0, 0),
             RateSet::One { rate, count } => (rate, count),
             RateSet::Many(list) => {
-                e.flags |= MANY_RATES;
+                e.flags.insert(EntryFlags::MANY_RATES);
                 (list.raw(), 0)
             }
         };
@@ -704,7 +719,7 @@ impl SourceTable {
     }
 
     /// Counts a subscriber of `idx` at `rate` (the first gives the entry its own sample
-    /// slot, see [`OWN_SAMPLE`]).
+    /// slot, see [`EntryFlags::OWN_SAMPLE`]).
     pub fn add_rate(&mut self, idx: u32, rate: u32) {
         self.own_sample(idx);
         let set = match self.rates(idx) {
@@ -808,7 +823,9 @@ impl SourceTable {
     /// Sources with at least one subscriber.
     pub fn subscribed(&self) -> usize {
         (0..self.entries.len() as u32)
-            .filter(|&i| self.entries[i as usize].flags & LIVE != 0 && self.subscribers(i) > 0)
+            .filter(|&i| {
+                self.entries[i as usize].flags.contains(EntryFlags::LIVE) && self.subscribers(i) > 0
+            })
             .count()
     }
 
@@ -825,8 +842,8 @@ impl SourceTable {
         for &idx in &dirty {
             let want = self.fastest(idx);
             let e = &mut self.entries[idx as usize];
-            e.flags &= !DIRTY;
-            if e.flags & LIVE == 0 {
+            e.flags.remove(EntryFlags::DIRTY);
+            if !e.flags.contains(EntryFlags::LIVE) {
                 continue;
             }
             let announced = self.announced_rate(idx);
@@ -866,7 +883,10 @@ impl SourceTable {
     }
 
     fn free_entry(&mut self, idx: u32) {
-        if self.entries[idx as usize].flags & ENUMERATED != 0 {
+        if self.entries[idx as usize]
+            .flags
+            .contains(EntryFlags::ENUMERATED)
+        {
             self.enum_texts.remove(&idx);
         }
         let e = &self.entries[idx as usize];
@@ -878,7 +898,7 @@ impl SourceTable {
         e.key_len = 0;
         e.sample = None;
         e.eu_range = None;
-        e.flags = 0;
+        e.flags = EntryFlags::empty();
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
         self.live -= 1;

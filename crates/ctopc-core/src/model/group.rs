@@ -5,7 +5,7 @@ use super::buffer::ItemBuffer;
 use super::cache::CachedValue;
 use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle, SessionHandle};
-use super::item::{GroupItem, ItemOpts, ALIAS, BUFFERED, REMOVED, SENT, SUBSCRIBED};
+use super::item::{GroupItem, ItemFlags, ItemOpts};
 use super::util::IntMap;
 use super::Revised;
 use crate::{OpcError, Timestamp};
@@ -158,7 +158,7 @@ impl Group {
         } else {
             self.items.iter().position(|it| it.handle == handle)?
         };
-        (self.items[i].flags & REMOVED == 0).then_some(i)
+        (!self.items[i].flags.contains(ItemFlags::REMOVED)).then_some(i)
     }
 
     /// Callbacks are due: active, live, sink connected, enabled.
@@ -177,7 +177,7 @@ impl Group {
     /// Every active item is reported at the next update (group or callback became active).
     pub fn resend_all(&mut self) {
         for it in &mut self.items {
-            it.flags &= !SENT;
+            it.flags.remove(ItemFlags::SENT);
         }
         self.needs_scan = true;
     }
@@ -390,9 +390,9 @@ impl Engine {
 
     /// Drops the cache and name references of a removed item.
     pub(crate) fn release_item_refs(&mut self, it: &GroupItem) {
-        debug_assert_eq!(it.flags & SUBSCRIBED, 0);
+        debug_assert!(!it.flags.contains(ItemFlags::SUBSCRIBED));
         self.sources.release(it.source);
-        if it.flags & ALIAS != 0 {
+        if it.flags.contains(ItemFlags::ALIAS) {
             self.names.release(it.name);
         }
     }
@@ -630,9 +630,10 @@ impl Engine {
             if let Some(&o) = opts.get(&old) {
                 clone.opts.insert(it.handle, o);
             }
-            it.flags &= !(SENT | SUBSCRIBED | BUFFERED);
+            it.flags
+                .remove(ItemFlags::SENT | ItemFlags::SUBSCRIBED | ItemFlags::BUFFERED);
             self.sources.add_ref(it.source);
-            if it.flags & ALIAS != 0 {
+            if it.flags.contains(ItemFlags::ALIAS) {
                 self.names.add_ref(it.name);
             }
             clone.items.push(it);
