@@ -39,7 +39,7 @@ use std::hash::Hash;
 use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
-use ctopc_core::compact::{grow_exact, Growth, Idx};
+use ctopc_core::compact::{grow_exact, Growth, Idx, PackedValue, SideMap};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -308,6 +308,15 @@ impl VarEntry {
     }
 }
 
+/// A short variable's last sample (24 bytes, and as an `Option` too): its value packed, a
+/// string or array in [`Vars::last_values`] by slot index.
+#[derive(Clone, Copy)]
+struct Last {
+    value: PackedValue,
+    quality: Quality,
+    timestamp: Timestamp,
+}
+
 /// The raw variables wanted by subscribed items. Most variables of a large subscription
 /// of the simulation are read by exactly one item, with no item's rules reading them and
 /// no sample kept: such a variable's entry is that item's slot index, 4 bytes besides the
@@ -315,7 +324,7 @@ impl VarEntry {
 /// a [`VarState`] would add 40). The others have a [`VarState`] in `rich`, and go back to
 /// the short form once they are plain again ([`Vars::settle`]). A source that cannot peek
 /// (the network) keeps every sampled variable's last sample: a short variable's is in
-/// `lasts` at its item's slot index (48 bytes, where a [`VarState`] and a boxed sample
+/// `lasts` at its item's slot index (24 bytes, where a [`VarState`] and a boxed sample
 /// would take 88).
 struct Vars<V> {
     map: HashMap<V, VarEntry>,
@@ -323,8 +332,10 @@ struct Vars<V> {
     /// Indices of `rich` free for reuse.
     free: Vec<Idx<VarState>>,
     /// The last samples of short variables, at their items' slot indices; empty while none
-    /// is kept (the simulation's plain variables keep none).
-    lasts: Vec<Option<Vqt>>,
+    /// is kept (the simulation's plain variables keep none) ...
+    lasts: Vec<Option<Last>>,
+    /// ... and their string and array values, by slot index.
+    last_values: SideMap<u32, Value>,
 }
 
 /// A variable's entry in [`Vars`], read.
@@ -341,6 +352,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
             rich: Vec::new(),
             free: Vec::new(),
             lasts: Vec::new(),
+            last_values: SideMap::default(),
         }
     }
 
@@ -352,10 +364,17 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     }
 
     /// The variable's last sample, if kept.
-    fn last(&self, v: &V) -> Option<&Vqt> {
+    fn last(&self, v: &V) -> Option<Vqt> {
         match self.get(v)? {
-            VarRef::One(i) => self.lasts.get(i as usize)?.as_ref(),
-            VarRef::Rich(st) => st.last.as_deref(),
+            VarRef::One(i) => {
+                let last = self.lasts.get(i as usize)?.as_ref()?;
+                Some(Vqt {
+                    value: self.last_values.get(last.value, i).into_owned(),
+                    quality: last.quality,
+                    timestamp: last.timestamp,
+                })
+            }
+            VarRef::Rich(st) => st.last.as_deref().cloned(),
         }
     }
 
@@ -461,19 +480,30 @@ impl<V: Eq + Hash + Clone> Vars<V> {
 
     /// Takes the last sample kept at slot index `i`.
     fn take_last(&mut self, i: u32) -> Option<Vqt> {
-        self.lasts.get_mut(i as usize)?.take()
+        let mut last = self.lasts.get_mut(i as usize)?.take()?;
+        Some(Vqt {
+            value: self.last_values.take(&mut last.value, i),
+            quality: last.quality,
+            timestamp: last.timestamp,
+        })
     }
 
-    /// The room for the last sample at slot index `i`, made if need be (by what is missing,
-    /// or a quarter: the slots are dense).
-    fn last_at(&mut self, i: u32) -> &mut Option<Vqt> {
-        let i = i as usize;
-        if i >= self.lasts.len() {
-            let need = i + 1 - self.lasts.len();
+    /// Keeps `vqt` as the last sample at slot index `i`, with room made if need be (by what
+    /// is missing, or a quarter: the slots are dense).
+    fn put_last(&mut self, i: u32, vqt: Vqt) {
+        let at = i as usize;
+        if at >= self.lasts.len() {
+            let need = at + 1 - self.lasts.len();
             grow_exact(&mut self.lasts, need, Growth::quarter(16));
-            self.lasts.resize(i + 1, None);
+            self.lasts.resize(at + 1, None);
         }
-        &mut self.lasts[i]
+        let last = self.lasts[at].get_or_insert(Last {
+            value: PackedValue::EMPTY,
+            quality: vqt.quality,
+            timestamp: vqt.timestamp,
+        });
+        (last.quality, last.timestamp) = (vqt.quality, vqt.timestamp);
+        self.last_values.put(&mut last.value, i, vqt.value);
     }
 
     fn free_rich(&mut self, i: Idx<VarState>) {
@@ -490,7 +520,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
         let at = self.map.get(v).map(|e| e.at());
         match (last, at) {
-            (Some(vqt), Some(VarAt::One(i))) => *self.last_at(i) = Some(vqt),
+            (Some(vqt), Some(VarAt::One(i))) => self.put_last(i, vqt),
             (Some(vqt), _) => match &mut self.rich_mut(v, one).last {
                 Some(last) => **last = vqt,
                 last @ None => *last = Some(Box::new(vqt)),
@@ -530,7 +560,7 @@ impl<V: Eq + Hash + Clone> Vars<V> {
             return;
         }
         if let Some(last) = self.rich[i].last.take() {
-            self.lasts[k as usize] = Some(*last);
+            self.put_last(k, *last);
         }
         if let Some(e) = self.map.get_mut(v) {
             *e = short;
@@ -699,7 +729,7 @@ impl<S: VariableSource> AsixBackend<S> {
 
     /// A variable's current raw VQT: the source's, else the last sample.
     fn current(&self, v: &S::Var) -> Option<Vqt> {
-        self.source.peek(v).or_else(|| self.vars.last(v).cloned())
+        self.source.peek(v).or_else(|| self.vars.last(v))
     }
 
     /// An item's VQT from a raw sample of its variable (quality rules over the current
@@ -1824,7 +1854,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
         assert_eq!(std::mem::size_of::<Option<Slot<u32>>>(), 24);
-        assert_eq!(std::mem::size_of::<Option<Vqt>>(), 48);
+        assert_eq!(std::mem::size_of::<Option<Last>>(), 24);
     }
 
     /// A variable read by one item and nothing else is that item's slot index; a second
@@ -1866,7 +1896,7 @@ mod tests {
         assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], false)));
         vars.set_last(&2, Some(Vqt::default()), one);
         assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], true)));
-        assert_eq!(vars.last(&2), Some(&Vqt::default()));
+        assert_eq!(vars.last(&2), Some(Vqt::default()));
         vars.remove_rule_user(&2, c);
         vars.settle(&2);
         assert!(
@@ -1884,17 +1914,17 @@ mod tests {
         let x = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
         vars.set_last(&1, Some(x(1.0)), one);
         assert_eq!(short(&vars, 1), Some(b.index()));
-        assert_eq!(vars.last(&1), Some(&x(1.0)));
+        assert_eq!(vars.last(&1), Some(x(1.0)));
         vars.set_last(&1, Some(x(2.0)), one);
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         vars.add_item(&1, a, one);
         assert_eq!(rich(&vars, 1), Some((vec![b, a], vec![], true)));
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         assert!(vars.lasts.iter().all(Option::is_none));
         vars.remove_item(&1, a);
         vars.settle(&1);
         assert_eq!(short(&vars, 1), Some(b.index()), "with its sample");
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         vars.set_last(&1, None, one);
         assert_eq!(vars.last(&1), None);
         assert_eq!(short(&vars, 1), Some(b.index()));
@@ -1925,5 +1955,35 @@ mod tests {
         assert_eq!(short(&vars, 2), Some(c.index()), "another item's");
         vars.remove(&2);
         assert!(vars.map.is_empty() && vars.rich.is_empty() && vars.free.is_empty());
+    }
+
+    /// A short variable keeps a string or array sample aside, by its item's slot index,
+    /// while it is the last; it moves with the sample into a full state and back.
+    #[test]
+    fn a_short_variables_string_sample_is_kept_aside() {
+        let (a, b) = (SourceKey::new(3, 0), SourceKey::new(4, 0));
+        let one = |i: u32| (i == a.index()).then_some(a);
+        let text = Vqt::new(Value::Bstr("on".into()), Quality::GOOD, T);
+        let num = Vqt::new(Value::R4(1.0), Quality::UNCERTAIN, T);
+        let mut vars = Vars::new();
+        vars.add_item(&1, a, one);
+        vars.set_last(&1, Some(text.clone()), one);
+        assert_eq!(vars.last(&1), Some(text.clone()));
+        assert_eq!(vars.last_values.len(), 1);
+        vars.set_last(&1, Some(num.clone()), one);
+        assert_eq!(vars.last(&1), Some(num));
+        assert!(vars.last_values.is_empty(), "a number follows");
+        vars.set_last(&1, Some(text.clone()), one);
+        vars.add_item(&1, b, one);
+        assert!(matches!(vars.get(&1), Some(VarRef::Rich(_))));
+        assert!(vars.last_values.is_empty(), "moved into the full state");
+        assert_eq!(vars.last(&1), Some(text.clone()));
+        vars.remove_item(&1, b);
+        vars.settle(&1);
+        assert!(matches!(vars.get(&1), Some(VarRef::One(3))));
+        assert_eq!(vars.last(&1), Some(text));
+        assert_eq!(vars.last_values.len(), 1);
+        vars.remove(&1);
+        assert!(vars.last_values.is_empty() && vars.lasts.iter().all(Option::is_none));
     }
 }

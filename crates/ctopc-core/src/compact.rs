@@ -7,14 +7,23 @@
 //! - [`Idx`]: an index into a table of one type, in 4 bytes with a niche, so that
 //!   `Option<Idx<T>>` is 4 bytes too and says "none" without a sentinel value
 //!   (rust-analyzer's `la-arena` `Idx`, over a non-max `u32`);
+//! - [`PackedValue`] and [`SideMap`]: "a number inline, else shared": a row keeps a
+//!   number's type and bits in 10 bytes, or a mark that its value (a string, an array) is
+//!   in the table's side map under the row's key;
 //! - [`grow_exact`]: a table grows by a quarter, not double, or by what a large call says
-//!   it needs.
+//!   it needs;
+//! - flags are `bitflags` types of each table's own (`EntryFlags`, `ItemFlags`), so that
+//!   one table's flag cannot be tested on another's row.
 
+use std::borrow::Cow;
+use std::collections::HashMap;
 use std::fmt;
-use std::hash::{Hash, Hasher};
+use std::hash::{BuildHasherDefault, Hash, Hasher};
 use std::marker::PhantomData;
 use std::num::NonZeroU32;
 use std::ops::{Index, IndexMut};
+
+use crate::{Value, VarType};
 
 /// A `u32` that is never `u32::MAX`, held as the `NonZeroU32` of its complement, so that
 /// `Option<NonMaxU32>` is 4 bytes.
@@ -193,14 +202,274 @@ pub fn grow_exact<T: Room + ?Sized>(table: &mut T, need: usize, growth: Growth) 
     }
 }
 
+/// The types of the numbers a [`PackedValue`] holds inline: [`Value`]'s scalars, by their
+/// VARTYPE. An enum, so that the values no type takes are niches for
+/// `Option<PackedValue>` and the shared mark.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u16)]
+enum NumType {
+    Empty = VarType::EMPTY.0,
+    I2 = VarType::I2.0,
+    I4 = VarType::I4.0,
+    R4 = VarType::R4.0,
+    R8 = VarType::R8.0,
+    Cy = VarType::CY.0,
+    Date = VarType::DATE.0,
+    Error = VarType::ERROR.0,
+    Bool = VarType::BOOL.0,
+    I1 = VarType::I1.0,
+    UI1 = VarType::UI1.0,
+    UI2 = VarType::UI2.0,
+    UI4 = VarType::UI4.0,
+    I8 = VarType::I8.0,
+    UI8 = VarType::UI8.0,
+}
+
+/// A scalar value as its type and bits, exact (an `f64`'s sign of zero and NaN payload
+/// included).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Num {
+    vt: NumType,
+    bits: u64,
+}
+
+impl Num {
+    pub const EMPTY: Num = Num {
+        vt: NumType::Empty,
+        bits: 0,
+    };
+
+    /// `v` as a number; `None` for a string or an array.
+    pub fn of(v: &Value) -> Option<Num> {
+        let (vt, bits) = match *v {
+            Value::Empty => (NumType::Empty, 0),
+            Value::I1(x) => (NumType::I1, x as i64 as u64),
+            Value::UI1(x) => (NumType::UI1, u64::from(x)),
+            Value::I2(x) => (NumType::I2, x as i64 as u64),
+            Value::UI2(x) => (NumType::UI2, u64::from(x)),
+            Value::I4(x) => (NumType::I4, x as i64 as u64),
+            Value::UI4(x) => (NumType::UI4, u64::from(x)),
+            Value::I8(x) => (NumType::I8, x as u64),
+            Value::UI8(x) => (NumType::UI8, x),
+            Value::R4(x) => (NumType::R4, u64::from(x.to_bits())),
+            Value::R8(x) => (NumType::R8, x.to_bits()),
+            Value::Cy(x) => (NumType::Cy, x as u64),
+            Value::Date(x) => (NumType::Date, x.to_bits()),
+            Value::Bool(b) => (NumType::Bool, u64::from(b)),
+            Value::Error(e) => (NumType::Error, e as i64 as u64),
+            Value::Bstr(_) | Value::Array(_) => return None,
+        };
+        Some(Num { vt, bits })
+    }
+
+    pub fn vt(self) -> VarType {
+        VarType(self.vt as u16)
+    }
+
+    pub fn to_value(self) -> Value {
+        let bits = self.bits;
+        match self.vt {
+            NumType::Empty => Value::Empty,
+            NumType::I1 => Value::I1(bits as i8),
+            NumType::UI1 => Value::UI1(bits as u8),
+            NumType::I2 => Value::I2(bits as i16),
+            NumType::UI2 => Value::UI2(bits as u16),
+            NumType::I4 => Value::I4(bits as i32),
+            NumType::UI4 => Value::UI4(bits as u32),
+            NumType::I8 => Value::I8(bits as i64),
+            NumType::UI8 => Value::UI8(bits),
+            NumType::R4 => Value::R4(f32::from_bits(bits as u32)),
+            NumType::R8 => Value::R8(f64::from_bits(bits)),
+            NumType::Cy => Value::Cy(bits as i64),
+            NumType::Date => Value::Date(f64::from_bits(bits)),
+            NumType::Bool => Value::Bool(bits != 0),
+            NumType::Error => Value::Error(bits as i32),
+        }
+    }
+}
+
+/// A row's value in a compact table: a [`Num`] inline, or the mark that the value is
+/// shared, in the table's [`SideMap`] under the row's key. 10 bytes at an alignment of 2
+/// (packed: a row puts it beside its 16-bit fields without padding), and
+/// `Option<PackedValue>` as well.
+#[derive(Clone, Copy, PartialEq, Eq)]
+#[repr(Rust, packed(2))]
+pub struct PackedValue {
+    bits: u64,
+    /// The number's type; `None`: shared.
+    vt: Option<NumType>,
+}
+
+impl PackedValue {
+    pub const EMPTY: PackedValue = PackedValue::num(Num::EMPTY);
+    const SHARED: PackedValue = PackedValue { bits: 0, vt: None };
+
+    pub const fn num(n: Num) -> Self {
+        PackedValue {
+            bits: n.bits,
+            vt: Some(n.vt),
+        }
+    }
+
+    /// The number held inline; `None` when the value is shared.
+    pub fn get(self) -> Option<Num> {
+        let (vt, bits) = (self.vt?, self.bits);
+        Some(Num { vt, bits })
+    }
+
+    pub fn is_shared(self) -> bool {
+        self.vt.is_none()
+    }
+}
+
+impl fmt::Debug for PackedValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.get() {
+            Some(n) => n.fmt(f),
+            None => f.write_str("Shared"),
+        }
+    }
+}
+
+/// A value a [`SideMap`] keeps: a number inline, else the value itself aside.
+pub trait Packable: Sized {
+    /// The value as a number; `None` keeps it aside.
+    fn as_num(&self) -> Option<Num>;
+    fn from_num(n: Num) -> Self;
+}
+
+impl Packable for Value {
+    fn as_num(&self) -> Option<Num> {
+        Num::of(self)
+    }
+    fn from_num(n: Num) -> Self {
+        n.to_value()
+    }
+}
+
+/// A multiplicative hasher for integer keys (server handles, indices). They are the
+/// server's own, so there is no flooding concern; std's SipHash would cost more than the
+/// lookup itself.
+#[derive(Default, Clone, Copy)]
+pub struct IntHasher(u64);
+
+impl Hasher for IntHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+    fn write_u32(&mut self, n: u32) {
+        self.0 = (self.0 ^ u64::from(n)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = (self.0 ^ n).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+/// The shared values of a compact table's rows, by the rows' keys: the other half of their
+/// [`PackedValue`]s. Every change of a row's value goes through here, so that a row is
+/// marked shared exactly while the map holds its value.
+pub struct SideMap<K, V> {
+    map: HashMap<K, V, BuildHasherDefault<IntHasher>>,
+}
+
+impl<K, V> Default for SideMap<K, V> {
+    fn default() -> Self {
+        SideMap {
+            map: HashMap::default(),
+        }
+    }
+}
+
+impl<K: Copy + Eq + Hash, V: Packable> SideMap<K, V> {
+    /// Stores `v` as the value of row `key`, whose packed value is `at`: a number in `at`
+    /// (a shared value the row had leaves the map), anything else in the map.
+    pub fn put(&mut self, at: &mut PackedValue, key: K, v: V) {
+        match v.as_num() {
+            Some(n) => self.put_num(at, key, n),
+            None => {
+                *at = PackedValue::SHARED;
+                self.map.insert(key, v);
+            }
+        }
+    }
+
+    /// Stores the number `n` as the value of row `key`.
+    pub fn put_num(&mut self, at: &mut PackedValue, key: K, n: Num) {
+        if at.is_shared() {
+            self.map.remove(&key);
+        }
+        *at = PackedValue::num(n);
+    }
+
+    /// The value of row `key`: a number made from `at`, a shared value borrowed.
+    pub fn get(&self, at: PackedValue, key: K) -> Cow<'_, V>
+    where
+        V: Clone,
+    {
+        match at.get() {
+            Some(n) => Cow::Owned(V::from_num(n)),
+            None => self
+                .map
+                .get(&key)
+                .map_or_else(|| Cow::Owned(V::from_num(Num::EMPTY)), Cow::Borrowed),
+        }
+    }
+
+    /// The shared value of row `key`, if `at` marks one.
+    pub fn shared(&self, at: PackedValue, key: K) -> Option<&V> {
+        if at.is_shared() {
+            self.map.get(&key)
+        } else {
+            None
+        }
+    }
+
+    /// Takes the value of row `key` out; `at` becomes empty.
+    pub fn take(&mut self, at: &mut PackedValue, key: K) -> V {
+        let v = match at.get() {
+            Some(n) => V::from_num(n),
+            None => self
+                .map
+                .remove(&key)
+                .unwrap_or_else(|| V::from_num(Num::EMPTY)),
+        };
+        *at = PackedValue::EMPTY;
+        v
+    }
+
+    /// Forgets the value of row `key`; `at` becomes empty.
+    pub fn forget(&mut self, at: &mut PackedValue, key: K) {
+        self.put_num(at, key, Num::EMPTY);
+    }
+
+    /// The shared values held.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::value::ArrayValue;
+    use std::mem::size_of;
 
     #[test]
-    fn indices_have_a_niche() {
-        assert_eq!(std::mem::size_of::<Idx<String>>(), 4);
-        assert_eq!(std::mem::size_of::<Option<Idx<String>>>(), 4);
+    fn indices_and_packed_values_have_niches() {
+        assert_eq!(size_of::<Idx<String>>(), 4);
+        assert_eq!(size_of::<Option<Idx<String>>>(), 4);
+        assert_eq!(size_of::<PackedValue>(), 10);
+        assert_eq!(std::mem::align_of::<PackedValue>(), 2);
+        assert_eq!(size_of::<Option<PackedValue>>(), 10);
     }
 
     #[test]
@@ -237,5 +506,57 @@ mod tests {
         let mut s = String::new();
         grow_exact(&mut s, 5, Growth::quarter(4096));
         assert_eq!(s.capacity(), 4096);
+    }
+
+    #[test]
+    fn numbers_round_trip_exactly() {
+        let values = [
+            Value::Empty,
+            Value::I1(-3),
+            Value::UI1(200),
+            Value::I2(-30000),
+            Value::UI2(65000),
+            Value::I4(-7),
+            Value::UI4(4_000_000_000),
+            Value::I8(i64::MIN),
+            Value::UI8(u64::MAX),
+            Value::R4(1.5),
+            Value::R8(-0.0),
+            Value::Cy(123_456),
+            Value::Date(45_000.25),
+            Value::Bool(true),
+            Value::Error(-2147352571),
+        ];
+        for v in values {
+            let n = Num::of(&v).expect("a number");
+            assert_eq!(n.to_value(), v);
+            assert_eq!(PackedValue::num(n).get(), Some(n));
+            assert_eq!(n.vt(), v.var_type());
+        }
+        assert_eq!(Num::of(&Value::Bstr("x".into())), None);
+        let array = Value::Array(ArrayValue::new(VarType::I4, vec![Value::I4(1)]));
+        assert_eq!(Num::of(&array), None);
+    }
+
+    /// A row is marked shared exactly while the map holds its value.
+    #[test]
+    fn shared_values_are_aside_while_the_row_is_marked() {
+        let mut side: SideMap<u32, Value> = SideMap::default();
+        let (mut a, mut b) = (PackedValue::EMPTY, PackedValue::EMPTY);
+        side.put(&mut a, 1, Value::Bstr("x".into()));
+        side.put(&mut b, 2, Value::R8(2.5));
+        assert!(a.is_shared() && !b.is_shared());
+        assert_eq!(side.len(), 1);
+        assert!(matches!(side.get(a, 1), Cow::Borrowed(Value::Bstr(s)) if s == "x"));
+        assert_eq!(side.get(b, 2).into_owned(), Value::R8(2.5));
+        assert_eq!(side.shared(b, 2), None);
+        side.put(&mut a, 1, Value::I4(3));
+        assert!(side.is_empty());
+        side.put(&mut a, 1, Value::Bstr("y".into()));
+        assert_eq!(side.take(&mut a, 1), Value::Bstr("y".into()));
+        assert!(side.is_empty() && a == PackedValue::EMPTY);
+        side.put(&mut b, 2, Value::Bstr("z".into()));
+        side.forget(&mut b, 2);
+        assert!(side.is_empty() && b == PackedValue::EMPTY);
     }
 }

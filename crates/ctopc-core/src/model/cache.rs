@@ -8,60 +8,37 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
 use super::boundary::{SourceItem, SourceKey, SourceRequest, Subscription};
-use super::util::{IntMap, Interner};
-use crate::compact::{grow_exact, Growth, Idx};
+use super::util::Interner;
+use crate::compact::{grow_exact, Growth, Idx, Num, Packable, PackedValue, SideMap};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
 /// "Never refreshed by the source."
 pub(crate) const NEVER: Timestamp = Timestamp(i64::MIN);
 
-/// A value as the cache and the last-sent state of group items hold it: numbers inline
-/// (type and bits, exact), strings and arrays shared.
+/// A value as the engine works with it (the cache's samples, the value last sent to a
+/// group, the values of a transaction): a number (type and bits, exact), or a string or
+/// array shared. The tables keep it packed ([`PackedValue`] with a [`SideMap`]).
 #[derive(Debug, Clone)]
 pub(crate) enum CachedValue {
-    Num { vt: VarType, bits: u64 },
+    Num(Num),
     Shared(Arc<Value>),
 }
 
-fn num_bits(v: &Value) -> Option<(VarType, u64)> {
-    Some(match *v {
-        Value::Empty => (VarType::EMPTY, 0),
-        Value::I1(x) => (VarType::I1, x as i64 as u64),
-        Value::UI1(x) => (VarType::UI1, u64::from(x)),
-        Value::I2(x) => (VarType::I2, x as i64 as u64),
-        Value::UI2(x) => (VarType::UI2, u64::from(x)),
-        Value::I4(x) => (VarType::I4, x as i64 as u64),
-        Value::UI4(x) => (VarType::UI4, u64::from(x)),
-        Value::I8(x) => (VarType::I8, x as u64),
-        Value::UI8(x) => (VarType::UI8, x),
-        Value::R4(x) => (VarType::R4, u64::from(x.to_bits())),
-        Value::R8(x) => (VarType::R8, x.to_bits()),
-        Value::Cy(x) => (VarType::CY, x as u64),
-        Value::Date(x) => (VarType::DATE, x.to_bits()),
-        Value::Bool(b) => (VarType::BOOL, u64::from(b)),
-        Value::Error(e) => (VarType::ERROR, e as i64 as u64),
-        Value::Bstr(_) | Value::Array(_) => return None,
-    })
-}
-
 impl CachedValue {
-    pub const EMPTY: CachedValue = CachedValue::Num {
-        vt: VarType::EMPTY,
-        bits: 0,
-    };
+    pub const EMPTY: CachedValue = CachedValue::Num(Num::EMPTY);
 
     pub fn from_value(v: Value) -> Self {
-        match num_bits(&v) {
-            Some((vt, bits)) => CachedValue::Num { vt, bits },
+        match Num::of(&v) {
+            Some(n) => CachedValue::Num(n),
             None => CachedValue::Shared(Arc::new(v)),
         }
     }
 
     /// Equal to `v` (same type, same bits or equal contents), without allocating.
     pub fn same_as(&self, v: &Value) -> bool {
-        match (self, num_bits(v)) {
-            (CachedValue::Num { vt, bits }, Some((vt2, bits2))) => *vt == vt2 && *bits == bits2,
+        match (self, Num::of(v)) {
+            (CachedValue::Num(a), Some(b)) => *a == b,
             (CachedValue::Shared(a), None) => **a == *v,
             _ => false,
         }
@@ -70,30 +47,14 @@ impl CachedValue {
     pub fn to_value(&self) -> Value {
         match self {
             CachedValue::Shared(a) => (**a).clone(),
-            &CachedValue::Num { vt, bits } => match vt {
-                VarType::I1 => Value::I1(bits as i8),
-                VarType::UI1 => Value::UI1(bits as u8),
-                VarType::I2 => Value::I2(bits as i16),
-                VarType::UI2 => Value::UI2(bits as u16),
-                VarType::I4 => Value::I4(bits as i32),
-                VarType::UI4 => Value::UI4(bits as u32),
-                VarType::I8 => Value::I8(bits as i64),
-                VarType::UI8 => Value::UI8(bits),
-                VarType::R4 => Value::R4(f32::from_bits(bits as u32)),
-                VarType::R8 => Value::R8(f64::from_bits(bits)),
-                VarType::CY => Value::Cy(bits as i64),
-                VarType::DATE => Value::Date(f64::from_bits(bits)),
-                VarType::BOOL => Value::Bool(bits != 0),
-                VarType::ERROR => Value::Error(bits as i32),
-                _ => Value::Empty,
-            },
+            CachedValue::Num(n) => n.to_value(),
         }
     }
 
     /// The number for deadband checks (see [`Value::as_f64`]); `None` for non-numbers.
     pub fn as_f64(&self) -> Option<f64> {
         match self {
-            CachedValue::Num { .. } => self.to_value().as_f64(),
+            CachedValue::Num(n) => n.to_value().as_f64(),
             CachedValue::Shared(a) => a.as_f64(),
         }
     }
@@ -102,12 +63,22 @@ impl CachedValue {
 impl PartialEq for CachedValue {
     fn eq(&self, other: &Self) -> bool {
         match (self, other) {
-            (CachedValue::Num { vt: a, bits: x }, CachedValue::Num { vt: b, bits: y }) => {
-                a == b && x == y
-            }
+            (CachedValue::Num(a), CachedValue::Num(b)) => a == b,
             (CachedValue::Shared(a), CachedValue::Shared(b)) => Arc::ptr_eq(a, b) || **a == **b,
             _ => false,
         }
+    }
+}
+
+impl Packable for CachedValue {
+    fn as_num(&self) -> Option<Num> {
+        match self {
+            CachedValue::Num(n) => Some(*n),
+            CachedValue::Shared(_) => None,
+        }
+    }
+    fn from_num(n: Num) -> Self {
+        CachedValue::Num(n)
     }
 }
 
@@ -177,9 +148,6 @@ pub(crate) struct SourceEntry {
     pub flags: EntryFlags,
 }
 
-/// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
-const SHARED_VALUE: VarType = VarType(u16::MAX);
-
 /// What the cache holds of an entry's value and subscription (48 bytes), apart from the
 /// entry: an item that is never subscribed nor read (in inactive groups only) costs no
 /// sample of its own (issue 16). A number is in the sample (type and bits), a string or array in
@@ -187,12 +155,11 @@ const SHARED_VALUE: VarType = VarType(u16::MAX);
 /// [`SampleRef`].
 #[derive(Debug, Clone)]
 pub(crate) struct Sample {
-    bits: u64,
+    /// A number, or shared: in `SourceTable::shared` by sample slot.
+    value: PackedValue,
     timestamp: Timestamp,
     refreshed_at: Timestamp,
     changed_seq: u64,
-    /// The number's type, or [`SHARED_VALUE`].
-    vt: VarType,
     quality: Quality,
     /// A shared initial state: the entries referring to it. An entry's own sample: with
     /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
@@ -207,11 +174,10 @@ impl Sample {
     /// The state of an entry before its first sample, created at `now`.
     const fn initial(now: Timestamp) -> Self {
         Sample {
-            bits: 0,
+            value: PackedValue::EMPTY,
             timestamp: now,
             refreshed_at: NEVER,
             changed_seq: 0,
-            vt: VarType::EMPTY,
             quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
             refs: 0,
             sub_rate: 0,
@@ -299,7 +265,7 @@ pub(crate) struct SourceTable {
     samples: Vec<Sample>,
     free_samples: Vec<Idx<Sample>>,
     /// The string and array values of the samples, by sample slot.
-    shared: IntMap<Idx<Sample>, CachedValue>,
+    shared: SideMap<Idx<Sample>, CachedValue>,
     /// ... and the shared initial state last created, which the entries created at the
     /// same time share.
     initial: Option<Idx<Sample>>,
@@ -497,42 +463,22 @@ impl SourceTable {
                 self.initial = None;
             }
         }
-        if s.vt == SHARED_VALUE {
-            self.shared.remove(&slot);
-        }
+        self.shared.forget(&mut s.value, slot);
         *s = Sample::initial(NEVER);
         self.free_samples.push(slot);
     }
 
     /// Stores the value of the sample in `slot`.
     fn put_value(&mut self, slot: Idx<Sample>, v: CachedValue) {
-        let s = &mut self.samples[slot];
-        match v {
-            CachedValue::Num { vt, bits } => {
-                if s.vt == SHARED_VALUE {
-                    self.shared.remove(&slot);
-                }
-                (s.vt, s.bits) = (vt, bits);
-            }
-            shared @ CachedValue::Shared(_) => {
-                (s.vt, s.bits) = (SHARED_VALUE, 0);
-                self.shared.insert(slot, shared);
-            }
-        }
+        self.shared.put(&mut self.samples[slot].value, slot, v);
     }
 
     fn sample_at(&self, slot: Option<Idx<Sample>>) -> SampleRef<'_> {
         static FREED: Sample = Sample::initial(NEVER);
         let s = slot.map_or(&FREED, |slot| &self.samples[slot]);
         let value = match slot {
-            Some(slot) if s.vt == SHARED_VALUE => self
-                .shared
-                .get(&slot)
-                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed),
-            _ => Cow::Owned(CachedValue::Num {
-                vt: s.vt,
-                bits: s.bits,
-            }),
+            Some(slot) => self.shared.get(s.value, slot),
+            None => Cow::Owned(CachedValue::EMPTY),
         };
         SampleRef {
             value,
@@ -574,25 +520,20 @@ impl SourceTable {
         let slot = self.own_sample(idx);
         let s = &mut self.samples[slot];
         let quality_changed = s.quality != vqt.quality;
-        let value_changed = match num_bits(&vqt.value) {
-            Some((vt, bits)) => {
-                let changed = (s.vt, s.bits) != (vt, bits);
-                if changed && s.vt == SHARED_VALUE {
-                    self.shared.remove(&slot);
-                }
-                (s.vt, s.bits) = (vt, bits);
+        let value_changed = match Num::of(&vqt.value) {
+            Some(n) => {
+                let changed = s.value != PackedValue::num(n);
+                self.shared.put_num(&mut s.value, slot, n);
                 changed
             }
             None => {
-                let same = s.vt == SHARED_VALUE
-                    && self
-                        .shared
-                        .get(&slot)
-                        .is_some_and(|old| old.same_as(&vqt.value));
+                let same = self
+                    .shared
+                    .shared(s.value, slot)
+                    .is_some_and(|old| old.same_as(&vqt.value));
                 if !same {
-                    (s.vt, s.bits) = (SHARED_VALUE, 0);
-                    self.shared
-                        .insert(slot, CachedValue::Shared(Arc::new(vqt.value)));
+                    let v = CachedValue::Shared(Arc::new(vqt.value));
+                    self.shared.put(&mut s.value, slot, v);
                 }
                 !same
             }
@@ -1329,7 +1270,7 @@ mod tests {
         assert!(t
             .samples
             .iter()
-            .all(|s| s.vt == VarType::EMPTY && s.refs == 0));
+            .all(|s| s.value == PackedValue::EMPTY && s.refs == 0));
         assert!(t.shared.is_empty());
         let freed = &t.entries[x as usize];
         assert!(!freed.has_own_sample());

@@ -2,10 +2,9 @@
 //! connection state the COM layer reports (callback advised, COM references).
 
 use super::buffer::ItemBuffer;
-use super::cache::CachedValue;
 use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle, SessionHandle};
-use super::item::{GroupItem, ItemFlags, ItemOpts};
+use super::item::{GroupItem, ItemFlags, ItemOpts, Lasts};
 use super::util::IntMap;
 use super::Revised;
 use crate::{OpcError, Timestamp};
@@ -136,7 +135,7 @@ pub(crate) struct Group {
     /// The item sampling rates and deadbands of the items that have one, by server handle.
     pub opts: IntMap<u32, ItemOpts>,
     /// The string and array values last sent, by server handle ([`GroupItem::last`]).
-    pub lasts: IntMap<u32, CachedValue>,
+    pub lasts: Lasts,
     /// ... and how many they hold together.
     pub buffered: usize,
 }
@@ -292,7 +291,7 @@ impl Engine {
             first_sample_ready: false,
             buffers: IntMap::default(),
             opts: IntMap::default(),
-            lasts: IntMap::default(),
+            lasts: Lasts::default(),
             buffered: 0,
         };
         self.insert_group(group);
@@ -366,7 +365,7 @@ impl Engine {
             }
             let g = self.group_mut(slot);
             g.opts = IntMap::default();
-            g.lasts = IntMap::default();
+            g.lasts = Lasts::default();
             let (session, name) = (g.session, std::mem::take(&mut g.name));
             if let Some(s) = self.sessions.get_mut(&session.0) {
                 if s.names.get(&name) == Some(&handle) {
@@ -613,14 +612,14 @@ impl Engine {
             first_sample_ready: false,
             buffers: IntMap::default(),
             opts: IntMap::default(),
-            lasts: IntMap::default(),
+            lasts: Lasts::default(),
             buffered: 0,
         };
         let items: Vec<GroupItem> = src.items.clone();
         let opts = src.opts.clone();
         for mut it in items {
             // Nothing is sent to the clone yet (no SENT): its last value does not count.
-            it.forget_last(&mut IntMap::default());
+            it.forget_last(&mut Lasts::default());
             let old = it.handle;
             it.handle = Self::alloc_item_handle(
                 &mut self.next_item_handle,

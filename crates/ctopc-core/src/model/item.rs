@@ -10,6 +10,7 @@ use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle};
 use super::util::IntMap;
 use super::Revised;
+use crate::compact::{PackedValue, SideMap};
 use crate::namespace::{EuInfo, ItemDef};
 use crate::{OpcError, Quality, Timestamp, VarType};
 
@@ -73,16 +74,18 @@ bitflags::bitflags! {
     }
 }
 
-/// [`GroupItem::last_vt`] of a string or array value, which is in `Group::lasts`.
-const SHARED_LAST: VarType = VarType(u16::MAX);
+/// A group's values last sent that are strings or arrays, by server handle
+/// ([`GroupItem::last`]).
+pub(crate) type Lasts = SideMap<u32, CachedValue>;
 
 /// An item in a group: 32 bytes, no strings (the item ID and access path are interned;
 /// its sampling rate and deadband, rarely set, are in [`ItemOpts`]; a string or array
 /// value last sent is in `Group::lasts`). Checked by `group_items_stay_small` below.
 #[derive(Debug, Clone)]
 pub(crate) struct GroupItem {
-    /// The value last sent to the group ([`GroupItem::last`]): a number's bits ...
-    last_bits: u64,
+    /// The value last sent to the group ([`GroupItem::last`]): a number, or shared in the
+    /// group's [`Lasts`].
+    last: PackedValue,
     pub handle: u32,
     pub client: u32,
     /// Cache entry index.
@@ -90,8 +93,6 @@ pub(crate) struct GroupItem {
     /// Access path id, or alias name id with [`ItemFlags::ALIAS`].
     pub name: u32,
     pub req_type: VarType,
-    /// ... and its type, or [`SHARED_LAST`].
-    last_vt: VarType,
     pub last_quality: Quality,
     pub flags: ItemFlags,
 }
@@ -100,13 +101,12 @@ impl GroupItem {
     /// A new item: nothing sent yet.
     pub fn new(handle: u32, client: u32, source: u32, name: u32, req_type: VarType) -> Self {
         GroupItem {
-            last_bits: 0,
+            last: PackedValue::EMPTY,
             handle,
             client,
             source,
             name,
             req_type,
-            last_vt: VarType::EMPTY,
             last_quality: Quality::BAD,
             flags: ItemFlags::empty(),
         }
@@ -116,44 +116,22 @@ impl GroupItem {
         self.flags.contains(ItemFlags::ACTIVE)
     }
 
-    /// The value last sent to the group (meaningful with [`ItemFlags::SENT`]), given the group's
-    /// `lasts`.
-    pub fn last<'a>(&self, lasts: &'a IntMap<u32, CachedValue>) -> Cow<'a, CachedValue> {
-        if self.last_vt != SHARED_LAST {
-            return Cow::Owned(CachedValue::Num {
-                vt: self.last_vt,
-                bits: self.last_bits,
-            });
-        }
-        lasts
-            .get(&self.handle)
-            .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+    /// The value last sent to the group (meaningful with [`ItemFlags::SENT`]), given the
+    /// group's `lasts`.
+    pub fn last<'a>(&self, lasts: &'a Lasts) -> Cow<'a, CachedValue> {
+        lasts.get(self.last, self.handle)
     }
 
     /// Records the value and quality sent to the group.
-    pub fn set_last(&mut self, lasts: &mut IntMap<u32, CachedValue>, v: CachedValue, q: Quality) {
+    pub fn set_last(&mut self, lasts: &mut Lasts, v: CachedValue, q: Quality) {
         self.last_quality = q;
-        match v {
-            CachedValue::Num { vt, bits } => {
-                if self.last_vt == SHARED_LAST {
-                    lasts.remove(&self.handle);
-                }
-                (self.last_vt, self.last_bits) = (vt, bits);
-            }
-            shared @ CachedValue::Shared(_) => {
-                (self.last_vt, self.last_bits) = (SHARED_LAST, 0);
-                lasts.insert(self.handle, shared);
-            }
-        }
+        lasts.put(&mut self.last, self.handle, v);
     }
 
     /// Forgets the value last sent (the item leaves the group, or is copied to another
     /// under a new handle: `lasts` is then the old group's).
-    pub fn forget_last(&mut self, lasts: &mut IntMap<u32, CachedValue>) {
-        if self.last_vt == SHARED_LAST {
-            lasts.remove(&self.handle);
-        }
-        (self.last_vt, self.last_bits) = (VarType::EMPTY, 0);
+    pub fn forget_last(&mut self, lasts: &mut Lasts) {
+        lasts.forget(&mut self.last, self.handle);
     }
 }
 
@@ -826,7 +804,7 @@ mod tests {
     /// leave it when a number follows or the item goes).
     #[test]
     fn the_last_value_sent_is_a_number_in_the_item_or_shared_in_the_map() {
-        let mut lasts = IntMap::default();
+        let mut lasts = Lasts::default();
         let (mut a, mut b) = (item(1), item(2));
         assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
         let text = CachedValue::from_value(crate::Value::Bstr("x".into()));
