@@ -32,6 +32,7 @@ pub struct NonMaxU32(NonZeroU32);
 
 impl NonMaxU32 {
     /// `v`, unless it is `u32::MAX`.
+    #[inline]
     pub const fn new(v: u32) -> Option<Self> {
         match NonZeroU32::new(!v) {
             Some(n) => Some(NonMaxU32(n)),
@@ -39,6 +40,7 @@ impl NonMaxU32 {
         }
     }
 
+    #[inline]
     pub const fn get(self) -> u32 {
         !self.0.get()
     }
@@ -60,6 +62,7 @@ pub struct Idx<T> {
 impl<T> Idx<T> {
     /// The index `i`. Panics when `i` does not fit a `u32` below `u32::MAX`: a compact
     /// table holds fewer rows.
+    #[inline]
     pub fn new(i: usize) -> Self {
         let raw = u32::try_from(i).ok().and_then(NonMaxU32::new);
         Idx {
@@ -69,15 +72,18 @@ impl<T> Idx<T> {
     }
 
     /// The index `raw` as [`Idx::raw`] gave it (panics at `u32::MAX`).
+    #[inline]
     pub fn from_raw(raw: u32) -> Self {
         Self::new(raw as usize)
     }
 
     /// The index as a `u32` (below `u32::MAX`).
+    #[inline]
     pub const fn raw(self) -> u32 {
         self.raw.get()
     }
 
+    #[inline]
     pub const fn index(self) -> usize {
         self.raw.get() as usize
     }
@@ -118,11 +124,13 @@ impl<T> fmt::Debug for Idx<T> {
 
 impl<T> Index<Idx<T>> for Vec<T> {
     type Output = T;
+    #[inline]
     fn index(&self, i: Idx<T>) -> &T {
         &self[i.index()]
     }
 }
 impl<T> IndexMut<Idx<T>> for Vec<T> {
+    #[inline]
     fn index_mut(&mut self, i: Idx<T>) -> &mut T {
         &mut self[i.index()]
     }
@@ -240,6 +248,7 @@ impl Num {
     };
 
     /// `v` as a number; `None` for a string or an array.
+    #[inline]
     pub fn of(v: &Value) -> Option<Num> {
         let (vt, bits) = match *v {
             Value::Empty => (NumType::Empty, 0),
@@ -262,10 +271,12 @@ impl Num {
         Some(Num { vt, bits })
     }
 
+    #[inline]
     pub fn vt(self) -> VarType {
         VarType(self.vt as u16)
     }
 
+    #[inline]
     pub fn to_value(self) -> Value {
         let bits = self.bits;
         match self.vt {
@@ -304,6 +315,7 @@ impl PackedValue {
     pub const EMPTY: PackedValue = PackedValue::num(Num::EMPTY);
     const SHARED: PackedValue = PackedValue { bits: 0, vt: None };
 
+    #[inline]
     pub const fn num(n: Num) -> Self {
         PackedValue {
             bits: n.bits,
@@ -312,11 +324,13 @@ impl PackedValue {
     }
 
     /// The number held inline; `None` when the value is shared.
+    #[inline]
     pub fn get(self) -> Option<Num> {
         let (vt, bits) = (self.vt?, self.bits);
         Some(Num { vt, bits })
     }
 
+    #[inline]
     pub fn is_shared(self) -> bool {
         self.vt.is_none()
     }
@@ -339,9 +353,11 @@ pub trait Packable: Sized {
 }
 
 impl Packable for Value {
+    #[inline]
     fn as_num(&self) -> Option<Num> {
         Num::of(self)
     }
+    #[inline]
     fn from_num(n: Num) -> Self {
         n.to_value()
     }
@@ -388,6 +404,7 @@ impl<K, V> Default for SideMap<K, V> {
 impl<K: Copy + Eq + Hash, V: Packable> SideMap<K, V> {
     /// Stores `v` as the value of row `key`, whose packed value is `at`: a number in `at`
     /// (a shared value the row had leaves the map), anything else in the map.
+    #[inline]
     pub fn put(&mut self, at: &mut PackedValue, key: K, v: V) {
         match v.as_num() {
             Some(n) => self.put_num(at, key, n),
@@ -399,6 +416,7 @@ impl<K: Copy + Eq + Hash, V: Packable> SideMap<K, V> {
     }
 
     /// Stores the number `n` as the value of row `key`.
+    #[inline]
     pub fn put_num(&mut self, at: &mut PackedValue, key: K, n: Num) {
         if at.is_shared() {
             self.map.remove(&key);
@@ -407,20 +425,28 @@ impl<K: Copy + Eq + Hash, V: Packable> SideMap<K, V> {
     }
 
     /// The value of row `key`: a number made from `at`, a shared value borrowed.
+    #[inline]
     pub fn get(&self, at: PackedValue, key: K) -> Cow<'_, V>
     where
         V: Clone,
     {
         match at.get() {
             Some(n) => Cow::Owned(V::from_num(n)),
-            None => self
-                .map
-                .get(&key)
-                .map_or_else(|| Cow::Owned(V::from_num(Num::EMPTY)), Cow::Borrowed),
+            None => self.get_shared(key),
         }
     }
 
+    fn get_shared(&self, key: K) -> Cow<'_, V>
+    where
+        V: Clone,
+    {
+        self.map
+            .get(&key)
+            .map_or_else(|| Cow::Owned(V::from_num(Num::EMPTY)), Cow::Borrowed)
+    }
+
     /// The shared value of row `key`, if `at` marks one.
+    #[inline]
     pub fn shared(&self, at: PackedValue, key: K) -> Option<&V> {
         if at.is_shared() {
             self.map.get(&key)
@@ -443,6 +469,7 @@ impl<K: Copy + Eq + Hash, V: Packable> SideMap<K, V> {
     }
 
     /// Forgets the value of row `key`; `at` becomes empty.
+    #[inline]
     pub fn forget(&mut self, at: &mut PackedValue, key: K) {
         self.put_num(at, key, Num::EMPTY);
     }
