@@ -1,5 +1,5 @@
 //! Every input that once failed a fuzz target (`fuzz/regressions/<target>/*`), replayed:
-//! each must now pass. A new failure found by `cargo xtask fuzz` goes there once fixed.
+//! each must pass. A new failure found by `cargo xtask fuzz` goes there once fixed.
 
 use std::path::Path;
 

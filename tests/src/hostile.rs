@@ -178,9 +178,7 @@ pub fn write_raw(io: &IOPCSyncIO, handles: &[u32], values: &[VARIANT]) -> (HRESU
         return (hr, Vec::new());
     }
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    (hr, unsafe {
-        ctopc_com::client::take_array(errors, handles.len())
-    })
+    (hr, unsafe { opc_client::take_array(errors, handles.len()) })
 }
 
 // ---- sinks ----------------------------------------------------------------------------

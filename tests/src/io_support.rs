@@ -2,8 +2,8 @@
 //! that records (or only counts) what the server calls back, and small helpers that make
 //! a group with items through IOPCServer::AddGroup and IOPCItemMgt::AddItems.
 
-use ctopc_com::client::Server;
 use ctopc_com::interfaces::*;
+use opc_client::Server;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -13,7 +13,7 @@ use windows::Win32::System::Com::CoTaskMemFree;
 use windows::Win32::System::Variant::VARIANT;
 
 /// One item of an OnDataChange / OnReadComplete (the client library's owned copy).
-pub type CbItem = ctopc_com::client::ReadItem;
+pub type CbItem = opc_client::ReadItem;
 
 /// One call the server made on the sink.
 #[derive(Debug, Clone, PartialEq)]
@@ -136,7 +136,7 @@ impl TestSink {
     }
 }
 
-use ctopc_com::client::diag::callback_items as items;
+use opc_client::diag::callback_items as items;
 
 impl IOPCDataCallback_Impl for TestSink_Impl {
     unsafe fn OnDataChange(
@@ -209,7 +209,7 @@ impl IOPCDataCallback_Impl for TestSink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the stub passes `n`-element arrays.
-        let items = unsafe { ctopc_com::client::diag::write_results(n, h, e) };
+        let items = unsafe { opc_client::diag::write_results(n, h, e) };
         self.0.push(|| Callback::WriteComplete {
             transaction,
             group,
@@ -359,7 +359,7 @@ pub fn add_items(
     }
     let n = items.len();
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    let errs = unsafe { ctopc_com::client::take_array(errors, n) };
+    let errs = unsafe { opc_client::take_array(errors, n) };
     let mut out = Vec::with_capacity(n);
     if !results.is_null() {
         // SAFETY: the server allocated `n` OPCITEMRESULTs; blobs and the block freed once.

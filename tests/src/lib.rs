@@ -16,16 +16,17 @@ pub mod probe;
 pub mod server_config;
 pub mod start;
 
-pub use ctopc_com::client::{ComThread, Server};
+pub use ctopc_com::apartment::Apartment;
 pub use ctopc_com::interfaces;
+pub use opc_client::Server;
 use std::path::PathBuf;
 use windows::core::{IUnknown, HRESULT};
 
 pub const PROGID: &str = "ServerCTOPC.App";
 
 /// Joins the MTA and connects to a new ServerCTOPC server object.
-pub fn connect() -> (ComThread, Server) {
-    let com = ComThread::mta().expect("CoInitializeEx");
+pub fn connect() -> (Apartment, Server) {
+    let com = Apartment::mta().expect("CoInitializeEx");
     let server = Server::connect(PROGID).expect("CoCreateInstance(ServerCTOPC.App)");
     (com, server)
 }

@@ -10,7 +10,7 @@
 
 use e2e_tests::da10::*;
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, connect, interfaces::*, Apartment, Server};
 use std::time::Duration;
 use windows::core::{Interface, HRESULT};
 use windows::Win32::Foundation::{
@@ -31,7 +31,7 @@ const OPC_E_INVALIDHANDLE: HRESULT = HRESULT(0xC004_0001u32 as i32);
 const TYPES: [u16; 14] = [0, 2, 3, 5, 6, 7, 8, 11, 16, 17, 18, 19, 20, 21];
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     h: Vec<u32>,

@@ -1,4 +1,4 @@
-//! The `_Diagnostics` branch end to end (issue 18, item 2): while a second client works
+//! The `_Diagnostics` branch end to end: while a second client works
 //! (SetClientName, a group, items, a subscription), the observing client browses the
 //! branch every way (BrowseOPCItemIDs branch/leaf/flat, ChangeBrowsePosition down into a
 //! client's branch and back up, GetItemID, IOPCBrowse::Browse), reads the items and finds
@@ -11,13 +11,13 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{self, BrowseArgs, Server};
 use ctopc_core::model::ItemVqt;
 use ctopc_core::Value;
 use e2e_tests::interfaces::*;
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
-use e2e_tests::{wait_for_no_other_server, ComThread, PROGID};
+use e2e_tests::{wait_for_no_other_server, Apartment, PROGID};
+use opc_client::{self as client, BrowseArgs, Server};
 use std::time::{Duration, Instant};
 use windows::Win32::Foundation::{E_FAIL, S_FALSE, S_OK};
 
@@ -77,7 +77,7 @@ fn the_diagnostics_branch_follows_a_working_server() {
     wait_for_no_other_server();
     let (dir, ini) = write_demo_config("diagnostics", "ASIXConnect-diag.ini", "", "");
     std::env::set_var("SERVERCTOPC_INI", &ini);
-    let com = ComThread::mta().expect("MTA");
+    let com = Apartment::mta().expect("MTA");
     let observer = Server::connect(PROGID).expect("connect");
     std::env::remove_var("SERVERCTOPC_INI");
     observer.set_locale(0x0409).unwrap();

@@ -1,9 +1,10 @@
 //! Foundation: activation through COM, GetStatus and IOPCCommon end to end.
 #![cfg(windows)]
 
-use ctopc_com::client::{ComThread, Server};
+use ctopc_com::apartment::Apartment;
 use ctopc_com::clock;
 use e2e_tests::{assert_alive, code, connect, interfaces::*, PROGID};
+use opc_client::Server;
 use std::time::Duration;
 use windows::core::{IUnknown, Interface, GUID, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE};
@@ -133,7 +134,7 @@ fn each_client_gets_its_own_server_object() {
 
 #[test]
 fn create_instance_for_an_interface_the_server_lacks_is_e_nointerface() {
-    let _com = ComThread::mta().unwrap();
+    let _com = Apartment::mta().unwrap();
     // SAFETY: valid ProgID string.
     let clsid = unsafe { CLSIDFromProgID(windows::core::w!("ServerCTOPC.App")) }.unwrap();
     // IOPCServerList is OPCEnum's interface, never the server's.
@@ -154,7 +155,7 @@ fn create_instance_for_an_interface_the_server_lacks_is_e_nointerface() {
 
 #[test]
 fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
-    let _com = ComThread::mta().unwrap();
+    let _com = Apartment::mta().unwrap();
     let first = Server::connect(PROGID)
         .unwrap()
         .status()
@@ -184,7 +185,7 @@ fn server_exits_when_the_last_client_is_gone_and_restarts_on_demand() {
 /// of exiting under the new object.
 #[test]
 fn a_client_that_creates_an_instance_right_after_the_revoke_is_served_on() {
-    let _com = ComThread::mta().unwrap();
+    let _com = Apartment::mta().unwrap();
     // SAFETY: a valid ProgID string; COM is initialised above.
     let clsid = unsafe { CLSIDFromProgID(&windows::core::HSTRING::from(PROGID)) }.unwrap();
     let server = Server::connect(PROGID).unwrap();

@@ -1,4 +1,4 @@
-//! What generic OPC clients rely on (issue 15), end to end against the embedded demo plant:
+//! What generic OPC clients rely on, end to end against the embedded demo plant:
 //!
 //! - writes convert as `VariantChangeTypeEx` with the group's LCID would: numeric text
 //!   (`"12,5"` in a Polish group, `"12.5"` in an English one, blanks around it), BOOL
@@ -15,12 +15,12 @@
 //! The tests that write take one lock: they write the same setpoints.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, connect, interfaces::*, Apartment, Server};
+use opc_client as client;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use windows::core::HRESULT;
@@ -38,7 +38,7 @@ fn writes() -> MutexGuard<'static, ()> {
 }
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     /// SETPOINT, MODE.
@@ -260,7 +260,7 @@ fn write_vqt_with_an_empty_value_is_not_supported_and_qualities_keep_16_bits() {
         .unwrap();
     assert_eq!((hr, errors), (S_FALSE, vec![OPC_E_NOTSUPPORTED]));
 
-    // The extended write: 0x100C0 is no 16-bit quality (it was truncated to 0xC0).
+    // The extended write: 0x100C0 is no 16-bit quality (refused, not truncated to 0xC0).
     let ext = |q: i32| {
         Value::Array(ArrayValue::new(
             VarType::VARIANT,
@@ -287,8 +287,8 @@ fn set_state_refuses_the_lcids_add_group_refuses() {
 }
 
 /// The first OnDataChange after AddItems on an active group with a connected sink carries
-/// the first samples (issue 15: it carried BAD Waiting for Initial Data, 0x20, and the
-/// values came one update later).
+/// the first samples (not BAD Waiting for Initial Data, 0x20, with the values one update
+/// later).
 #[test]
 fn the_first_on_data_change_after_add_items_carries_real_values() {
     let (_com, server) = connect();

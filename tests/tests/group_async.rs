@@ -6,11 +6,11 @@
 //! operations that certainly wait for a slow device.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{Quality, Timestamp, Value};
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, code, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, code, connect, interfaces::*, Apartment, Server};
+use opc_client as client;
 use std::sync::Arc;
 use std::time::Duration;
 use windows::core::{BOOL, HRESULT};
@@ -29,7 +29,7 @@ const SETPOINT: &str = "KW_A110";
 const TEMPERATURE: &str = "KW_A001";
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     /// LEVEL, SETPOINT, TEMPERATURE (client handles 1, 2, 3).

@@ -5,10 +5,11 @@
 
 mod group_common;
 
-use ctopc_com::client::{ComThread, GroupStateChange, Server};
+use ctopc_com::apartment::Apartment;
 use ctopc_core::Value;
 use e2e_tests::{assert_alive, code, connect, connections, interfaces::*, next_connection, PROGID};
 use group_common::*;
+use opc_client::{GroupStateChange, Server};
 use std::time::{Duration, Instant};
 use windows::core::{IUnknown, Interface};
 use windows::Win32::Foundation::{S_FALSE, S_OK};
@@ -259,7 +260,7 @@ fn one_connection_per_group_and_connection_point_rules() {
 #[test]
 fn callbacks_reach_an_sta_client_that_pumps_messages() {
     let t = std::thread::spawn(|| {
-        let _com = ComThread::sta().expect("STA");
+        let _com = Apartment::sta().expect("STA");
         let server = Server::connect(PROGID).expect("connect from an STA");
         let g = add_group(&server, "cb-sta", true, GROUP_CLIENT);
         add_ok(&g, &[item("KW_A000", 1)]);

@@ -4,13 +4,13 @@
 //! answers.
 #![cfg(windows)]
 
-use ctopc_com::client::{self, ReadItem};
 use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 use e2e_tests::io_support::*;
-use e2e_tests::{assert_alive, code, connect, interfaces::*, ComThread, Server};
+use e2e_tests::{assert_alive, code, connect, interfaces::*, Apartment, Server};
+use opc_client::{self as client, ReadItem};
 use std::time::{Duration, Instant};
 use windows::core::HRESULT;
 use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
@@ -30,7 +30,7 @@ const SETPOINT: &str = "KW_A110";
 const UI1_WRITABLE: &str = "KW_D201";
 
 struct Plant {
-    _com: ComThread,
+    _com: Apartment,
     server: Server,
     group: TestGroup,
     /// Server handles of LEVEL, SETPOINT, UI1_WRITABLE (client handles 1, 2, 3).
@@ -468,8 +468,8 @@ fn write_failures_reach_the_client_per_item() {
             (p.h[1], Value::R8(1e300)),          // does not fit R4
             (p.h[2], Value::I4(70_000)),         // does not fit UI1
             (p.h[1], Value::Bstr("abc".into())), // not a number
-            (p.h[1], Value::Bstr("5".into())),   // numeric text converts (issue 15)
-            (p.h[1], Value::Bool(true)),         // TRUE is 1 (issue 15)
+            (p.h[1], Value::Bstr("5".into())),   // numeric text converts
+            (p.h[1], Value::Bool(true)),         // TRUE is 1
             (p.h[1], Value::Date(45_000.0)),     // a date is no process value
             (p.h[1], Value::Empty),              // nothing
             (0, Value::R4(1.0)),                 // invalid handle

@@ -5,10 +5,10 @@
 
 mod group_common;
 
-use ctopc_com::client::{ItemDef, OpcGroup};
 use ctopc_core::Value;
 use e2e_tests::{assert_alive, connect, interfaces::*};
 use group_common::*;
+use opc_client::{ItemDef, OpcGroup};
 use std::time::Instant;
 use windows::core::{IUnknown, Interface, HRESULT};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, S_FALSE, S_OK};
@@ -133,9 +133,9 @@ fn add_items_rejects_count_zero_and_null_pointers() {
     let hr = unsafe { g.item_mgt.AddItems(1, &def, &mut results, &mut errors) };
     assert_eq!(hr, S_FALSE);
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    let errs = unsafe { ctopc_com::client::take_array(errors, 1) };
+    let errs = unsafe { opc_client::take_array(errors, 1) };
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    unsafe { ctopc_com::client::take_array(results, 1) };
+    unsafe { opc_client::take_array(results, 1) };
     assert_eq!(errs, vec![OPC_E_INVALIDITEMID]);
     assert_alive(&server);
 }
@@ -481,7 +481,7 @@ fn item_sampling_rate_and_buffering() {
         (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
     );
 
-    // Buffering (issue 14): enabling and disabling succeed per item; Get reads it back.
+    // Buffering: enabling and disabling succeed per item; Get reads it back.
     let (hr, errs) = g
         .set_item_buffer_enable(&[(h[0], true), (h[1], false), (12345, false)])
         .unwrap();

@@ -20,16 +20,16 @@
 //! that later tests get a server with the default configuration.
 #![cfg(windows)]
 
-use ctopc_com::client;
 use ctopc_com::clock::now;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{OpcError, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{wait_until_no_server, write_demo_config};
 use e2e_tests::{
-    assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, ComThread,
+    assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, Apartment,
     Server,
 };
+use opc_client as client;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -59,7 +59,7 @@ struct Plant {
 struct SlowServer {
     p: Option<Plant>,
     dir: PathBuf,
-    _com: ComThread,
+    _com: Apartment,
     _serial: MutexGuard<'static, ()>,
 }
 
@@ -222,7 +222,7 @@ fn a_device_slower_than_the_source_timeout_fails_items_with_net_answer_timeout()
     );
     let p = s.p();
 
-    // Issue 15: the first OnDataChange carries the items' first samples, not BAD Waiting
+    // The first OnDataChange carries the items' first samples, not BAD Waiting
     // for Initial Data (0x20), also with a device that answers reads 3 s late (the
     // subscription's samples are not delayed).
     let first = p
@@ -509,7 +509,7 @@ fn a_missing_serverctopc_ini_stops_the_server_with_the_error() {
         .lock()
         .unwrap_or_else(|p| p.into_inner());
     wait_for_no_other_server();
-    let _com = ComThread::mta().expect("CoInitializeEx");
+    let _com = Apartment::mta().expect("CoInitializeEx");
     let missing = format!("C:\\ServerCTOPC-test-{}\\missing.ini", std::process::id());
     std::env::set_var("SERVERCTOPC_INI", &missing);
     let (r, took) = timed(|| Server::connect(e2e_tests::PROGID));

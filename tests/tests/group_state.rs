@@ -4,9 +4,9 @@
 
 mod group_common;
 
-use ctopc_com::client::{GroupStateChange, OpcGroup};
 use e2e_tests::{assert_alive, code, connect, interfaces::*};
 use group_common::*;
+use opc_client::{GroupStateChange, OpcGroup};
 use windows::core::{IUnknown, Interface, BOOL, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, E_NOTIMPL, S_OK};
 

@@ -1,4 +1,4 @@
-//! A hostile client (issue 19): counts 0 and huge, NULLs the proxy lets through, invalid
+//! A hostile client: counts 0 and huge, NULLs the proxy lets through, invalid
 //! and foreign handles, 64 Ki-unit and invalid UTF-16 texts, every VARTYPE requested and
 //! written, nested arrays, bogus continuation points, sinks that fail or sleep, and a
 //! client process that exits without releasing. Every COM call runs under a watchdog
@@ -8,7 +8,6 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{BrowseArgs, ItemDef, OpcGroup, Server};
 use ctopc_com::variant;
 use ctopc_core::limits;
 use ctopc_core::value::ArrayValue;
@@ -16,7 +15,8 @@ use ctopc_core::{Value, VarType};
 use e2e_tests::hostile::*;
 use e2e_tests::interfaces::*;
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{connect, ComThread, PROGID};
+use e2e_tests::{connect, Apartment, PROGID};
+use opc_client::{BrowseArgs, ItemDef, OpcGroup, Server};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -42,7 +42,7 @@ fn assert_answers(server: &Server, after: &str) {
 
 fn group(server: &Server, name: &str) -> (OpcGroup, u32) {
     let g = call("AddGroup", || {
-        server.add_group(&ctopc_com::client::GroupSpec::new(name))
+        server.add_group(&opc_client::GroupSpec::new(name))
     })
     .expect("AddGroup");
     (OpcGroup::from_unknown(g.object).unwrap(), g.server_handle)
@@ -84,7 +84,7 @@ fn read_codes(io: &IOPCSyncIO, handles: &[u32]) -> (HRESULT, Vec<HRESULT>) {
             variant::clear(&mut s.vDataValue);
         }
         windows::Win32::System::Com::CoTaskMemFree(Some(states as *const _));
-        (hr, ctopc_com::client::take_array(errors, n))
+        (hr, opc_client::take_array(errors, n))
     }
 }
 
@@ -181,7 +181,7 @@ fn nulls_inside_structures_fail_per_item() {
 #[test]
 fn invalid_and_foreign_handles_fail_per_item() {
     let (_com, server) = connect();
-    let (com2, other) = (ComThread::mta().unwrap(), Server::connect(PROGID).unwrap());
+    let (com2, other) = (Apartment::mta().unwrap(), Server::connect(PROGID).unwrap());
     let (mine, my_group) = group(&server, "mine");
     let (theirs, their_group) = group(&other, "theirs");
     let their_items = add(&theirs, &[SETPOINT, LEVEL]);
@@ -518,7 +518,7 @@ fn sinks_that_fail_or_sleep_do_not_stall_the_server() {
         add(&g, &[LEVEL, SETPOINT]);
         let sink = RudeSink::create(how, calls);
         let cookie = call("Advise(rude sink)", || {
-            ctopc_com::client::advise_data_callback(&g.unknown, &sink)
+            opc_client::advise_data_callback(&g.unknown, &sink)
         })
         .unwrap();
         cookies.push(cookie);
@@ -556,7 +556,7 @@ fn sinks_that_fail_or_sleep_do_not_stall_the_server() {
     // Unadvise and RemoveGroup while a callback may be under way.
     for (g, cookie) in groups.iter().zip(cookies) {
         let r = call("Unadvise(rude sink)", || {
-            ctopc_com::client::unadvise_data_callback(&g.unknown, cookie)
+            opc_client::unadvise_data_callback(&g.unknown, cookie)
         });
         assert!(r.is_ok(), "{r:?}");
     }
@@ -583,7 +583,7 @@ fn hostile_child() {
     add(&g, &[LEVEL, SETPOINT]);
     let calls = Arc::new(AtomicU32::new(0));
     let sink = RudeSink::create(Rudeness::Sleep(Duration::from_millis(1)), &calls);
-    ctopc_com::client::advise_data_callback(&g.unknown, &sink).unwrap();
+    opc_client::advise_data_callback(&g.unknown, &sink).unwrap();
     let deadline = Instant::now() + Duration::from_secs(20);
     while calls.load(Ordering::SeqCst) == 0 && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
@@ -615,9 +615,9 @@ fn z_a_client_that_exits_without_releasing_leaves_the_server_answering() {
         String::from_utf8_lossy(&child.stderr)
     );
     assert_answers(&server, "a client that exited without releasing");
-    // The one hang of the issue: AddItems with a 64 Ki access path of lone surrogates on a
-    // server holding a crashed client's session, tried repeatedly while the server's
-    // callbacks to the dead sink fail.
+    // The combination that must not hang: AddItems with a 64 Ki access path of lone
+    // surrogates on a server holding a crashed client's session, tried repeatedly while
+    // the server's callbacks to the dead sink fail.
     let (g, _) = group(&server, "");
     let id = utf16(SETPOINT);
     let lone = lone_surrogates(HUGE);

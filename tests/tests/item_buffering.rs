@@ -1,4 +1,4 @@
-//! Item buffering end to end (issue 14 item 3, IOPCItemSamplingMgt::SetItemBufferEnable):
+//! Item buffering end to end (IOPCItemSamplingMgt::SetItemBufferEnable):
 //! the server started with a configuration of the test's own (`SERVERCTOPC_INI`, the
 //! embedded demo with `MinUpdateRate = 100`), a 1000 ms group, its tank level sampled at
 //! 100 ms with buffering on: an OnDataChange carries several samples of that one item,
@@ -11,10 +11,10 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{self, OpcGroup};
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{wait_until_no_server, write_demo_config};
 use e2e_tests::{connect, other_servers, wait_for_no_other_server};
+use opc_client::{self as client, OpcGroup};
 use std::time::Duration;
 use windows::Win32::Foundation::S_OK;
 

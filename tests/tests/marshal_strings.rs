@@ -528,10 +528,11 @@ fn table_lists_every_string_output_declared_in_idl() {
 #[cfg(windows)]
 mod through_the_proxy {
     use super::*;
-    use ctopc_com::client::{BrowseArgs, BrowseElement, BrowsePage, ComThread, Server};
+    use ctopc_com::apartment::Apartment;
     use e2e_tests::probe::{self, client as read};
     use e2e_tests::start::StartRetrying;
     use e2e_tests::{artifact, code, interfaces::*};
+    use opc_client::{BrowseArgs, BrowseElement, BrowsePage, Server};
     use std::process::Command;
     use std::sync::OnceLock;
     use std::time::{Duration, Instant};
@@ -582,8 +583,8 @@ mod through_the_proxy {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
 
     /// Joins the MTA and creates a probe server object in the probe's own process.
-    fn connect() -> (ComThread, Server) {
-        let com = ComThread::mta().expect("CoInitializeEx");
+    fn connect() -> (Apartment, Server) {
+        let com = Apartment::mta().expect("CoInitializeEx");
         if let Err(e) = REGISTERED.get_or_init(register_probe) {
             panic!("registering the marshal probe: {e}");
         }

@@ -1,4 +1,4 @@
-//! The write audit end to end (issue 18, item 3): every kind of write reaches the server's
+//! The write audit end to end: every kind of write reaches the server's
 //! log file as one `write ...` line (target `audit`, on by default: `AuditWrites = tak`)
 //! with the client's name, the group, the item, the value (quality and timestamp when
 //! given) and the per-item result; an asynchronous write's final result follows in a
@@ -6,11 +6,11 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client;
 use ctopc_core::model::ItemVqt;
 use ctopc_core::{Quality, Timestamp, Value};
 use e2e_tests::io_support::*;
 use e2e_tests::{assert_alive, connect};
+use opc_client as client;
 use std::time::{Duration, Instant};
 use windows::Win32::Foundation::{S_FALSE, S_OK};
 

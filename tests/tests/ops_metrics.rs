@@ -1,4 +1,4 @@
-//! The metrics endpoint end to end (issue 18, item 4): a server of the test's own
+//! The metrics endpoint end to end: a server of the test's own
 //! (`SERVERCTOPC_INI`) with `MetricsAddress = 127.0.0.1:<port>` answers an HTTP GET of
 //! `/metrics` from the test (Wine's sockets are the host's) with the Prometheus text of
 //! what a working client did: clients, groups, items, callbacks and values sent, writes,
@@ -11,11 +11,11 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{self, Server};
 use ctopc_core::Value;
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
-use e2e_tests::{other_servers, wait_for_no_other_server, ComThread, PROGID};
+use e2e_tests::{other_servers, wait_for_no_other_server, Apartment, PROGID};
+use opc_client::{self as client, Server};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::sync::atomic::Ordering;
@@ -70,7 +70,7 @@ fn the_metrics_endpoint_shows_what_a_client_does() {
         "",
     );
     std::env::set_var("SERVERCTOPC_INI", &ini);
-    let com = ComThread::mta().expect("MTA");
+    let com = Apartment::mta().expect("MTA");
     let server = Server::connect(PROGID).expect("connect");
     std::env::remove_var("SERVERCTOPC_INI");
     assert_eq!(other_servers(0).len(), 1, "only the test's server runs");

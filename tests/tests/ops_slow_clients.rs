@@ -1,4 +1,4 @@
-//! Slow and hung callback clients end to end (issue 18, item 5): a server of the test's
+//! Slow and hung callback clients end to end: a server of the test's
 //! own (`SERVERCTOPC_INI`) with `CallbackTimeout = 500` and `CallbackFailures = 2`; a
 //! client whose OnDataChange sleeps far longer than the timeout loses its callback
 //! connection (the connection point lists none) with a WARN in the server's log, the
@@ -10,12 +10,12 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::{self, Server};
 use e2e_tests::io_support::*;
 use e2e_tests::server_config::{read_log, wait_until_no_server, write_demo_config};
 use e2e_tests::{
-    connections, interfaces::*, other_servers, wait_for_no_other_server, ComThread, PROGID,
+    connections, interfaces::*, other_servers, wait_for_no_other_server, Apartment, PROGID,
 };
+use opc_client::{self as client, Server};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -105,7 +105,7 @@ fn a_hung_client_loses_its_callbacks_and_does_not_stall_another() {
         "",
     );
     std::env::set_var("SERVERCTOPC_INI", &ini);
-    let com = ComThread::mta().expect("MTA");
+    let com = Apartment::mta().expect("MTA");
     let slow = Server::connect(PROGID).expect("the slow client");
     std::env::remove_var("SERVERCTOPC_INI");
     assert_eq!(other_servers(0).len(), 1, "only the test's server runs");

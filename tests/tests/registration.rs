@@ -229,7 +229,7 @@ fn guid(s: &str) -> GUID {
 #[test]
 fn this_process_finds_the_server_by_category_and_by_progid() {
     let bits = 8 * std::mem::size_of::<usize>();
-    let _com = e2e_tests::ComThread::mta().expect("CoInitializeEx");
+    let _com = e2e_tests::Apartment::mta().expect("CoInitializeEx");
     let clsid = guid(CLSID);
     // SAFETY: a valid NUL-terminated string.
     let found = unsafe { CLSIDFromProgID(windows::core::w!("ServerCTOPC.App")) };

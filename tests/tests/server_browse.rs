@@ -3,9 +3,9 @@
 //! filters, properties).
 #![cfg(windows)]
 
-use ctopc_com::client::{BrowseArgs, Server};
 use ctopc_core::Value;
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
+use opc_client::{BrowseArgs, Server};
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_FAIL, E_INVALIDARG, E_NOTIMPL, S_FALSE, S_OK};
 use windows::Win32::System::Com::IEnumString;
@@ -155,7 +155,7 @@ fn flat_listing_and_filters() {
         .browse_item_ids(OPC_LEAF, "kw_a000", VT_R4_U16, OPC_READABLE)
         .unwrap();
     assert_eq!(leaves, ["KW_A000"]);
-    // The access-rights and data-type filters (DA 2.05a; issue 15: they were ignored).
+    // The access-rights and data-type filters (DA 2.05a).
     // Z101's variables are read-only R4s.
     assert_eq!(
         server
@@ -280,7 +280,7 @@ const VT_EMPTY_VARTYPE: VARTYPE = windows::Win32::System::Variant::VT_EMPTY;
 
 // ---- IOPCBrowse::Browse ----------------------------------------------------------------
 
-fn names(page: &ctopc_com::client::BrowsePage) -> Vec<String> {
+fn names(page: &opc_client::BrowsePage) -> Vec<String> {
     page.elements
         .iter()
         .map(|e| e.name.clone().unwrap_or_default())
@@ -589,7 +589,8 @@ fn browse_null_pointers() {
         assert_invalid_arg_or_null_ref(hr, "szItemID");
         assert_alive(&server);
     }
-    ctopc_com::client::take_wstr(cp);
+    // SAFETY: NULL or a CoTaskMem string a failed call may have handed out, ours.
+    unsafe { opc_client::take_wstr(cp) };
     // SAFETY: a CoTaskMem array of that many elements, just handed out by the call.
-    unsafe { ctopc_com::client::take_array(elements, count as usize) };
+    unsafe { opc_client::take_array(elements, count as usize) };
 }

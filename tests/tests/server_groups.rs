@@ -2,8 +2,8 @@
 //! CreateGroupEnumerator (and the group count of GetStatus).
 #![cfg(windows)]
 
-use ctopc_com::client::{GroupSpec, OpcGroup, Server};
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
+use opc_client::{GroupSpec, OpcGroup, Server};
 use windows::core::{IUnknown, Interface, BOOL, GUID, HRESULT, HSTRING, PCWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, E_NOINTERFACE, S_FALSE, S_OK};
 use windows::Win32::System::Com::{IEnumString, IEnumUnknown};

@@ -101,7 +101,7 @@ fn write_then_read_back() {
 }
 
 /// IOPCItemIO has no group, so its writes convert text in the server object's LCID
-/// (IOPCCommon::SetLocaleID; issue 15): "1,5" is 1.5 for a Polish client and 15 for an
+/// (IOPCCommon::SetLocaleID): "1,5" is 1.5 for a Polish client and 15 for an
 /// English one (',' groups digits in en-US), each client its own.
 #[test]
 fn write_text_in_the_clients_locale() {

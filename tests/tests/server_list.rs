@@ -7,15 +7,15 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::server_list::{opc_enum_guids, ServerBrowser};
 use ctopc_com::interfaces::{IOPCEnumGUID, IOPCServerList2};
-use ctopc_com::registration::{
-    self, guid_string, Key, View, CATID_OPC_DA_SERVER_10, CATID_OPC_DA_SERVER_20,
+use ctopc_com::winreg;
+use ctopc_registration::{
+    self as registration, guid_string, Key, View, CATID_OPC_DA_SERVER_10, CATID_OPC_DA_SERVER_20,
     CATID_OPC_DA_SERVER_30, CLSID_SERVERCTOPC,
 };
-use ctopc_com::registry;
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{artifact, ComThread};
+use e2e_tests::{artifact, Apartment};
+use opc_client::server_list::{opc_enum_guids, ServerBrowser};
 use windows::core::GUID;
 use windows::Win32::Foundation::{CO_E_CLASSSTRING, REGDB_E_CLASSNOTREG, S_FALSE, S_OK};
 
@@ -24,8 +24,8 @@ const DA20: GUID = GUID::from_u128(CATID_OPC_DA_SERVER_20);
 const DA30: GUID = GUID::from_u128(CATID_OPC_DA_SERVER_30);
 const OURS: GUID = GUID::from_u128(CLSID_SERVERCTOPC);
 
-fn browser() -> (ComThread, ServerBrowser) {
-    let com = ComThread::mta().expect("CoInitializeEx");
+fn browser() -> (Apartment, ServerBrowser) {
+    let com = Apartment::mta().expect("CoInitializeEx");
     let b = ServerBrowser::connect().expect("CoCreateInstance(OPC.ServerList.1)");
     (com, b)
 }
@@ -72,7 +72,7 @@ impl FakeServer {
                 &[],
             ));
         }
-        registry::write_keys(&keys).expect("write the fake server's keys");
+        winreg::write_keys(&keys).expect("write the fake server's keys");
         FakeServer {
             view,
             clsid,
@@ -83,7 +83,7 @@ impl FakeServer {
 
 impl Drop for FakeServer {
     fn drop(&mut self) {
-        let _ = registry::delete_trees(&[
+        let _ = winreg::delete_trees(&[
             (self.view, format!("CLSID\\{}", guid_string(self.clsid))),
             (self.view, self.progid.to_string()),
         ]);
@@ -180,11 +180,11 @@ fn clsid_from_progid_follows_cur_ver() {
         path: "CtopcTest.CurVer\\CurVer".into(),
         values: vec![(String::new(), "CtopcTest.CurVer.2".into())],
     };
-    registry::write_keys(&[vi]).expect("write the CurVer key");
+    winreg::write_keys(&[vi]).expect("write the CurVer key");
     let (_com, b) = browser();
     let found = b.clsid_from_progid("CtopcTest.CurVer");
     let versioned = b.clsid_from_progid("CtopcTest.CurVer.2");
-    let _ = registry::delete_trees(&[(View::Reg64, "CtopcTest.CurVer".to_string())]);
+    let _ = winreg::delete_trees(&[(View::Reg64, "CtopcTest.CurVer".to_string())]);
     assert_eq!(found.unwrap(), GUID::from_u128(FAKE), "through CurVer");
     assert_eq!(versioned.unwrap(), GUID::from_u128(FAKE));
 }
@@ -243,7 +243,7 @@ fn run_server_list(args: &[&str]) -> std::process::Output {
 struct Reregister;
 impl Drop for Reregister {
     fn drop(&mut self) {
-        let _ = registry::delete_trees(&[
+        let _ = winreg::delete_trees(&[
             (View::Reg64, registration::server_list_local_server_key()),
             (View::Reg32, registration::server_list_local_server_key()),
         ]);
@@ -256,7 +256,7 @@ fn registration_leaves_another_server_browser_alone() {
     let _restore = Reregister;
     let theirs = "C:\\windows\\system32\\OpcEnum.exe";
     let key = registration::server_list_local_server_key();
-    registry::write_keys(&[Key {
+    winreg::write_keys(&[Key {
         view: View::Reg32,
         path: key.clone(),
         values: vec![(String::new(), theirs.to_string())],
@@ -266,7 +266,7 @@ fn registration_leaves_another_server_browser_alone() {
     assert!(out.status.success(), "{out:?}");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("not ours"), "{text}");
-    let read = |v: View| ctopc_com::server_list::read_default(v, &key);
+    let read = |v: View| ctopc_com::winreg::read_default(v, &key);
     assert_eq!(read(View::Reg32).as_deref(), Some(theirs), "left alone");
     assert!(
         read(View::Reg64).is_some_and(|l| registration::is_our_server_list(&l)),
@@ -286,7 +286,7 @@ fn registering_twice_is_harmless() {
     }
     let key = registration::server_list_local_server_key();
     for v in registration::VIEWS {
-        let ls = ctopc_com::server_list::read_default(v, &key).unwrap();
+        let ls = ctopc_com::winreg::read_default(v, &key).unwrap();
         assert!(registration::is_our_server_list(&ls), "{v:?}: {ls}");
     }
 }

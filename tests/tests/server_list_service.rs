@@ -1,4 +1,4 @@
-//! The server browser as an NT service (issue 14 item 1, for remote clients, as the OPC
+//! The server browser as an NT service (for remote clients, as the OPC
 //! Foundation's OpcEnum runs): `OpcServerList.exe /Service` installs the service
 //! `OpcServerList` (on demand, as LocalService) with AppID LocalService, COM starts it when
 //! a client creates `OPC.ServerList.1`, it serves until stopped, and `/UnregServer` removes
@@ -7,12 +7,12 @@
 #![cfg(windows)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use ctopc_com::client::server_list::ServerBrowser;
-use ctopc_com::registration::{
+use ctopc_registration::{
     guid_string, APPID_SERVER_LIST, CATID_OPC_DA_SERVER_20, CLSID_SERVERCTOPC,
 };
 use e2e_tests::start::StartRetrying;
-use e2e_tests::{artifact, processes_named, ComThread};
+use e2e_tests::{artifact, processes_named, Apartment};
+use opc_client::server_list::ServerBrowser;
 use std::time::{Duration, Instant};
 use windows::core::{GUID, PCWSTR};
 use windows::Win32::System::Registry::{
@@ -126,7 +126,7 @@ fn the_browser_service_is_installed_started_by_com_stopped_and_removed() {
     );
 
     // COM activation starts the service, which lists the machine's servers.
-    let com = ComThread::mta().expect("CoInitializeEx");
+    let com = Apartment::mta().expect("CoInitializeEx");
     let b = ServerBrowser::connect().expect("CoCreateInstance(OPC.ServerList.1)");
     assert_eq!(
         service_state(),

@@ -4,10 +4,10 @@
 //! I2 0..1 without a unit).
 #![cfg(windows)]
 
-use ctopc_com::client::Server;
 use ctopc_com::clock::now;
 use ctopc_core::{Timestamp, Value};
 use e2e_tests::{assert_alive, assert_invalid_arg_or_null_ref, code, connect, interfaces::*};
+use opc_client::Server;
 use windows::core::{HRESULT, HSTRING, PCWSTR, PWSTR};
 use windows::Win32::Foundation::{E_INVALIDARG, S_FALSE, S_OK};
 use windows::Win32::System::Variant::VARIANT;
@@ -15,7 +15,7 @@ use windows::Win32::System::Variant::VARIANT;
 const LCID_POLISH: u32 = 0x0415;
 const LCID_ENGLISH_US: u32 = 0x0409;
 
-fn english() -> (ctopc_com::client::ComThread, Server) {
+fn english() -> (ctopc_com::apartment::Apartment, Server) {
     let (com, server) = connect();
     server.set_locale(LCID_ENGLISH_US).unwrap();
     (com, server)

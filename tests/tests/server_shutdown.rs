@@ -12,13 +12,13 @@
 //! other ServerCTOPC.exe runs (servers of earlier tests exit 3 s after their last client).
 #![cfg(windows)]
 
-use ctopc_com::client::Server;
 use ctopc_com::clock::now;
 use ctopc_core::Timestamp;
 use e2e_tests::start::StartRetrying;
 use e2e_tests::{
     assert_alive, code, connect, interfaces::*, other_servers, wait_for_no_other_server, PROGID,
 };
+use opc_client::Server;
 use std::os::windows::process::CommandExt;
 use std::sync::mpsc;
 use std::sync::Mutex;
@@ -161,7 +161,7 @@ const MARKER_RATE_MS: u32 = 777;
 /// True when `server` is the process started with the marker configuration: its revised
 /// rate for a 1 ms group is the marker rate (a server COM starts has no SERVERCTOPC_INI).
 fn is_marked(server: &Server) -> bool {
-    use ctopc_com::client::GroupSpec;
+    use opc_client::GroupSpec;
     let spec = GroupSpec {
         name: String::new(),
         active: false,
@@ -218,7 +218,7 @@ fn wait_exit(child: &mut std::process::Child, limit: Duration) -> Option<std::pr
 #[test]
 fn ctrl_c_sends_shutdown_request_to_a_connected_client() {
     use windows::Win32::System::Threading::CREATE_NEW_CONSOLE;
-    let _com = ctopc_com::client::ComThread::mta().unwrap();
+    let _com = ctopc_com::apartment::Apartment::mta().unwrap();
     wait_for_no_other_server();
     let since = now();
     let ini = std::env::temp_dir().join(format!("ServerCTOPC-ctrl-c-{}.ini", std::process::id()));

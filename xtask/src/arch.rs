@@ -1,6 +1,6 @@
 //! The two Windows bitnesses the project builds for: x64 (the server, the 64-bit
 //! proxy/stub and clients) and x86 (the 32-bit proxy/stub, opcdiag and the e2e tests as a
-//! 32-bit OPC client, issue 13). One prefix serves both: a win64 Wine prefix runs 32-bit
+//! 32-bit OPC client). One prefix serves both: a win64 Wine prefix runs 32-bit
 //! programs through WoW64 from `syswow64`.
 
 use std::path::{Path, PathBuf};

@@ -13,41 +13,13 @@
 //! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`).
 
 use crate::{build, setup, util, wine};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 const LIMIT: Duration = Duration::from_secs(20 * 60);
 
 fn prefix() -> PathBuf {
     util::root().join("target/wine/bench-prefix")
-}
-
-/// Registers the proxy/stub DLL and the server in the prefix `pfx` (the benchmarks' own).
-pub fn register(pfx: &Path, artifacts: &build::Artifacts) -> Result<(), String> {
-    let limit = Duration::from_secs(120);
-    let status = util::run_with_timeout(
-        wine::wine_in(pfx, "regsvr32")
-            .arg("/s")
-            .arg(&artifacts.proxy),
-        limit,
-    )?;
-    if !status.success() {
-        return Err(format!(
-            "regsvr32 {} failed: {status}",
-            artifacts.proxy.display()
-        ));
-    }
-    let status = util::run_with_timeout(
-        wine::wine_in(pfx, &artifacts.server).arg("/RegServer"),
-        limit,
-    )?;
-    if !status.success() {
-        return Err(format!(
-            "{} /RegServer failed: {status}",
-            artifacts.server.display()
-        ));
-    }
-    Ok(())
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
@@ -62,7 +34,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::ensure_prefix(&pfx)?;
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     let result = (|| {
-        register(&pfx, &artifacts)?;
+        wine::register_in(&pfx, &artifacts.proxy, &artifacts.server)?;
         println!(
             "bench: running {} under Wine (prefix {})",
             exe.display(),

@@ -50,6 +50,11 @@ pub fn run(_args: &[String]) -> Result<(), String> {
             "docs/asix-net-protocol.md".into(),
             root.join("docs/asix-net-protocol.md"),
         ),
+        (
+            "docs/configuration.md".into(),
+            root.join("docs/configuration.md"),
+        ),
+        ("docs/operations.md".into(), root.join("docs/operations.md")),
     ];
     for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
         files.push((

@@ -8,7 +8,6 @@ mod build;
 mod demo;
 mod dist;
 mod fuzz;
-mod guard;
 mod msi;
 mod proxy;
 mod scale;

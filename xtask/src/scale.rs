@@ -1,5 +1,5 @@
 //! `cargo xtask bench --scale`: ServerCTOPC with a synthetic database of 100,000 and
-//! 1,000,000 variables under Wine (issue 16; not in CI).
+//! 1,000,000 variables under Wine (not in CI).
 //!
 //! Options: `--sizes 100000,1000000`, `--runs 3`, `--items 100000`, `--soak-minutes 10`,
 //! `--only <phase>` (`load`, `browse`, `items`, `soak`; may be repeated).
@@ -37,7 +37,7 @@
 //! Prints every measurement and then, per size, medians of the runs beside the
 //! baseline's. Never fails on figures; fails when a phase cannot be measured.
 
-use crate::{bench, build, setup, soak, util, wine};
+use crate::{build, setup, soak, util, wine};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -1003,7 +1003,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-    bench::register(&pfx, &artifacts)?;
+    wine::register_in(&pfx, &artifacts.proxy, &artifacts.server)?;
     println!(
         "scale: prefix {}, sizes {:?}, {} runs, {} items",
         pfx.display(),

@@ -1,6 +1,6 @@
 //! `cargo xtask soak [--minutes M] [--clients K] [--items N] [--round-seconds R]
 //! [--calls LIST | --no-in-arrays] [--stall-seconds S] [--simulate-stall]`: the memory soak
-//! of issue 19 (not in CI).
+//! (not in CI).
 //!
 //! Builds the server and `soak-client.exe`, registers them in a Wine prefix of the soak's
 //! own (`target/wine/soak-prefix`), starts one client that holds the server for the whole
@@ -22,7 +22,7 @@
 //! stub predicts (it keeps the top-level block of such an array: [`KEPT_PER_ITEM`],
 //! docs/wine-ndr-leak.md) and the residual, the growth Wine's leak does not explain.
 //!
-//! **Stalls** (issue 19: no call may hang): each churning client prints a line per round;
+//! **Stalls** (no call may hang): each churning client prints a line per round;
 //! when a running client has printed nothing for `--stall-seconds S` (default 60), the
 //! soak, before it stops anything, takes `winedbg` backtraces of every thread of the
 //! server and of every soak client ([`capture_backtraces`]), writes them with the Linux
@@ -512,7 +512,7 @@ pub fn capture_backtraces(
 /// Writes a stall report to `dir/stall-<unix time>.txt`: `what`, the Linux threads of
 /// `linux_pids` and winedbg backtraces of every thread of the processes of `pfx` whose
 /// name `ours` accepts, the frames of `exes` resolved (the prefix still runs). Its path.
-/// Also the e2e runs' stall guard (`guard.rs`).
+/// Also the e2e runs' stall guard (`wine/guard.rs`).
 pub fn capture(
     dir: &Path,
     pfx: &Path,

@@ -1,5 +1,5 @@
 //! Drift check between the IDL the proxy/stub DLL is built from (`idl/*.idl`) and the Rust
-//! definitions of the same interfaces (`crates/ctopc-com/src/interfaces/**.rs`).
+//! definitions of the same interfaces (`crates/ctopc-com/src/com/interfaces/**.rs`).
 //!
 //! A vtable mismatch between the two is silent memory corruption across processes, so this
 //! test fails, with one line per discrepancy, when
@@ -881,7 +881,7 @@ fn relative(root: &Path, p: &Path) -> String {
 fn interfaces_match_idl() {
     let root = workspace_root();
     let idl_dir = root.join("idl");
-    let rust_dir = root.join("crates/ctopc-com/src/interfaces");
+    let rust_dir = root.join("crates/ctopc-com/src/com/interfaces");
 
     let mut idl = Definitions::default();
     for required in ["opccomn.idl", "opcda.idl"] {

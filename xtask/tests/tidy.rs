@@ -1,21 +1,23 @@
 //! Tidy: the code rules of ARCHITECTURE.md that no compiler lint can say.
 //!
-//! Most rules are lints now, checked by `cargo clippy -- -D warnings` in `cargo xtask
-//! test`, with their levels in the `[lints]` tables of the manifests and their settings in
-//! `clippy.toml`; this test had text scanners for them, which the lints replaced:
-//! - `unsafe` only in crates/ctopc-com and the end-to-end tests (tests/, which pass
-//!   deliberately invalid raw pointers and hold the marshal probe in tests/src/probe):
-//!   rustc's `unsafe_code = "forbid"` (`[workspace.lints.rust]`), relaxed only in the
-//!   `[lints]` tables of those two crates;
+//! Most rules are lints, checked by `cargo clippy -- -D warnings` in `cargo xtask test`,
+//! with their levels in the `[lints]` tables of the manifests and their settings in
+//! `clippy.toml`:
+//! - `unsafe` only in crates/ctopc-com, the client library (crates/opc-client), the server
+//!   browser (crates/serverlist) and the end-to-end tests (tests/, which pass deliberately
+//!   invalid raw pointers and hold the marshal probe in tests/src/probe): rustc's
+//!   `unsafe_code = "forbid"` (`[workspace.lints.rust]`), relaxed only in the `[lints]`
+//!   tables of those crates;
 //! - a `// SAFETY:` comment at every unsafe block: clippy's `undocumented_unsafe_blocks`;
-//! - no `.unwrap()` / `.expect(` in ctopc-com and tests/src/probe outside tests (a panic
-//!   would cross COM): clippy's `unwrap_used` and `expect_used` (the COM crate's
-//!   `[lints]`, the probe's `#![deny]`; `allow-unwrap-in-tests` in clippy.toml);
+//! - no `.unwrap()` / `.expect(` in ctopc-com, opc-client, serverlist and tests/src/probe
+//!   outside tests (a panic would cross COM): clippy's `unwrap_used` and `expect_used`
+//!   (those crates' `[lints]`, the probe's `#![deny]`; `allow-unwrap-in-tests` in
+//!   clippy.toml);
 //! - no `windows::core::Error::new` outside `ctopc_com::error` (it aborts under Wine):
 //!   clippy's `disallowed_methods` (clippy.toml).
 //!
-//! What is left: the core has no `windows` dependency (a manifest, not code), and the lint
-//! configuration itself is in place (a member that set `[lints]` of its own, or dropped
+//! What is left: the core and the registration data have no `windows` dependency (a
+//! manifest, not code), and the lint configuration itself is in place (a member that set `[lints]` of its own, or dropped
 //! it, would silently escape every rule above).
 
 use std::path::{Path, PathBuf};
@@ -71,6 +73,18 @@ fn the_core_forbids_unsafe_and_does_not_depend_on_windows() {
 }
 
 #[test]
+fn the_registration_data_does_not_depend_on_windows() {
+    let manifest = read("crates/registration/Cargo.toml");
+    assert!(
+        !manifest
+            .lines()
+            .any(|l| l.trim_start().starts_with("windows")),
+        "ctopc-registration must not depend on windows crates"
+    );
+    assert_eq!(table(&manifest, "lints"), ["workspace = true"]);
+}
+
+#[test]
 fn the_workspace_lints_forbid_unsafe_and_deny_the_com_rules() {
     let manifest = read("Cargo.toml");
     assert!(table(&manifest, "workspace.lints.rust").contains(&r#"unsafe_code = "forbid""#.into()));
@@ -93,13 +107,19 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
     let inheriting = [
         "crates/ctopc-core",
         "crates/asix-model",
+        "crates/registration",
+        "crates/runtime",
         "crates/asix-net",
         "crates/server",
-        "crates/opc-client",
-        "crates/serverlist",
         "xtask",
     ];
-    let own = ["crates/ctopc-com", "tests", "fuzz"];
+    let own = [
+        "crates/ctopc-com",
+        "crates/opc-client",
+        "crates/serverlist",
+        "tests",
+        "fuzz",
+    ];
     let mut all: Vec<&str> = inheriting.iter().chain(&own).copied().collect();
     all.sort_unstable();
     let mut members = workspace_members(&read("Cargo.toml"));
@@ -117,9 +137,12 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         );
     }
     // Their own tables (forbid cannot be relaxed inside a crate): unsafe code allowed, the
-    // workspace's clippy lints kept; the COM crate also denies unwrap/expect.
+    // workspace's clippy lints kept; the COM crate, the client library and the server
+    // browser also deny unwrap/expect.
     for (m, extra) in [
         ("crates/ctopc-com", &["unwrap_used", "expect_used"][..]),
+        ("crates/opc-client", &["unwrap_used", "expect_used"][..]),
+        ("crates/serverlist", &["unwrap_used", "expect_used"][..]),
         ("tests", &[][..]),
         ("fuzz", &[][..]),
     ] {

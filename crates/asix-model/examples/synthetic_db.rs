@@ -1,6 +1,6 @@
 //! Writes a synthetic variable database (`asix_model::synthetic`) and a ServerCTOPC.ini
 //! that serves it, simulated: for measuring a server with many variables by hand, e.g.
-//! browse under Wine (`docs` and the README's figures say which runs used it).
+//! browse under Wine (`docs/benchmarks.md` says which runs used it).
 //!
 //! `cargo run --release -p asix-model --example synthetic_db -- N DIR` writes
 //! `DIR/synthetic.zez`, `DIR/atrybuty.csv` and `DIR/ServerCTOPC.ini`; the ini names the

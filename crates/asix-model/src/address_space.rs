@@ -125,7 +125,7 @@ mod tests {
         }
     }
 
-    /// The BrowseOPCItemIDs filters over the demo plant (issue 15): OPC_WRITEABLE lists
+    /// The BrowseOPCItemIDs filters over the demo plant: OPC_WRITEABLE lists
     /// only the writable variables, a data type only the variables of that canonical type.
     #[test]
     fn item_filters_over_the_demo_plant() {

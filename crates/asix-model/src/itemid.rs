@@ -1,4 +1,5 @@
-//! Item identifiers of current data (manual §6.1-6.2), parsed into a typed [`ItemId`].
+//! Item identifiers of current data (manual §6.1-6.2), parsed into a typed [`ItemId`];
+//! [`ItemKey`], the asix variable (channel and name) behind them.
 //!
 //! ```text
 //! asmen.<channel>.<var>.<R4|I2|UI2|I4|UI4|UI1>   descriptive (no database needed)
@@ -33,6 +34,7 @@
 //! - A well-formed ID naming no known variable: `OPC_E_UNKNOWNITEMID`.
 
 use std::fmt;
+use std::sync::Arc;
 
 use ctopc_core::{OpcError, OpcResult, VarType};
 
@@ -204,6 +206,30 @@ impl fmt::Display for ItemId {
                 Ok(())
             }
         }
+    }
+}
+
+/// An asix process variable: channel plus variable name (both case-sensitive), the key
+/// the data sources (network client, simulation) and the adapter know a variable by.
+/// Cloning is two reference-count increments.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ItemKey {
+    pub channel: Arc<str>,
+    pub variable: Arc<str>,
+}
+
+impl ItemKey {
+    pub fn new(channel: &str, variable: &str) -> Self {
+        ItemKey {
+            channel: channel.into(),
+            variable: variable.into(),
+        }
+    }
+}
+
+impl fmt::Display for ItemKey {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.channel, self.variable)
     }
 }
 

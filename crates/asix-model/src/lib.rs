@@ -29,9 +29,10 @@ pub use config::{
     DefaultLanguage, LogLevel, ServerOptions, ServerSelection, BASIC_CHANNEL,
 };
 pub use format::FormatSpec;
-pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, Suffix, VarItem};
+pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, ItemKey, Suffix, VarItem};
 pub use namespace::{
-    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, ItemAttributes, LimitProps, LiveItem,
+    AsixNamespace, BrowseNode, ChannelDatabase, Derivation, LimitProps, LiveItem,
+    PropertyAttributes,
 };
 pub use quality_rules::{
     apply_quality_rules, apply_quality_rules_with, check_write_value, RuleDef, RuleOptions,

@@ -43,7 +43,7 @@ use super::itemid::{parse_item_id, ItemId, Suffix, VarItem};
 use super::text::{parse_number, Warning};
 use super::vardb::{load_database_file, DbError, GroupNode, VarDatabase, Variable};
 use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_READABLE, OPC_WRITEABLE};
-pub use ctopc_core::namespace::{ItemAttributes, LimitProps};
+pub use ctopc_core::namespace::{LimitProps, PropertyAttributes};
 use ctopc_core::properties as p;
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{OpcError, OpcResult, Value, VarType};
@@ -237,7 +237,7 @@ impl AsixNamespace {
         &self,
         item_id: &str,
         access_path: &str,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         let channel = self.config.resolve_channel(access_path)?;
         let db = self.database(channel.name).map(Arc::as_ref);
         let id = parse_item_id(item_id, |n| {
@@ -256,7 +256,7 @@ impl AsixNamespace {
                     eu: EuInfo::None,
                     constant: None,
                 };
-                Ok((def, ItemAttributes::default()))
+                Ok((def, PropertyAttributes::default()))
             }
             (ItemId::Variable { variable, item }, Some(db)) => {
                 let var = db
@@ -290,7 +290,11 @@ impl AsixNamespace {
     }
 
     /// The OPC item-property values of an item.
-    pub fn item_attributes(&self, item_id: &str, access_path: &str) -> OpcResult<ItemAttributes> {
+    pub fn item_attributes(
+        &self,
+        item_id: &str,
+        access_path: &str,
+    ) -> OpcResult<PropertyAttributes> {
         self.resolve_with_attributes(item_id, access_path)
             .map(|(_, a)| a)
     }
@@ -426,8 +430,8 @@ fn walk<'a, E>(
 }
 
 /// Variable `i` of `db`, decoded for one resolution and not kept: [`VarDatabase::find_public`]
-/// keeps every variable it decodes (about 1.2 KB each), so resolving through it made every
-/// item a client ever added cost that much for the life of the server (issue 16).
+/// keeps every variable it decodes (about 1.2 KB each), so resolving through it would make
+/// every item a client ever added cost that much for the life of the server.
 fn decoded(db: &VarDatabase, i: usize) -> Variable {
     db.variables.view(i).decode()
 }
@@ -465,9 +469,9 @@ impl Ctx<'_> {
         )
     }
 
-    fn attrs(var: &Variable) -> ItemAttributes {
+    fn attrs(var: &Variable) -> PropertyAttributes {
         let opt = |s: &str| (!s.is_empty()).then(|| s.to_owned());
-        ItemAttributes {
+        PropertyAttributes {
             description: opt(&var.description),
             description_en: opt(&var.description_en),
             eu_units: None,
@@ -481,7 +485,7 @@ impl Ctx<'_> {
         db: &VarDatabase,
         var: &Variable,
         s: &Suffix,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         let key = |suffix: &str| format!("{}.{suffix}", var.name);
         let mut attrs = Self::attrs(var);
         let range = var.range;
@@ -554,7 +558,7 @@ impl Ctx<'_> {
         attribute: &str,
         n: f64,
         then: Option<&Suffix>,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         let key = format!("{}.{attribute}.CV", var.name);
         let attrs = Self::attrs(var);
         let def = match then {
@@ -591,7 +595,7 @@ impl Namespace for AsixNamespace {
         &self,
         item_id: &str,
         access_path: &str,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         AsixNamespace::resolve_with_attributes(self, item_id, access_path)
     }
 
@@ -659,8 +663,8 @@ mod tests {
     use ctopc_core::properties::{lookup_item_ids, static_properties, PropertyContext};
     use ctopc_core::Lang;
 
-    /// The namespace of the property tests that were in the COM crate: `V` (alias `A`)
-    /// and some of its attribute items.
+    /// The namespace of the property tests: `V` (alias `A`) and some of its attribute
+    /// items.
     fn fake(item_id: &str) -> OpcResult<ItemDef> {
         let var = |key: &str| ItemDef {
             source_key: key.into(),

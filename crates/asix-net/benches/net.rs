@@ -18,10 +18,11 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use asix_model::ItemKey;
 use asix_net::client::ClientEvent;
 use asix_net::sim::plant::ChannelDef;
 use asix_net::sim::{self, SimConfig};
-use asix_net::{AsixClient, ClientConfig, ItemKey};
+use asix_net::{AsixClient, ClientConfig};
 use tokio::runtime::{Builder, Runtime};
 
 fn env(name: &str, default: usize) -> usize {

@@ -18,15 +18,15 @@
 //!    with `data_change_delivered`) before the next: the growth over those cycles.
 //!
 //! These are the server-side shares of the figures `scale-client` measures from outside
-//! under Wine (issue 16); the rest is the COM transport and Wine's heap.
+//! under Wine; the rest is the COM transport and Wine's heap.
 
 use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
 use asix_model::AsixNamespace;
+use asix_model::ItemKey;
 use asix_net::backend::{AsixBackend, RawId, RawOutput, VariableSource};
 use asix_net::inproc::{InProcessSim, PlantSource};
-use asix_net::ItemKey;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::model::{
     Engine, EngineConfig, Event, GroupHandle, GroupParams, ItemDefinition, SetGroupState,

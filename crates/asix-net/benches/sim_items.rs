@@ -45,7 +45,7 @@ fn demo_namespace() -> Arc<AsixNamespace> {
     )
 }
 
-/// The server's driver thread, in miniature (crates/ctopc-com/src/runtime.rs).
+/// The server's driver thread, in miniature (crates/runtime/src/runtime.rs).
 struct Driver {
     e: Engine,
     sim: InProcessSim,

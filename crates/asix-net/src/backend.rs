@@ -20,16 +20,14 @@
 //!   AsixConnect channel's client on the network, one part in the simulation), answered to
 //!   the engine when every part has answered, one result per item in request order.
 //!
-//! Decided for both sources (they used to differ; pinned by the tests below):
-//! - A variable is sampled at the fastest rate of its items and every sample fans out (the
-//!   network's way). The simulation used to sample each item with a phase of its own; an
-//!   item added to a variable already sampled now gets the variable's current value at
-//!   once (the simulation's current plant value, the network's last sample) instead.
+//! Decided for both sources (pinned by the tests below):
+//! - A variable is sampled at the fastest rate of its items and every sample fans out; an
+//!   item added to a variable already sampled gets the variable's current value at once
+//!   (the simulation's current plant value, the network's last sample).
 //! - An item the source has no variable for ([`Resolution::NoVariable`], and items the
 //!   namespace does not know as live) is reported once, when subscribed, with
 //!   BAD_CONFIG_ERROR, as the asix client reports a variable its server does not know;
-//!   the simulation used to report it again at every tick (nothing ever changes), the
-//!   network skipped it.
+//!   nothing about it ever changes, so it is not reported again.
 //!
 //! Nothing here reads a clock or blocks: time is the `now` of the engine's calls.
 
@@ -44,8 +42,8 @@ use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId,
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
 
-use crate::client::ItemKey;
 use crate::pipeline::{self, Resolution, Treatment};
+use asix_model::ItemKey;
 
 /// Identifies one raw device read or write of a [`VariableSource`] (chosen by the adapter).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -150,7 +148,7 @@ impl<V> Unserved<V> {
 
 /// What the adapter keeps of an item's resolution: its variable with its treatment,
 /// shared with the other items treated the same way ([`AsixBackend::share`]: a plain value
-/// item costs its variable and a pointer, issue 16), or one of the [`Unserved`]
+/// item costs its variable and a pointer), or one of the [`Unserved`]
 /// resolutions.
 #[derive(Clone)]
 enum ItemRes<V> {
@@ -188,7 +186,7 @@ struct Slot<V> {
 
 /// Keys of items, most often none or one: those inline, more in a vector of their own
 /// (16 bytes, no allocation for one item: most variables of a large subscription have
-/// exactly one, issue 16).
+/// exactly one).
 #[derive(Debug, Clone, Default, PartialEq)]
 enum Keys {
     #[default]
@@ -708,8 +706,8 @@ impl<S: VariableSource> AsixBackend<S> {
     /// else kept for the next items: up to [`SHARED_TREATMENTS`], those no item uses any
     /// more making room first, then the one kept longest. (Items treated alike mostly come
     /// together, as a branch of the database's variables whose control variable and limits
-    /// are the same; keeping only the first kinds, a large subscription with quality rules
-    /// had a treatment per item after the first 64 kinds, 200 B an item, issue 16.)
+    /// are the same; keeping only the first kinds would give a large subscription with
+    /// quality rules a treatment per item after the first 64 kinds, 200 B an item.)
     fn share(&mut self, r: ItemRes<S::Var>) -> ItemRes<S::Var> {
         let ItemRes::Var(v, t) = r else {
             return r;
@@ -1274,7 +1272,7 @@ impl<S: VariableSource> Backend for AsixBackend<S> {
         }
         // Kept for the next poll only while small: the samples of a large subscription
         // would otherwise hold a buffer of every variable's last sample between polls (56
-        // bytes a variable, issue 16); a poll of many samples allocates it anew.
+        // bytes a variable); a poll of many samples allocates it anew.
         if raw.samples.capacity() > RAW_SAMPLES_KEPT {
             raw.samples = Vec::new();
         }
@@ -1460,7 +1458,7 @@ mod tests {
 
     /// Decided for both sources (the network's way): a variable is subscribed once, at the
     /// fastest rate of its items and of the items whose rules read it, and each sample goes
-    /// to every item on it; the simulation used to sample each item with its own phase.
+    /// to every item on it, in the simulation as on the network.
     #[test]
     fn a_variable_is_subscribed_once_at_the_fastest_rate_and_its_samples_fan_out() {
         let (mut b, ns) = backend();
@@ -1550,8 +1548,8 @@ mod tests {
 
     /// Decided for both sources: an item the source has no variable for is reported once,
     /// when subscribed, with BAD_CONFIG_ERROR (as the asix client reports a variable its
-    /// server does not know); the simulation used to repeat it every tick, the network
-    /// skipped it. Device reads and writes of it fail without asking the source.
+    /// server does not know), and not again at later ticks. Device reads and writes of it
+    /// fail without asking the source.
     #[test]
     fn an_item_without_a_variable_is_reported_once_with_config_error() {
         let (mut b, ns) = backend();
@@ -1721,7 +1719,7 @@ mod tests {
 
     /// Items treated the same way (here two control variables: no limits, no control
     /// variable of their own, read-only) share one treatment, so that a plain item costs
-    /// its slot (issue 16); an item treated otherwise has its own.
+    /// its slot; an item treated otherwise has its own.
     #[test]
     fn items_treated_alike_share_their_treatment() {
         let (mut b, ns) = backend();

@@ -25,12 +25,13 @@ use tokio::runtime::{Handle, Runtime};
 use tracing::{info, warn};
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
-use crate::client::{AsixClient, ClientEvent, ItemKey, RequestId};
+use crate::client::{AsixClient, ClientEvent, RequestId};
 use crate::config::{ClientConfig, ConnectOptions, ExternalServerLists};
 use crate::naming::asix_client_name;
 use crate::proto::frame::ReadSource;
 use crate::proto::DEFAULT_DISCOVERY_PORT;
 use crate::Vqt;
+use asix_model::ItemKey;
 
 pub use crate::pipeline::{limit_variables, CHANNEL_ATTRIBUTE};
 

@@ -31,7 +31,7 @@ pub mod sim;
 
 pub use sim::inproc;
 
-pub use client::{channel_sink, AsixClient, ClientEvent, EventSink, ItemKey, RequestId};
+pub use client::{channel_sink, AsixClient, ClientEvent, EventSink, RequestId};
 pub use config::{ClientConfig, ConnectOptions, ExternalServerLists, ServerChoice};
 /// The value-quality-timestamp triple, shared with the core.
 pub use ctopc_core::Vqt;

@@ -13,22 +13,20 @@
 //! 3. **a write** ([`Resolved::check_write`]): derived items are not writable, only
 //!    integers and reals are, and a variable the database marks read-only is refused.
 //!
-//! The two sources used to carry their own copies, which had drifted apart; the rules
-//! they disagreed on are decided here, once:
+//! The rules on which the two sources could part are decided here, once, for both:
 //! - a limit variable whose value is BAD (or not numeric, or not known yet) is an
-//!   **unknown limit**: the rules skip that limit (the network's rule; the simulation
-//!   used the plant value whatever its quality). A BAD value is no value an operator set.
+//!   **unknown limit**: the rules skip that limit. A BAD value is no value an operator set.
 //! - the database's `Writable` is checked again at the data source, as a second guard
-//!   behind the engine's access rights (the simulation's rule; the network path left it
-//!   to the asix server). A write the server would refuse anyway is refused at once and
-//!   the same way from both sources (ASKOM_E_WriteErrorDeviceRequestIllegal).
+//!   behind the engine's access rights: a write the asix server would refuse anyway is
+//!   refused at once and the same way from both sources
+//!   (ASKOM_E_WriteErrorDeviceRequestIllegal).
 
 use asix_model::namespace::{AsixNamespace, Derivation};
 use asix_model::{check_write_value, Limit, RuleDef, RuleOptions, Variable};
 use ctopc_core::model::datasource::SourceItem;
 use ctopc_core::{OpcError, Quality, Value, Vqt};
 
-use crate::client::ItemKey;
+use asix_model::ItemKey;
 
 /// The attribute of the variable database naming a variable's asix channel.
 pub const CHANNEL_ATTRIBUTE: &str = "Channel";
@@ -397,7 +395,7 @@ mod tests {
 
     /// Decided for both sources: a BAD limit variable is an unknown limit (the network
     /// test `a_limit_variable_without_a_value_is_an_unknown_limit` pins the same rule end
-    /// to end); the simulation used to compare with the BAD value.
+    /// to end), the simulation's plant values included.
     #[test]
     fn a_bad_limit_variable_is_an_unknown_limit() {
         let f = furnace(Quality::GOOD, Quality::BAD);
@@ -434,8 +432,7 @@ mod tests {
     }
 
     /// Decided for both sources: the database's Writable is checked again at the data
-    /// source (the network path used to leave it to the asix server, which answers the
-    /// same code).
+    /// source, with the code the asix server would answer.
     #[test]
     fn writes_check_derivation_value_kind_and_writable() {
         let f = Fake::new(&[

@@ -1,4 +1,4 @@
-//! Issue 16 item 4: a device read of many items is one request to the data source per
+//! A device read of many items is one request to the data source per
 //! call (per part of the source: one in the simulation, one per asix channel on the
 //! network), never one per item or per variable. The engine and the asix adapter
 //! (`AsixBackend`) over a counting fake source, with a synthetic database of 10,000
@@ -10,9 +10,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use asix_model::synthetic::{synthetic_database, variable_name};
+use asix_model::ItemKey;
 use asix_model::{parse_config, AsixNamespace};
 use asix_net::backend::{AsixBackend, RawId, RawOutput, VariableSource};
-use asix_net::ItemKey;
 use ctopc_core::model::{
     DataSource, Engine, EngineConfig, GroupHandle, GroupParams, ItemDefinition, ItemVqt,
     SourceRequest, SyncOutcome,

@@ -574,7 +574,7 @@ fn a_bad_limit_variable_is_an_unknown_limit_in_the_simulation() {
 
 /// The adapter's rule for an item without a plant variable, in the simulation: one
 /// BAD_CONFIG_ERROR sample when subscribed (the cache shows it), and no sampling of it
-/// afterwards (the simulation used to report it again every tick).
+/// afterwards (nothing about it changes).
 #[test]
 fn an_item_without_a_plant_variable_is_config_error_once() {
     let ns = demo();

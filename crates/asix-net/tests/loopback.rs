@@ -5,9 +5,10 @@ mod common;
 
 use std::time::{Duration, Instant};
 
+use asix_model::ItemKey;
 use asix_net::client::{discover, ClientEvent};
 use asix_net::proto::discovery::Resource;
-use asix_net::{ExternalServerLists, ItemKey, ReadSource, Vqt};
+use asix_net::{ExternalServerLists, ReadSource, Vqt};
 use common::*;
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
 

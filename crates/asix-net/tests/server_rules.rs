@@ -5,12 +5,12 @@ mod common;
 
 use std::time::Duration;
 
+use asix_model::ItemKey;
 use asix_net::client::ClientEvent;
 use asix_net::proto::frame::{
     body_len, decode_body, frame_bytes, Frame, Hello, Message, SubscribeItem, VarRef,
 };
 use asix_net::sim::plant::{channels_from_database, ACID_PLANT_CHANNEL};
-use asix_net::ItemKey;
 use common::*;
 use ctopc_core::{OpcError, Quality};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};

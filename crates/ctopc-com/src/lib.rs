@@ -1,54 +1,24 @@
-//! The COM layer of ServerCTOPC: OPC interface definitions (mirroring `idl/`), the COM
-//! objects over `ctopc-core`, registration and the server host. Every `unsafe` block of
-//! the project is in this crate, each with a `// SAFETY:` comment.
+//! The COM layer of ServerCTOPC, in two floors as the OPC Foundation's sample server has
+//! them: the plumbing ([`com`]: the argument toolkit, interface definitions, connection
+//! points, enumerators, class factory, lifetime, VARIANT, registry, service, the apartment
+//! guard and the platform's quirks) and the OPC DA objects over it ([`da`]: server,
+//! group, context, callbacks, host). A module of the plumbing never imports from the DA
+//! floor. Most of the project's `unsafe` blocks are in this crate (the rest in the client
+//! library `opc-client`, the server browser `opc-server-list` and the e2e tests), each
+//! with a `// SAFETY:` comment.
 //!
-//! Everything but [`registration`] is Windows-only; `registration` (the registry entries
-//! as data) is plain Rust, compiled and tested on every host, so that it can be tested
-//! natively and reused by an installer build.
+//! Windows-only; the registry entries it writes are data of the portable crate
+//! `ctopc-registration` (crates/registration), tested natively and read by the MSI build.
+//! The crate's users name the modules by their short paths (`ctopc_com::abi`,
+//! `ctopc_com::host`), re-exported here.
 
-#[cfg(windows)]
-pub mod abi;
-pub mod catalog;
-#[cfg(windows)]
-pub mod client;
-#[cfg(windows)]
-pub mod clock;
-#[cfg(windows)]
-pub mod comdef;
-#[cfg(windows)]
-pub mod connpoint;
-#[cfg(windows)]
-pub mod context;
-#[cfg(windows)]
-pub mod enums;
-#[cfg(windows)]
-pub mod error;
-#[cfg(windows)]
-pub mod factory;
-#[cfg(windows)]
-pub mod group;
-#[cfg(windows)]
-pub mod host;
-#[cfg(windows)]
-pub mod interfaces;
-#[cfg(windows)]
-pub mod lifetime;
-#[cfg(windows)]
-pub mod metrics_http;
-#[cfg(windows)]
-pub mod ops;
-pub mod registration;
-#[cfg(windows)]
-pub mod registry;
-#[cfg(windows)]
-pub mod runtime;
-#[cfg(windows)]
-pub mod server;
-#[cfg(windows)]
-pub mod server_list;
-#[cfg(windows)]
-pub mod service;
-#[cfg(windows)]
-pub mod variant;
-#[cfg(windows)]
-pub mod wine_keepalive;
+#![cfg(windows)]
+
+pub mod com;
+pub mod da;
+
+pub use com::{
+    abi, apartment, clock, comdef, connpoint, enums, error, factory, interfaces, lifetime, service,
+    variant, winreg,
+};
+pub use da::{callbacks, context, group, host, server};

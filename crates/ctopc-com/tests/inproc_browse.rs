@@ -2,7 +2,7 @@
 //! proxy): every NULL pointer, count of 0 and enumeration value outside the IDL's reaches
 //! the server and answers its exact HRESULT, with out-parameters cleared on failure; and
 //! the success paths over the embedded demo plant. The rules are the module docs of
-//! `crates/ctopc-com/src/server.rs` and `server/browse.rs`.
+//! `crates/ctopc-com/src/da/server.rs` and `server/browse.rs`.
 #![cfg(windows)]
 // Test code (helpers included): a panic fails the test, it crosses no COM boundary.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -10,8 +10,8 @@
 mod common;
 
 use common::*;
-use ctopc_com::client::{enum_strings, BrowseArgs};
 use ctopc_com::interfaces::*;
+use opc_client::{enum_strings, BrowseArgs};
 use std::ptr::{null, null_mut};
 use windows::Win32::Foundation::E_NOTIMPL;
 use windows::Win32::System::Com::IEnumString;
@@ -267,7 +267,7 @@ fn browse_opc_item_ids_success() {
     );
     assert_eq!(names(OPC_LEAF, "*[12]", 0).1, ["KW_A001", "KW_A002"]);
     assert_eq!(names(OPC_LEAF, "nic*", 0), (S_FALSE, vec![]));
-    // The access-rights filter applies (issue 15): Z101's variables are read-only.
+    // The access-rights filter applies: Z101's variables are read-only.
     assert_eq!(names(OPC_LEAF, "", OPC_WRITEABLE), (S_FALSE, vec![]));
     assert_eq!(change(&a, OPC_BROWSE_TO, ""), S_OK);
     let (_, writable) = names(OPC_FLAT, "", OPC_WRITEABLE);

@@ -80,16 +80,12 @@ impl Plant {
     }
 }
 
-fn clients(items: &[ctopc_com::client::ReadItem]) -> Vec<u32> {
+fn clients(items: &[opc_client::ReadItem]) -> Vec<u32> {
     items.iter().map(|i| i.client_handle).collect()
 }
 
 /// IOPCSyncIO::Read: (HRESULT, items with their per-item errors).
-fn read(
-    p: &Plant,
-    source: OPCDATASOURCE,
-    h: &[u32],
-) -> (HRESULT, Vec<ctopc_com::client::ReadItem>) {
+fn read(p: &Plant, source: OPCDATASOURCE, h: &[u32]) -> (HRESULT, Vec<opc_client::ReadItem>) {
     let (mut values, mut errors) = (poison::<OPCITEMSTATE>(), poison::<HRESULT>());
     // SAFETY: valid pointers.
     let hr = unsafe {
@@ -988,7 +984,7 @@ fn cancel2_ends_a_transaction_with_on_cancel_complete_or_fails_once_it_completed
     eprintln!("Cancel2: {cancelled} of 20 cancelled before completion");
 }
 
-/// WriteVQT of a VT_EMPTY value with a quality or a timestamp (issue 15): OPC_E_NOTSUPPORTED
+/// WriteVQT of a VT_EMPTY value with a quality or a timestamp: OPC_E_NOTSUPPORTED
 /// per item (DA 3.0: "the server does not support the requested combination (which could be
 /// a single quantity such as just timestamp)"); VT_EMPTY alone is OPC_E_BADTYPE; a VARIANT
 /// that decodes to no value keeps its decoding error (OPC_E_BADTYPE) even with a quality;

@@ -270,8 +270,8 @@ fn set_state_with_a_deadband_out_of_range_is_e_invalidarg_and_changes_nothing() 
     }
 }
 
-/// SetState validates the LCID as AddGroup does (issue 15: it accepted 0xDEADBEEF, which
-/// AddGroup refuses): E_INVALIDARG and nothing changed; the LCIDs AddGroup takes are taken.
+/// SetState validates the LCID as AddGroup does (both refuse 0xDEADBEEF): E_INVALIDARG
+/// and nothing changed; the LCIDs AddGroup takes are taken.
 #[test]
 fn set_state_validates_the_lcid_as_add_group_does() {
     let (_s, g) = server_with_group("state-set-lcid");
@@ -776,7 +776,7 @@ fn item_sampling_rate_and_buffering() {
         clear(&[h[0], BAD_HANDLE]),
         (S_FALSE, vec![OPC_E_RATENOTSET, OPC_E_INVALIDHANDLE])
     );
-    // Buffering (issue 14): enabling and disabling succeed per item; Get reads it back.
+    // Buffering: enabling and disabling succeed per item; Get reads it back.
     let hs = [h[0], h[1], BAD_HANDLE];
     let en = [BOOL(1), BOOL(0), BOOL(0)];
     let (r, errs) = errors_of(3, |e| {

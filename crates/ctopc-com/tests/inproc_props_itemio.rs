@@ -2,7 +2,7 @@
 //! NULL pointer, count of 0 and bad item ID with its exact HRESULT, out-parameters cleared
 //! on failure (all or nothing), and the success paths over the simulated demo plant
 //! (KW_A000: read-only R4 level 0..8 m; KW_A110: writable R4 setpoint). The rules are the
-//! module docs of `crates/ctopc-com/src/server.rs`, `server/props.rs` and
+//! module docs of `crates/ctopc-com/src/da/server.rs`, `server/props.rs` and
 //! `server/itemio.rs`.
 #![cfg(windows)]
 // Test code (helpers included): a panic fails the test, it crosses no COM boundary.
@@ -523,7 +523,7 @@ fn write_text(io: &IOPCItemIO, text: &str) -> HRESULT {
 }
 
 /// IOPCItemIO has no group: WriteVQT converts text in the LCID the client set on this
-/// server object with IOPCCommon::SetLocaleID (issue 15), per server object; a refused
+/// server object with IOPCCommon::SetLocaleID, per server object; a refused
 /// SetLocaleID changes nothing.
 #[test]
 fn item_io_write_vqt_converts_text_in_the_server_objects_locale() {

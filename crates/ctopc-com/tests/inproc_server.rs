@@ -1,7 +1,7 @@
 //! IOPCServer and IOPCCommon of the server object, in process (no proxy): every argument
 //! branch with its exact HRESULT, out-parameters cleared on failure (all or nothing), and
 //! each method's success path. The argument rules are the module doc of
-//! `crates/ctopc-com/src/server.rs`; the group rules that of `server/groups.rs`. The
+//! `crates/ctopc-com/src/da/server.rs`; the group rules that of `server/groups.rs`. The
 //! harness is `common/mod.rs`.
 #![cfg(windows)]
 // Test code (helpers included): a panic fails the test, it crosses no COM boundary.
@@ -10,8 +10,8 @@
 mod common;
 
 use common::*;
-use ctopc_com::client::enum_strings;
 use ctopc_com::interfaces::*;
+use opc_client::enum_strings;
 use std::ptr::{null, null_mut};
 use windows::Win32::System::Com::{IConnectionPointContainer, IEnumString, IEnumUnknown};
 
@@ -160,8 +160,8 @@ fn add_group_null_pointers_are_invalidarg_and_clear_every_output() {
     assert_eq!(client_of(&s).status().unwrap().group_count, 0);
 }
 
-fn client_of(s: &IOPCServer) -> ctopc_com::client::Server {
-    ctopc_com::client::Server::from_unknown(s.cast().unwrap()).unwrap()
+fn client_of(s: &IOPCServer) -> opc_client::Server {
+    opc_client::Server::from_unknown(s.cast().unwrap()).unwrap()
 }
 
 #[test]
@@ -683,7 +683,7 @@ fn create_group_enumerator_success() {
     // IEnumUnknown: the group objects themselves.
     let (r, e) = enumerate(OPC_ENUM_ALL, &IEnumUnknown::IID);
     assert_eq!(r, S_OK);
-    let objects = ctopc_com::client::enum_unknowns(&e.cast().unwrap()).unwrap();
+    let objects = opc_client::enum_unknowns(&e.cast().unwrap()).unwrap();
     let mut ids: Vec<_> = objects.iter().map(identity).collect();
     ids.sort();
     let mut expected = vec![identity(&a.unknown), identity(&b.unknown)];

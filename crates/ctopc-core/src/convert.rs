@@ -145,7 +145,7 @@ impl Value {
 ///   from VariantChangeType, which gives VARIANT_TRUE = -1 (and 255, 65535, ... for
 ///   unsigned targets): a client that writes TRUE to a process variable (a switch, a
 ///   set-point enable, an Excel check box) means "on", i.e. 1 in the PLC register, and -1
-///   would be out of range of every unsigned or 0/1 variable (issue 15 asks for 1);
+///   would be out of range of every unsigned or 0/1 variable;
 /// - text that is not a number (also "True"/"False": VarI4FromStr refuses them too), DATE
 ///   (a point in time is no process value, although VariantChangeType would give its day
 ///   count), VT_ERROR, VT_EMPTY and arrays to a scalar item are `OPC_E_BADTYPE`;

@@ -2,10 +2,11 @@
 //! data between the engine and its data source, and the bookkeeping of paced OnDataChange
 //! calls. Sans-IO like the engine: no threads, no clock (`now` is an argument), no COM.
 //!
-//! The COM layer (`ctopc-com/src/runtime.rs`) owns the threads: a driver thread that locks
-//! the [`Driver`] and calls [`Driver::step`] whenever it is woken or [`Step::next`] is due,
-//! and one callback worker per client. It hands the step's events to [`dispatch`] with a
-//! [`Deliver`] that queues each on its client's worker and marshals the values there.
+//! The runtime (`crates/runtime/src/runtime.rs`) owns the threads: a driver thread that
+//! locks the [`Driver`] and calls [`Driver::step`] whenever it is woken or [`Step::next`] is
+//! due, and one callback worker per client. It hands the step's events to [`dispatch`] with
+//! a [`Deliver`] that queues each on its client's worker, where the front end makes the
+//! call.
 //!
 //! Pacing (`EngineConfig::max_pending_data_changes`): every scheduled OnDataChange
 //! ([`is_paced`]) that is handed to a client is reported back as [`Report::Ended`] once its
@@ -16,7 +17,7 @@
 //!
 //! Synchronous callers (IOPCSyncIO, IOPCItemIO) wait for their own result with
 //! `Engine::take_sync_result`; [`Step::sync_completed`] says after which step one of them
-//! has an answer, so the COM layer wakes its waiters only then.
+//! has an answer, so the runtime wakes its waiters only then.
 
 use crate::model::{Engine, Event, GroupHandle, SyncId};
 use crate::source::{Backend, SourceOutput};

@@ -36,10 +36,11 @@ pub struct ItemDef {
     pub constant: Option<Value>,
 }
 
-/// Attribute values of an item for its OPC item properties (asix: from the variable
-/// database's attribute table).
+/// The attribute values behind an item's OPC item properties: descriptions, EU units and
+/// info, limits (asix: from the variable database's attribute table). The attributes of
+/// an item in a group (OPCITEMATTRIBUTES) are [`crate::model::ItemAttributes`].
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct ItemAttributes {
+pub struct PropertyAttributes {
     /// `Description` of the variable behind the item (Polish, the asix original).
     pub description: Option<String>,
     /// `DescriptionEn`, when given.
@@ -84,10 +85,10 @@ pub trait Namespace: Send + Sync {
         &self,
         item_id: &str,
         access_path: &str,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         Ok((
             self.resolve(item_id, access_path)?,
-            ItemAttributes::default(),
+            PropertyAttributes::default(),
         ))
     }
 

@@ -22,8 +22,8 @@ pub struct OpsConfig {
     /// `CallbackFailures` (default [`DEFAULT_CALLBACK_FAILURES`]): after this many
     /// consecutive failed callbacks the client's callback sinks are dropped.
     pub callback_failures: u32,
-    /// `MetricsAddress` (default none: off): the loopback `ip:port` of the Prometheus
-    /// endpoint ([`crate::metrics`]).
+    /// `MetricsAddress` (default none: off): the loopback `ip:port` the runtime shows the
+    /// counters of [`crate::metrics`] on.
     pub metrics_address: Option<String>,
 }
 

@@ -223,7 +223,7 @@ fn a_step_subscribes_pulls_the_source_and_delivers_the_due_on_data_change() {
     r.set("A1", 1.0);
     r.set("A2", 2.0);
     // The group's first update runs before its items are subscribed: they have no value
-    // yet and are held back (issue 15: no placeholder callback). The Subscribe goes out in
+    // yet and are held back (no placeholder callback). The Subscribe goes out in
     // the same step, the in-process source answers at once, and the first callback, in
     // the same step, carries the real values.
     let dc = r.step();

@@ -1,5 +1,5 @@
-//! Server model: item buffering (IOPCItemSamplingMgt::SetItemBufferEnable, issue 14 item
-//! 3) with a stepped clock: a 1000 ms group, items sampled at 100 ms.
+//! Server model: item buffering (IOPCItemSamplingMgt::SetItemBufferEnable) with a
+//! stepped clock: a 1000 ms group, items sampled at 100 ms.
 
 mod model_util;
 

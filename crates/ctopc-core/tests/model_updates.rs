@@ -43,7 +43,7 @@ fn first_update_sends_all_active_items_then_only_changes() {
     assert_eq!(values(&dc[0]), vec![(101, Value::R8(2.5))]);
 }
 
-/// Issue 15: the first OnDataChange of a new item waits (bounded) for its first sample from
+/// The first OnDataChange of a new item waits (bounded) for its first sample from
 /// the source, and goes as soon as it arrives, not at the next tick.
 #[test]
 fn the_first_callback_waits_for_the_first_sample_and_goes_when_it_arrives() {
@@ -160,7 +160,7 @@ fn refresh_and_cache_reads_in_the_window_answer_from_the_cache() {
     assert_eq!(values(&sim.data_changes()[0]), vec![(100, Value::R8(1.0))]);
 }
 
-/// `first_sample_wait_ms = 0`: no wait, the placeholder goes at once (the old behaviour).
+/// `first_sample_wait_ms = 0`: no wait, the placeholder goes at once.
 #[test]
 fn without_a_wait_items_waiting_for_initial_data_report_bad_waiting_quality() {
     let mut sim = Sim::with_config(EngineConfig {

@@ -4,8 +4,7 @@
 //! and only then checked by the namespace (`Namespace::check_write_value`; asix: integers
 //! and reals, AsixConnect §5). Numeric text ("2.5", Polish "12,5"), BOOL (TRUE = 1) and CY
 //! reach the source as numbers; DATE and text that is not a number are OPC_E_BADTYPE; a
-//! value out of the target's range is OPC_E_RANGE. (Issue 15 changed this: before it,
-//! everything but integers and reals was OPC_E_BADTYPE.)
+//! value out of the target's range is OPC_E_RANGE.
 
 mod model_util;
 
@@ -309,8 +308,8 @@ fn write_vqt_and_async_writes_apply_the_same_conversion() {
 }
 
 /// IOPCItemIO::WriteVQT has no group: its text converts in the session's LCID, the one the
-/// client set with IOPCCommon::SetLocaleID (issue 15; before, always the server's default
-/// locale). A Polish session's "12,5" is 12.5; in an English one the comma groups digits,
+/// client set with IOPCCommon::SetLocaleID. A Polish session's "12,5" is 12.5; in an
+/// English one the comma groups digits,
 /// so "12,5" is 125 (VarR8FromStr with en-US) and "12.5" is 12.5.
 #[test]
 fn item_io_writes_convert_in_the_sessions_locale() {

@@ -14,6 +14,72 @@ pub const SUFFIX: &str = ".log";
 /// A calendar date (year, month, day).
 pub type Date = (i32, u32, u32);
 
+/// The log directory: `LogDirectory` (relative to the install folder), else `<install>\Log`.
+pub fn log_dir(install_dir: &Path, configured: Option<&str>) -> PathBuf {
+    match configured.map(str::trim).filter(|s| !s.is_empty()) {
+        Some(d) => install_dir.join(d),
+        None => install_dir.join("Log"),
+    }
+}
+
+/// Sets up tracing into the log files, written on a background thread (never blocking a
+/// COM call). Keep the returned guard alive: dropping it flushes and ends the writer.
+#[cfg(windows)]
+pub fn init(
+    install_dir: &Path,
+    opts: &asix_model::ServerOptions,
+) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+    use asix_model::LogLevel;
+    let dir = log_dir(install_dir, opts.log_directory.as_deref());
+    let max = u64::from(opts.log_max_file_size_mb) * 1024 * 1024;
+    let files = match LogFiles::new(
+        &dir,
+        max,
+        opts.log_keep_files as usize,
+        Box::new(ctopc_com::clock::local_date),
+    ) {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("ServerCTOPC: cannot write logs to {}: {e}", dir.display());
+            return None;
+        }
+    };
+    let (writer, guard) = tracing_appender::non_blocking(files);
+    let level = match opts.log_level {
+        LogLevel::Error => tracing::Level::ERROR,
+        LogLevel::Warn => tracing::Level::WARN,
+        LogLevel::Info => tracing::Level::INFO,
+        LogLevel::Debug => tracing::Level::DEBUG,
+    };
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(writer)
+        .with_ansi(false)
+        .with_max_level(level)
+        .with_thread_names(true)
+        .finish();
+    if tracing::subscriber::set_global_default(subscriber).is_err() {
+        eprintln!("ServerCTOPC: logging was already set up");
+    }
+    Some(guard)
+}
+
+/// A last-resort log line when the configuration could not be read (no log settings known).
+pub fn emergency(install_dir: &Path, message: &str) {
+    let dir = log_dir(install_dir, None);
+    if let Ok(mut f) = LogFiles::new(&dir, 10 * 1024 * 1024, 30, Box::new(today_utc)) {
+        let _ = writeln!(f, "ERROR ServerCTOPC cannot start: {message}");
+    }
+}
+
+/// The UTC date (used only when the local date is not available).
+pub fn today_utc() -> Date {
+    let since = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    let c = ctopc_core::Timestamp::from_unix_micros(since.as_micros()).civil();
+    (c.year as i32, c.month, c.day)
+}
+
 /// `ServerCTOPC.20261122.log`, or `ServerCTOPC.20261122.3.log` for `index` 3.
 pub fn file_name(date: Date, index: u32) -> String {
     let (y, m, d) = date;
@@ -35,13 +101,6 @@ pub fn parse_name(name: &str) -> Option<(u32, u32)> {
         return None;
     }
     Some((date.parse().ok()?, index))
-}
-
-struct Open {
-    date: Date,
-    index: u32,
-    file: File,
-    written: u64,
 }
 
 /// A `Write` that appends to the day's log file and rotates by date and size.
@@ -145,6 +204,14 @@ impl Write for LogFiles {
     }
 }
 
+/// The file being written: its date and index, and the bytes it holds.
+struct Open {
+    date: Date,
+    index: u32,
+    file: File,
+    written: u64,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -234,76 +301,7 @@ mod tests {
         );
         let _ = fs::remove_dir_all(&dir);
     }
-}
 
-/// The log directory: `LogDirectory` (relative to the install folder), else `<install>\Log`.
-pub fn log_dir(install_dir: &Path, configured: Option<&str>) -> PathBuf {
-    match configured.map(str::trim).filter(|s| !s.is_empty()) {
-        Some(d) => install_dir.join(d),
-        None => install_dir.join("Log"),
-    }
-}
-
-/// Sets up tracing into the log files, written on a background thread (never blocking a
-/// COM call). Keep the returned guard alive: dropping it flushes and ends the writer.
-#[cfg(windows)]
-pub fn init(
-    install_dir: &Path,
-    opts: &asix_model::ServerOptions,
-) -> Option<tracing_appender::non_blocking::WorkerGuard> {
-    use asix_model::LogLevel;
-    let dir = log_dir(install_dir, opts.log_directory.as_deref());
-    let max = u64::from(opts.log_max_file_size_mb) * 1024 * 1024;
-    let files = match LogFiles::new(
-        &dir,
-        max,
-        opts.log_keep_files as usize,
-        Box::new(ctopc_com::clock::local_date),
-    ) {
-        Ok(f) => f,
-        Err(e) => {
-            eprintln!("ServerCTOPC: cannot write logs to {}: {e}", dir.display());
-            return None;
-        }
-    };
-    let (writer, guard) = tracing_appender::non_blocking(files);
-    let level = match opts.log_level {
-        LogLevel::Error => tracing::Level::ERROR,
-        LogLevel::Warn => tracing::Level::WARN,
-        LogLevel::Info => tracing::Level::INFO,
-        LogLevel::Debug => tracing::Level::DEBUG,
-    };
-    let subscriber = tracing_subscriber::fmt()
-        .with_writer(writer)
-        .with_ansi(false)
-        .with_max_level(level)
-        .with_thread_names(true)
-        .finish();
-    if tracing::subscriber::set_global_default(subscriber).is_err() {
-        eprintln!("ServerCTOPC: logging was already set up");
-    }
-    Some(guard)
-}
-
-/// A last-resort log line when the configuration could not be read (no log settings known).
-pub fn emergency(install_dir: &Path, message: &str) {
-    let dir = log_dir(install_dir, None);
-    if let Ok(mut f) = LogFiles::new(&dir, 10 * 1024 * 1024, 30, Box::new(today_utc)) {
-        let _ = writeln!(f, "ERROR ServerCTOPC cannot start: {message}");
-    }
-}
-
-/// The UTC date (used only when the local date is not available).
-pub fn today_utc() -> Date {
-    let since = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap_or_default();
-    let c = ctopc_core::Timestamp::from_unix_micros(since.as_micros()).civil();
-    (c.year as i32, c.month, c.day)
-}
-
-#[cfg(test)]
-mod date_tests {
     #[test]
     fn the_log_directory_defaults_to_log_under_the_install_folder() {
         let base = std::path::Path::new("/opt/ctopc");

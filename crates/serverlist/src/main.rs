@@ -3,8 +3,8 @@
 //! OPC server with its data source. Switches as Windows COM servers have them,
 //! case-insensitive, `/` or `-`: `/RegServer`, `/UnregServer`, `-Embedding` (COM starts
 //! it so), `/Service` (register as the NT service `OpcServerList`, for remote clients),
-//! `-ServiceRun` (the service control manager starts it so). Everything else is in
-//! `ctopc_com::server_list`.
+//! `-ServiceRun` (the service control manager starts it so). Everything else is in the
+//! crate's library (`src/lib.rs`).
 
 use std::process::ExitCode;
 
@@ -62,7 +62,7 @@ fn main() -> ExitCode {
 
 #[cfg(windows)]
 fn run(cmd: Command) -> ExitCode {
-    use ctopc_com::server_list;
+    use opc_server_list as server_list;
     let result = match cmd {
         Command::RegServer => server_list::register(),
         Command::UnregServer => server_list::unregister(),

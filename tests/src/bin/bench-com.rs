@@ -39,10 +39,11 @@ fn main() -> std::process::ExitCode {
 
 #[cfg(windows)]
 mod bench {
-    use ctopc_com::client::{ComThread, Server};
+    use ctopc_com::apartment::Apartment;
     use ctopc_com::interfaces::*;
     use e2e_tests::io_support::*;
     use e2e_tests::PROGID;
+    use opc_client::Server;
     use std::sync::atomic::Ordering;
     use std::sync::Arc;
     use std::time::{Duration, Instant};
@@ -346,7 +347,7 @@ mod bench {
         add_all(&g, &names)?;
         let rec = Recorder::recording();
         let sink = TestSink::create(&rec);
-        ctopc_com::client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
+        opc_client::advise_data_callback(&g.unknown, &sink).map_err(err("Advise"))?;
         std::thread::sleep(Duration::from_millis(u64::from(RATE_MS) * 8));
         let updates: Vec<Vec<u32>> = rec
             .all()
@@ -506,7 +507,7 @@ mod bench {
             let g = group(&server, RATE_MS)?;
             add_all(&g, &ids)?;
             let rec = Recorder::counting();
-            ctopc_com::client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
+            opc_client::advise_data_callback(&g.unknown, &TestSink::create(&rec))
                 .map_err(err("Advise"))?;
             recs.push(rec);
             conns.push((server, g));
@@ -550,9 +551,9 @@ mod bench {
     /// `--loop read|write N`: only repeats one call N times (10,000 demo items from cache,
     /// or 10,000 writes), for a profiler attached to the processes; prints the median.
     /// After `read` it also prints the median cache read of 10 to 10,000 items, which shows
-    /// the per-item cost of the transport (linear under Wine, see the README).
+    /// the per-item cost of the transport (linear under Wine, see docs/benchmarks.md).
     fn profile_loop(what: &str, n: usize) -> Res<()> {
-        let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+        let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
         let main = Server::connect(PROGID).map_err(err("connect"))?;
         let vars = demo_vars();
         let ids: Vec<String> = match what {
@@ -612,7 +613,7 @@ mod bench {
             if what == "callbacks" {
                 // N clients x --items-per-client items, 5 windows of 2 s.
                 let o = opts();
-                let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+                let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
                 let main = Server::connect(PROGID).map_err(err("connect"))?;
                 let changing = changing_vars(&main, &demo_vars())?;
                 let (rates, cbs) = throughput(n, o.items_per_client, &changing, 5, o.window)?;
@@ -626,7 +627,7 @@ mod bench {
             return profile_loop(what, n);
         }
         let o = opts();
-        let _com = ComThread::mta().map_err(err("CoInitializeEx"))?;
+        let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
         println!("ServerCTOPC COM benchmark (demo plant, simulated, MinUpdateRate {RATE_MS} ms, config {}; Wine; medians of {} runs unless noted)", ini.display(), o.runs);
         let t = Instant::now();
         let main = Server::connect(PROGID).map_err(err("first CoCreateInstance"))?;
@@ -759,8 +760,8 @@ mod bench {
         }
 
         // Reads of 10,000 and of 80,000 items: the demo variables repeated, in an active
-        // group; the device read beside the cache read of the same call (issue 16's goal:
-        // at most 20 % more). The 10,000-item group stays for the transport figure below.
+        // group; the device read beside the cache read of the same call (the goal: at
+        // most 20 % more). The 10,000-item group stays for the transport figure below.
         let mut kept = None;
         for (n, cache_what, device_what, cache_goal) in [
             (
@@ -783,7 +784,7 @@ mod bench {
             loop {
                 let (hr, failed) = read_raw(&sync, OPC_DS_CACHE, &handles);
                 let (_, items) =
-                    ctopc_com::client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()])
+                    opc_client::sync_read(&sync, OPC_DS_CACHE, &handles[..names.len()])
                         .map_err(err("Read"))?;
                 if hr.is_ok()
                     && failed == 0

@@ -1,4 +1,4 @@
-//! scale-client.exe: one client of the scale measurements (issue 16), under Wine. A runner
+//! scale-client.exe: one client of the scale measurements, under Wine. A runner
 //! (`cargo xtask bench --scale`, or a script) starts it, reads one `ready` line per stage
 //! on its stdout, measures the server from outside (VmRSS of ServerCTOPC.exe) and writes
 //! one line on its stdin to go on to the next stage.
@@ -63,9 +63,10 @@ fn main() -> std::process::ExitCode {
 
 #[cfg(windows)]
 mod scale {
-    use ctopc_com::client::{ComThread, GroupSpec, GroupStateChange, ItemDef, OpcGroup, Server};
+    use ctopc_com::apartment::Apartment;
     use ctopc_com::interfaces::*;
     use e2e_tests::PROGID;
+    use opc_client::{GroupSpec, GroupStateChange, ItemDef, OpcGroup, Server};
     use std::io::{BufRead, Write};
     use std::process::ExitCode;
     use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
@@ -395,7 +396,7 @@ mod scale {
         advise: Option<u32>,
     ) -> Result<(), String> {
         if let Some(cookie) = advise {
-            ctopc_com::client::unadvise_data_callback(&group.unknown, cookie)
+            opc_client::unadvise_data_callback(&group.unknown, cookie)
                 .map_err(|e| format!("Unadvise: {e}"))?;
         }
         if !handles.is_empty() {
@@ -434,7 +435,7 @@ mod scale {
         if o.active {
             let sink: IOPCDataCallback = Sink(Coverage::new(1)).into();
             advise = Some(
-                ctopc_com::client::advise_data_callback(&group.unknown, &sink)
+                opc_client::advise_data_callback(&group.unknown, &sink)
                     .map_err(|e| format!("warm-up Advise: {e}"))?,
             );
             for active in [true, false] {
@@ -456,7 +457,7 @@ mod scale {
             lines: stdin_lines(),
             limit: o.input_timeout,
         };
-        let Ok(_com) = ComThread::mta() else {
+        let Ok(_com) = Apartment::mta() else {
             println!("error connected CoInitializeEx failed");
             return ExitCode::FAILURE;
         };
@@ -561,7 +562,7 @@ mod scale {
             let Some((group, _)) = held.group.as_ref() else {
                 return Err(Stop::Failed("subscribed", "no group".into()));
             };
-            let cookie = ctopc_com::client::advise_data_callback(&group.unknown, &sink)
+            let cookie = opc_client::advise_data_callback(&group.unknown, &sink)
                 .map_err(|e| format!("Advise: {e}"))
                 .map_err(fail("subscribed"))?;
             held.advise = Some(cookie);

@@ -63,11 +63,12 @@ fn main() -> std::process::ExitCode {
 
 #[cfg(windows)]
 mod soak {
-    use ctopc_com::client::{self, ComThread, GroupSpec, ItemDef, OpcGroup, Server};
+    use ctopc_com::apartment::Apartment;
     use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE};
     use ctopc_core::Value;
     use e2e_tests::io_support::{Recorder, TestSink};
     use e2e_tests::PROGID;
+    use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, Server};
     use std::time::{Duration, Instant};
     use windows::core::Interface;
 
@@ -124,7 +125,7 @@ mod soak {
     }
 
     pub fn hold(seconds: u64) -> Result<(), String> {
-        let _com = ComThread::mta().map_err(|e| e.to_string())?;
+        let _com = Apartment::mta().map_err(|e| e.to_string())?;
         let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
         let deadline = Instant::now() + Duration::from_secs(seconds);
         while Instant::now() < deadline {
@@ -166,7 +167,7 @@ mod soak {
         calls: &Calls,
         stall_after: Option<u64>,
     ) -> Result<(), String> {
-        let _com = ComThread::mta().map_err(|e| e.to_string())?;
+        let _com = Apartment::mta().map_err(|e| e.to_string())?;
         let mut counts = Counts::default();
         let kept = if calls.add {
             None

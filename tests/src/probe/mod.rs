@@ -16,7 +16,7 @@
 //! * Methods without string outputs return `E_NOTIMPL`. Out-parameters are all-or-nothing
 //!   and CoTaskMem-allocated, as in the real server.
 //!
-//! [`client`] and the client library `ctopc_com::client` hold safe readers of the same
+//! [`client`] and the client library `opc_client` hold safe readers of the same
 //! outputs for the test (every raw call and every CoTaskMem free of the test is there, so
 //! that the test itself has no `unsafe`).
 
@@ -25,11 +25,11 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 use ctopc_com::abi::{self, nonnull, put, OwnedArray, OwnedWstr, TaskMem};
-use ctopc_com::client::ComThread;
+use ctopc_com::apartment::Apartment;
 use ctopc_com::factory::ClassFactory;
 use ctopc_com::interfaces::*;
 use ctopc_com::lifetime::{Lifetime, ObjectGuard};
-use ctopc_com::registry::{self, ServerRegistration};
+use ctopc_com::winreg::{self, ServerRegistration};
 use ctopc_com::{clock, error};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
@@ -1024,26 +1024,26 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
 
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
-    with_registration(registry::register)??;
+    let _com = Apartment::mta()?;
+    with_registration(winreg::register)??;
     println!(
         "marshal-probe: registered {PROGID} ({})",
-        registry::guid_string(&CLSID_MARSHAL_PROBE)
+        winreg::guid_string(&CLSID_MARSHAL_PROBE)
     );
     Ok(())
 }
 
 /// `/UnregServer`.
 pub fn unregister() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
-    with_registration(registry::unregister)??;
+    let _com = Apartment::mta()?;
+    with_registration(winreg::unregister)??;
     println!("marshal-probe: unregistered {PROGID}");
     Ok(())
 }
 
 /// `-Embedding`: serve until the last client has gone (as ServerCTOPC.exe does).
 pub fn serve() -> windows::core::Result<()> {
-    let _com = ComThread::mta()?;
+    let _com = Apartment::mta()?;
     ctopc_com::host::init_security();
     let factory = ClassFactory::new(Arc::clone(probe_lifetime()), create_instance);
     let cookie = ctopc_com::host::register_class(&CLSID_MARSHAL_PROBE, &factory)?;
@@ -1059,7 +1059,7 @@ pub fn serve() -> windows::core::Result<()> {
 // ---------------------------------------------------------------------------------------
 
 /// Safe readers of the string outputs the probe produces that the client library
-/// (`ctopc_com::client::Server`, which reads GetItemID, QueryAvailableProperties,
+/// (`opc_client::Server`, which reads GetItemID, QueryAvailableProperties,
 /// LookupItemIDs, GetProperties and Browse for the test) has no reader for: each calls one
 /// method through the given interface pointer (a proxy when the object lives in another
 /// process), copies what arrived and frees it. A string that arrived NULL is `None` (also

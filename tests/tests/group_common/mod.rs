@@ -2,8 +2,8 @@
 //! made through IOPCServer::AddGroup, and a recording IOPCDataCallback sink.
 #![allow(dead_code)]
 
-use ctopc_com::client::{ItemDef, OpcGroup, Server};
 use e2e_tests::interfaces::*;
+use opc_client::{ItemDef, OpcGroup, Server};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use windows::core::{implement, IUnknown, Interface, BOOL, HRESULT, HSTRING, PCWSTR};

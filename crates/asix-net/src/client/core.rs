@@ -9,11 +9,11 @@
 //! channel bound to that server.
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
-use std::fmt;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Instant;
 
+use asix_model::ItemKey;
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
 use tracing::{debug, warn};
 
@@ -38,30 +38,9 @@ pub struct Now {
     pub wall: Timestamp,
 }
 
-/// A process variable: asix channel plus variable name (both case-sensitive).
-/// Cloning is two reference-count increments.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct ItemKey {
-    pub channel: Arc<str>,
-    pub variable: Arc<str>,
-}
-
-impl ItemKey {
-    pub fn new(channel: &str, variable: &str) -> Self {
-        ItemKey {
-            channel: channel.into(),
-            variable: variable.into(),
-        }
-    }
-    fn var_ref(&self) -> VarRef {
-        VarRef::new(&*self.channel, &*self.variable)
-    }
-}
-
-impl fmt::Display for ItemKey {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}/{}", self.channel, self.variable)
-    }
+/// The variable as the protocol names it.
+fn var_ref(key: &ItemKey) -> VarRef {
+    VarRef::new(&*key.channel, &*key.variable)
 }
 
 /// What the client tells its user.
@@ -438,7 +417,7 @@ impl ClientCore {
         for (i, k) in keys.iter().enumerate() {
             let e = parts.entry(k.channel.clone()).or_default();
             e.0.push(i);
-            e.1.push(k.var_ref());
+            e.1.push(var_ref(k));
         }
         let n = keys.len();
         self.requests.insert(
@@ -471,7 +450,7 @@ impl ClientCore {
         for (i, (k, v)) in items.into_iter().enumerate() {
             let e = parts.entry(k.channel.clone()).or_default();
             e.0.push(i);
-            e.1.push((k.var_ref(), v));
+            e.1.push((var_ref(&k), v));
             keys.push(k);
         }
         self.start_write(
@@ -492,7 +471,7 @@ impl ClientCore {
         for (i, (k, v)) in items.into_iter().enumerate() {
             let e = parts.entry(k.channel.clone()).or_default();
             e.0.push(i);
-            e.1.push((k.var_ref(), v));
+            e.1.push((var_ref(&k), v));
             keys.push(k);
         }
         self.start_write(
@@ -1200,7 +1179,7 @@ impl ClientCore {
                 .or_default()
                 .push(SubscribeItem {
                     handle: h,
-                    var: key.var_ref(),
+                    var: var_ref(key),
                 });
         }
         let changes_only = self.cfg.changes_only;

@@ -12,6 +12,7 @@ use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
+use asix_model::ItemKey;
 use ctopc_core::{OpcError, Timestamp, Value};
 use tokio::io::{AsyncWriteExt, BufWriter};
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
@@ -21,7 +22,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tracing::{debug, warn};
 
-pub use self::core::{Action, ClientCore, ClientEvent, ItemKey, LinkId, Now, RequestId};
+pub use self::core::{Action, ClientCore, ClientEvent, LinkId, Now, RequestId};
 use crate::config::ClientConfig;
 use crate::discovery::{Candidate, Search};
 use crate::proto::codec::{frames, next_frame, ReadError};

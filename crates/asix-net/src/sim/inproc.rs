@@ -15,9 +15,9 @@
 //! delayed.
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
-use crate::client::ItemKey;
 use crate::sim::plant::{numeric, Plant};
 use asix_model::AsixNamespace;
+use asix_model::ItemKey;
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::{OpcError, Timestamp, Vqt};
 use std::collections::HashMap;
@@ -90,8 +90,8 @@ pub struct PlantSource {
     /// in ms and when it is next due. Each variable keeps its phase; missed periods are
     /// skipped, not burst. Only subscribed variables have an entry (a million-variable
     /// plant costs nothing here until subscribed). A sorted vector, 8 bytes a variable and
-    /// 16 a class (a B-tree map cost ~40, a rate and due time per variable 16, issue 16;
-    /// a variable subscribed alone, at a time of its own, costs 24).
+    /// 16 a class, so that the variables subscribed together share one rate and due time
+    /// (a variable subscribed alone, at a time of its own, costs 24).
     sampling: Vec<Sampled>,
     /// Indexed by [`Sampled::class`].
     classes: Vec<Class>,
@@ -414,8 +414,8 @@ mod tests {
         assert_eq!(sampled(&mut s, t0.add_millis(1500)), [5, 7]);
     }
 
-    /// The sampling as it was with a rate and due time per variable: the classes must
-    /// sample exactly as it did.
+    /// The reference sampling, a rate and due time per variable: the classes must sample
+    /// exactly as it does.
     #[derive(Default)]
     struct PerVariable {
         /// (var, rate, due), in variable order.

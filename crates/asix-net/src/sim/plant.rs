@@ -394,7 +394,7 @@ fn opt_var(v: u32) -> Option<u32> {
     (v != NO_VAR).then_some(v)
 }
 
-/// One variable's state: 64 bytes (issue 16: a million of them), its name in the
+/// One variable's state: 64 bytes (a large plant has a million of them), its name in the
 /// database it comes from or in the plant's arena ([`Plant::name`]). A behaviour's
 /// parameters (the same few for most variables) are in the plant's `params`, its state and
 /// references in `state`, `a`, `b` and `flag` ([`PlantVar::kind`]).
@@ -1656,8 +1656,8 @@ mod tests {
         }
     }
 
-    /// The simulation's values are a function of the seed: these digests were taken before
-    /// the plant's layout was made compact (issue 16), which must not change a value.
+    /// The simulation's values are a function of the seed: these digests pin them, so that
+    /// a change of the plant's layout cannot change a value.
     #[test]
     fn histories_are_those_of_the_plant_before_its_compact_layout() {
         let mut acid = Plant::new(&[acid_plant()], 42, 100, Timestamp(0));

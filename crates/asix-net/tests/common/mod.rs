@@ -5,9 +5,10 @@
 use std::net::{Ipv4Addr, SocketAddr};
 use std::time::{Duration, Instant};
 
+use asix_model::ItemKey;
 use asix_net::client::ClientEvent;
 use asix_net::sim::{self, SimConfig, SimHandle};
-use asix_net::{channel_sink, AsixClient, ClientConfig, ItemKey};
+use asix_net::{channel_sink, AsixClient, ClientConfig};
 use ctopc_core::Quality;
 use tokio::sync::mpsc::UnboundedReceiver;
 

@@ -408,13 +408,13 @@ pub unsafe fn raw_query(unk: &IUnknown, riid: *const GUID, ppv: *mut *mut c_void
 
 /// A new server object wrapped in the client library's `Server` (for success paths: its
 /// readers copy and free what the server hands out).
-pub fn client() -> ctopc_com::client::Server {
+pub fn client() -> opc_client::Server {
     client_from(&factory())
 }
 
 /// [`client`] over a new server object of the class object `f` (its context).
-pub fn client_from(f: &IClassFactory) -> ctopc_com::client::Server {
-    ctopc_com::client::Server::from_unknown(new_server_of(f)).expect("IOPCServer and IOPCCommon")
+pub fn client_from(f: &IClassFactory) -> opc_client::Server {
+    opc_client::Server::from_unknown(new_server_of(f)).expect("IOPCServer and IOPCCommon")
 }
 
 /// The environment variable that tells a child test process which helper test to run.

@@ -4,8 +4,8 @@
 #![allow(dead_code, unused_imports)]
 
 use crate::common::*;
-use ctopc_com::client::ReadItem;
 use ctopc_com::interfaces::*;
+use opc_client::ReadItem;
 use std::ffi::c_void;
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
@@ -391,7 +391,7 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { ctopc_com::client::diag::callback_items(n, h, v, q, t, e) };
+        let items = unsafe { opc_client::diag::callback_items(n, h, v, q, t, e) };
         self.0.push(Callback::DataChange {
             transaction,
             group,
@@ -416,7 +416,7 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { ctopc_com::client::diag::callback_items(n, h, v, q, t, e) };
+        let items = unsafe { opc_client::diag::callback_items(n, h, v, q, t, e) };
         self.0.push(Callback::ReadComplete {
             transaction,
             group,
@@ -437,7 +437,7 @@ impl IOPCDataCallback_Impl for Sink_Impl {
         e: *const HRESULT,
     ) -> windows::core::Result<()> {
         // SAFETY: the server passes `n`-element arrays.
-        let items = unsafe { ctopc_com::client::diag::write_results(n, h, e) };
+        let items = unsafe { opc_client::diag::write_results(n, h, e) };
         self.0.push(Callback::WriteComplete {
             transaction,
             group,

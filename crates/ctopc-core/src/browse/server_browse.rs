@@ -539,7 +539,7 @@ mod tests {
     }
 
     /// Every data-type × access-rights filter combination on `OPC_LEAF`, `OPC_FLAT` and
-    /// `OPC_BRANCH` (issue 15: the filters were ignored, as the asix original documented).
+    /// `OPC_BRANCH` (DA 2.05a defines them; the asix original ignores them, manual §6.6.2.3).
     #[test]
     fn browse_opc_item_ids_applies_the_data_type_and_access_rights_filters() {
         const R: u32 = OPC_READABLE;

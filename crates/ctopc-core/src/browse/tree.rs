@@ -755,7 +755,7 @@ impl<'a> NodeRef<'a> {
 mod tests {
     use super::*;
 
-    /// A node is 24 bytes (issue 16: a million leaves): its item ID is its name unless it
+    /// A node is 24 bytes (a large plant has a million leaves): its item ID is its name unless it
     /// has one of its own, kept aside.
     #[test]
     fn nodes_stay_compact_and_own_item_ids_are_kept_aside() {

@@ -1,4 +1,4 @@
-//! The `_Diagnostics` branch of the address space (issue 18, item 2): items any OPC client
+//! The `_Diagnostics` branch of the address space: items any OPC client
 //! can browse, read and subscribe that show what the server is doing. Pure: the model of
 //! the branch (its names, types, descriptions), the values of one counters snapshot, and
 //! the wrappers that put the branch beside the real address space.
@@ -42,7 +42,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
 
 use crate::browse::{AddressSpace, MatchCase, NodeId};
-use crate::namespace::{EuInfo, ItemAttributes, ItemDef, Namespace, OPC_READABLE};
+use crate::namespace::{EuInfo, ItemDef, Namespace, PropertyAttributes, OPC_READABLE};
 use crate::{Lang, OpcError, OpcResult, Timestamp, Value, VarType};
 
 /// The branch's name under the root, and the first segment of its item IDs.
@@ -687,7 +687,7 @@ pub fn description(f: &Field, lang: Lang) -> &'static str {
 
 impl DiagNamespace {
     /// A diagnostic ID's item, if it is one that exists now. Access paths: only `""`.
-    fn diag(&self, item_id: &str, access_path: &str) -> OpcResult<(ItemDef, ItemAttributes)> {
+    fn diag(&self, item_id: &str, access_path: &str) -> OpcResult<(ItemDef, PropertyAttributes)> {
         let item = DiagItem::parse(item_id).ok_or(OpcError::UnknownItemId)?;
         if !self.board.current().has(&item) {
             return Err(OpcError::UnknownItemId);
@@ -696,12 +696,12 @@ impl DiagNamespace {
             return Err(OpcError::UnknownPath);
         }
         let f = item.info();
-        let attrs = ItemAttributes {
+        let attrs = PropertyAttributes {
             description: Some(f.description_pl.to_owned()),
             description_en: Some(f.description_en.to_owned()),
             eu_units: f.eu_units.map(str::to_owned),
             eu: eu(f),
-            ..ItemAttributes::default()
+            ..PropertyAttributes::default()
         };
         Ok((item_def(item_id, &item), attrs))
     }
@@ -723,7 +723,7 @@ impl Namespace for DiagNamespace {
         &self,
         item_id: &str,
         access_path: &str,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
         if is_diagnostic_id(item_id) {
             return self.diag(item_id, access_path);
         }

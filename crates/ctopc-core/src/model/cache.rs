@@ -150,7 +150,7 @@ pub(crate) struct SourceEntry {
 
 /// What the cache holds of an entry's value and subscription (48 bytes), apart from the
 /// entry: an item that is never subscribed nor read (in inactive groups only) costs no
-/// sample of its own (issue 16). A number is in the sample (type and bits), a string or array in
+/// sample of its own. A number is in the sample (type and bits), a string or array in
 /// `SourceTable::shared` by sample slot; [`SourceTable::sample`] gives both as a
 /// [`SampleRef`].
 #[derive(Debug, Clone)]
@@ -231,7 +231,7 @@ impl SourceEntry {
 }
 
 /// The keys of the cache's entries one after another in one string, so that a key costs
-/// its bytes and no allocation (issue 16). A freed entry's key is garbage until garbage is
+/// its bytes and no allocation. A freed entry's key is garbage until garbage is
 /// most of the text; then the text is rebuilt from the live entries' keys.
 #[derive(Default)]
 struct KeyText {

@@ -68,7 +68,7 @@ pub struct DataChange {
 /// The most items one scheduled OnDataChange call carries. A subscription update of more
 /// items is delivered as several calls ([`DataChange::calls`]), so that the server never
 /// holds one client call's VARIANTs, arrays and marshalling buffer for every item of a
-/// large group at once (issue 16: the peak of a 100,000-item subscription).
+/// large group at once (the peak of a 100,000-item subscription).
 pub const MAX_ITEMS_PER_CALLBACK: usize = 10_000;
 
 impl DataChange {

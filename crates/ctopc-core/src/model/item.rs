@@ -35,7 +35,8 @@ pub struct ItemResult {
     pub access_rights: u32,
 }
 
-/// OPCITEMATTRIBUTES (IEnumOPCItemAttributes).
+/// OPCITEMATTRIBUTES (IEnumOPCItemAttributes): an item as its group holds it. The values
+/// behind its item properties are [`crate::namespace::PropertyAttributes`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ItemAttributes {
     pub access_path: String,
@@ -136,8 +137,8 @@ impl GroupItem {
 }
 
 /// The item sampling rate and item deadband of a group's items that have one set
-/// (`Group::opts`, by server handle; [`ItemFlags::SAMPLING`] and [`ItemFlags::DEADBAND`] say which is set). Few
-/// items have one, so they are kept out of [`GroupItem`] (issue 16).
+/// (`Group::opts`, by server handle; [`ItemFlags::SAMPLING`] and [`ItemFlags::DEADBAND`]
+/// say which is set). Few items have one, so they are kept out of [`GroupItem`].
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub(crate) struct ItemOpts {
     /// In ms, with [`ItemFlags::SAMPLING`].

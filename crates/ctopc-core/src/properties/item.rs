@@ -1,6 +1,6 @@
 //! Which properties an item has and their values: the behaviour behind IOPCItemProperties
 //! (DA 2.05a) and the property part of IOPCBrowse (DA 3.0 GetProperties, Browse with
-//! properties). The COM layer (`ctopc-com/src/server/props.rs`) checks arguments, makes
+//! properties). The COM layer (`ctopc-com/src/da/server/props.rs`) checks arguments, makes
 //! one call here per method, does the one engine read for the live values and marshals.
 //!
 //! Which properties an item has (asix manual §6.6; the digest's §6):
@@ -32,7 +32,7 @@
 use super::{self as p, require_property};
 use crate::lang::Lang;
 use crate::model::ItemState;
-use crate::namespace::{EuInfo, ItemAttributes, ItemDef, Namespace};
+use crate::namespace::{EuInfo, ItemDef, Namespace, PropertyAttributes};
 use crate::value::ArrayValue;
 use crate::{OpcError, OpcResult, Value, VarType};
 
@@ -45,7 +45,7 @@ pub struct ItemInfo {
     /// The item ID as the client wrote it.
     pub item_id: String,
     pub def: ItemDef,
-    pub attrs: ItemAttributes,
+    pub attrs: PropertyAttributes,
 }
 
 /// One property of one item, ready for OPCITEMPROPERTY / the IOPCItemProperties arrays.
@@ -87,7 +87,7 @@ fn non_empty(s: &Option<String>) -> Option<&str> {
 }
 
 /// The description in `lang`, falling back to the other language's.
-fn description(attrs: &ItemAttributes, lang: Lang) -> Option<&str> {
+fn description(attrs: &PropertyAttributes, lang: Lang) -> Option<&str> {
     match lang {
         Lang::English => non_empty(&attrs.description_en).or_else(|| non_empty(&attrs.description)),
         Lang::Polish => non_empty(&attrs.description).or_else(|| non_empty(&attrs.description_en)),

@@ -20,8 +20,8 @@ fn var(key: &str) -> ItemDef {
     }
 }
 
-fn v_attrs() -> ItemAttributes {
-    ItemAttributes {
+fn v_attrs() -> PropertyAttributes {
+    PropertyAttributes {
         description: Some("Poziom".into()),
         description_en: Some("Level".into()),
         eu_units: Some("m".into()),
@@ -48,8 +48,8 @@ impl Namespace for Fake {
         &self,
         item_id: &str,
         _access_path: &str,
-    ) -> OpcResult<(ItemDef, ItemAttributes)> {
-        let plain = |key: &str, attrs: ItemAttributes| {
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
+        let plain = |key: &str, attrs: PropertyAttributes| {
             let mut d = var(key);
             d.eu = attrs.eu.clone();
             Ok((d, attrs))
@@ -60,11 +60,11 @@ impl Namespace for Fake {
             | "V.WarnLow.CV" => {
                 let mut d = var(item_id);
                 d.constant = Some(Value::Bstr("x".into()));
-                Ok((d, ItemAttributes::default()))
+                Ok((d, PropertyAttributes::default()))
             }
             "V.PercentageCV" => Ok((
                 var("V.PercentageCV"),
-                ItemAttributes {
+                PropertyAttributes {
                     eu_units: Some("%".into()),
                     ..Default::default()
                 },
@@ -72,7 +72,7 @@ impl Namespace for Fake {
             // Enumerated, with a Polish description only.
             "E" => plain(
                 "E",
-                ItemAttributes {
+                PropertyAttributes {
                     description: Some("Stan".into()),
                     eu: EuInfo::Enumerated(vec!["stop".into(), "praca".into()]),
                     ..Default::default()
@@ -81,7 +81,7 @@ impl Namespace for Fake {
             // No EU information, an English description only, empty units.
             "N" => plain(
                 "N",
-                ItemAttributes {
+                PropertyAttributes {
                     description_en: Some("Counter".into()),
                     eu_units: Some(String::new()),
                     ..Default::default()
@@ -90,7 +90,7 @@ impl Namespace for Fake {
             // Empty descriptions and only the LoLo limit.
             "L" => plain(
                 "L",
-                ItemAttributes {
+                PropertyAttributes {
                     description: Some(String::new()),
                     description_en: Some(String::new()),
                     limits: LimitProps {

@@ -1,15 +1,16 @@
-//! The command line of opcdiag: parsing and help texts (pure, tested natively).
+//! The command line of opcdiag: parsing and help (pure, tested natively).
 //!
 //! Parsed by clap (derive): global options (`--server`, `--lang`) anywhere, then a
 //! subcommand with its own options and arguments, `-h`/`--help`/`/?` anywhere for the
-//! command's help. The help texts are the hand-written ones below (clap shows them as its
-//! help of each command); clap's errors are turned into opcdiag's own messages, each
-//! with the help of the command it is about, and exit code 2.
+//! command's help. The help is clap's, from the doc comments of [`Cli`] and [`Command`]
+//! (`-h` and `--help` show the same text: clap's compact layout with the command's whole
+//! doc comment); clap's errors are turned into opcdiag's own messages, each with the help
+//! of the command it is about, and exit code 2.
 // Natively only the tests use what the Windows commands show.
 #![cfg_attr(not(windows), allow(dead_code))]
 
 use clap::error::{ContextKind, ContextValue, ErrorKind};
-use clap::{CommandFactory, Parser, Subcommand};
+use clap::{ArgAction, Args, CommandFactory, Parser, Subcommand};
 use ctopc_core::VarType;
 
 pub const DEFAULT_SERVER: &str = "ServerCTOPC.App";
@@ -21,215 +22,269 @@ pub const EXIT_FAILED: u8 = 1;
 /// Bad command line.
 pub const EXIT_USAGE: u8 = 2;
 
-pub const USAGE: &str = "\
-opcdiag - diagnostic client for any OPC DA 2.05a/3.0 server (local, through COM)
+/// The heading of the options every command takes.
+const GLOBAL: &str = "Global options";
 
-usage: opcdiag [--server PROGID] [--lang en|pl|LCID] <command> [options]
-
-commands:
-  status                    the server's status: vendor, version, state, times, groups
-  browse [--flat] [--branch PATH] [--depth N]
-                            the address space as an indented tree (or a flat list)
-  props ITEMID              the item's properties: ID, description, value
-  read ITEMID... [--device] [--path ACCESSPATH]
-                            read items once (from the cache, or the device)
-  write ITEMID VALUE [--type VT] [--path ACCESSPATH]
-                            write one value (converted to the item's type or to VT)
-  subscribe ITEMID... [--rate MS] [--for SECONDS] [--count N] [--path ACCESSPATH]
-                            print every change the server reports, until Ctrl+C
-  demo [--for SECONDS]      ServerCTOPC's demo plant: status, plant tree, live values
-  servers                   the machine's OPC servers: ProgID, DA versions, description
-  doctor [--json] [--config FILE] [--item ITEMID] [--timeout SECONDS]
-                            check ServerCTOPC's installation: OK / WARN / FAIL with fixes
-  help [COMMAND]            this text, or a command's
-
-global options:
-  --server PROGID           the server's ProgID (default ServerCTOPC.App)
-  --lang en|pl|LCID         the session's language (error texts, descriptions);
-                            default: the server's
-  -h, --help                help (after a command: that command's help)
-
+/// The end of the general help.
+const AFTER_HELP: &str = "\
 exit codes: 0 success, 1 the server or an item reported an error, 2 bad command line.
-Errors show the HRESULT in hex, its symbol, and the server's text for it.
-";
+Errors show the HRESULT in hex, its symbol, and the server's text for it.";
 
-const STATUS_HELP: &str = "\
-usage: opcdiag [--server PROGID] status
-
-Connects to the server and prints IOPCServer::GetStatus: vendor information, version,
-state (RUNNING, FAILED, NOCONFIG, SUSPENDED, TEST, COMM_FAULT), start, current and last
-update time (local time), group count and band width. Exit code 1 when the server cannot
-be reached.
-";
-
-const BROWSE_HELP: &str = "\
-usage: opcdiag [--server PROGID] browse [--flat] [--branch PATH] [--depth N]
-
-Shows the address space through IOPCBrowseServerAddressSpace: branches end with '/',
-each level indented by two spaces; a leaf whose item ID differs from its name shows the
-item ID after '='.
-  --flat          one item ID per line (BrowseOPCItemIDs with OPC_FLAT)
-  --branch PATH   start at this branch: its item ID (ChangeBrowsePosition TO) or its
-                  names from the root separated by '/' (DOWN step by step)
-  --depth N       show N levels (default: all)
-";
-
-const PROPS_HELP: &str = "\
-usage: opcdiag [--server PROGID] props ITEMID
-
-Lists the item's properties through IOPCItemProperties (QueryAvailableProperties and
-GetItemProperties): property ID, description, data type and value.
-";
-
-const READ_HELP: &str = "\
-usage: opcdiag [--server PROGID] read ITEMID... [--device] [--path ACCESSPATH]
-
-Adds the items to a temporary group and reads them once with IOPCSyncIO::Read. Prints
-per item: value, data type, quality (e.g. GOOD, BAD Comm Failure [Low limit]) and
-timestamp in local time. Exit code 1 when an item failed.
-  --device            read from the device (default: the server's cache, waiting up
-                      to 3 s for the first value)
-  --path ACCESSPATH   the items' access path (default: none)
-";
-
-const WRITE_HELP: &str = "\
-usage: opcdiag [--server PROGID] write ITEMID VALUE [--type VT] [--path ACCESSPATH]
-
-Writes VALUE with IOPCSyncIO::Write and prints the item's result. VALUE is converted to
-the item's canonical data type (as en-US text: a '.' decimal point; true/false for BOOL),
-or to VT when given. Exit code 1 when the write failed.
-  --type VT           send the value as VT: R4 R8 I1 I2 I4 I8 UI1 UI2 UI4 UI8 BOOL BSTR
-                      CY DATE (VT_R4 etc. also accepted)
-  --path ACCESSPATH   the item's access path (default: none)
-";
-
-const SUBSCRIBE_HELP: &str = "\
-usage: opcdiag [--server PROGID] subscribe ITEMID... [--rate MS] [--for SECONDS]
-                                                    [--count N] [--path ACCESSPATH]
-
-Adds the items to an active group with an IOPCDataCallback sink and prints each change
-as it arrives: time (local), item, value, quality. Runs until Ctrl+C or, with --for,
-until SECONDS have passed, or, with --count, until N changes have arrived (whichever
-comes first; scripts use both, e.g. --count 1 --for 30). Exit code 1 when --count was
-given and fewer than N changes arrived.
-  --rate MS           the group's update rate (default 1000)
-  --for SECONDS       stop after SECONDS (may have decimals)
-  --count N           stop after N item changes (the first values count)
-  --path ACCESSPATH   the items' access path (default: none)
-";
-
-const DEMO_HELP: &str = "\
-usage: opcdiag [--server PROGID] demo [--for SECONDS]
-
-For ServerCTOPC with the Wytwornia_Kwasu demo plant (the embedded default, or the demo
-database over the asix network, as `cargo xtask demo` runs it): prints the server status,
-the first levels of the plant tree, then subscribes to a handful of process variables -
-tank levels, temperatures, flows, a pump - and prints their changes live, until Ctrl+C
-or, with --for, until SECONDS have passed.
-";
-
-const SERVERS_HELP: &str = "\
-usage: opcdiag servers
-
-Lists the OPC DA servers of this machine (both registry views) through the server browser
-OPC.ServerList.1 (ours, OpcServerList.exe, or the OPC Foundation's OpcEnum): for each its
-ProgID, the DA versions it implements (component categories DA 1.0, 2.0, 3.0), its
-description and CLSID. Without a server browser it falls back to the component
-categories manager (ICatInformation, this process's registry view only) and says so.
---server is not used.
-";
-
-const DOCTOR_HELP: &str = "\
-usage: opcdiag doctor [--json] [--config FILE] [--item ITEMID] [--timeout SECONDS]
-
-Checks ServerCTOPC's installation and prints each check as OK, WARN or FAIL with the fix
-in one line: the registration in both registry views (CLSID, LocalServer32 and that the
-exe exists, ProgID and CurVer, categories DA 2.0/3.0, AppID, the OPC key), a proxy/stub
-for every OPC Common and DA interface in both views (ours or the OPC Foundation's), a
-server browser (OPC.ServerList.1), the NT service when installed, the log folder, the
-configuration file and each channel's variable database (read as the server reads
-them), each channel's asix link (discovery within FindServerTimeout, the server chosen),
-machine-wide DCOM settings and the firewall (warnings), and finally a connection that
-reads one item and receives one callback. Exit code 0 when nothing failed, else 1.
-  --json              one JSON object per check: name, status, detail, fix
-  --config FILE       the configuration to check (default: SERVERCTOPC_INI, else
-                      ASIXConnect.ini next to the registered exe, else the embedded
-                      demo); under Wine the server started by the last check uses it too
-  --item ITEMID       the item to read and subscribe (default: the first variable of
-                      the basic channel's database)
-  --timeout SECONDS   the longest wait of the connection check (default 20)
-";
-
-/// The help text of a command (the general usage for `None` or an unknown name).
-pub fn help(command: Option<&str>) -> &'static str {
-    match command {
-        Some("status") => STATUS_HELP,
-        Some("browse") => BROWSE_HELP,
-        Some("props") => PROPS_HELP,
-        Some("read") => READ_HELP,
-        Some("write") => WRITE_HELP,
-        Some("subscribe") => SUBSCRIBE_HELP,
-        Some("demo") => DEMO_HELP,
-        Some("servers") => SERVERS_HELP,
-        Some("doctor") => DOCTOR_HELP,
-        _ => USAGE,
-    }
+/// opcdiag - diagnostic client for any OPC DA 2.05a/3.0 server (local, through COM)
+#[derive(Parser, Debug)]
+#[command(
+    name = "opcdiag",
+    after_help = AFTER_HELP,
+    disable_version_flag = true,
+    disable_help_subcommand = true,
+    disable_help_flag = true,
+    args_override_self = true,
+    subcommand_required = true
+)]
+struct Cli {
+    #[command(flatten)]
+    global: Global,
+    /// help (after a command: that command's help)
+    #[arg(short, long, global = true, action = ArgAction::Help, help_heading = GLOBAL)]
+    help: Option<bool>,
+    /// Not supported (remote servers): rejected with a message.
+    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
+          value_parser = host_arg)]
+    host: Option<String>,
+    /// Not supported (remote servers): rejected with a message.
+    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
+          value_parser = node_arg)]
+    node: Option<String>,
+    #[command(subcommand)]
+    command: Sub,
 }
 
 /// Options every command takes.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Args, Debug, Clone, PartialEq)]
 pub struct Global {
+    /// the server's ProgID
+    #[arg(long, global = true, value_name = "PROGID", default_value = DEFAULT_SERVER,
+          value_parser = server_arg, help_heading = GLOBAL)]
     pub server: String,
-    /// The LCID to set with IOPCCommon::SetLocaleID; `None`: the server's default.
+    // The LCID to set with IOPCCommon::SetLocaleID; `None`: the server's default.
+    /// the session's language (error texts, descriptions);
+    /// default: the server's
+    #[arg(long = "lang", global = true, value_name = "en|pl|LCID", value_parser = lang_arg,
+          help_heading = GLOBAL, verbatim_doc_comment)]
     pub lcid: Option<u32>,
 }
 
-#[derive(Debug, Clone, PartialEq)]
+/// The subcommands: the commands that run, and `help`.
+#[derive(Subcommand, Debug)]
+enum Sub {
+    #[command(flatten)]
+    Run(Command),
+    /// this text, or a command's
+    Help {
+        #[arg(value_name = "COMMAND")]
+        command: Vec<String>,
+    },
+}
+
+/// The commands that run. The first paragraph of each doc comment is its line in the
+/// general help, the whole its own help.
+#[derive(Subcommand, Debug, Clone, PartialEq)]
 pub enum Command {
+    /// the server's status: vendor, version, state, times, groups
+    ///
+    /// Connects to the server and prints IOPCServer::GetStatus: vendor information, version,
+    /// state (RUNNING, FAILED, NOCONFIG, SUSPENDED, TEST, COMM_FAULT), start, current and last
+    /// update time (local time), group count and band width. Exit code 1 when the server cannot
+    /// be reached.
+    #[command(verbatim_doc_comment)]
     Status,
+    /// the address space as an indented tree (or a flat list)
+    ///
+    /// Shows the address space through IOPCBrowseServerAddressSpace: branches end with '/',
+    /// each level indented by two spaces; a leaf whose item ID differs from its name shows the
+    /// item ID after '='.
+    #[command(verbatim_doc_comment)]
     Browse {
+        /// one item ID per line (BrowseOPCItemIDs with OPC_FLAT)
+        #[arg(long)]
         flat: bool,
+        /// start at this branch: its item ID (ChangeBrowsePosition TO) or its
+        /// names from the root separated by '/' (DOWN step by step)
+        #[arg(long, value_name = "PATH", verbatim_doc_comment)]
         branch: Option<String>,
+        /// show N levels (default: all)
+        #[arg(long, value_name = "N", value_parser = depth_arg, allow_negative_numbers = true)]
         depth: Option<usize>,
     },
+    /// the item's properties: ID, description, value
+    ///
+    /// Lists the item's properties through IOPCItemProperties (QueryAvailableProperties and
+    /// GetItemProperties): property ID, description, data type and value.
+    #[command(verbatim_doc_comment)]
     Props {
+        /// the item's ID
+        #[arg(value_name = "ITEMID")]
         item: String,
     },
+    /// read items once (from the cache, or the device)
+    ///
+    /// Adds the items to a temporary group and reads them once with IOPCSyncIO::Read. Prints
+    /// per item: value, data type, quality (e.g. GOOD, BAD Comm Failure [Low limit]) and
+    /// timestamp in local time. Exit code 1 when an item failed.
+    #[command(verbatim_doc_comment)]
     Read {
+        /// the items' IDs
+        #[arg(value_name = "ITEMID", required = true)]
         items: Vec<String>,
+        /// read from the device (default: the server's cache, waiting up
+        /// to 3 s for the first value)
+        #[arg(long, verbatim_doc_comment)]
         device: bool,
+        /// the items' access path (default: none)
+        #[arg(
+            long,
+            value_name = "ACCESSPATH",
+            default_value = "",
+            hide_default_value = true
+        )]
         path: String,
     },
+    /// write one value (converted to the item's type or to VT)
+    ///
+    /// Writes VALUE with IOPCSyncIO::Write and prints the item's result. VALUE is converted to
+    /// the item's canonical data type (as en-US text: a '.' decimal point; true/false for BOOL),
+    /// or to VT when given. Exit code 1 when the write failed.
+    #[command(verbatim_doc_comment, allow_negative_numbers = true)]
     Write {
+        /// the item's ID
+        #[arg(value_name = "ITEMID")]
         item: String,
+        /// the value to write (as en-US text, see above)
+        #[arg(value_name = "VALUE")]
         value: String,
+        /// send the value as VT: R4 R8 I1 I2 I4 I8 UI1 UI2 UI4 UI8 BOOL BSTR
+        /// CY DATE (VT_R4 etc. also accepted)
+        #[arg(long = "type", value_name = "VT", value_parser = type_arg, verbatim_doc_comment)]
         vt: Option<VarType>,
+        /// the item's access path (default: none)
+        #[arg(
+            long,
+            value_name = "ACCESSPATH",
+            default_value = "",
+            hide_default_value = true
+        )]
         path: String,
     },
+    /// print every change the server reports, until Ctrl+C
+    ///
+    /// Adds the items to an active group with an IOPCDataCallback sink and prints each change
+    /// as it arrives: time (local), item, value, quality. Runs until Ctrl+C or, with --for,
+    /// until SECONDS have passed, or, with --count, until N changes have arrived (whichever
+    /// comes first; scripts use both, e.g. --count 1 --for 30). Exit code 1 when --count was
+    /// given and fewer than N changes arrived.
+    #[command(verbatim_doc_comment)]
     Subscribe {
+        /// the items' IDs
+        #[arg(value_name = "ITEMID", required = true)]
         items: Vec<String>,
+        /// the group's update rate
+        #[arg(long = "rate", value_name = "MS", default_value_t = 1000, value_parser = rate_arg,
+              allow_negative_numbers = true)]
         rate_ms: u32,
+        /// stop after SECONDS (may have decimals)
+        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg,
+              allow_negative_numbers = true)]
         for_secs: Option<f64>,
-        /// `--count N`: stop after N item changes.
+        /// stop after N item changes (the first values count)
+        #[arg(long, value_name = "N", value_parser = count_arg, allow_negative_numbers = true)]
         count: Option<usize>,
+        /// the items' access path (default: none)
+        #[arg(
+            long,
+            value_name = "ACCESSPATH",
+            default_value = "",
+            hide_default_value = true
+        )]
         path: String,
     },
+    /// ServerCTOPC's demo plant: status, plant tree, live values
+    ///
+    /// For ServerCTOPC with the Wytwornia_Kwasu demo plant (the embedded default, or the demo
+    /// database over the asix network, as `cargo xtask demo` runs it): prints the server status,
+    /// the first levels of the plant tree, then subscribes to a handful of process variables -
+    /// tank levels, temperatures, flows, a pump - and prints their changes live, until Ctrl+C
+    /// or, with --for, until SECONDS have passed.
+    #[command(verbatim_doc_comment)]
     Demo {
+        /// stop after SECONDS (may have decimals)
+        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg,
+              allow_negative_numbers = true)]
         for_secs: Option<f64>,
     },
-    /// The machine's OPC servers, through the server browser (no server connection).
+    /// the machine's OPC servers: ProgID, DA versions, description
+    ///
+    /// Lists the OPC DA servers of this machine (both registry views) through the server browser
+    /// OPC.ServerList.1 (ours, OpcServerList.exe, or the OPC Foundation's OpcEnum): for each its
+    /// ProgID, the DA versions it implements (component categories DA 1.0, 2.0, 3.0), its
+    /// description and CLSID. Without a server browser it falls back to the component
+    /// categories manager (ICatInformation, this process's registry view only) and says so.
+    /// --server is not used (no server connection).
+    #[command(verbatim_doc_comment)]
     Servers,
-    /// `opcdiag doctor`: the installation's self-check.
+    /// check ServerCTOPC's installation: OK / WARN / FAIL with fixes
+    ///
+    /// Checks ServerCTOPC's installation and prints each check as OK, WARN or FAIL with the fix
+    /// in one line: the registration in both registry views (CLSID, LocalServer32 and that the
+    /// exe exists, ProgID and CurVer, categories DA 2.0/3.0, AppID, the OPC key), a proxy/stub
+    /// for every OPC Common and DA interface in both views (ours or the OPC Foundation's), a
+    /// server browser (OPC.ServerList.1), the NT service when installed, the log folder, the
+    /// configuration file and each channel's variable database (read as the server reads
+    /// them), each channel's asix link (discovery within FindServerTimeout, the server chosen),
+    /// machine-wide DCOM settings and the firewall (warnings), and finally a connection that
+    /// reads one item and receives one callback. Exit code 0 when nothing failed, else 1.
+    #[command(verbatim_doc_comment)]
     Doctor(DoctorOptions),
 }
 
 /// The options of `opcdiag doctor`.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Args, Debug, Clone, PartialEq, Default)]
 pub struct DoctorOptions {
+    /// one JSON object per check: name, status, detail, fix
+    #[arg(long)]
     pub json: bool,
+    /// the configuration to check (default: SERVERCTOPC_INI, else
+    /// ASIXConnect.ini next to the registered exe, else the embedded
+    /// demo); under Wine the server started by the last check uses it too
+    #[arg(long, value_name = "FILE", verbatim_doc_comment)]
     pub config: Option<String>,
+    /// the item to read and subscribe (default: the first variable of
+    /// the basic channel's database)
+    #[arg(long, value_name = "ITEMID", verbatim_doc_comment)]
     pub item: Option<String>,
+    /// the longest wait of the connection check (default 20)
+    #[arg(long = "timeout", value_name = "SECONDS", value_parser = for_arg,
+          allow_negative_numbers = true)]
     pub timeout_secs: Option<f64>,
+}
+
+/// The help of a command (the general help for `None`, `help` or an unknown name): clap's
+/// help in its compact layout, with a command's whole doc comment as its description.
+pub fn help(command: Option<&str>) -> String {
+    let mut cli = Cli::command();
+    cli.build();
+    match command
+        .filter(|c| *c != "help")
+        .and_then(|c| cli.find_subcommand(c))
+    {
+        Some(sub) => {
+            let mut sub = sub.clone();
+            if let Some(long) = sub.get_long_about().cloned() {
+                sub = sub.about(long);
+            }
+            sub.render_help().to_string()
+        }
+        None => cli.render_help().to_string(),
+    }
 }
 
 /// What the command line asks for.
@@ -237,14 +292,14 @@ pub struct DoctorOptions {
 pub enum Parsed {
     Run(Global, Command),
     /// Print this help text and exit 0.
-    Help(&'static str),
+    Help(String),
 }
 
 /// A command-line error: the message and the help text to show with it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UsageError {
     pub message: String,
-    pub help: &'static str,
+    pub help: String,
 }
 
 const COMMANDS: &[&str] = &[
@@ -365,111 +420,6 @@ fn count_arg(v: &str) -> Result<usize, String> {
         .ok_or_else(|| format!("--count: expected a number of changes > 0, got {v:?}"))
 }
 
-/// The command line as clap sees it.
-#[derive(Parser, Debug)]
-#[command(
-    name = "opcdiag",
-    override_help = USAGE,
-    disable_version_flag = true,
-    disable_help_subcommand = true,
-    args_override_self = true
-)]
-struct Cli {
-    /// The server's ProgID.
-    #[arg(long, global = true, value_name = "PROGID", value_parser = server_arg)]
-    server: Option<String>,
-    /// The session's language: en, pl or an LCID.
-    #[arg(long, global = true, value_name = "LCID", value_parser = lang_arg)]
-    lang: Option<u32>,
-    /// Not supported (remote servers): rejected with a message.
-    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
-          value_parser = host_arg)]
-    host: Option<String>,
-    /// Not supported (remote servers): rejected with a message.
-    #[arg(long, global = true, hide = true, num_args = 0..=1, default_missing_value = "",
-          value_parser = node_arg)]
-    node: Option<String>,
-    #[command(subcommand)]
-    command: Option<Sub>,
-}
-
-#[derive(Subcommand, Debug)]
-enum Sub {
-    #[command(override_help = STATUS_HELP)]
-    Status,
-    #[command(override_help = BROWSE_HELP)]
-    Browse {
-        #[arg(long)]
-        flat: bool,
-        #[arg(long, value_name = "PATH")]
-        branch: Option<String>,
-        #[arg(long, value_name = "N", value_parser = depth_arg, allow_negative_numbers = true)]
-        depth: Option<usize>,
-    },
-    #[command(override_help = PROPS_HELP)]
-    Props {
-        #[arg(value_name = "ITEMID")]
-        item: String,
-    },
-    #[command(override_help = READ_HELP)]
-    Read {
-        #[arg(value_name = "ITEMID", required = true)]
-        items: Vec<String>,
-        #[arg(long)]
-        device: bool,
-        #[arg(long, value_name = "ACCESSPATH")]
-        path: Option<String>,
-    },
-    #[command(override_help = WRITE_HELP, allow_negative_numbers = true)]
-    Write {
-        #[arg(value_name = "ITEMID")]
-        item: String,
-        #[arg(value_name = "VALUE")]
-        value: String,
-        #[arg(long = "type", value_name = "VT", value_parser = type_arg)]
-        vt: Option<VarType>,
-        #[arg(long, value_name = "ACCESSPATH")]
-        path: Option<String>,
-    },
-    #[command(override_help = SUBSCRIBE_HELP)]
-    Subscribe {
-        #[arg(value_name = "ITEMID", required = true)]
-        items: Vec<String>,
-        #[arg(long = "rate", value_name = "MS", value_parser = rate_arg, allow_negative_numbers = true)]
-        rate_ms: Option<u32>,
-        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
-        for_secs: Option<f64>,
-        #[arg(long, value_name = "N", value_parser = count_arg, allow_negative_numbers = true)]
-        count: Option<usize>,
-        #[arg(long, value_name = "ACCESSPATH")]
-        path: Option<String>,
-    },
-    #[command(override_help = DEMO_HELP)]
-    Demo {
-        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
-        for_secs: Option<f64>,
-    },
-    #[command(override_help = SERVERS_HELP)]
-    Servers,
-    #[command(override_help = DOCTOR_HELP)]
-    Doctor {
-        #[arg(long)]
-        json: bool,
-        #[arg(long, value_name = "FILE")]
-        config: Option<String>,
-        #[arg(long, value_name = "ITEMID")]
-        item: Option<String>,
-        #[arg(long = "timeout", value_name = "SECONDS", value_parser = for_arg, allow_negative_numbers = true)]
-        timeout_secs: Option<f64>,
-    },
-    /// `help [COMMAND]`: the general usage, or a command's help.
-    #[command(override_help = USAGE)]
-    Help {
-        #[arg(value_name = "COMMAND")]
-        command: Vec<String>,
-    },
-}
-
 /// Parses the arguments after the program name.
 pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
     // `/?` is the Windows spelling of --help.
@@ -485,79 +435,10 @@ pub fn parse(args: &[String]) -> Result<Parsed, UsageError> {
         }
         Err(e) => return Err(usage_error(&e, command_in(&args))),
     };
-    let global = Global {
-        server: cli.server.unwrap_or_else(|| DEFAULT_SERVER.to_string()),
-        lcid: cli.lang,
-    };
-    let command = match cli.command {
-        None => {
-            return Err(UsageError {
-                message: "no command given".into(),
-                help: USAGE,
-            })
-        }
-        Some(Sub::Help { command }) => {
-            return Ok(Parsed::Help(help(command.first().map(String::as_str))))
-        }
-        Some(Sub::Status) => Command::Status,
-        Some(Sub::Browse {
-            flat,
-            branch,
-            depth,
-        }) => Command::Browse {
-            flat,
-            branch,
-            depth,
-        },
-        Some(Sub::Props { item }) => Command::Props { item },
-        Some(Sub::Read {
-            items,
-            device,
-            path,
-        }) => Command::Read {
-            items,
-            device,
-            path: path.unwrap_or_default(),
-        },
-        Some(Sub::Write {
-            item,
-            value,
-            vt,
-            path,
-        }) => Command::Write {
-            item,
-            value,
-            vt,
-            path: path.unwrap_or_default(),
-        },
-        Some(Sub::Subscribe {
-            items,
-            rate_ms,
-            for_secs,
-            count,
-            path,
-        }) => Command::Subscribe {
-            items,
-            rate_ms: rate_ms.unwrap_or(1000),
-            for_secs,
-            count,
-            path: path.unwrap_or_default(),
-        },
-        Some(Sub::Demo { for_secs }) => Command::Demo { for_secs },
-        Some(Sub::Servers) => Command::Servers,
-        Some(Sub::Doctor {
-            json,
-            config,
-            item,
-            timeout_secs,
-        }) => Command::Doctor(DoctorOptions {
-            json,
-            config,
-            item,
-            timeout_secs,
-        }),
-    };
-    Ok(Parsed::Run(global, command))
+    match cli.command {
+        Sub::Help { command } => Ok(Parsed::Help(help(command.first().map(String::as_str)))),
+        Sub::Run(command) => Ok(Parsed::Run(cli.global, command)),
+    }
 }
 
 /// The command the arguments name (the first word that is not an option or an option's
@@ -608,11 +489,18 @@ fn usage_error(e: &clap::Error, command: Option<&str>) -> UsageError {
     };
     let arg = context(ContextKind::InvalidArg).unwrap_or("");
     let message = match e.kind() {
+        // No command: clap asks for the general help (arg_required_else_help).
+        ErrorKind::MissingSubcommand | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            return UsageError {
+                message: "no command given".into(),
+                help: help(None),
+            }
+        }
         ErrorKind::InvalidSubcommand => {
             let name = context(ContextKind::InvalidSubcommand).unwrap_or(arg);
             return UsageError {
                 message: format!("unknown command {name:?}"),
-                help: USAGE,
+                help: help(None),
             };
         }
         ErrorKind::UnknownArgument if !arg.starts_with('-') => match command {
@@ -620,7 +508,7 @@ fn usage_error(e: &clap::Error, command: Option<&str>) -> UsageError {
             None => {
                 return UsageError {
                     message: format!("unknown command {arg:?}"),
-                    help: USAGE,
+                    help: help(None),
                 }
             }
         },
@@ -705,6 +593,7 @@ mod tests {
         assert_eq!(g.lcid, Some(0x0415));
         assert_eq!(run("status --lang 0x0409").0.lcid, Some(0x0409));
         assert_eq!(run("status --lang 1045").0.lcid, Some(1045));
+        assert_eq!(run("status --server X.Y").0.server, "X.Y");
     }
 
     #[test]
@@ -830,32 +719,40 @@ mod tests {
 
     #[test]
     fn help_for_everything() {
-        assert_eq!(parse(&args("--help")), Ok(Parsed::Help(USAGE)));
-        assert_eq!(parse(&args("help")), Ok(Parsed::Help(USAGE)));
-        assert_eq!(parse(&args("help write")), Ok(Parsed::Help(WRITE_HELP)));
+        assert_eq!(parse(&args("--help")), Ok(Parsed::Help(help(None))));
+        assert_eq!(parse(&args("help")), Ok(Parsed::Help(help(None))));
+        assert_eq!(
+            parse(&args("help write")),
+            Ok(Parsed::Help(help(Some("write"))))
+        );
         assert_eq!(
             parse(&args("subscribe --help")),
-            Ok(Parsed::Help(SUBSCRIBE_HELP))
+            Ok(Parsed::Help(help(Some("subscribe"))))
         );
-        assert_eq!(parse(&args("read -h")), Ok(Parsed::Help(READ_HELP)));
+        assert_eq!(
+            parse(&args("read -h")),
+            Ok(Parsed::Help(help(Some("read"))))
+        );
         for c in COMMANDS {
             let text = help(Some(c));
-            assert!(text.starts_with("usage: opcdiag"), "{c}");
-            assert!(text.contains(c), "{c}");
-            assert!(USAGE.contains(c), "{c} is in the general usage");
+            assert!(text.contains(&format!("Usage: opcdiag {c}")), "{c}");
+            assert!(help(None).contains(c), "{c} is in the general usage");
         }
     }
 
     #[test]
     fn mistakes_are_usage_errors_with_the_commands_help() {
         let e = parse(&args("")).unwrap_err();
-        assert_eq!((e.message.as_str(), e.help), ("no command given", USAGE));
+        assert_eq!(
+            (e.message.as_str(), e.help.as_str()),
+            ("no command given", help(None).as_str())
+        );
         let e = parse(&args("frobnicate")).unwrap_err();
         assert!(e.message.contains("unknown command"));
         let e = parse(&args("read A --flat")).unwrap_err();
         assert_eq!(
-            (e.message.as_str(), e.help),
-            ("read does not take --flat", READ_HELP)
+            (e.message.as_str(), e.help.as_str()),
+            ("read does not take --flat", help(Some("read")).as_str())
         );
         assert!(usage_error("status extra").contains("no arguments"));
         assert!(usage_error("props").contains("one ITEMID"));
@@ -881,24 +778,65 @@ mod tests {
     }
 
     #[test]
-    fn the_clap_definition_is_consistent_and_shows_the_help_texts() {
-        let cli = Cli::command();
+    fn the_clap_definition_is_consistent_and_the_help_tells_everything() {
+        let mut cli = Cli::command();
         cli.clone().debug_assert();
-        assert_eq!(cli.clone().render_help().to_string(), USAGE);
-        for c in COMMANDS {
-            let mut sub = cli.find_subcommand(c).unwrap().clone();
-            assert_eq!(sub.render_help().to_string(), help(Some(c)), "{c}");
+        cli.build();
+        let general = help(None);
+        for fact in [
+            "diagnostic client for any OPC DA 2.05a/3.0 server (local, through COM)",
+            "--server <PROGID>",
+            "[default: ServerCTOPC.App]",
+            "--lang <en|pl|LCID>",
+            "-h, --help",
+            "exit codes: 0 success, 1 the server or an item reported an error, 2 bad command line.",
+            "Errors show the HRESULT in hex, its symbol, and the server's text for it.",
+        ] {
+            assert!(general.contains(fact), "{fact}: {general}");
         }
+        for c in COMMANDS.iter().chain(&["servers", "help"]) {
+            let sub = cli.find_subcommand(c).unwrap();
+            let summary = sub.get_about().unwrap().to_string();
+            assert!(
+                general.contains(&summary),
+                "{c}: its line in the general help"
+            );
+        }
+        for c in COMMANDS.iter().chain(&["servers"]) {
+            let sub = cli.find_subcommand(c).unwrap();
+            let text = help(Some(c));
+            let whole = sub.get_long_about().unwrap().to_string();
+            assert!(
+                text.starts_with(&whole),
+                "{c}: its whole description: {text}"
+            );
+            assert!(
+                text.contains(&format!("Usage: opcdiag {c} [OPTIONS]")),
+                "{c}: {text}"
+            );
+            for option in options_of(Some(c)) {
+                assert!(text.contains(&option), "{c}: {option}: {text}");
+            }
+            assert!(text.contains("--server <PROGID>"), "{c}: {text}");
+        }
+        assert!(help(Some("subscribe")).contains("[default: 1000]"));
+        assert!(help(Some("doctor")).contains("Exit code 0 when nothing failed, else 1."));
     }
 
     #[test]
     fn windows_help_negative_values_and_options_before_their_command() {
-        assert_eq!(parse(&args("/?")), Ok(Parsed::Help(USAGE)));
-        assert_eq!(parse(&args("write /?")), Ok(Parsed::Help(WRITE_HELP)));
-        assert_eq!(parse(&args("help frobnicate")), Ok(Parsed::Help(USAGE)));
+        assert_eq!(parse(&args("/?")), Ok(Parsed::Help(help(None))));
+        assert_eq!(
+            parse(&args("write /?")),
+            Ok(Parsed::Help(help(Some("write"))))
+        );
+        assert_eq!(
+            parse(&args("help frobnicate")),
+            Ok(Parsed::Help(help(None)))
+        );
         assert_eq!(
             parse(&args("--server X.Y --help browse")),
-            Ok(Parsed::Help(BROWSE_HELP))
+            Ok(Parsed::Help(help(Some("browse"))))
         );
         assert_eq!(
             run("--lang=pl write X -3.5").1,
@@ -922,10 +860,10 @@ mod tests {
         );
         let e = parse(&args("--flat browse")).unwrap_err();
         assert_eq!(
-            (e.message.as_str(), e.help),
+            (e.message.as_str(), e.help.as_str()),
             (
                 "--flat is an option of browse: give it after browse",
-                BROWSE_HELP
+                help(Some("browse")).as_str()
             )
         );
         assert!(usage_error("status --node").contains("--node: remote servers"));
@@ -950,8 +888,14 @@ mod tests {
                 Command::Servers
             ))
         );
-        assert_eq!(parse(&args("servers -h")), Ok(Parsed::Help(SERVERS_HELP)));
-        assert_eq!(parse(&args("help servers")), Ok(Parsed::Help(SERVERS_HELP)));
+        assert_eq!(
+            parse(&args("servers -h")),
+            Ok(Parsed::Help(help(Some("servers"))))
+        );
+        assert_eq!(
+            parse(&args("help servers")),
+            Ok(Parsed::Help(help(Some("servers"))))
+        );
         assert!(parse(&args("servers x")).is_err());
     }
 }

@@ -6,7 +6,7 @@
 //! loader `asix_model::startup` gives it, the discovery's answers): tested natively. The
 //! readers (`doctor/read.rs`, Windows only) are thin.
 //!
-//! The expected registry entries are `ctopc_com::registration::serverctopc(exe,
+//! The expected registry entries are `ctopc_registration::serverctopc(exe,
 //! service).keys()` (what `/RegServer` writes), the interfaces that need a proxy/stub are
 //! parsed from our IDL (`idl/`), so neither list is written twice.
 
@@ -15,7 +15,7 @@
 
 use asix_model::namespace::ChannelDatabase;
 use asix_model::AsixNamespace;
-use ctopc_com::registration::{self, guid_string, Key, View};
+use ctopc_registration::{self as registration, guid_string, Key, View};
 
 #[cfg(windows)]
 #[path = "doctor/read.rs"]

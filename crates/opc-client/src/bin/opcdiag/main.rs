@@ -4,7 +4,7 @@
 //!
 //! The command line and every formatting rule are plain Rust (`cli`, `text`: tested
 //! natively); the COM calls (`win`, `demo`) exist on Windows only and go through the safe
-//! client wrapper `ctopc_com::client`.
+//! client wrapper `opc_client`.
 
 /// `println!` that does not panic when stdout is gone (piped into `head`, say): the
 /// line is dropped and [`out::closed`] turns true, which ends a subscription.
@@ -43,7 +43,13 @@ fn main() -> ExitCode {
 
 #[cfg(windows)]
 fn run(global: cli::Global, command: cli::Command) -> ExitCode {
-    match win::run(&global, command) {
+    let result = match command {
+        cli::Command::Demo { for_secs } => {
+            win::Session::connect(&global).and_then(|s| demo::run(&s, for_secs))
+        }
+        command => win::run(&global, command),
+    };
+    match result {
         Ok(code) => ExitCode::from(code),
         Err(e) => {
             eprintln!("opcdiag: error: {e}");

@@ -1,13 +1,14 @@
 //! The commands, through COM (Windows only). Every call goes through the safe client
-//! wrapper `ctopc_com::client`; errors become one line with the HRESULT, its symbol and
+//! wrapper `opc_client`; errors become one line with the HRESULT, its symbol and
 //! the server's text for it (IOPCCommon::GetErrorString), else the system's.
 
 use crate::cli::{Command, Global, EXIT_FAILED, EXIT_OK, EXIT_USAGE};
 use crate::text::{self, TreeLine};
-use ctopc_com::client::diag::{self, DataChange};
-use ctopc_com::client::{self, ComThread, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
+use ctopc_com::apartment::Apartment;
 use ctopc_com::interfaces::*;
 use ctopc_core::{Timestamp, VarType};
+use opc_client::diag::{self, DataChange};
+use opc_client::{self as client, GroupSpec, ItemDef, OpcGroup, ReadItem, Server};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 use windows::core::{Interface, HRESULT};
@@ -68,10 +69,11 @@ pub struct Session {
     // Declared before `_com`: released before COM is uninitialised.
     pub server: Server,
     pub progid: String,
-    _com: ComThread,
+    _com: Apartment,
 }
 
-/// Runs a command; `Err` is a failure to report (exit code 1).
+/// Runs a command but `demo` (main runs it through `demo::run`, which builds on this
+/// module); `Err` is a failure to report (exit code 1).
 pub fn run(global: &Global, command: Command) -> Result<u8, String> {
     if command == Command::Servers {
         return servers();
@@ -106,7 +108,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
             count,
             path,
         } => s.subscribe(&items, rate_ms, for_secs, count, &path),
-        Command::Demo { for_secs } => crate::demo::run(&s, for_secs),
+        Command::Demo { .. } => Err("demo runs from main".into()),
         Command::Servers => servers(),
         Command::Doctor(_) => Err("doctor runs without a session".into()),
     }
@@ -115,10 +117,10 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
 /// `opcdiag servers`: the machine's OPC DA servers through OPC.ServerList.1, else the
 /// component categories manager.
 fn servers() -> Result<u8, String> {
-    use ctopc_com::client::server_list::{classes_by_category_manager, ServerBrowser};
-    use ctopc_com::registration::{guid_string, VIEWS};
+    use ctopc_registration::{guid_string, VIEWS};
+    use opc_client::server_list::{classes_by_category_manager, ServerBrowser};
     use windows::core::GUID;
-    let _com = ComThread::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
+    let _com = Apartment::mta().map_err(|e| format!("CoInitializeEx: {e}"))?;
     let categories = [
         (CATID_OPCDAServer10, "1.0"),
         (CATID_OPCDAServer20, "2.0"),
@@ -142,7 +144,7 @@ fn servers() -> Result<u8, String> {
     let registry_text = |path: String| {
         VIEWS
             .iter()
-            .find_map(|&v| ctopc_com::server_list::read_default(v, &path))
+            .find_map(|&v| ctopc_com::winreg::read_default(v, &path))
     };
     let rows: Vec<text::ServerRow> = found
         .into_iter()
@@ -189,7 +191,7 @@ fn system_text(hr: HRESULT) -> Option<String> {
 
 impl Session {
     pub fn connect(g: &Global) -> Result<Session, String> {
-        let com = ComThread::mta().map_err(|e| {
+        let com = Apartment::mta().map_err(|e| {
             format!(
                 "cannot initialise COM: {}",
                 text::hresult_text(e.code().0, system_text(e.code()).as_deref())

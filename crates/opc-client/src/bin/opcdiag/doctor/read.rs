@@ -6,21 +6,21 @@ use crate::cli::{DoctorOptions, Global};
 use crate::win::{Session, Subscription};
 use asix_net::datasource::{client_config_from_server_options, NamespaceResolver, Resolver};
 use asix_net::proto::discovery::Resource;
-use ctopc_com::server_list;
+use ctopc_com::winreg;
 use std::path::Path;
 use std::sync::mpsc;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// The registry of this machine, through `ctopc_com::server_list`'s readers.
+/// The registry of this machine, through `ctopc_com::winreg`'s readers.
 struct MachineRegistry;
 
 impl Registry for MachineRegistry {
     fn key_exists(&self, view: View, path: &str) -> bool {
-        server_list::key_exists(view, path)
+        winreg::key_exists(view, path)
     }
     fn value(&self, view: View, path: &str, name: &str) -> Option<String> {
-        server_list::read_value(view, path, name)
+        winreg::read_value(view, path, name)
     }
 }
 
@@ -102,7 +102,7 @@ fn checks(global: &Global, options: &DoctorOptions) -> Vec<Check> {
         out.extend(link_checks(Arc::new(l.namespace)));
     }
     // DCOM and the firewall.
-    let ole = |path: &str, name: &str| server_list::read_machine_value(View::Reg64, path, name);
+    let ole = |path: &str, name: &str| winreg::read_machine_value(View::Reg64, path, name);
     out.extend(dcom_checks(
         ole("Software\\Microsoft\\Ole", "EnableDCOM").as_deref(),
         ole("Software\\Microsoft\\Ole", "LegacyAuthenticationLevel").as_deref(),

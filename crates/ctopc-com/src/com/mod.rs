@@ -1,0 +1,22 @@
+//! The plumbing floor: COM without OPC semantics. The argument and out-parameter toolkit
+//! (`abi`), the error mapping, FILETIME and the clock, the interface definitions (mirroring
+//! `idl/`), our raw definitions of the connection-point and enumerator interfaces
+//! (`comdef`), connection points, enumerators, the class factory, the server's lifetime,
+//! VARIANT conversion, the Windows registry, the NT service, the one apartment guard and,
+//! under it, the platform's quirks (`platform`). Nothing here imports from the DA floor
+//! (`crate::da`); `xtask/tests/tidy.rs` checks it.
+
+pub mod abi;
+pub mod apartment;
+pub mod clock;
+pub mod comdef;
+pub mod connpoint;
+pub mod enums;
+pub mod error;
+pub mod factory;
+pub mod interfaces;
+pub mod lifetime;
+pub mod platform;
+pub mod service;
+pub mod variant;
+pub mod winreg;

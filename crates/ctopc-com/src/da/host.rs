@@ -1,0 +1,334 @@
+//! What ServerCTOPC.exe does for each switch: register, unregister, serve.
+//!
+//! Serving ([`serve_as`]) takes the configuration ([`Setup`]), the data source's maker and
+//! the shutdown signal ([`StopSignal`]) as parameters: [`start`] makes the server's
+//! [`Context`] (no process-wide one), the class object captures it, and the stop request
+//! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
+//! the NT service's control handler (`service::run`) trigger.
+
+use crate::com::apartment::Apartment;
+use crate::com::lifetime::{ExitReason, Lifetime, StopSignal};
+use crate::com::winreg::{self, ServerRegistration};
+use crate::da::context::{Context, Setup};
+use crate::da::server;
+use ctopc_core::Lang;
+use ctopc_registration as registration;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use windows::core::{BOOL, GUID};
+use windows::Win32::Foundation::E_FAIL;
+use windows::Win32::Globalization::{GetSystemDefaultLCID, GetUserDefaultUILanguage};
+use windows::Win32::System::Com::{
+    CoInitializeSecurity, CoRegisterClassObject, CoRevokeClassObject, CLSCTX_LOCAL_SERVER,
+    EOAC_NONE, REGCLS_MULTIPLEUSE, RPC_C_AUTHN_LEVEL_NONE, RPC_C_IMP_LEVEL_IDENTIFY,
+};
+use windows::Win32::System::Console::SetConsoleCtrlHandler;
+
+/// CLSID of ServerCTOPC.App (ours; the AppID is the same GUID, as is customary).
+pub const CLSID_SERVERCTOPC: GUID = GUID::from_u128(registration::CLSID_SERVERCTOPC);
+pub use ctopc_registration::{DESCRIPTION, EXE_NAME, PROGID, PROGID_VERSIONED};
+/// How long a server started by COM waits for its first client before it exits.
+pub const STARTUP_GRACE: Duration = Duration::from_secs(60);
+/// How long the server stays up after its last client has gone, so that a client
+/// connecting right then is served instead of reaching a process that is exiting.
+pub const EXIT_LINGER: Duration = Duration::from_secs(3);
+/// How long a server that has revoked its class object to exit still waits for a client
+/// that got the class object from the system just before the revoke (its CreateInstance or
+/// LockServer arrives after it): such a client makes the server register again and serve
+/// on ([`serve_class`], `Lifetime::stays_unused`).
+pub const REVOKE_SETTLE: Duration = Duration::from_secs(2);
+/// What the log says when the class object has been revoked to exit (the e2e test of the
+/// settle time waits for it).
+pub const REVOKED_LOG: &str = "class object revoked";
+
+/// The full path of this process's exe (what a server registers as its `LocalServer32`).
+pub fn exe_path() -> windows::core::Result<String> {
+    let exe = std::env::current_exe().map_err(|e| {
+        crate::com::error::error(windows::Win32::Foundation::E_FAIL, &e.to_string())
+    })?;
+    Ok(exe.to_string_lossy().into_owned())
+}
+
+fn with_registration<R>(
+    service: Option<&str>,
+    f: impl FnOnce(&ServerRegistration) -> R,
+) -> windows::core::Result<R> {
+    let exe = exe_path()?;
+    Ok(f(&registration::serverctopc(&exe, service)))
+}
+
+/// `/RegServer`.
+pub fn register() -> windows::core::Result<()> {
+    let _com = Apartment::mta_without_keepalive()?;
+    with_registration(None, winreg::register)??;
+    println!(
+        "ServerCTOPC: registered {PROGID} ({})",
+        winreg::guid_string(&CLSID_SERVERCTOPC)
+    );
+    Ok(())
+}
+
+/// `/Service`: the COM registration with AppID `LocalService`, and the NT service
+/// (on demand, as LocalService): COM starts the service when a client activates the server.
+pub fn register_service() -> windows::core::Result<()> {
+    let _com = Apartment::mta_without_keepalive()?;
+    let exe = exe_path()?;
+    crate::com::service::install(std::path::Path::new(&exe))
+        .map_err(|e| crate::com::error::error(E_FAIL, &e))?;
+    with_registration(Some(crate::com::service::SERVICE_NAME), winreg::register)??;
+    println!(
+        "ServerCTOPC: registered {PROGID} as the NT service {}",
+        crate::com::service::SERVICE_NAME
+    );
+    Ok(())
+}
+
+/// `/UnregServer`.
+pub fn unregister() -> windows::core::Result<()> {
+    let _com = Apartment::mta_without_keepalive()?;
+    with_registration(None, winreg::unregister)??;
+    crate::com::service::uninstall().map_err(|e| crate::com::error::error(E_FAIL, &e))?;
+    println!("ServerCTOPC: unregistered {PROGID}");
+    Ok(())
+}
+
+/// Makes the data source (the server binary decides: the in-process simulation or the
+/// asix network client).
+pub use ctopc_runtime::MakeBackend;
+
+/// The default language: the configured one, else Polish on Polish Windows, else English.
+fn default_lang(configured: Option<Lang>) -> Lang {
+    if let Some(l) = configured {
+        return l;
+    }
+    // SAFETY: no arguments; returns the user's UI language.
+    let ui = unsafe { GetUserDefaultUILanguage() };
+    Lang::default_for_system(u32::from(ui))
+}
+
+/// The number format of LOCALE_SYSTEM_DEFAULT (and of the neutral and user-default LCIDs):
+/// the machine's system locale, as `VariantChangeTypeEx` would use it (pl-PL on a Polish
+/// system, else en-US, the only other format the conversions know).
+fn system_locale() -> ctopc_core::convert::Locale {
+    // SAFETY: no arguments; returns the system locale's LCID.
+    let lcid = unsafe { GetSystemDefaultLCID() };
+    ctopc_core::convert::Locale::from_lcid(lcid, ctopc_core::convert::Locale::EnUs)
+}
+
+/// The process-wide COM security of our local servers (ServerCTOPC.exe, OpcServerList.exe,
+/// the tests' marshal probe): authentication level NONE and identify-level impersonation,
+/// the usual OPC setting, so that callbacks into clients on other machines work without a
+/// shared domain; access is governed by the AppID's DCOM settings (see the deployment
+/// guide). Call once, after COM is initialised and before any marshalling; a failure
+/// (security already set) is ignored, as every caller did.
+pub fn init_security() {
+    // SAFETY: no pointers are passed; the callers call it once, before any marshalling.
+    let _ = unsafe {
+        CoInitializeSecurity(
+            None,
+            -1,
+            None,
+            None,
+            RPC_C_AUTHN_LEVEL_NONE,
+            RPC_C_IMP_LEVEL_IDENTIFY,
+            None,
+            EOAC_NONE,
+            None,
+        )
+    };
+}
+
+/// Keeps every interface a server hands out registered with RPC for the process's life
+/// where the platform needs it (`Apartment::keep_server_interfaces`; after
+/// `init_security`, which must come before any marshal; on the main thread, in the MTA).
+pub fn keep_interfaces_registered() {
+    match crate::com::apartment::Apartment::keep_server_interfaces() {
+        Ok(0) => {}
+        Ok(n) => tracing::info!("keep-alive: {n} interfaces kept registered"),
+        Err(e) => tracing::warn!("{e}"),
+    }
+}
+
+/// Registers `factory` as the class object of `clsid` for out-of-process activation
+/// (CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE); the caller revokes the cookie with
+/// CoRevokeClassObject before it drops the factory.
+pub fn register_class(
+    clsid: &GUID,
+    factory: impl windows::core::Param<windows::core::IUnknown>,
+) -> windows::core::Result<u32> {
+    // SAFETY: `clsid` is a valid reference for the call; the caller keeps the factory alive
+    // until it revokes the registration.
+    unsafe { CoRegisterClassObject(clsid, factory, CLSCTX_LOCAL_SERVER, REGCLS_MULTIPLEUSE) }
+}
+
+/// Registers `factory` as the class object of `clsid` ([`register_class`]), serves until
+/// `wait` returns, and revokes it. When `wait` decided the server was unused (the last
+/// client gone, or none came) but a client arrives within [`REVOKE_SETTLE`] of the revoke,
+/// registers again and serves on: that client got the class object just before the revoke,
+/// and the process must not exit under it. (Windows's `CoReleaseServerProcess` suspends the
+/// class objects for this; Wine's does not.) Returns why the serving ended.
+pub fn serve_class(
+    clsid: &GUID,
+    factory: &windows::Win32::System::Com::IClassFactory,
+    lifetime: &Lifetime,
+    mut wait: impl FnMut() -> ExitReason,
+) -> windows::core::Result<ExitReason> {
+    loop {
+        let cookie = register_class(clsid, factory)?;
+        let reason = wait();
+        // SAFETY: the cookie came from CoRegisterClassObject above.
+        unsafe { CoRevokeClassObject(cookie)? };
+        if reason == ExitReason::StopRequested {
+            return Ok(reason);
+        }
+        tracing::info!(
+            "{REVOKED_LOG} ({reason:?}); exiting unless a client comes within {} ms",
+            REVOKE_SETTLE.as_millis()
+        );
+        if lifetime.stays_unused(REVOKE_SETTLE) {
+            return Ok(reason);
+        }
+        tracing::info!("a client came while the class object was being revoked: serving on");
+    }
+}
+
+/// The folder of ServerCTOPC.exe (the install folder: ASIXConnect.ini, Log\).
+pub fn install_dir() -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot locate ServerCTOPC.exe: {e}"))?;
+    Ok(exe.parent().map(PathBuf::from).unwrap_or_default())
+}
+
+/// Starts a runtime over a configuration and makes its context (one per call: the
+/// in-process tests make one per test). The server state comes from the data source: a
+/// backend that simulates current data is OPC_STATUS_TEST. Dropping the last reference
+/// (the context, the class object and every object made from it) stops the runtime.
+pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Context>, String> {
+    let Setup {
+        namespace,
+        address_space,
+        mut engine_config,
+        default_language,
+        no_config_reason,
+        ops,
+    } = setup;
+    // Text written with a default LCID converts in the system's number format (a Polish
+    // system reads "12,5" as 12.5), as VariantChangeTypeEx does on Windows.
+    engine_config.default_locale = system_locale();
+    if let Some(r) = &no_config_reason {
+        tracing::error!("OPC_STATUS_NOCONFIG: {r}");
+    }
+    if engine_config.source_timeout_ms != ctopc_core::model::DEFAULT_SOURCE_TIMEOUT_MS {
+        tracing::info!(
+            "data source timeout: {} ms (SourceTimeout)",
+            engine_config.source_timeout_ms
+        );
+    }
+    // The `_Diagnostics` branch beside the real namespace and backend, the operations
+    // settings and the metrics endpoint: the runtime's, as for every front end.
+    let started = ctopc_runtime::start(
+        namespace,
+        address_space.filter_case(),
+        engine_config,
+        &ops,
+        crate::da::callbacks::thread_hook,
+        make_backend,
+    )?;
+    let ctx = Context {
+        runtime: started.runtime,
+        address_space,
+        default_lang: default_lang(default_language),
+        namespace: started.namespace,
+        state: Context::state_for(no_config_reason.as_deref(), started.simulation),
+        no_config_reason,
+        lifetime: Lifetime::new(),
+        groups: Default::default(),
+    };
+    Ok(Arc::new(ctx))
+}
+
+/// The stop signal the console control handler triggers. A console control handler is a
+/// plain `extern "system" fn` with no user data, so this one process-level hook is
+/// unavoidable; it holds nothing but the signal to trigger (set by
+/// [`stop_on_console_ctrl`]) and no server state.
+static CONSOLE_STOP: Mutex<Option<StopSignal>> = Mutex::new(None);
+
+unsafe extern "system" fn on_console_ctrl(ctrl: u32) -> BOOL {
+    // CTRL_LOGOFF_EVENT (5) and CTRL_SHUTDOWN_EVENT (6): the system is going down.
+    let reason = if ctrl >= 5 {
+        "the system is shutting down"
+    } else {
+        "ServerCTOPC was stopped from its console"
+    };
+    let signal = CONSOLE_STOP
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clone();
+    if let Some(s) = signal {
+        s.trigger(reason);
+    }
+    BOOL(1)
+}
+
+/// Ctrl+C, closing the console, a log-off or a system shutdown trigger `signal` (the
+/// process's console handler forwards to the signal set last).
+pub fn stop_on_console_ctrl(signal: &StopSignal) {
+    let first = CONSOLE_STOP
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .replace(signal.clone())
+        .is_none();
+    if first {
+        // SAFETY: a plain function pointer with the handler signature, valid for the process.
+        let _ = unsafe { SetConsoleCtrlHandler(Some(on_console_ctrl), true) };
+    }
+}
+
+/// How long the server process serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServeMode {
+    /// Started by COM: exit after the last client has gone (or a stop request).
+    UntilUnused,
+    /// The NT service: serve until the service control manager stops it.
+    UntilStopped,
+}
+
+/// Serves in the given mode: start, register the class object for multiple use, serve
+/// until the last client has gone (`ServeMode::UntilUnused`, `-Embedding`) or `stop` is
+/// triggered, then revoke it and exit. On a triggered stop every connected client first
+/// gets IOPCShutdown::ShutdownRequest with the trigger's reason.
+pub fn serve_as(
+    setup: Setup,
+    make_backend: Box<MakeBackend<'_>>,
+    mode: ServeMode,
+    stop: &StopSignal,
+) -> windows::core::Result<()> {
+    let _com = Apartment::mta_without_keepalive()?;
+    init_security();
+    keep_interfaces_registered();
+    let ctx = start(setup, make_backend).map_err(|e| {
+        tracing::error!("cannot start: {e}");
+        crate::com::error::error(E_FAIL, &e)
+    })?;
+    ctx.lifetime.stop_on(stop);
+    let factory = server::class_factory(&ctx);
+    let mut announced = false;
+    let reason = serve_class(&CLSID_SERVERCTOPC, &factory, &ctx.lifetime, || {
+        if !announced {
+            tracing::info!("serving {PROGID}");
+            announced = true;
+        }
+        match mode {
+            ServeMode::UntilUnused => ctx.lifetime.wait_until_unused(STARTUP_GRACE, EXIT_LINGER),
+            ServeMode::UntilStopped => {
+                ctx.lifetime.wait_for_stop();
+                ExitReason::StopRequested
+            }
+        }
+    })?;
+    if reason == ExitReason::StopRequested {
+        ctx.runtime.shutdown(ctx.lifetime.stop_reason());
+    }
+    tracing::info!("exiting ({reason:?})");
+    Ok(())
+}
