@@ -37,6 +37,7 @@ use std::hash::Hash;
 use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
+use ctopc_core::compact::{grow_exact, Growth, Idx, PackedValue, SideMap};
 use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
@@ -262,30 +263,80 @@ struct VarState {
     last: Option<Box<Vqt>>,
 }
 
-/// Marks a [`Vars`] entry that indexes [`Vars::rich`]; an entry without it is the slot
-/// index of the variable's only item.
-const RICH: u32 = 1 << 31;
+/// A variable's entry in [`Vars::map`], in 4 bytes: the slot index of its only item (the
+/// short form), or the index of its [`VarState`] in [`Vars::rich`]. The top bit says which,
+/// so the short form takes slot indices below 2^31 (an item at a larger one goes rich).
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct VarEntry(u32);
+
+/// What a [`VarEntry`] names.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum VarAt {
+    /// The only item's slot index.
+    One(u32),
+    Rich(Idx<VarState>),
+}
+
+impl VarEntry {
+    const RICH: u32 = 1 << 31;
+
+    /// The short entry of the variable whose only item is at slot index `i`, if it fits.
+    fn one(i: u32) -> Option<Self> {
+        (i & Self::RICH == 0).then_some(VarEntry(i))
+    }
+
+    fn rich(i: Idx<VarState>) -> Self {
+        assert!(i.raw() & Self::RICH == 0, "rich variables fit 31 bits");
+        VarEntry(Self::RICH | i.raw())
+    }
+
+    fn at(self) -> VarAt {
+        if self.0 & Self::RICH == 0 {
+            VarAt::One(self.0)
+        } else {
+            VarAt::Rich(Idx::from_raw(self.0 & !Self::RICH))
+        }
+    }
+
+    fn rich_idx(self) -> Option<Idx<VarState>> {
+        match self.at() {
+            VarAt::Rich(i) => Some(i),
+            VarAt::One(_) => None,
+        }
+    }
+}
+
+/// A short variable's last sample (24 bytes, and as an `Option` too): its value packed, a
+/// string or array in [`Vars::last_values`] by slot index.
+#[derive(Clone, Copy)]
+struct Last {
+    value: PackedValue,
+    quality: Quality,
+    timestamp: Timestamp,
+}
 
 /// The raw variables wanted by subscribed items. Most variables of a large subscription
 /// of the simulation are read by exactly one item, with no item's rules reading them and
 /// no sample kept: such a variable's entry is that item's slot index, 4 bytes besides the
 /// variable in the map (a `u32` variable of the simulation: 8 bytes and a control byte;
-/// a [`VarState`] is 48 bytes). The others have
-/// a [`VarState`] in `rich`, and go back to the short form once they are plain again
-/// ([`Vars::settle`]). A source that cannot peek (the network) keeps every sampled
-/// variable's last sample: a short variable's is in `lasts` at its item's slot index (48
-/// bytes; a [`VarState`] with a boxed sample would be 88).
+/// a [`VarState`] would add 40). The others have a [`VarState`] in `rich`, and go back to
+/// the short form once they are plain again ([`Vars::settle`]). A source that cannot peek
+/// (the network) keeps every sampled variable's last sample: a short variable's is in
+/// `lasts` at its item's slot index (24 bytes, where a [`VarState`] and a boxed sample
+/// would take 88).
 struct Vars<V> {
-    map: HashMap<V, u32>,
+    map: HashMap<V, VarEntry>,
     rich: Vec<VarState>,
     /// Indices of `rich` free for reuse.
-    free: Vec<u32>,
+    free: Vec<Idx<VarState>>,
     /// The last samples of short variables, at their items' slot indices; empty while none
-    /// is kept (the simulation's plain variables keep none).
-    lasts: Vec<Option<Vqt>>,
+    /// is kept (the simulation's plain variables keep none) ...
+    lasts: Vec<Option<Last>>,
+    /// ... and their string and array values, by slot index.
+    last_values: SideMap<u32, Value>,
 }
 
-/// A variable's entry in [`Vars`].
+/// A variable's entry in [`Vars`], read.
 enum VarRef<'a> {
     /// Read by the item at this slot index, and that is all.
     One(u32),
@@ -299,23 +350,29 @@ impl<V: Eq + Hash + Clone> Vars<V> {
             rich: Vec::new(),
             free: Vec::new(),
             lasts: Vec::new(),
+            last_values: SideMap::default(),
         }
     }
 
     fn get(&self, v: &V) -> Option<VarRef<'_>> {
-        let e = *self.map.get(v)?;
-        Some(if e & RICH == 0 {
-            VarRef::One(e)
-        } else {
-            VarRef::Rich(&self.rich[(e & !RICH) as usize])
+        Some(match self.map.get(v)?.at() {
+            VarAt::One(i) => VarRef::One(i),
+            VarAt::Rich(i) => VarRef::Rich(&self.rich[i]),
         })
     }
 
     /// The variable's last sample, if kept.
-    fn last(&self, v: &V) -> Option<&Vqt> {
+    fn last(&self, v: &V) -> Option<Vqt> {
         match self.get(v)? {
-            VarRef::One(i) => self.lasts.get(i as usize)?.as_ref(),
-            VarRef::Rich(st) => st.last.as_deref(),
+            VarRef::One(i) => {
+                let last = self.lasts.get(i as usize)?.as_ref()?;
+                Some(Vqt {
+                    value: self.last_values.get(last.value, i).into_owned(),
+                    quality: last.quality,
+                    timestamp: last.timestamp,
+                })
+            }
+            VarRef::Rich(st) => st.last.as_deref().cloned(),
         }
     }
 
@@ -326,53 +383,52 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// The variable's full state, made from its short entry (`one`: the key of the item at
     /// a slot index) or anew.
     fn rich_mut(&mut self, v: &V, one: impl FnOnce(u32) -> Option<SourceKey>) -> &mut VarState {
-        let e = self.map.get(v).copied();
-        if let Some(e) = e.filter(|e| e & RICH != 0) {
-            return &mut self.rich[(e & !RICH) as usize];
-        }
+        let short = match self.map.get(v).map(|e| e.at()) {
+            Some(VarAt::Rich(i)) => return &mut self.rich[i],
+            Some(VarAt::One(i)) => Some(i),
+            None => None,
+        };
         let st = VarState {
-            items: match e.and_then(one) {
+            items: match short.and_then(one) {
                 Some(k) => Keys::One(k),
                 None => Keys::None,
             },
             rule_users: Keys::None,
-            last: e.and_then(|i| self.take_last(i)).map(Box::new),
+            last: short.and_then(|i| self.take_last(i)).map(Box::new),
         };
         let i = match self.free.pop() {
             Some(i) => {
-                self.rich[i as usize] = st;
+                self.rich[i] = st;
                 i
             }
             None => {
-                if self.rich.len() == self.rich.capacity() {
-                    // By a quarter, not double: a source that cannot peek (the network)
-                    // keeps every sampled variable's last sample here, and doubling would
-                    // leave up to half of a large subscription's room unused.
-                    self.rich.reserve_exact((self.rich.len() / 4).max(16));
-                }
+                // By a quarter: a source that cannot peek (the network) keeps every
+                // sampled variable's last sample here.
+                grow_exact(&mut self.rich, 1, Growth::quarter(16));
                 self.rich.push(st);
-                (self.rich.len() - 1) as u32
+                Idx::new(self.rich.len() - 1)
             }
         };
-        debug_assert!(i < RICH);
         match self.map.get_mut(v) {
-            Some(e) => *e = RICH | i,
+            Some(e) => *e = VarEntry::rich(i),
             None => {
-                self.map.insert(v.clone(), RICH | i);
+                self.map.insert(v.clone(), VarEntry::rich(i));
             }
         }
-        &mut self.rich[i as usize]
+        &mut self.rich[i]
     }
 
     /// Item `k` reads `v` (noted once).
     fn add_item(&mut self, v: &V, k: SourceKey, one: impl FnOnce(u32) -> Option<SourceKey>) {
         match self.map.get(v) {
-            None if k.index() < RICH => {
-                self.map.insert(v.clone(), k.index());
-                return;
+            None => {
+                if let Some(e) = VarEntry::one(k.index()) {
+                    self.map.insert(v.clone(), e);
+                    return;
+                }
             }
-            Some(&e) if e & RICH == 0 && e == k.index() => return,
-            _ => {}
+            Some(e) if e.at() == VarAt::One(k.index()) => return,
+            Some(_) => {}
         }
         let st = self.rich_mut(v, one);
         if !st.items.contains(&k) {
@@ -388,60 +444,68 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// Item `k` no longer reads `v` (a variable nothing else needs keeps its entry, if it
     /// has a full state, until [`Self::remove`]).
     fn remove_item(&mut self, v: &V, k: SourceKey) {
-        let Some(&e) = self.map.get(v) else {
+        let Some(e) = self.map.get(v) else {
             return;
         };
-        if e & RICH == 0 {
-            if e == k.index() {
-                self.map.remove(v);
-                self.take_last(e);
+        match e.at() {
+            VarAt::One(i) => {
+                if i == k.index() {
+                    self.map.remove(v);
+                    self.take_last(i);
+                }
             }
-        } else {
-            self.rich[(e & !RICH) as usize].items.remove(k, false);
+            VarAt::Rich(i) => self.rich[i].items.remove(k, false),
         }
     }
 
     /// One use of `v` by item `k`'s rules less.
     fn remove_rule_user(&mut self, v: &V, k: SourceKey) {
-        if let Some(&e) = self.map.get(v) {
-            if e & RICH != 0 {
-                self.rich[(e & !RICH) as usize].rule_users.remove(k, true);
-            }
+        if let Some(i) = self.map.get(v).and_then(|e| e.rich_idx()) {
+            self.rich[i].rule_users.remove(k, true);
         }
     }
 
     /// Forgets `v`.
     fn remove(&mut self, v: &V) {
-        if let Some(e) = self.map.remove(v) {
-            if e & RICH != 0 {
-                self.free_rich(e & !RICH);
-            } else {
-                self.take_last(e);
+        match self.map.remove(v).map(VarEntry::at) {
+            Some(VarAt::Rich(i)) => self.free_rich(i),
+            Some(VarAt::One(i)) => {
+                self.take_last(i);
             }
+            None => {}
         }
     }
 
     /// Takes the last sample kept at slot index `i`.
     fn take_last(&mut self, i: u32) -> Option<Vqt> {
-        self.lasts.get_mut(i as usize)?.take()
+        let mut last = self.lasts.get_mut(i as usize)?.take()?;
+        Some(Vqt {
+            value: self.last_values.take(&mut last.value, i),
+            quality: last.quality,
+            timestamp: last.timestamp,
+        })
     }
 
-    /// The room for the last sample at slot index `i`, made if need be (by what is missing,
-    /// or a quarter: the slots are dense).
-    fn last_at(&mut self, i: u32) -> &mut Option<Vqt> {
-        let i = i as usize;
-        if i >= self.lasts.len() {
-            if i >= self.lasts.capacity() {
-                let grow = (i + 1 - self.lasts.len()).max(self.lasts.len() / 4).max(16);
-                self.lasts.reserve_exact(grow);
-            }
-            self.lasts.resize(i + 1, None);
+    /// Keeps `vqt` as the last sample at slot index `i`, with room made if need be (by what
+    /// is missing, or a quarter: the slots are dense).
+    fn put_last(&mut self, i: u32, vqt: Vqt) {
+        let at = i as usize;
+        if at >= self.lasts.len() {
+            let need = at + 1 - self.lasts.len();
+            grow_exact(&mut self.lasts, need, Growth::quarter(16));
+            self.lasts.resize(at + 1, None);
         }
-        &mut self.lasts[i]
+        let last = self.lasts[at].get_or_insert(Last {
+            value: PackedValue::EMPTY,
+            quality: vqt.quality,
+            timestamp: vqt.timestamp,
+        });
+        (last.quality, last.timestamp) = (vqt.quality, vqt.timestamp);
+        self.last_values.put(&mut last.value, i, vqt.value);
     }
 
-    fn free_rich(&mut self, i: u32) {
-        self.rich[i as usize] = VarState::default();
+    fn free_rich(&mut self, i: Idx<VarState>) {
+        self.rich[i] = VarState::default();
         self.free.push(i);
         if self.free.len() == self.rich.len() {
             // None left: their room goes too.
@@ -452,18 +516,18 @@ impl<V: Eq + Hash + Clone> Vars<V> {
 
     /// Keeps `last` as the variable's last sample (`Some`), or keeps none.
     fn set_last(&mut self, v: &V, last: Option<Vqt>, one: impl FnOnce(u32) -> Option<SourceKey>) {
-        let e = self.map.get(v).copied();
-        match (last, e) {
-            (Some(vqt), Some(i)) if i & RICH == 0 => *self.last_at(i) = Some(vqt),
+        let at = self.map.get(v).map(|e| e.at());
+        match (last, at) {
+            (Some(vqt), Some(VarAt::One(i))) => self.put_last(i, vqt),
             (Some(vqt), _) => match &mut self.rich_mut(v, one).last {
                 Some(last) => **last = vqt,
                 last @ None => *last = Some(Box::new(vqt)),
             },
-            (None, Some(i)) if i & RICH == 0 => {
+            (None, Some(VarAt::One(i))) => {
                 self.take_last(i);
             }
-            (None, Some(e)) => {
-                self.rich[(e & !RICH) as usize].last = None;
+            (None, Some(VarAt::Rich(i))) => {
+                self.rich[i].last = None;
                 self.settle(v);
             }
             (None, None) => {}
@@ -473,32 +537,31 @@ impl<V: Eq + Hash + Clone> Vars<V> {
     /// Gives a variable read by one item and nothing else its short entry again (with its
     /// last sample, where short variables keep theirs already).
     fn settle(&mut self, v: &V) {
-        let Some(&e) = self.map.get(v) else {
+        let Some(i) = self.map.get(v).and_then(|e| e.rich_idx()) else {
             return;
         };
-        if e & RICH == 0 {
-            return;
-        }
-        let i = e & !RICH;
         let VarState {
             items: Keys::One(k),
             rule_users: Keys::None,
             last,
-        } = &self.rich[i as usize]
+        } = &self.rich[i]
         else {
             return;
         };
         let k = k.index();
         // A last sample moves only into room made already (a peeking source's
         // variables keep theirs only while rules read them).
-        if k >= RICH || last.is_some() && k as usize >= self.lasts.len() {
+        let Some(short) = VarEntry::one(k) else {
+            return;
+        };
+        if last.is_some() && k as usize >= self.lasts.len() {
             return;
         }
-        if let Some(last) = self.rich[i as usize].last.take() {
-            self.lasts[k as usize] = Some(*last);
+        if let Some(last) = self.rich[i].last.take() {
+            self.put_last(k, *last);
         }
         if let Some(e) = self.map.get_mut(v) {
-            *e = k;
+            *e = short;
         }
         self.free_rich(i);
     }
@@ -664,7 +727,7 @@ impl<S: VariableSource> AsixBackend<S> {
 
     /// A variable's current raw VQT: the source's, else the last sample.
     fn current(&self, v: &S::Var) -> Option<Vqt> {
-        self.source.peek(v).or_else(|| self.vars.last(v).cloned())
+        self.source.peek(v).or_else(|| self.vars.last(v))
     }
 
     /// An item's VQT from a raw sample of its variable (quality rules over the current
@@ -782,19 +845,15 @@ impl<S: VariableSource> AsixBackend<S> {
     fn subscribe(&mut self, now: Timestamp, subs: Vec<(SourceItem, u32)>) {
         let mut touched = Touched::new();
         let mut subscribed = Vec::with_capacity(subs.len());
-        // The slots this request reaches: grown once, by a quarter (not double: large
-        // configurations, see the engine's source table) or to exactly what a large
-        // request needs if that is more.
+        // The slots this request reaches: grown once, by a quarter or to exactly what a
+        // large request needs if that is more.
         let top = subs
             .iter()
             .map(|(item, _)| item.key.index() as usize + 1)
-            .max();
-        if let Some(top) = top.filter(|&t| t > self.slots.capacity()) {
-            let quarter = (self.slots.len() / 4).max(1024);
-            let need = top - self.slots.len();
-            self.slots
-                .reserve_exact(if need > quarter { need } else { quarter });
-        }
+            .max()
+            .unwrap_or(0);
+        let need = top.saturating_sub(self.slots.len());
+        grow_exact(&mut self.slots, need, Growth::quarter(1024));
         for (item, rate) in subs {
             let key = item.key;
             let i = key.index() as usize;
@@ -1793,7 +1852,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<Keys>(), 16);
         assert_eq!(std::mem::size_of::<VarState>(), 40);
         assert_eq!(std::mem::size_of::<Option<Slot<u32>>>(), 24);
-        assert_eq!(std::mem::size_of::<Option<Vqt>>(), 48);
+        assert_eq!(std::mem::size_of::<Option<Last>>(), 24);
     }
 
     /// A variable read by one item and nothing else is that item's slot index; a second
@@ -1835,7 +1894,7 @@ mod tests {
         assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], false)));
         vars.set_last(&2, Some(Vqt::default()), one);
         assert_eq!(rich(&vars, 2), Some((vec![c], vec![c], true)));
-        assert_eq!(vars.last(&2), Some(&Vqt::default()));
+        assert_eq!(vars.last(&2), Some(Vqt::default()));
         vars.remove_rule_user(&2, c);
         vars.settle(&2);
         assert!(
@@ -1853,17 +1912,17 @@ mod tests {
         let x = |v: f32| Vqt::new(Value::R4(v), Quality::GOOD, T);
         vars.set_last(&1, Some(x(1.0)), one);
         assert_eq!(short(&vars, 1), Some(b.index()));
-        assert_eq!(vars.last(&1), Some(&x(1.0)));
+        assert_eq!(vars.last(&1), Some(x(1.0)));
         vars.set_last(&1, Some(x(2.0)), one);
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         vars.add_item(&1, a, one);
         assert_eq!(rich(&vars, 1), Some((vec![b, a], vec![], true)));
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         assert!(vars.lasts.iter().all(Option::is_none));
         vars.remove_item(&1, a);
         vars.settle(&1);
         assert_eq!(short(&vars, 1), Some(b.index()), "with its sample");
-        assert_eq!(vars.last(&1), Some(&x(2.0)));
+        assert_eq!(vars.last(&1), Some(x(2.0)));
         vars.set_last(&1, None, one);
         assert_eq!(vars.last(&1), None);
         assert_eq!(short(&vars, 1), Some(b.index()));
@@ -1894,5 +1953,35 @@ mod tests {
         assert_eq!(short(&vars, 2), Some(c.index()), "another item's");
         vars.remove(&2);
         assert!(vars.map.is_empty() && vars.rich.is_empty() && vars.free.is_empty());
+    }
+
+    /// A short variable keeps a string or array sample aside, by its item's slot index,
+    /// while it is the last; it moves with the sample into a full state and back.
+    #[test]
+    fn a_short_variables_string_sample_is_kept_aside() {
+        let (a, b) = (SourceKey::new(3, 0), SourceKey::new(4, 0));
+        let one = |i: u32| (i == a.index()).then_some(a);
+        let text = Vqt::new(Value::Bstr("on".into()), Quality::GOOD, T);
+        let num = Vqt::new(Value::R4(1.0), Quality::UNCERTAIN, T);
+        let mut vars = Vars::new();
+        vars.add_item(&1, a, one);
+        vars.set_last(&1, Some(text.clone()), one);
+        assert_eq!(vars.last(&1), Some(text.clone()));
+        assert_eq!(vars.last_values.len(), 1);
+        vars.set_last(&1, Some(num.clone()), one);
+        assert_eq!(vars.last(&1), Some(num));
+        assert!(vars.last_values.is_empty(), "a number follows");
+        vars.set_last(&1, Some(text.clone()), one);
+        vars.add_item(&1, b, one);
+        assert!(matches!(vars.get(&1), Some(VarRef::Rich(_))));
+        assert!(vars.last_values.is_empty(), "moved into the full state");
+        assert_eq!(vars.last(&1), Some(text.clone()));
+        vars.remove_item(&1, b);
+        vars.settle(&1);
+        assert!(matches!(vars.get(&1), Some(VarRef::One(3))));
+        assert_eq!(vars.last(&1), Some(text));
+        assert_eq!(vars.last_values.len(), 1);
+        vars.remove(&1);
+        assert!(vars.last_values.is_empty() && vars.lasts.iter().all(Option::is_none));
     }
 }

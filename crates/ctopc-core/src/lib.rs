@@ -6,6 +6,7 @@
 
 pub mod audit;
 pub mod browse;
+pub mod compact;
 pub mod convert;
 pub mod diagnostics;
 pub mod driver;

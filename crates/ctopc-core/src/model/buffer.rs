@@ -26,7 +26,7 @@ use super::cache::CachedValue;
 use super::deadband::{band, value_changed};
 use super::engine::{Engine, GroupHandle};
 use super::events::ItemValue;
-use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
+use super::item::{ItemFlags, ItemOpts};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Quality, Timestamp};
@@ -99,12 +99,12 @@ impl Engine {
             let it = &mut g.items[i];
             let refs = buffer_refs.entry(it.source).or_default();
             if enable {
-                it.flags |= BUFFERED;
+                it.flags.insert(ItemFlags::BUFFERED);
                 if !refs.contains(&(group.0, h)) {
                     refs.push((group.0, h));
                 }
             } else {
-                it.flags &= !BUFFERED;
+                it.flags.remove(ItemFlags::BUFFERED);
                 refs.retain(|&r| r != (group.0, h));
                 if refs.is_empty() {
                     buffer_refs.remove(&it.source);
@@ -130,7 +130,7 @@ impl Engine {
             .iter()
             .map(|&h| {
                 g.find(h)
-                    .map(|i| g.items[i].flags & BUFFERED != 0)
+                    .map(|i| g.items[i].flags.contains(ItemFlags::BUFFERED))
                     .ok_or(OpcError::InvalidHandle)
             })
             .collect())
@@ -167,12 +167,12 @@ impl Engine {
             let rate = g.update_rate;
             let group_deadband = g.deadband;
             let it = &g.items[i];
-            if it.source != source || it.flags & BUFFERED == 0 {
+            if it.source != source || !it.flags.contains(ItemFlags::BUFFERED) {
                 return false;
             }
             let sampling = ItemOpts::sampling(&g.opts, it);
             if !ticking
-                || it.flags & (ACTIVE | SENT) != (ACTIVE | SENT)
+                || !it.flags.contains(ItemFlags::ACTIVE | ItemFlags::SENT)
                 || sampling == 0
                 || sampling >= rate
             {

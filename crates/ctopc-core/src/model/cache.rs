@@ -7,60 +7,38 @@ use std::borrow::Cow;
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 
-use super::datasource::{SourceItem, SourceKey, SourceRequest, Subscription};
-use super::util::{IntMap, Interner};
+use super::boundary::{SourceItem, SourceKey, SourceRequest, Subscription};
+use super::util::Interner;
+use crate::compact::{grow_exact, Growth, Idx, Num, Packable, PackedValue, SideMap};
 use crate::namespace::{EuInfo, ItemDef, OPC_READABLE, OPC_WRITEABLE};
 use crate::{OpcError, Quality, Timestamp, Value, VarType, Vqt};
 
 /// "Never refreshed by the source."
 pub(crate) const NEVER: Timestamp = Timestamp(i64::MIN);
 
-/// A value as the cache and the last-sent state of group items hold it: numbers inline
-/// (type and bits, exact), strings and arrays shared.
+/// A value as the engine works with it (the cache's samples, the value last sent to a
+/// group, the values of a transaction): a number (type and bits, exact), or a string or
+/// array shared. The tables keep it packed ([`PackedValue`] with a [`SideMap`]).
 #[derive(Debug, Clone)]
 pub(crate) enum CachedValue {
-    Num { vt: VarType, bits: u64 },
+    Num(Num),
     Shared(Arc<Value>),
 }
 
-fn num_bits(v: &Value) -> Option<(VarType, u64)> {
-    Some(match *v {
-        Value::Empty => (VarType::EMPTY, 0),
-        Value::I1(x) => (VarType::I1, x as i64 as u64),
-        Value::UI1(x) => (VarType::UI1, u64::from(x)),
-        Value::I2(x) => (VarType::I2, x as i64 as u64),
-        Value::UI2(x) => (VarType::UI2, u64::from(x)),
-        Value::I4(x) => (VarType::I4, x as i64 as u64),
-        Value::UI4(x) => (VarType::UI4, u64::from(x)),
-        Value::I8(x) => (VarType::I8, x as u64),
-        Value::UI8(x) => (VarType::UI8, x),
-        Value::R4(x) => (VarType::R4, u64::from(x.to_bits())),
-        Value::R8(x) => (VarType::R8, x.to_bits()),
-        Value::Cy(x) => (VarType::CY, x as u64),
-        Value::Date(x) => (VarType::DATE, x.to_bits()),
-        Value::Bool(b) => (VarType::BOOL, u64::from(b)),
-        Value::Error(e) => (VarType::ERROR, e as i64 as u64),
-        Value::Bstr(_) | Value::Array(_) => return None,
-    })
-}
-
 impl CachedValue {
-    pub const EMPTY: CachedValue = CachedValue::Num {
-        vt: VarType::EMPTY,
-        bits: 0,
-    };
+    pub const EMPTY: CachedValue = CachedValue::Num(Num::EMPTY);
 
     pub fn from_value(v: Value) -> Self {
-        match num_bits(&v) {
-            Some((vt, bits)) => CachedValue::Num { vt, bits },
+        match Num::of(&v) {
+            Some(n) => CachedValue::Num(n),
             None => CachedValue::Shared(Arc::new(v)),
         }
     }
 
     /// Equal to `v` (same type, same bits or equal contents), without allocating.
     pub fn same_as(&self, v: &Value) -> bool {
-        match (self, num_bits(v)) {
-            (CachedValue::Num { vt, bits }, Some((vt2, bits2))) => *vt == vt2 && *bits == bits2,
+        match (self, Num::of(v)) {
+            (CachedValue::Num(a), Some(b)) => *a == b,
             (CachedValue::Shared(a), None) => **a == *v,
             _ => false,
         }
@@ -69,30 +47,14 @@ impl CachedValue {
     pub fn to_value(&self) -> Value {
         match self {
             CachedValue::Shared(a) => (**a).clone(),
-            &CachedValue::Num { vt, bits } => match vt {
-                VarType::I1 => Value::I1(bits as i8),
-                VarType::UI1 => Value::UI1(bits as u8),
-                VarType::I2 => Value::I2(bits as i16),
-                VarType::UI2 => Value::UI2(bits as u16),
-                VarType::I4 => Value::I4(bits as i32),
-                VarType::UI4 => Value::UI4(bits as u32),
-                VarType::I8 => Value::I8(bits as i64),
-                VarType::UI8 => Value::UI8(bits),
-                VarType::R4 => Value::R4(f32::from_bits(bits as u32)),
-                VarType::R8 => Value::R8(f64::from_bits(bits)),
-                VarType::CY => Value::Cy(bits as i64),
-                VarType::DATE => Value::Date(f64::from_bits(bits)),
-                VarType::BOOL => Value::Bool(bits != 0),
-                VarType::ERROR => Value::Error(bits as i32),
-                _ => Value::Empty,
-            },
+            CachedValue::Num(n) => n.to_value(),
         }
     }
 
     /// The number for deadband checks (see [`Value::as_f64`]); `None` for non-numbers.
     pub fn as_f64(&self) -> Option<f64> {
         match self {
-            CachedValue::Num { .. } => self.to_value().as_f64(),
+            CachedValue::Num(n) => n.to_value().as_f64(),
             CachedValue::Shared(a) => a.as_f64(),
         }
     }
@@ -101,14 +63,31 @@ impl CachedValue {
 impl PartialEq for CachedValue {
     fn eq(&self, other: &Self) -> bool {
         match (self, other) {
-            (CachedValue::Num { vt: a, bits: x }, CachedValue::Num { vt: b, bits: y }) => {
-                a == b && x == y
-            }
+            (CachedValue::Num(a), CachedValue::Num(b)) => a == b,
             (CachedValue::Shared(a), CachedValue::Shared(b)) => Arc::ptr_eq(a, b) || **a == **b,
             _ => false,
         }
     }
 }
+
+impl Packable for CachedValue {
+    fn as_num(&self) -> Option<Num> {
+        match self {
+            CachedValue::Num(n) => Some(*n),
+            CachedValue::Shared(_) => None,
+        }
+    }
+    fn from_num(n: Num) -> Self {
+        CachedValue::Num(n)
+    }
+}
+
+/// An analog entry's EU range, low and high (`SourceTable::eu_ranges`).
+type EuRange = (f64, f64);
+
+/// The distinct sampling rates of one source item's subscribers, with counts
+/// (`SourceTable::many_rates`).
+type RateList = Vec<(u32, u32)>;
 
 /// The sampling rates requested by the subscribers of one source item, with counts. More
 /// than one distinct rate spills into [`SourceTable`]'s side table (rare), which keeps the
@@ -121,26 +100,31 @@ pub(crate) enum RateSet {
         rate: u32,
         count: u32,
     },
-    /// Index into `SourceTable::many_rates`.
-    Many(u32),
+    Many(Idx<RateList>),
 }
 
-pub(crate) const LIVE: u8 = 1;
-pub(crate) const CONSTANT: u8 = 2;
-pub(crate) const DIRTY: u8 = 4;
-/// EU type OPC_ANALOG: `eu_range` names the range in `SourceTable::eu_ranges`.
-pub(crate) const ANALOG: u8 = 8;
-/// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
-pub(crate) const ENUMERATED: u8 = 16;
-/// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates` index.
-pub(crate) const MANY_RATES: u8 = 32;
-
-/// The entry has a sample slot of its own in `SourceTable::samples`: made when it is first
-/// subscribed (so that a subscription's samples lie in the order of its entries, as the
-/// scans read them) or gets a sample otherwise (a device read), or at once for a constant;
-/// without it, `sample` names the shared initial state of the entries created at the same
-/// time.
-pub(crate) const OWN_SAMPLE: u8 = 64;
+bitflags::bitflags! {
+    /// A [`SourceEntry`]'s flags.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub(crate) struct EntryFlags: u8 {
+        /// In use (a freed entry has no flags).
+        const LIVE = 1;
+        const CONSTANT = 1 << 1;
+        /// In `SourceTable::dirty`: its subscription changed since the last flush.
+        const DIRTY = 1 << 2;
+        /// EU type OPC_ENUMERATED: the texts are in `SourceTable::enum_texts`.
+        const ENUMERATED = 1 << 4;
+        /// The rate set spilled: the sample's `sub_rate` is a `SourceTable::many_rates`
+        /// index.
+        const MANY_RATES = 1 << 5;
+        /// The entry has a sample slot of its own in `SourceTable::samples`: made when it
+        /// is first subscribed (so that a subscription's samples lie in the order of its
+        /// entries, as the scans read them) or gets a sample otherwise (a device read), or
+        /// at once for a constant; without it, `sample` names the shared initial state of
+        /// the entries created at the same time.
+        const OWN_SAMPLE = 1 << 6;
+    }
+}
 
 /// One source item in the cache (32 bytes; its key is in [`SourceTable`]'s key text and
 /// its sample and subscription state in [`SourceTable`]'s samples, no allocation of its
@@ -150,22 +134,19 @@ pub(crate) struct SourceEntry {
     /// The key: its start and length in `SourceTable::keys`.
     key_at: u32,
     key_len: u32,
-    /// The entry's [`Sample`] in `SourceTable::samples`: its own with [`OWN_SAMPLE`], else the
-    /// shared initial state (no value yet).
-    sample: u32,
+    /// The entry's [`Sample`]: its own with [`EntryFlags::OWN_SAMPLE`], else the shared initial state
+    /// (no value yet); none once the entry is freed.
+    sample: Option<Idx<Sample>>,
     pub generation: u32,
     /// Group items referring to this entry.
     pub refs: u32,
     pub channel: u32,
-    /// With [`ANALOG`], the index of the EU range in `SourceTable::eu_ranges`.
-    eu_range: u32,
+    /// EU type OPC_ANALOG: its range.
+    eu_range: Option<Idx<EuRange>>,
     pub canonical: VarType,
     pub access: u8,
-    pub flags: u8,
+    pub flags: EntryFlags,
 }
-
-/// [`Sample::vt`] of a string or array value, which is in `SourceTable::shared`.
-const SHARED_VALUE: VarType = VarType(u16::MAX);
 
 /// What the cache holds of an entry's value and subscription (48 bytes), apart from the
 /// entry: an item that is never subscribed nor read (in inactive groups only) costs no
@@ -174,16 +155,15 @@ const SHARED_VALUE: VarType = VarType(u16::MAX);
 /// [`SampleRef`].
 #[derive(Debug, Clone)]
 pub(crate) struct Sample {
-    bits: u64,
+    /// A number, or shared: in `SourceTable::shared` by sample slot.
+    value: PackedValue,
     timestamp: Timestamp,
     refreshed_at: Timestamp,
     changed_seq: u64,
-    /// The number's type, or [`SHARED_VALUE`].
-    vt: VarType,
     quality: Quality,
     /// A shared initial state: the entries referring to it. An entry's own sample: with
     /// `sub_rate`, the subscribers' rates ([`SourceTable::rates`]): one rate and its count
-    /// (this), or with [`MANY_RATES`] an index into the side table.
+    /// (this), or with [`EntryFlags::MANY_RATES`] the raw [`Idx`] of its list in the side table.
     refs: u32,
     sub_rate: u32,
     /// The sampling rate the backend was last told (0: not subscribed).
@@ -194,11 +174,10 @@ impl Sample {
     /// The state of an entry before its first sample, created at `now`.
     const fn initial(now: Timestamp) -> Self {
         Sample {
-            bits: 0,
+            value: PackedValue::EMPTY,
             timestamp: now,
             refreshed_at: NEVER,
             changed_seq: 0,
-            vt: VarType::EMPTY,
             quality: Quality::BAD_WAITING_FOR_INITIAL_DATA,
             refs: 0,
             sub_rate: 0,
@@ -229,18 +208,22 @@ impl SampleRef<'_> {
 
 impl SourceEntry {
     pub fn is_constant(&self) -> bool {
-        self.flags & CONSTANT != 0
+        self.flags.contains(EntryFlags::CONSTANT)
     }
-    /// See [`OWN_SAMPLE`].
+    /// The sample of a live entry (its own or the shared initial state).
+    fn live_sample(&self) -> Idx<Sample> {
+        self.sample.expect("a live entry has a sample")
+    }
+    /// See [`EntryFlags::OWN_SAMPLE`].
     pub fn has_own_sample(&self) -> bool {
-        self.flags & OWN_SAMPLE != 0
+        self.flags.contains(EntryFlags::OWN_SAMPLE)
     }
     pub fn readable(&self) -> bool {
         u32::from(self.access) & OPC_READABLE != 0
     }
     /// EU type OPC_ANALOG (percent deadband applies).
     pub fn is_analog(&self) -> bool {
-        self.flags & ANALOG != 0
+        self.eu_range.is_some()
     }
     pub fn writable(&self) -> bool {
         u32::from(self.access) & OPC_WRITEABLE != 0 && !self.is_constant()
@@ -257,6 +240,7 @@ struct KeyText {
 }
 
 /// The cache: a slab of entries, an index by `(channel, source key)` and the strings.
+#[derive(Default)]
 pub(crate) struct SourceTable {
     pub entries: Vec<SourceEntry>,
     keys: KeyText,
@@ -268,53 +252,28 @@ pub(crate) struct SourceTable {
     dirty: Vec<u32>,
     live: usize,
     /// Rate sets with more than one distinct rate.
-    many_rates: Vec<Vec<(u32, u32)>>,
-    free_many: Vec<u32>,
+    many_rates: Vec<RateList>,
+    free_many: Vec<Idx<RateList>>,
     /// OPC_ENUMERATED texts by entry index.
     enum_texts: HashMap<u32, Vec<String>>,
     /// The distinct EU ranges of analog entries (a plant has few: interning them keeps 12
     /// bytes per entry out of the cache), by bit pattern; never shrinks, as the ranges come
     /// from the configuration, not from clients.
-    eu_ranges: Vec<(f64, f64)>,
-    eu_range_ids: HashMap<(u64, u64), u32>,
+    eu_ranges: Vec<EuRange>,
+    eu_range_ids: HashMap<(u64, u64), Idx<EuRange>>,
     /// The entries' samples ([`SourceEntry::sample`]), with the free slots ...
     samples: Vec<Sample>,
-    free_samples: Vec<u32>,
+    free_samples: Vec<Idx<Sample>>,
     /// The string and array values of the samples, by sample slot.
-    shared: IntMap<u32, CachedValue>,
-    /// ... and the shared initial state last created (`u32::MAX`: none), which the entries
-    /// created at the same time share.
-    initial: u32,
+    shared: SideMap<Idx<Sample>, CachedValue>,
+    /// ... and the shared initial state last created, which the entries created at the
+    /// same time share.
+    initial: Option<Idx<Sample>>,
     /// Items left in the AddItems call being made ([`SourceTable::batch_left`]): room for
     /// that many when the entries must grow, rather than a quarter more; and their item IDs'
     /// bytes, for the key text.
     batch_left: usize,
     batch_keys: usize,
-}
-
-impl Default for SourceTable {
-    fn default() -> Self {
-        SourceTable {
-            entries: Vec::new(),
-            keys: KeyText::default(),
-            free: Vec::new(),
-            index: SourceIndex::default(),
-            paths: Interner::default(),
-            dirty: Vec::new(),
-            live: 0,
-            many_rates: Vec::new(),
-            free_many: Vec::new(),
-            enum_texts: HashMap::new(),
-            eu_ranges: Vec::new(),
-            eu_range_ids: HashMap::new(),
-            samples: Vec::new(),
-            free_samples: Vec::new(),
-            shared: IntMap::default(),
-            initial: u32::MAX,
-            batch_left: 0,
-            batch_keys: 0,
-        }
-    }
 }
 
 impl SourceTable {
@@ -353,17 +312,9 @@ impl SourceTable {
         }
         let text = &mut self.keys.text;
         let len = text.len();
-        if len + key.len() > text.capacity() {
-            // As the entries: by the rest of a large AddItems (its item IDs' bytes, which
-            // are the keys' unless aliases), else by a quarter, not double.
-            let quarter = (len / 4).max(4096);
-            let grow = if self.batch_keys >= quarter {
-                self.batch_keys
-            } else {
-                quarter
-            };
-            text.reserve_exact(grow.max(key.len()));
-        }
+        // As the entries: by the rest of a large AddItems (its item IDs' bytes, which are
+        // the keys' unless aliases), else by a quarter.
+        grow_exact(text, key.len(), Growth::quarter(4096).hint(self.batch_keys));
         text.push_str(key);
         Some(len as u32)
     }
@@ -372,7 +323,11 @@ impl SourceTable {
     fn compact_keys(&mut self) {
         let live = self.keys.text.len() - self.keys.garbage;
         let mut text = String::with_capacity(live);
-        for e in self.entries.iter_mut().filter(|e| e.flags & LIVE != 0) {
+        for e in self
+            .entries
+            .iter_mut()
+            .filter(|e| e.flags.contains(EntryFlags::LIVE))
+        {
             let key = Self::key_in(&self.keys.text, e);
             e.key_at = text.len() as u32;
             text.push_str(key);
@@ -401,25 +356,25 @@ impl SourceTable {
                     ..Sample::initial(now)
                 });
                 self.put_value(sample, CachedValue::from_value(v.clone()));
-                (sample, LIVE | CONSTANT | OWN_SAMPLE)
+                (
+                    sample,
+                    EntryFlags::LIVE | EntryFlags::CONSTANT | EntryFlags::OWN_SAMPLE,
+                )
             }
-            None => (self.share_initial(now), LIVE),
+            None => (self.share_initial(now), EntryFlags::LIVE),
         };
         let eu_range = match &def.eu {
-            EuInfo::Analog { low, high } => {
-                flags |= ANALOG;
-                self.intern_range(*low, *high)
-            }
+            EuInfo::Analog { low, high } => Some(self.intern_range(*low, *high)),
             EuInfo::Enumerated(_) => {
-                flags |= ENUMERATED;
-                0
+                flags |= EntryFlags::ENUMERATED;
+                None
             }
-            EuInfo::None => 0,
+            EuInfo::None => None,
         };
         let entry = SourceEntry {
             key_at,
             key_len: def.source_key.len() as u32,
-            sample,
+            sample: Some(sample),
             generation: 0,
             refs: 0,
             channel,
@@ -438,19 +393,13 @@ impl SourceTable {
                 idx
             }
             None => {
-                if self.entries.len() == self.entries.capacity() {
-                    // Grow by a quarter, not double: the entries are most of the memory of
-                    // a large configuration, and doubling would leave up to half unused;
-                    // by the rest of a large AddItems at once, so that the entries of one
-                    // large call take what they need and no more.
-                    let quarter = (self.entries.len() / 4).max(1024);
-                    let grow = if self.batch_left >= quarter {
-                        self.batch_left
-                    } else {
-                        quarter
-                    };
-                    self.entries.reserve_exact(grow);
-                }
+                // By a quarter, or by the rest of a large AddItems at once, so that the
+                // entries of one large call take what they need and no more.
+                grow_exact(
+                    &mut self.entries,
+                    1,
+                    Growth::quarter(1024).hint(self.batch_left),
+                );
                 self.entries.push(entry);
                 (self.entries.len() - 1) as u32
             }
@@ -473,84 +422,63 @@ impl SourceTable {
     /// A free sample slot holding `sample`. The samples grow by a quarter (at least
     /// 1,024) but not past one per live entry while they can help it: most entries get
     /// their first sample one by one, after the AddItems that made them.
-    fn alloc_sample(&mut self, sample: Sample) -> u32 {
+    fn alloc_sample(&mut self, sample: Sample) -> Idx<Sample> {
         if let Some(slot) = self.free_samples.pop() {
-            self.samples[slot as usize] = sample;
+            self.samples[slot] = sample;
             return slot;
         }
         let len = self.samples.len();
-        if len == self.samples.capacity() {
-            let quarter = (len / 4).max(1024);
-            let room = (self.live + 16).saturating_sub(len).max(64);
-            self.samples.reserve_exact(quarter.min(room));
-        }
+        let room = (self.live + 16).saturating_sub(len).max(64);
+        grow_exact(&mut self.samples, 1, Growth::quarter(1024).at_most(room));
         self.samples.push(sample);
-        len as u32
+        Idx::new(len)
     }
 
     /// The shared initial state for an entry created at `now` (one more entry refers to it).
-    fn share_initial(&mut self, now: Timestamp) -> u32 {
-        if let Some(s) = self.samples.get_mut(self.initial as usize) {
+    fn share_initial(&mut self, now: Timestamp) -> Idx<Sample> {
+        if let Some(initial) = self.initial {
+            let s = &mut self.samples[initial];
             if s.refs > 0 && s.timestamp == now {
                 s.refs += 1;
-                return self.initial;
+                return initial;
             }
         }
-        self.initial = self.alloc_sample(Sample {
+        let initial = self.alloc_sample(Sample {
             refs: 1,
             ..Sample::initial(now)
         });
-        self.initial
+        self.initial = Some(initial);
+        initial
     }
 
     /// Lets go of an entry's sample: its own, or one reference to a shared initial state.
-    fn release_sample(&mut self, slot: u32, own: bool) {
-        let s = &mut self.samples[slot as usize];
+    fn release_sample(&mut self, slot: Idx<Sample>, own: bool) {
+        let s = &mut self.samples[slot];
         if !own {
             s.refs -= 1;
             if s.refs > 0 {
                 return;
             }
-            if self.initial == slot {
-                self.initial = u32::MAX;
+            if self.initial == Some(slot) {
+                self.initial = None;
             }
         }
-        if s.vt == SHARED_VALUE {
-            self.shared.remove(&slot);
-        }
+        self.shared.forget(&mut s.value, slot);
         *s = Sample::initial(NEVER);
         self.free_samples.push(slot);
     }
 
     /// Stores the value of the sample in `slot`.
-    fn put_value(&mut self, slot: u32, v: CachedValue) {
-        let s = &mut self.samples[slot as usize];
-        match v {
-            CachedValue::Num { vt, bits } => {
-                if s.vt == SHARED_VALUE {
-                    self.shared.remove(&slot);
-                }
-                (s.vt, s.bits) = (vt, bits);
-            }
-            shared @ CachedValue::Shared(_) => {
-                (s.vt, s.bits) = (SHARED_VALUE, 0);
-                self.shared.insert(slot, shared);
-            }
-        }
+    fn put_value(&mut self, slot: Idx<Sample>, v: CachedValue) {
+        self.shared.put(&mut self.samples[slot].value, slot, v);
     }
 
-    fn sample_at(&self, slot: u32) -> SampleRef<'_> {
+    fn sample_at(&self, slot: Option<Idx<Sample>>) -> SampleRef<'_> {
         static FREED: Sample = Sample::initial(NEVER);
-        let s = self.samples.get(slot as usize).unwrap_or(&FREED);
-        let value = if s.vt == SHARED_VALUE {
-            self.shared
-                .get(&slot)
-                .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
-        } else {
-            Cow::Owned(CachedValue::Num {
-                vt: s.vt,
-                bits: s.bits,
-            })
+        let s = slot.map_or(&FREED, |slot| &self.samples[slot]);
+        let value = match slot {
+            Some(slot) => self.shared.get(s.value, slot),
+            None => Cow::Owned(CachedValue::EMPTY),
         };
         SampleRef {
             value,
@@ -569,20 +497,20 @@ impl SourceTable {
 
     /// The sample slot of the live entry `idx`, made its own first if it shares the
     /// initial state.
-    fn own_sample(&mut self, idx: u32) -> u32 {
+    fn own_sample(&mut self, idx: u32) -> Idx<Sample> {
         let e = &self.entries[idx as usize];
         if e.has_own_sample() {
-            return e.sample;
+            return e.live_sample();
         }
-        let shared = e.sample;
+        let shared = e.live_sample();
         let own = self.alloc_sample(Sample {
             refs: 0,
-            ..self.samples[shared as usize].clone()
+            ..self.samples[shared].clone()
         });
         self.release_sample(shared, false);
         let e = &mut self.entries[idx as usize];
-        e.sample = own;
-        e.flags |= OWN_SAMPLE;
+        e.sample = Some(own);
+        e.flags.insert(EntryFlags::OWN_SAMPLE);
         own
     }
 
@@ -590,27 +518,22 @@ impl SourceTable {
     /// up and records it as the entry's change.
     pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) {
         let slot = self.own_sample(idx);
-        let s = &mut self.samples[slot as usize];
+        let s = &mut self.samples[slot];
         let quality_changed = s.quality != vqt.quality;
-        let value_changed = match num_bits(&vqt.value) {
-            Some((vt, bits)) => {
-                let changed = (s.vt, s.bits) != (vt, bits);
-                if changed && s.vt == SHARED_VALUE {
-                    self.shared.remove(&slot);
-                }
-                (s.vt, s.bits) = (vt, bits);
+        let value_changed = match Num::of(&vqt.value) {
+            Some(n) => {
+                let changed = s.value != PackedValue::num(n);
+                self.shared.put_num(&mut s.value, slot, n);
                 changed
             }
             None => {
-                let same = s.vt == SHARED_VALUE
-                    && self
-                        .shared
-                        .get(&slot)
-                        .is_some_and(|old| old.same_as(&vqt.value));
+                let same = self
+                    .shared
+                    .shared(s.value, slot)
+                    .is_some_and(|old| old.same_as(&vqt.value));
                 if !same {
-                    (s.vt, s.bits) = (SHARED_VALUE, 0);
-                    self.shared
-                        .insert(slot, CachedValue::Shared(Arc::new(vqt.value)));
+                    let v = CachedValue::Shared(Arc::new(vqt.value));
+                    self.shared.put(&mut s.value, slot, v);
                 }
                 !same
             }
@@ -624,26 +547,26 @@ impl SourceTable {
         }
     }
 
-    fn intern_range(&mut self, low: f64, high: f64) -> u32 {
+    fn intern_range(&mut self, low: f64, high: f64) -> Idx<EuRange> {
         let ranges = &mut self.eu_ranges;
         *self
             .eu_range_ids
             .entry((low.to_bits(), high.to_bits()))
             .or_insert_with(|| {
                 ranges.push((low, high));
-                (ranges.len() - 1) as u32
+                Idx::new(ranges.len() - 1)
             })
     }
 
     /// The EU range of an entry when it is analog (percent deadband applies).
     pub fn analog_range(&self, e: &SourceEntry) -> Option<(f64, f64)> {
-        e.is_analog().then(|| self.eu_ranges[e.eu_range as usize])
+        e.eu_range.map(|i| self.eu_ranges[i])
     }
 
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
         self.entries
             .get(key.index() as usize)
-            .filter(|e| e.generation == key.generation() && e.flags & LIVE != 0)
+            .filter(|e| e.generation == key.generation() && e.flags.contains(EntryFlags::LIVE))
     }
 
     pub fn source_item(&self, idx: u32) -> SourceItem {
@@ -658,8 +581,8 @@ impl SourceTable {
 
     fn mark_dirty(&mut self, idx: u32) {
         let e = &mut self.entries[idx as usize];
-        if e.flags & DIRTY == 0 {
-            e.flags |= DIRTY;
+        if !e.flags.contains(EntryFlags::DIRTY) {
+            e.flags.insert(EntryFlags::DIRTY);
             self.dirty.push(idx);
         }
     }
@@ -681,7 +604,7 @@ impl SourceTable {
         let e = &self.entries[idx as usize];
         if let Some((low, high)) = self.analog_range(e) {
             EuInfo::Analog { low, high }
-        } else if e.flags & ENUMERATED != 0 {
+        } else if e.flags.contains(EntryFlags::ENUMERATED) {
             EuInfo::Enumerated(self.enum_texts.get(&idx).cloned().unwrap_or_default())
         } else {
             EuInfo::None
@@ -694,9 +617,9 @@ impl SourceTable {
         if !e.has_own_sample() {
             return RateSet::Empty;
         }
-        let s = &self.samples[e.sample as usize];
-        if e.flags & MANY_RATES != 0 {
-            RateSet::Many(s.sub_rate)
+        let s = &self.samples[e.live_sample()];
+        if e.flags.contains(EntryFlags::MANY_RATES) {
+            RateSet::Many(Idx::from_raw(s.sub_rate))
         } else if s.refs == 0 {
             RateSet::Empty
         } else {
@@ -710,18 +633,18 @@ impl SourceTable {
     /// Sets the rates of `idx`, which has its own sample unless `r` is empty.
     fn set_rates(&mut self, idx: u32, r: RateSet) {
         let e = &mut self.entries[idx as usize];
-        e.flags &= !MANY_RATES;
+        e.flags.remove(EntryFlags::MANY_RATES);
         if !e.has_own_sample() {
             debug_assert_eq!(r, RateSet::Empty);
             return;
         }
-        let s = &mut self.samples[e.sample as usize];
+        let s = &mut self.samples[e.live_sample()];
         (s.sub_rate, s.refs) = match r {
             RateSet::Empty => (0, 0),
             RateSet::One { rate, count } => (rate, count),
-            RateSet::Many(slot) => {
-                e.flags |= MANY_RATES;
-                (slot, 0)
+            RateSet::Many(list) => {
+                e.flags.insert(EntryFlags::MANY_RATES);
+                (list.raw(), 0)
             }
         };
     }
@@ -730,14 +653,14 @@ impl SourceTable {
     pub fn announced_rate(&self, idx: u32) -> u32 {
         let e = &self.entries[idx as usize];
         if e.has_own_sample() {
-            self.samples[e.sample as usize].announced_rate
+            self.samples[e.live_sample()].announced_rate
         } else {
             0
         }
     }
 
     /// Counts a subscriber of `idx` at `rate` (the first gives the entry its own sample
-    /// slot, see [`OWN_SAMPLE`]).
+    /// slot, see [`EntryFlags::OWN_SAMPLE`]).
     pub fn add_rate(&mut self, idx: u32, rate: u32) {
         self.own_sample(idx);
         let set = match self.rates(idx) {
@@ -748,25 +671,25 @@ impl SourceTable {
             },
             RateSet::One { rate: r, count } => {
                 let v = vec![(r, count), (rate, 1)];
-                let slot = match self.free_many.pop() {
-                    Some(slot) => {
-                        self.many_rates[slot as usize] = v;
-                        slot
+                let list = match self.free_many.pop() {
+                    Some(list) => {
+                        self.many_rates[list] = v;
+                        list
                     }
                     None => {
                         self.many_rates.push(v);
-                        (self.many_rates.len() - 1) as u32
+                        Idx::new(self.many_rates.len() - 1)
                     }
                 };
-                RateSet::Many(slot)
+                RateSet::Many(list)
             }
-            RateSet::Many(slot) => {
-                let v = &mut self.many_rates[slot as usize];
+            RateSet::Many(list) => {
+                let v = &mut self.many_rates[list];
                 match v.iter_mut().find(|(r, _)| *r == rate) {
                     Some((_, c)) => *c += 1,
                     None => v.push((rate, 1)),
                 }
-                RateSet::Many(slot)
+                RateSet::Many(list)
             }
         };
         self.set_rates(idx, set);
@@ -788,8 +711,8 @@ impl SourceTable {
                 }
             }
             one @ RateSet::One { .. } => one,
-            RateSet::Many(slot) => {
-                let v = &mut self.many_rates[slot as usize];
+            RateSet::Many(list) => {
+                let v = &mut self.many_rates[list];
                 if let Some(i) = v.iter().position(|(r, _)| *r == rate) {
                     v[i].1 -= 1;
                     if v[i].1 == 0 {
@@ -804,11 +727,11 @@ impl SourceTable {
                                 rate,
                                 count,
                             });
-                        self.many_rates[slot as usize] = Vec::new();
-                        self.free_many.push(slot);
+                        self.many_rates[list] = Vec::new();
+                        self.free_many.push(list);
                         set
                     }
-                    _ => RateSet::Many(slot),
+                    _ => RateSet::Many(list),
                 }
             }
         };
@@ -821,7 +744,7 @@ impl SourceTable {
         match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { rate, .. } => rate,
-            RateSet::Many(slot) => self.many_rates[slot as usize]
+            RateSet::Many(list) => self.many_rates[list]
                 .iter()
                 .map(|(r, _)| *r)
                 .min()
@@ -834,14 +757,16 @@ impl SourceTable {
         match self.rates(idx) {
             RateSet::Empty => 0,
             RateSet::One { count, .. } => count,
-            RateSet::Many(slot) => self.many_rates[slot as usize].iter().map(|(_, c)| *c).sum(),
+            RateSet::Many(list) => self.many_rates[list].iter().map(|(_, c)| *c).sum(),
         }
     }
 
     /// Sources with at least one subscriber.
     pub fn subscribed(&self) -> usize {
         (0..self.entries.len() as u32)
-            .filter(|&i| self.entries[i as usize].flags & LIVE != 0 && self.subscribers(i) > 0)
+            .filter(|&i| {
+                self.entries[i as usize].flags.contains(EntryFlags::LIVE) && self.subscribers(i) > 0
+            })
             .count()
     }
 
@@ -858,8 +783,8 @@ impl SourceTable {
         for &idx in &dirty {
             let want = self.fastest(idx);
             let e = &mut self.entries[idx as usize];
-            e.flags &= !DIRTY;
-            if e.flags & LIVE == 0 {
+            e.flags.remove(EntryFlags::DIRTY);
+            if !e.flags.contains(EntryFlags::LIVE) {
                 continue;
             }
             let announced = self.announced_rate(idx);
@@ -867,7 +792,7 @@ impl SourceTable {
                 // One of them is not 0: the entry has (had) subscribers, so its own sample.
                 let e = &self.entries[idx as usize];
                 let key = SourceKey::new(idx, e.generation);
-                self.samples[e.sample as usize].announced_rate = want;
+                self.samples[e.live_sample()].announced_rate = want;
                 if announced == 0 {
                     subscribe.push(Subscription {
                         item: self.source_item(idx),
@@ -899,18 +824,22 @@ impl SourceTable {
     }
 
     fn free_entry(&mut self, idx: u32) {
-        if self.entries[idx as usize].flags & ENUMERATED != 0 {
+        if self.entries[idx as usize]
+            .flags
+            .contains(EntryFlags::ENUMERATED)
+        {
             self.enum_texts.remove(&idx);
         }
         let e = &self.entries[idx as usize];
-        self.release_sample(e.sample, e.has_own_sample());
+        self.release_sample(e.live_sample(), e.has_own_sample());
         let e = &mut self.entries[idx as usize];
         self.index
             .remove(key_hash(e.channel, Self::key_in(&self.keys.text, e)), idx);
         self.keys.garbage += e.key_len as usize;
         e.key_len = 0;
-        e.sample = u32::MAX;
-        e.flags = 0;
+        e.sample = None;
+        e.eu_range = None;
+        e.flags = EntryFlags::empty();
         e.generation = e.generation.wrapping_add(1);
         self.free.push(idx);
         self.live -= 1;
@@ -1291,7 +1220,7 @@ mod tests {
         // b's first sample: the shared state of time 7 has no entry left and is freed.
         t.apply(b, vqt(2.0, 5), Timestamp(10), &mut seq);
         assert_eq!(t.free_samples.len(), 1);
-        assert_eq!(t.samples[t.free_samples[0] as usize].refs, 0);
+        assert_eq!(t.samples[t.free_samples[0]].refs, 0);
         // A new entry at time 8 shares c's state; at 11 one is made (in the freed slot).
         let d = t.find_or_insert(&r8_def("D".into()), Timestamp(8)).unwrap();
         assert_eq!(t.entries[d as usize].sample, t.entries[c as usize].sample);
@@ -1341,7 +1270,7 @@ mod tests {
         assert!(t
             .samples
             .iter()
-            .all(|s| s.vt == VarType::EMPTY && s.refs == 0));
+            .all(|s| s.value == PackedValue::EMPTY && s.refs == 0));
         assert!(t.shared.is_empty());
         let freed = &t.entries[x as usize];
         assert!(!freed.has_own_sample());
@@ -1373,7 +1302,10 @@ mod tests {
             t.add_rate(i, 1000);
         }
         t.add_rate(idx[0], 500);
-        let slots: Vec<u32> = idx.iter().map(|&i| t.entries[i as usize].sample).collect();
+        let slots: Vec<u32> = idx
+            .iter()
+            .map(|&i| t.entries[i as usize].live_sample().raw())
+            .collect();
         assert!(slots.windows(2).all(|w| w[0] + 1 == w[1]), "{slots:?}");
         assert_eq!(t.free_samples.len(), 1, "the shared state is free");
         for &i in &idx {

@@ -61,7 +61,7 @@ pub(crate) fn value_changed(new: &CachedValue, last: &CachedValue, band: Band) -
         return true;
     };
     match (new, last) {
-        (CachedValue::Num { .. }, CachedValue::Num { .. }) => match (new.as_f64(), last.as_f64()) {
+        (CachedValue::Num(_), CachedValue::Num(_)) => match (new.as_f64(), last.as_f64()) {
             (Some(a), Some(b)) => exceeds_percent_deadband(a, b, percent, low, high),
             _ => true,
         },

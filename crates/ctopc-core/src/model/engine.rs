@@ -8,7 +8,7 @@ use super::cache::SourceTable;
 use super::datasource::SourceRequest;
 use super::events::Event;
 use super::group::Group;
-use super::item::{GroupItem, ItemOpts, NameTable, SUBSCRIBED};
+use super::item::{GroupItem, ItemFlags, ItemOpts, NameTable};
 use super::scheduler::Scheduler;
 use super::transactions::Txns;
 use super::util::IntMap;
@@ -350,14 +350,14 @@ impl Engine {
         it: &mut GroupItem,
     ) {
         let want = group_on && it.active() && !sources.entries[it.source as usize].is_constant();
-        let has = it.flags & SUBSCRIBED != 0;
+        let has = it.flags.contains(ItemFlags::SUBSCRIBED);
         let rate = if sampling != 0 { sampling } else { group_rate };
         if want && !has {
             sources.add_rate(it.source, rate);
-            it.flags |= SUBSCRIBED;
+            it.flags.insert(ItemFlags::SUBSCRIBED);
         } else if !want && has {
             sources.remove_rate(it.source, rate);
-            it.flags &= !SUBSCRIBED;
+            it.flags.remove(ItemFlags::SUBSCRIBED);
         }
     }
 
@@ -377,7 +377,7 @@ impl Engine {
 
     /// Changes the rate a subscribed item is counted with.
     pub(crate) fn move_rate(sources: &mut SourceTable, it: &GroupItem, old: u32, new: u32) {
-        if it.flags & SUBSCRIBED != 0 && old != new {
+        if it.flags.contains(ItemFlags::SUBSCRIBED) && old != new {
             sources.remove_rate(it.source, old);
             sources.add_rate(it.source, new);
         }

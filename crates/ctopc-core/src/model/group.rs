@@ -2,10 +2,9 @@
 //! connection state the COM layer reports (callback advised, COM references).
 
 use super::buffer::ItemBuffer;
-use super::cache::CachedValue;
 use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle, SessionHandle};
-use super::item::{GroupItem, ItemOpts, ALIAS, BUFFERED, REMOVED, SENT, SUBSCRIBED};
+use super::item::{GroupItem, ItemFlags, ItemOpts, Lasts};
 use super::util::IntMap;
 use super::Revised;
 use crate::{OpcError, Timestamp};
@@ -136,7 +135,7 @@ pub(crate) struct Group {
     /// The item sampling rates and deadbands of the items that have one, by server handle.
     pub opts: IntMap<u32, ItemOpts>,
     /// The string and array values last sent, by server handle ([`GroupItem::last`]).
-    pub lasts: IntMap<u32, CachedValue>,
+    pub lasts: Lasts,
     /// ... and how many they hold together.
     pub buffered: usize,
 }
@@ -158,7 +157,7 @@ impl Group {
         } else {
             self.items.iter().position(|it| it.handle == handle)?
         };
-        (self.items[i].flags & REMOVED == 0).then_some(i)
+        (!self.items[i].flags.contains(ItemFlags::REMOVED)).then_some(i)
     }
 
     /// Callbacks are due: active, live, sink connected, enabled.
@@ -177,7 +176,7 @@ impl Group {
     /// Every active item is reported at the next update (group or callback became active).
     pub fn resend_all(&mut self) {
         for it in &mut self.items {
-            it.flags &= !SENT;
+            it.flags.remove(ItemFlags::SENT);
         }
         self.needs_scan = true;
     }
@@ -292,7 +291,7 @@ impl Engine {
             first_sample_ready: false,
             buffers: IntMap::default(),
             opts: IntMap::default(),
-            lasts: IntMap::default(),
+            lasts: Lasts::default(),
             buffered: 0,
         };
         self.insert_group(group);
@@ -366,7 +365,7 @@ impl Engine {
             }
             let g = self.group_mut(slot);
             g.opts = IntMap::default();
-            g.lasts = IntMap::default();
+            g.lasts = Lasts::default();
             let (session, name) = (g.session, std::mem::take(&mut g.name));
             if let Some(s) = self.sessions.get_mut(&session.0) {
                 if s.names.get(&name) == Some(&handle) {
@@ -390,9 +389,9 @@ impl Engine {
 
     /// Drops the cache and name references of a removed item.
     pub(crate) fn release_item_refs(&mut self, it: &GroupItem) {
-        debug_assert_eq!(it.flags & SUBSCRIBED, 0);
+        debug_assert!(!it.flags.contains(ItemFlags::SUBSCRIBED));
         self.sources.release(it.source);
-        if it.flags & ALIAS != 0 {
+        if it.flags.contains(ItemFlags::ALIAS) {
             self.names.release(it.name);
         }
     }
@@ -613,14 +612,14 @@ impl Engine {
             first_sample_ready: false,
             buffers: IntMap::default(),
             opts: IntMap::default(),
-            lasts: IntMap::default(),
+            lasts: Lasts::default(),
             buffered: 0,
         };
         let items: Vec<GroupItem> = src.items.clone();
         let opts = src.opts.clone();
         for mut it in items {
             // Nothing is sent to the clone yet (no SENT): its last value does not count.
-            it.forget_last(&mut IntMap::default());
+            it.forget_last(&mut Lasts::default());
             let old = it.handle;
             it.handle = Self::alloc_item_handle(
                 &mut self.next_item_handle,
@@ -630,9 +629,10 @@ impl Engine {
             if let Some(&o) = opts.get(&old) {
                 clone.opts.insert(it.handle, o);
             }
-            it.flags &= !(SENT | SUBSCRIBED | BUFFERED);
+            it.flags
+                .remove(ItemFlags::SENT | ItemFlags::SUBSCRIBED | ItemFlags::BUFFERED);
             self.sources.add_ref(it.source);
-            if it.flags & ALIAS != 0 {
+            if it.flags.contains(ItemFlags::ALIAS) {
                 self.names.add_ref(it.name);
             }
             clone.items.push(it);

@@ -10,6 +10,7 @@ use super::deadband::valid_percent;
 use super::engine::{Engine, GroupHandle};
 use super::util::IntMap;
 use super::Revised;
+use crate::compact::{PackedValue, SideMap};
 use crate::namespace::{EuInfo, ItemDef};
 use crate::{OpcError, Quality, Timestamp, VarType};
 
@@ -50,123 +51,106 @@ pub struct ItemAttributes {
     pub eu: EuInfo,
 }
 
-// GroupItem flags.
-pub(crate) const ACTIVE: u8 = 1;
-/// A value was sent to the group since the item (or group, or sink) became active.
-pub(crate) const SENT: u8 = 2;
-/// Counted in the source's subscribers.
-pub(crate) const SUBSCRIBED: u8 = 4;
-/// `name` is an alias-name id (the item ID differs from the source key), else an access
-/// path id.
-pub(crate) const ALIAS: u8 = 8;
-/// The item deadband is set (IOPCItemDeadbandMgt).
-pub(crate) const DEADBAND: u8 = 16;
-/// Removed during the current RemoveItems call (compacted at its end).
-pub(crate) const REMOVED: u8 = 32;
-/// Buffering is enabled (IOPCItemSamplingMgt::SetItemBufferEnable, `model/buffer.rs`).
-pub(crate) const BUFFERED: u8 = 64;
-/// The item sampling rate is set (IOPCItemSamplingMgt).
-pub(crate) const SAMPLING: u8 = 128;
+bitflags::bitflags! {
+    /// A [`GroupItem`]'s flags.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+    pub(crate) struct ItemFlags: u8 {
+        const ACTIVE = 1;
+        /// A value was sent to the group since the item (or group, or sink) became active.
+        const SENT = 1 << 1;
+        /// Counted in the source's subscribers.
+        const SUBSCRIBED = 1 << 2;
+        /// `name` is an alias-name id (the item ID differs from the source key), else an
+        /// access path id.
+        const ALIAS = 1 << 3;
+        /// The item deadband is set (IOPCItemDeadbandMgt).
+        const DEADBAND = 1 << 4;
+        /// Removed during the current RemoveItems call (compacted at its end).
+        const REMOVED = 1 << 5;
+        /// Buffering is enabled (IOPCItemSamplingMgt::SetItemBufferEnable,
+        /// `model/buffer.rs`).
+        const BUFFERED = 1 << 6;
+        /// The item sampling rate is set (IOPCItemSamplingMgt).
+        const SAMPLING = 1 << 7;
+    }
+}
 
-/// [`GroupItem::last_vt`] of a string or array value, which is in `Group::lasts`.
-const SHARED_LAST: VarType = VarType(u16::MAX);
+/// A group's values last sent that are strings or arrays, by server handle
+/// ([`GroupItem::last`]).
+pub(crate) type Lasts = SideMap<u32, CachedValue>;
 
 /// An item in a group: 32 bytes, no strings (the item ID and access path are interned;
 /// its sampling rate and deadband, rarely set, are in [`ItemOpts`]; a string or array
 /// value last sent is in `Group::lasts`). Checked by `group_items_stay_small` below.
 #[derive(Debug, Clone)]
 pub(crate) struct GroupItem {
-    /// The value last sent to the group ([`GroupItem::last`]): a number's bits ...
-    last_bits: u64,
+    /// The value last sent to the group ([`GroupItem::last`]): a number, or shared in the
+    /// group's [`Lasts`].
+    last: PackedValue,
     pub handle: u32,
     pub client: u32,
     /// Cache entry index.
     pub source: u32,
-    /// Access path id, or alias name id with [`ALIAS`].
+    /// Access path id, or alias name id with [`ItemFlags::ALIAS`].
     pub name: u32,
     pub req_type: VarType,
-    /// ... and its type, or [`SHARED_LAST`].
-    last_vt: VarType,
     pub last_quality: Quality,
-    pub flags: u8,
+    pub flags: ItemFlags,
 }
 
 impl GroupItem {
     /// A new item: nothing sent yet.
     pub fn new(handle: u32, client: u32, source: u32, name: u32, req_type: VarType) -> Self {
         GroupItem {
-            last_bits: 0,
+            last: PackedValue::EMPTY,
             handle,
             client,
             source,
             name,
             req_type,
-            last_vt: VarType::EMPTY,
             last_quality: Quality::BAD,
-            flags: 0,
+            flags: ItemFlags::empty(),
         }
     }
 
     pub fn active(&self) -> bool {
-        self.flags & ACTIVE != 0
+        self.flags.contains(ItemFlags::ACTIVE)
     }
 
-    /// The value last sent to the group (meaningful with [`SENT`]), given the group's
-    /// `lasts`.
-    pub fn last<'a>(&self, lasts: &'a IntMap<u32, CachedValue>) -> Cow<'a, CachedValue> {
-        if self.last_vt != SHARED_LAST {
-            return Cow::Owned(CachedValue::Num {
-                vt: self.last_vt,
-                bits: self.last_bits,
-            });
-        }
-        lasts
-            .get(&self.handle)
-            .map_or(Cow::Owned(CachedValue::EMPTY), Cow::Borrowed)
+    /// The value last sent to the group (meaningful with [`ItemFlags::SENT`]), given the
+    /// group's `lasts`.
+    pub fn last<'a>(&self, lasts: &'a Lasts) -> Cow<'a, CachedValue> {
+        lasts.get(self.last, self.handle)
     }
 
     /// Records the value and quality sent to the group.
-    pub fn set_last(&mut self, lasts: &mut IntMap<u32, CachedValue>, v: CachedValue, q: Quality) {
+    pub fn set_last(&mut self, lasts: &mut Lasts, v: CachedValue, q: Quality) {
         self.last_quality = q;
-        match v {
-            CachedValue::Num { vt, bits } => {
-                if self.last_vt == SHARED_LAST {
-                    lasts.remove(&self.handle);
-                }
-                (self.last_vt, self.last_bits) = (vt, bits);
-            }
-            shared @ CachedValue::Shared(_) => {
-                (self.last_vt, self.last_bits) = (SHARED_LAST, 0);
-                lasts.insert(self.handle, shared);
-            }
-        }
+        lasts.put(&mut self.last, self.handle, v);
     }
 
     /// Forgets the value last sent (the item leaves the group, or is copied to another
     /// under a new handle: `lasts` is then the old group's).
-    pub fn forget_last(&mut self, lasts: &mut IntMap<u32, CachedValue>) {
-        if self.last_vt == SHARED_LAST {
-            lasts.remove(&self.handle);
-        }
-        (self.last_vt, self.last_bits) = (VarType::EMPTY, 0);
+    pub fn forget_last(&mut self, lasts: &mut Lasts) {
+        lasts.forget(&mut self.last, self.handle);
     }
 }
 
 /// The item sampling rate and item deadband of a group's items that have one set
-/// (`Group::opts`, by server handle; [`SAMPLING`] and [`DEADBAND`] say which is set). Few
-/// items have one, so they are kept out of [`GroupItem`].
+/// (`Group::opts`, by server handle; [`ItemFlags::SAMPLING`] and [`ItemFlags::DEADBAND`]
+/// say which is set). Few items have one, so they are kept out of [`GroupItem`].
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub(crate) struct ItemOpts {
-    /// In ms, with [`SAMPLING`].
+    /// In ms, with [`ItemFlags::SAMPLING`].
     pub sampling: u32,
-    /// In percent, with [`DEADBAND`].
+    /// In percent, with [`ItemFlags::DEADBAND`].
     pub deadband: f32,
 }
 
 impl ItemOpts {
     /// The item sampling rate of `it`, 0 when not set.
     pub fn sampling(opts: &IntMap<u32, ItemOpts>, it: &GroupItem) -> u32 {
-        if it.flags & SAMPLING == 0 {
+        if !it.flags.contains(ItemFlags::SAMPLING) {
             return 0;
         }
         opts.get(&it.handle).map_or(0, |o| o.sampling)
@@ -174,7 +158,7 @@ impl ItemOpts {
 
     /// The item deadband of `it`, if set.
     pub fn deadband(opts: &IntMap<u32, ItemOpts>, it: &GroupItem) -> Option<f32> {
-        if it.flags & DEADBAND == 0 {
+        if !it.flags.contains(ItemFlags::DEADBAND) {
             return None;
         }
         opts.get(&it.handle).map(|o| o.deadband)
@@ -182,14 +166,14 @@ impl ItemOpts {
 
     /// Sets (`Some`) or clears the item sampling rate of `it`.
     pub fn set_sampling(opts: &mut IntMap<u32, ItemOpts>, it: &mut GroupItem, rate: Option<u32>) {
-        Self::update(opts, it, SAMPLING, rate.is_some(), |o| {
+        Self::update(opts, it, ItemFlags::SAMPLING, rate.is_some(), |o| {
             o.sampling = rate.unwrap_or(0);
         });
     }
 
     /// Sets (`Some`) or clears the item deadband of `it`.
     pub fn set_deadband(opts: &mut IntMap<u32, ItemOpts>, it: &mut GroupItem, band: Option<f32>) {
-        Self::update(opts, it, DEADBAND, band.is_some(), |o| {
+        Self::update(opts, it, ItemFlags::DEADBAND, band.is_some(), |o| {
             o.deadband = band.unwrap_or(0.0);
         });
     }
@@ -197,16 +181,15 @@ impl ItemOpts {
     fn update(
         opts: &mut IntMap<u32, ItemOpts>,
         it: &mut GroupItem,
-        flag: u8,
+        flag: ItemFlags,
         set: bool,
         f: impl FnOnce(&mut ItemOpts),
     ) {
-        if set {
-            it.flags |= flag;
-        } else {
-            it.flags &= !flag;
-        }
-        if it.flags & (SAMPLING | DEADBAND) == 0 {
+        it.flags.set(flag, set);
+        if !it
+            .flags
+            .intersects(ItemFlags::SAMPLING | ItemFlags::DEADBAND)
+        {
             opts.remove(&it.handle);
         } else {
             f(opts.entry(it.handle).or_default());
@@ -388,9 +371,9 @@ impl Engine {
             self.sources.add_ref(src);
             let path = self.sources.paths.intern(d.access_path);
             let (name, alias) = if self.sources.key(src) == d.item_id {
-                (path, 0)
+                (path, ItemFlags::empty())
             } else {
-                (self.names.acquire(d.item_id, path), ALIAS)
+                (self.names.acquire(d.item_id, path), ItemFlags::ALIAS)
             };
             let handle = {
                 let g = self.groups[slot].as_mut().expect("group");
@@ -403,7 +386,8 @@ impl Engine {
                 access_rights: u32::from(e.access),
             };
             let mut it = GroupItem::new(handle, d.client_handle, src, name, d.requested_type);
-            it.flags = alias | if d.active { ACTIVE } else { 0 };
+            it.flags = alias;
+            it.flags.set(ItemFlags::ACTIVE, d.active);
             let Engine {
                 groups, sources, ..
             } = self;
@@ -468,7 +452,7 @@ impl Engine {
                 let it = &mut g.items[i];
                 let sampling = ItemOpts::sampling(&g.opts, it);
                 Self::sync_sub(sources, false, rate, sampling, it);
-                it.flags |= REMOVED;
+                it.flags.insert(ItemFlags::REMOVED);
                 it.forget_last(&mut g.lasts);
                 g.drop_buffer(h);
                 g.opts.remove(&h);
@@ -481,7 +465,7 @@ impl Engine {
             self.release_item_refs(&it);
         }
         let g = self.group_mut(slot);
-        g.items.retain(|it| it.flags & REMOVED == 0);
+        g.items.retain(|it| !it.flags.contains(ItemFlags::REMOVED));
         if g.items.len() * 4 < g.items.capacity() && g.items.capacity() > 64 {
             g.items.shrink_to_fit();
         }
@@ -516,11 +500,11 @@ impl Engine {
             let it = &mut g.items[i];
             if it.active() != active {
                 if active {
-                    it.flags |= ACTIVE;
+                    it.flags.insert(ItemFlags::ACTIVE);
                 } else {
-                    it.flags &= !ACTIVE;
+                    it.flags.remove(ItemFlags::ACTIVE);
                 }
-                it.flags &= !SENT;
+                it.flags.remove(ItemFlags::SENT);
                 let sampling = ItemOpts::sampling(&g.opts, it);
                 Self::sync_sub(sources, on, rate, sampling, it);
                 g.drop_buffer(h);
@@ -580,7 +564,7 @@ impl Engine {
             .iter()
             .map(|it| {
                 let e = &self.sources.entries[it.source as usize];
-                let (item_id, path) = if it.flags & ALIAS != 0 {
+                let (item_id, path) = if it.flags.contains(ItemFlags::ALIAS) {
                     let (id, path) = self.names.get(it.name);
                     (id.to_string(), path)
                 } else {
@@ -614,7 +598,7 @@ impl Engine {
             .map(|&h| {
                 g.find(h).map(|i| {
                     let it = &g.items[i];
-                    if it.flags & ALIAS != 0 {
+                    if it.flags.contains(ItemFlags::ALIAS) {
                         self.names.get(it.name).0.to_string()
                     } else {
                         self.sources.key(it.source).to_string()
@@ -690,7 +674,7 @@ impl Engine {
             let it = &mut g.items[i];
             if !sources.entries[it.source as usize].is_analog() {
                 Err(OpcError::DeadbandNotSupported)
-            } else if it.flags & DEADBAND == 0 {
+            } else if !it.flags.contains(ItemFlags::DEADBAND) {
                 Err(OpcError::DeadbandNotSet)
             } else {
                 ItemOpts::set_deadband(&mut g.opts, it, None);
@@ -812,7 +796,7 @@ mod tests {
 
     fn item(handle: u32) -> GroupItem {
         GroupItem {
-            flags: ACTIVE,
+            flags: ItemFlags::ACTIVE,
             ..GroupItem::new(handle, 0, 0, 0, VarType::EMPTY)
         }
     }
@@ -821,7 +805,7 @@ mod tests {
     /// leave it when a number follows or the item goes).
     #[test]
     fn the_last_value_sent_is_a_number_in_the_item_or_shared_in_the_map() {
-        let mut lasts = IntMap::default();
+        let mut lasts = Lasts::default();
         let (mut a, mut b) = (item(1), item(2));
         assert_eq!(*a.last(&lasts), CachedValue::EMPTY);
         let text = CachedValue::from_value(crate::Value::Bstr("x".into()));
@@ -861,7 +845,10 @@ mod tests {
         assert_eq!(ItemOpts::deadband(&opts, &a), None);
         ItemOpts::set_sampling(&mut opts, &mut a, Some(250));
         ItemOpts::set_deadband(&mut opts, &mut a, Some(2.5));
-        assert_eq!(a.flags, ACTIVE | SAMPLING | DEADBAND);
+        assert_eq!(
+            a.flags,
+            ItemFlags::ACTIVE | ItemFlags::SAMPLING | ItemFlags::DEADBAND
+        );
         assert_eq!(
             (ItemOpts::sampling(&opts, &a), ItemOpts::deadband(&opts, &a)),
             (250, Some(2.5))
@@ -878,7 +865,7 @@ mod tests {
         assert_eq!(opts.len(), 1);
         ItemOpts::set_deadband(&mut opts, &mut a, None);
         assert!(opts.is_empty());
-        assert_eq!(a.flags, ACTIVE);
+        assert_eq!(a.flags, ItemFlags::ACTIVE);
         ItemOpts::set_deadband(&mut opts, &mut a, Some(1.0));
         assert_eq!(
             opts[&1],

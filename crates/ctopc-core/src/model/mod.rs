@@ -100,6 +100,7 @@
 //! item (OPC_S_UNSUPPORTEDRATE for sampling rates) are carried in the `Ok` value
 //! ([`Revised`]).
 
+mod boundary;
 pub mod buffer;
 mod cache;
 pub mod datasource;

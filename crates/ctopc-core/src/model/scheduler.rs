@@ -14,7 +14,7 @@ use std::collections::BinaryHeap;
 use super::deadband::{band, value_changed};
 use super::engine::Engine;
 use super::events::{master_codes, DataChange, DataChangeKind, Event};
-use super::item::{ItemOpts, ACTIVE, BUFFERED, SENT};
+use super::item::{ItemFlags, ItemOpts};
 use super::transactions::item_value;
 use crate::convert::Locale;
 use crate::{OpcError, Timestamp};
@@ -251,24 +251,24 @@ impl Engine {
         // and pages never written are never committed.
         let mut items = Vec::with_capacity(g.items.len());
         for it in g.items.iter_mut() {
-            if it.flags & ACTIVE == 0 {
+            if !it.flags.contains(ItemFlags::ACTIVE) {
                 continue;
             }
             let e = &sources.entries[it.source as usize];
             let s = sources.sample(e);
-            if it.flags & SENT == 0 && holding && !s.has_value() {
+            if !it.flags.contains(ItemFlags::SENT) && holding && !s.has_value() {
                 held += 1;
                 continue;
             }
-            if first_only && it.flags & SENT != 0 {
+            if first_only && it.flags.contains(ItemFlags::SENT) {
                 continue;
             }
-            if it.flags & BUFFERED != 0 && !first_only {
+            if it.flags.contains(ItemFlags::BUFFERED) && !first_only {
                 // Buffered samples first, oldest first (`model/buffer.rs`); the current
                 // value follows only if it moved on since the last of them.
                 if let Some(buf) = g.buffers.remove(&it.handle) {
                     g.buffered -= buf.len();
-                    if it.flags & SENT != 0 {
+                    if it.flags.contains(ItemFlags::SENT) {
                         if let Some((v, q)) =
                             buf.drain_into(&mut items, it.client, it.req_type, locale)
                         {
@@ -277,7 +277,7 @@ impl Engine {
                     }
                 }
             }
-            if it.flags & SENT != 0
+            if it.flags.contains(ItemFlags::SENT)
                 && (s.changed_seq <= scanned
                     || (s.quality == it.last_quality
                         && !value_changed(
@@ -301,7 +301,7 @@ impl Engine {
                 locale,
             ));
             it.set_last(&mut g.lasts, s.value.into_owned(), s.quality);
-            it.flags |= SENT;
+            it.flags.insert(ItemFlags::SENT);
         }
         if held == 0 {
             g.first_sample_until = None;

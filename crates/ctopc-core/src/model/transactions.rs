@@ -25,7 +25,7 @@ use super::events::{
     ReadComplete, WriteComplete, WriteResult,
 };
 use super::group::Group;
-use super::item::SENT;
+use super::item::ItemFlags;
 use super::util::IntMap;
 use super::MAX_AGE_CACHE;
 use crate::convert::{convert_for_write, Locale};
@@ -611,7 +611,7 @@ impl Engine {
                             {
                                 let it = &mut g.items[i];
                                 it.set_last(&mut g.lasts, value.clone(), *quality);
-                                it.flags |= SENT;
+                                it.flags.insert(ItemFlags::SENT);
                             }
                         }
                         g.last_callback = now;
