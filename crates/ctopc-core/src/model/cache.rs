@@ -473,6 +473,7 @@ impl SourceTable {
         self.shared.put(&mut self.samples[slot].value, slot, v);
     }
 
+    #[inline]
     fn sample_at(&self, slot: Option<Idx<Sample>>) -> SampleRef<'_> {
         static FREED: Sample = Sample::initial(NEVER);
         let s = slot.map_or(&FREED, |slot| &self.samples[slot]);
@@ -491,6 +492,7 @@ impl SourceTable {
 
     /// The sample of an entry (the shared initial state before its first; a freed entry
     /// has none: an empty one).
+    #[inline]
     pub fn sample(&self, e: &SourceEntry) -> SampleRef<'_> {
         self.sample_at(e.sample)
     }
