@@ -473,6 +473,7 @@ impl SourceTable {
         self.shared.put(&mut self.samples[slot].value, slot, v);
     }
 
+    #[inline]
     fn sample_at(&self, slot: Option<Idx<Sample>>) -> SampleRef<'_> {
         static FREED: Sample = Sample::initial(NEVER);
         let s = slot.map_or(&FREED, |slot| &self.samples[slot]);
@@ -491,18 +492,27 @@ impl SourceTable {
 
     /// The sample of an entry (the shared initial state before its first; a freed entry
     /// has none: an empty one).
+    #[inline]
     pub fn sample(&self, e: &SourceEntry) -> SampleRef<'_> {
         self.sample_at(e.sample)
     }
 
     /// The sample slot of the live entry `idx`, made its own first if it shares the
     /// initial state.
+    #[inline]
     fn own_sample(&mut self, idx: u32) -> Idx<Sample> {
         let e = &self.entries[idx as usize];
-        if e.has_own_sample() {
-            return e.live_sample();
+        match e.sample {
+            Some(own) if e.has_own_sample() => own,
+            _ => self.make_own_sample(idx),
         }
-        let shared = e.live_sample();
+    }
+
+    /// [`SourceTable::own_sample`] of an entry that shares the initial state: once per
+    /// entry, so kept out of the callers.
+    #[inline(never)]
+    fn make_own_sample(&mut self, idx: u32) -> Idx<Sample> {
+        let shared = self.entries[idx as usize].live_sample();
         let own = self.alloc_sample(Sample {
             refs: 0,
             ..self.samples[shared].clone()
@@ -516,6 +526,7 @@ impl SourceTable {
 
     /// Stores a sample of the live entry `idx`; when value or quality changed, counts `seq`
     /// up and records it as the entry's change.
+    #[inline]
     pub fn apply(&mut self, idx: u32, vqt: Vqt, now: Timestamp, seq: &mut u64) {
         let slot = self.own_sample(idx);
         let s = &mut self.samples[slot];
@@ -563,6 +574,7 @@ impl SourceTable {
         e.eu_range.map(|i| self.eu_ranges[i])
     }
 
+    #[inline]
     pub fn get(&self, key: SourceKey) -> Option<&SourceEntry> {
         self.entries
             .get(key.index() as usize)
