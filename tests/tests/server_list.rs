@@ -1,7 +1,8 @@
 //! OPC.ServerList.1, our server browser (OpcServerList.exe, registered by xtask), out of
 //! process through the proxy/stub: listing by category (DA 1.0, 2.0, 3.0) through
 //! IOPCServerList (IEnumGUID) and IOPCServerList2 (IOPCEnumGUID), GetClassDetails,
-//! CLSIDFromProgID (also through a version-independent ProgID's `CurVer`), the errors for an unknown CLSID / ProgID, a server registered only in
+//! CLSIDFromProgID (also through a version-independent ProgID's `CurVer`), a client
+//! matching the original's ProgID by name, the errors for an unknown CLSID / ProgID, a server registered only in
 //! the 32-bit registry view, and /RegServer leaving another browser alone. Runs as a
 //! 64-bit and as a 32-bit client (`E2E_32`).
 //!
@@ -149,15 +150,50 @@ fn a_server_in_the_64_bit_view_only_is_listed_too() {
 fn class_details_of_serverctopc() {
     let (_com, b) = browser();
     let d = b.details(&OURS).unwrap();
-    assert_eq!(d.progid, registration::PROGID_VERSIONED);
+    // The original's ProgID, which plants' client configurations hold and match by name.
+    assert_eq!(d.progid, registration::PROGID);
     assert_eq!(d.user_type, registration::DESCRIPTION);
     assert_eq!(
         d.version_independent_progid.as_deref(),
         Some(registration::PROGID)
     );
     let d1 = b.details1(&OURS).unwrap();
-    assert_eq!(d1.progid, registration::PROGID_VERSIONED);
+    assert_eq!(d1.progid, registration::PROGID);
     assert_eq!(d1.user_type, registration::DESCRIPTION);
+}
+
+/// A client configured with the original's ProgID, as plants' HMI configurations hold it,
+/// that lists the DA servers through the browser, picks the one whose registered ProgID
+/// is that name, and connects to it by the CLSID the browser gave.
+#[test]
+fn a_client_matching_the_originals_progid_by_name_finds_and_connects() {
+    let (_com, b) = browser();
+    let mut matched = Vec::new();
+    for clsid in list(&b, &[DA20]) {
+        let d = b.details(&clsid).unwrap();
+        if d.progid == "ServerCTOPC.App" {
+            matched.push(clsid);
+        }
+    }
+    assert_eq!(
+        matched,
+        vec![OURS],
+        "exactly one server named ServerCTOPC.App"
+    );
+    // SAFETY: the CLSID is a valid GUID; COM is initialised by the apartment above.
+    let unknown: windows::core::IUnknown = unsafe {
+        windows::Win32::System::Com::CoCreateInstance(
+            &matched[0],
+            None,
+            windows::Win32::System::Com::CLSCTX_LOCAL_SERVER,
+        )
+    }
+    .expect("CoCreateInstance by the browsed CLSID");
+    let server = opc_client::Server::from_unknown(unknown).expect("IOPCServer");
+    assert!(
+        server.status().is_ok(),
+        "the browsed server answers GetStatus"
+    );
 }
 
 #[test]

@@ -59,6 +59,10 @@ pub struct ServerRegistration<'a> {
     pub progid: &'a str,
     /// Version-dependent ProgID, e.g. `ServerCTOPC.App.1`.
     pub progid_versioned: &'a str,
+    /// The class's own ProgID (`CLSID\{..}\ProgID`): what `ProgIDFromCLSID` and a server
+    /// browser's `GetClassDetails` answer, so what a client that browses and matches by
+    /// name finds. One of the two above.
+    pub class_progid: &'a str,
     pub description: &'a str,
     /// Full path of the server executable.
     pub exe_path: &'a str,
@@ -109,6 +113,8 @@ pub fn serverctopc<'a>(exe_path: &'a str, service: Option<&'a str>) -> ServerReg
         appid: CLSID_SERVERCTOPC,
         progid: PROGID,
         progid_versioned: PROGID_VERSIONED,
+        // The original's ProgID, which plants' client configurations hold.
+        class_progid: PROGID,
         description: DESCRIPTION,
         exe_path,
         exe_name: EXE_NAME,
@@ -154,6 +160,8 @@ pub fn server_list_as<'a>(exe_path: &'a str, service: Option<&'a str>) -> Server
         appid: APPID_SERVER_LIST,
         progid: SERVER_LIST_PROGID,
         progid_versioned: SERVER_LIST_PROGID_VERSIONED,
+        // OpcEnum's, which clients create the browser by.
+        class_progid: SERVER_LIST_PROGID_VERSIONED,
         description: SERVER_LIST_DESCRIPTION,
         exe_path,
         exe_name: SERVER_LIST_EXE_NAME,
@@ -279,10 +287,7 @@ impl ServerRegistration<'_> {
             format!("{clsid_key}\\LocalServer32"),
             &[("", &format!("\"{}\"", self.exe_path))],
         );
-        key(
-            format!("{clsid_key}\\ProgID"),
-            &[("", self.progid_versioned)],
-        );
+        key(format!("{clsid_key}\\ProgID"), &[("", self.class_progid)]);
         key(
             format!("{clsid_key}\\VersionIndependentProgID"),
             &[("", self.progid)],
@@ -412,7 +417,7 @@ mod tests {
             );
             assert_eq!(
                 value(&keys, v, &format!("{clsid}\\ProgID"), ""),
-                Some("ServerCTOPC.App.1")
+                Some("ServerCTOPC.App")
             );
             assert_eq!(
                 value(&keys, v, &format!("{clsid}\\VersionIndependentProgID"), ""),

@@ -1012,6 +1012,7 @@ fn with_registration<R>(f: impl FnOnce(&ServerRegistration) -> R) -> windows::co
         appid: CLSID_MARSHAL_PROBE.to_u128(),
         progid: PROGID,
         progid_versioned: PROGID_VERSIONED,
+        class_progid: PROGID_VERSIONED,
         description: DESCRIPTION,
         exe_path: &exe,
         exe_name: EXE_NAME,
