@@ -109,7 +109,7 @@ fn copy(from: &Path, to: &Path) -> Result<(), String> {
 }
 
 /// Stages the demo install folder; returns it.
-fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
+pub fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
     let root = util::root();
     let dir = root.join("target/demo/ServerCTOPC");
     copy(&a.server, &dir.join("ServerCTOPC.exe"))?;
@@ -154,10 +154,10 @@ fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
 }
 
 /// asix-sim running in the background; stopped (quit, else killed) on drop.
-struct Sim(Child);
+pub struct Sim(Child);
 
 impl Sim {
-    fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
+    pub fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
         let mut child = Command::new(exe)
             .arg("--demo-db")
             .arg(db)

@@ -60,7 +60,10 @@ commands:
           server's resident memory sampled from /proc, the slope after warm-up beside
           the slope Wine's [in]-array leak predicts (docs/wine-ndr-leak.md);
           `--minutes M`, `--clients K`, `--items N`, `--round-seconds R`, `--calls
-          LIST` (add,validate,read,write,itemio,subscribe,remove) or `--no-in-arrays`
+          LIST` (add,validate,read,device,write,itemio,subscribe,remove) or
+          `--no-in-arrays`, `--ids all`; `--load`: 20 clients x 1,000 demo items, cache
+          and device reads, subscribe, leave, three 60 s rounds; fails on any failed
+          device read
   bench   build, register and run the COM benchmark (bench-com.exe) under Wine in a
           prefix of its own; prints figures (medians, ratios to a null round trip,
           goals) and never fails on speed; `--quick` for a short run.

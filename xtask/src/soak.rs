@@ -13,6 +13,18 @@
 //! after-round figures from the second round on (the first is warm-up), in MB per round
 //! and per minute. A flat slope means no memory kept per call.
 //!
+//! **`--load`**: the device-read load of clients in parallel: 20 clients, each round
+//! of each adding 1,000 items cycling through every item of the demo plant
+//! (`soak-client --ids all`), reading them from cache and from the device, subscribing
+//! and leaving (`--calls add,read,device,subscribe,remove`), three rounds of 60 s. After
+//! each round it prints the device reads made and how many failed (an answer other than
+//! S_OK), with the failing items' codes; any failed device read fails the run. The other
+//! options still apply after it (`--load --minutes 1`).
+//!
+//! **`--net`**: the server reads the demo plant over the asix network from a native
+//! `asix-sim` on loopback, as `cargo xtask demo` sets it up (the demo's staged folder and
+//! `ASIXConnect.ini`), instead of the in-process simulation.
+//!
 //! `--calls LIST` chooses the calls of a client round (`soak-client.rs`: `add`,
 //! `validate`, `read`, `write`, `itemio`, `subscribe`, `remove`; default all);
 //! `--no-in-arrays` is `--calls read,subscribe,remove`: connect, GetStatus, AddGroup,
@@ -50,7 +62,16 @@ struct Options {
     calls: Option<String>,
     stall_seconds: u64,
     simulate_stall: bool,
+    /// `--ids all` to the clients.
+    all_ids: bool,
+    /// `--load`: a failed device read fails the run.
+    load: bool,
+    /// `--net`: the demo plant over the asix network from asix-sim.
+    net: bool,
 }
+
+/// The calls of `--load`.
+const LOAD_CALLS: &str = "add,read,device,subscribe,remove";
 
 /// The calls of `--no-in-arrays`: none carries an `[in]` array the stub allocates.
 const NO_IN_ARRAYS: &str = "read,subscribe,remove";
@@ -102,11 +123,29 @@ fn options(args: &[String]) -> Result<Options, String> {
         calls: None,
         stall_seconds: 60,
         simulate_stall: false,
+        all_ids: false,
+        load: false,
+        net: false,
     };
     let mut it = args.iter();
     while let Some(a) = it.next() {
+        if a == "--load" {
+            o.load = true;
+            o.clients = 20;
+            o.items = 1000;
+            o.round_seconds = 60;
+            // Three rounds of 60 s with the 15 s pause after each.
+            o.minutes = 3.0 * 75.0 / 60.0 - 0.1;
+            o.calls = Some(LOAD_CALLS.into());
+            o.all_ids = true;
+            continue;
+        }
         if a == "--no-in-arrays" {
             o.calls = Some(NO_IN_ARRAYS.into());
+            continue;
+        }
+        if a == "--net" {
+            o.net = true;
             continue;
         }
         if a == "--simulate-stall" {
@@ -121,6 +160,7 @@ fn options(args: &[String]) -> Result<Options, String> {
             "--items" => o.items = v.parse().map_err(|_| bad())?,
             "--round-seconds" => o.round_seconds = v.parse().map_err(|_| bad())?,
             "--calls" => o.calls = Some(v.clone()),
+            "--ids" => o.all_ids = v == "all",
             "--stall-seconds" => o.stall_seconds = v.parse().map_err(|_| bad())?,
             _ => return Err(format!("soak: unknown option {a}")),
         }
@@ -552,11 +592,30 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    let mut sim = None;
+    let server = if o.net {
+        util::run(util::cargo().args([
+            "build",
+            "--release",
+            "-p",
+            "asix-net",
+            "--bin",
+            "asix-sim",
+        ]))?;
+        let dir = crate::demo::stage(&artifacts)?;
+        sim = Some(crate::demo::Sim::start(
+            &util::root().join("target/release/asix-sim"),
+            &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
+        )?);
+        dir.join("ServerCTOPC.exe")
+    } else {
+        artifacts.server.clone()
+    };
     let result = (|| {
         let limit = Duration::from_secs(120);
         let mut regsvr = wine::wine_in(&pfx, "regsvr32");
         regsvr.arg("/s").arg(&artifacts.proxy);
-        let mut reg = wine::wine_in(&pfx, &artifacts.server);
+        let mut reg = wine::wine_in(&pfx, &server);
         reg.arg("/RegServer");
         for c in [&mut regsvr, &mut reg] {
             let status = util::run_with_timeout(c, limit)?;
@@ -564,9 +623,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
                 return Err(format!("registration in the soak prefix failed: {status}"));
             }
         }
-        soak(&o, &pfx, &client, &artifacts.server)
+        soak(&o, &pfx, &client, &server)
     })();
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
+    drop(sim);
     result
 }
 
@@ -613,6 +673,7 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
     // The bytes Wine's leak predicts for each round.
     let mut predicted: Vec<f64> = Vec::new();
     let mut round = 0u32;
+    let mut total_device_failed = 0u64;
     while t0.elapsed() < total {
         round += 1;
         let churn: Vec<String> = vec![
@@ -624,6 +685,9 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
         let mut churn = churn;
         if let Some(c) = &o.calls {
             churn.extend(["--calls".to_owned(), c.clone()]);
+        }
+        if o.all_ids {
+            churn.extend(["--ids".to_owned(), "all".to_owned()]);
         }
         let mut kids = Vec::new();
         for i in 0..o.clients {
@@ -691,19 +755,31 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
         }
         let mut failed = 0;
         let mut bytes = 0.0;
+        let (mut device_reads, mut device_failed) = (0u64, 0u64);
         for k in kids {
             let (ok, text) = k.finish();
+            for l in text.lines().filter(|l| l.contains(" device failure ")) {
+                println!("soak:   client: {l}");
+            }
             match parse_counts(&text).filter(|_| ok) {
                 Some(c) => {
                     if let Some(line) = text.lines().rev().find(|l| l.contains(" counts ")) {
                         println!("soak:   client: {line}");
                     }
                     bytes += predicted_bytes(&c);
+                    let count =
+                        |name: &str| c.iter().find(|(k, _)| k == name).map_or(0, |(_, n)| *n);
+                    device_reads += count("devicereads");
+                    device_failed += count("devicefailed");
                 }
                 None => failed += 1,
             }
         }
         predicted.push(bytes);
+        if device_reads > 0 {
+            println!("soak: round {round}: {device_reads} device reads, {device_failed} failed");
+            total_device_failed += device_failed;
+        }
         std::thread::sleep(Duration::from_secs(15));
         let mb = sample(&format!(
             "15 s after round {round} ({failed} clients failed)"
@@ -741,6 +817,11 @@ fn soak(o: &Options, pfx: &Path, client: &Path, server: &Path) -> Result<(), Str
             }
         }
         None => println!("soak: too few rounds for a slope (run longer: --minutes)"),
+    }
+    if o.load && total_device_failed > 0 {
+        return Err(format!(
+            "soak --load: {total_device_failed} device reads failed (expected none)"
+        ));
     }
     Ok(())
 }

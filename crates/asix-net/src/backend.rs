@@ -577,11 +577,10 @@ struct Pending<V> {
     /// Each position's result once known (writes: `Vqt::default()` for success); empty
     /// while no position is known (a request of one part is then answered in one go).
     results: Vec<Option<Result<Vqt, OpcError>>>,
-    /// Reads: the items (the answers go through the pipeline with their resolutions: the
-    /// subscribed items' from their slots, the others' in `own`).
-    items: Vec<SourceItem>,
-    /// Reads: the resolutions made for this request, by ascending position.
-    own: Vec<(usize, ItemRes<V>)>,
+    /// Reads: each position's resolution when the request was sent (the subscribed
+    /// item's, else one made for the request), which its answer goes through the
+    /// pipeline with.
+    own: Vec<ItemRes<V>>,
     remaining: usize,
 }
 
@@ -955,28 +954,15 @@ impl<S: VariableSource> AsixBackend<S> {
         }
         let results = results
             .enumerate()
-            .map(|(i, r)| self.read_vqt(&p.items, &p.own, i, r?))
+            .map(|(i, r)| self.read_vqt(&p.own, i, r?))
             .collect();
         self.ready.read_results.push((req, results));
     }
 
     /// A read item's VQT from the raw answer of position `i`: through the pipeline, with
-    /// the resolution made for the request, else the subscribed item's (an item let go
-    /// before the answer came is unknown by then).
-    fn read_vqt(
-        &self,
-        items: &[SourceItem],
-        own: &[(usize, ItemRes<S::Var>)],
-        i: usize,
-        raw: Vqt,
-    ) -> Result<Vqt, OpcError> {
-        let r = match own.binary_search_by_key(&i, |(j, _)| *j) {
-            Ok(j) => &own[j].1,
-            Err(_) => {
-                let key = items.get(i).ok_or(OpcError::Fail)?.key;
-                &self.slot_of(key).ok_or(OpcError::ItemUnknown)?.r
-            }
-        };
+    /// the resolution the request was sent with.
+    fn read_vqt(&self, own: &[ItemRes<S::Var>], i: usize, raw: Vqt) -> Result<Vqt, OpcError> {
+        let r = own.get(i).ok_or(OpcError::Fail)?;
         Ok(match r.resolved() {
             Some((_, t)) => self.item_vqt(t, raw),
             None => raw,
@@ -1023,7 +1009,7 @@ impl<S: VariableSource> AsixBackend<S> {
                 let out = (0..p.remaining)
                     .map(|i| {
                         let raw = results.next().unwrap_or(Err(OpcError::Fail))?;
-                        self.read_vqt(&p.items, &p.own, i, raw)
+                        self.read_vqt(&p.own, i, raw)
                     })
                     .collect();
                 self.ready.read_results.push((req, out));
@@ -1071,22 +1057,20 @@ impl<S: VariableSource> AsixBackend<S> {
         let mut p = Pending {
             write: false,
             results: Vec::new(),
-            items: Vec::new(),
-            own: Vec::new(),
+            own: Vec::with_capacity(n),
             remaining: n,
         };
         let mut by_part: Parts<S::Part, S::Var> = Vec::new();
         for (i, item) in items.iter().enumerate() {
-            // The subscribed item's resolution, else one made for this request.
-            let var = match self.slot_of(item.key) {
-                Some(s) => s.r.resolved().map(|(v, _)| v.clone()),
-                None => {
-                    let own = self.resolve(item);
-                    let var = own.resolved().map(|(v, _)| v.clone());
-                    p.own.push((i, own));
-                    var
-                }
+            // The subscribed item's resolution, else one made for this request; kept with
+            // the request either way, since every subscriber may let the item go before
+            // the device answers.
+            let own = match self.slot_of(item.key) {
+                Some(s) => s.r.clone(),
+                None => self.resolve(item),
             };
+            let var = own.resolved().map(|(v, _)| v.clone());
+            p.own.push(own);
             match var {
                 Some(var) => {
                     let e = part_entry(&mut by_part, self.source.part(&var));
@@ -1096,7 +1080,6 @@ impl<S: VariableSource> AsixBackend<S> {
                 None => p.refuse(i, Err(OpcError::ItemUnknown)),
             }
         }
-        p.items = items;
         self.pending.insert(req, p);
         self.send_parts(req, by_part, |s, id, vars| s.read(now, id, vars));
     }
@@ -1111,7 +1094,6 @@ impl<S: VariableSource> AsixBackend<S> {
         let mut p = Pending {
             write: true,
             results: Vec::new(),
-            items: Vec::new(),
             own: Vec::new(),
             remaining: n,
         };
@@ -1659,6 +1641,38 @@ mod tests {
                 Ok(Value::R8(50.0)),
             ]
         );
+    }
+
+    /// A device read of subscribed items answers them even when every subscriber lets
+    /// them go before the device answers (another client's group leaving under load):
+    /// the read keeps the resolutions it was sent with.
+    #[test]
+    fn a_device_read_outlives_the_subscription_it_was_sent_under() {
+        let (mut b, ns) = backend();
+        let it = items(&ns, &["KW_A000", "KW_A000.PercentageCV"]);
+        subscribe(&mut b, &[(&it[0], 1000), (&it[1], 1000)]);
+        b.request(
+            T,
+            SourceRequest::Read {
+                req_id: SourceReqId(9),
+                items: it.clone(),
+            },
+        );
+        let reads = std::mem::take(&mut b.source.reads);
+        b.request(T, SourceRequest::Unsubscribe(vec![it[0].key, it[1].key]));
+        let vqt = |x: f32| Ok(Vqt::new(Value::R4(x), Quality::GOOD, T));
+        b.source
+            .out
+            .reads
+            .push((reads[0].0, vec![vqt(2.0), vqt(2.0)]));
+        let out = poll(&mut b, &[]);
+        let [(id, r)] = &out.read_results[..] else {
+            panic!("{:?}", out.read_results)
+        };
+        assert_eq!(*id, SourceReqId(9));
+        let values: Vec<Result<Value, OpcError>> =
+            r.iter().map(|r| r.clone().map(|v| v.value)).collect();
+        assert_eq!(values, [Ok(Value::R4(2.0)), Ok(Value::R8(25.0))]);
     }
 
     /// Writes are checked before the source sees them (derived items, read-only variables);

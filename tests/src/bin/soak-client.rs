@@ -9,6 +9,9 @@
 //! - `add`: IOPCItemMgt::AddItems of N items (an `[in]` array of N OPCITEMDEF);
 //! - `validate`: ValidateItems of the N (N OPCITEMDEF);
 //! - `read`: IOPCSyncIO::Read by handle (an array of DWORD handles);
+//! - `device`: IOPCSyncIO::Read by handle from the device; an answer other than S_OK is
+//!   a failed device read, and its items' codes are printed (`soak-client: device
+//!   failure ...`, the first few of the process);
 //! - `write`: IOPCSyncIO::Write of every writable item (one VARIANT each, N/4);
 //! - `itemio`: IOPCItemIO::Read of the N item IDs (N string pointers);
 //! - `subscribe`: IOPCDataCallback advised for about a second, callbacks, Unadvise;
@@ -19,13 +22,17 @@
 //! (`remove` with handles the server never issued, so that the items stay): the rounds
 //! make only calls that carry no array the stub allocates.
 //!
+//! `--ids all`: the N items cycle through every item ID the server's flat browse lists
+//! (but `_Diagnostics`), not through the four default ones.
+//!
 //! After each round it prints `soak-client: round N` (or `soak-client: failure N`): the
 //! soak's sign of progress. `--stall-after S` (the soak's `--simulate-stall`) stops after
 //! S seconds without a word, as a hung call would.
 //!
 //! At the end it prints one line `soak-client: counts rounds=R failures=F additems=A
-//! validateitems=V writes=W itemio=I` (items sent in each kind of allocated `[in]`
-//! array, summed over the process), which `cargo xtask soak` reads.
+//! validateitems=V writes=W itemio=I devicereads=D devicefailed=X` (items sent in each
+//! kind of allocated `[in]` array, summed over the process; device reads made and how
+//! many failed), which `cargo xtask soak` reads.
 
 #[cfg(not(windows))]
 fn main() -> std::process::ExitCode {
@@ -50,7 +57,9 @@ fn main() -> std::process::ExitCode {
     } else {
         let calls = arg("--calls").map_or(soak::ALL_CALLS, |s| s.as_str());
         let stall_after = arg("--stall-after").and_then(|v| v.parse().ok());
-        soak::Calls::parse(calls).and_then(|c| soak::churn(seconds, items, &c, stall_after))
+        let all_ids = arg("--ids").is_some_and(|v| v == "all");
+        soak::Calls::parse(calls)
+            .and_then(|c| soak::churn(seconds, items, &c, stall_after, all_ids))
     };
     match r {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -64,7 +73,7 @@ fn main() -> std::process::ExitCode {
 #[cfg(windows)]
 mod soak {
     use ctopc_com::apartment::Apartment;
-    use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE};
+    use ctopc_com::interfaces::{IOPCSyncIO, OPC_DS_CACHE, OPC_DS_DEVICE, OPC_FLAT};
     use ctopc_core::Value;
     use e2e_tests::io_support::{Recording, RecordingSink};
     use e2e_tests::PROGID;
@@ -87,6 +96,7 @@ mod soak {
         read: bool,
         write: bool,
         itemio: bool,
+        device: bool,
         subscribe: bool,
         remove: bool,
     }
@@ -101,6 +111,7 @@ mod soak {
                     "read" => c.read = true,
                     "write" => c.write = true,
                     "itemio" => c.itemio = true,
+                    "device" => c.device = true,
                     "subscribe" => c.subscribe = true,
                     "remove" => c.remove = true,
                     _ => return Err(format!("unknown call `{name}` in --calls")),
@@ -122,7 +133,12 @@ mod soak {
         validate_items: u64,
         writes: u64,
         item_io: u64,
+        device_reads: u64,
+        device_failed: u64,
     }
+
+    /// The most failed device reads whose item codes a process prints.
+    const DEVICE_FAILURES_SHOWN: u64 = 3;
 
     pub fn hold(seconds: u64) -> Result<(), String> {
         let _com = Apartment::mta().map_err(|e| e.to_string())?;
@@ -143,10 +159,24 @@ mod soak {
         handles: Vec<u32>,
     }
 
-    fn defs(items: usize) -> Vec<ItemDef> {
+    fn defs(items: usize, ids: &[String]) -> Vec<ItemDef> {
         (0..items)
-            .map(|i| ItemDef::new(IDS[i % IDS.len()], i as u32))
+            .map(|i| ItemDef::new(&ids[i % ids.len()], i as u32))
             .collect()
+    }
+
+    /// Every item ID of the server's flat browse but `_Diagnostics`, sorted.
+    fn browsed_ids() -> Result<Vec<String>, String> {
+        let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
+        let (_, mut ids) = server
+            .browse_item_ids(OPC_FLAT, "", 0, 0)
+            .map_err(|e| format!("BrowseOPCItemIDs: {e}"))?;
+        ids.retain(|id| !id.starts_with('_'));
+        ids.sort();
+        if ids.is_empty() {
+            return Err("the flat browse listed no item".into());
+        }
+        Ok(ids)
     }
 
     fn add_group(server: &Server) -> Result<(OpcGroup, u32), String> {
@@ -166,16 +196,22 @@ mod soak {
         items: usize,
         calls: &Calls,
         stall_after: Option<u64>,
+        all_ids: bool,
     ) -> Result<(), String> {
         let _com = Apartment::mta().map_err(|e| e.to_string())?;
         let mut counts = Counts::default();
+        let ids: Vec<String> = if all_ids {
+            browsed_ids()?
+        } else {
+            IDS.iter().map(|s| (*s).to_owned()).collect()
+        };
         let kept = if calls.add {
             None
         } else {
             let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
             let (group, _) = add_group(&server)?;
             let (_, added) = group
-                .add_items(&defs(items))
+                .add_items(&defs(items, &ids))
                 .map_err(|e| format!("AddItems: {e}"))?;
             counts.add_items += items as u64;
             let handles = added.iter().map(|a| a.server_handle).collect();
@@ -194,7 +230,7 @@ mod soak {
                     std::thread::sleep(Duration::from_secs(3600));
                 }
             }
-            match one_round(items, calls, kept.as_ref(), &mut counts) {
+            match one_round(items, &ids, calls, kept.as_ref(), &mut counts) {
                 Ok(()) => {
                     counts.rounds += 1;
                     println!("soak-client: round {}", counts.rounds);
@@ -209,19 +245,22 @@ mod soak {
             }
         }
         println!(
-            "soak-client: counts rounds={} failures={} additems={} validateitems={} writes={} itemio={}",
+            "soak-client: counts rounds={} failures={} additems={} validateitems={} writes={} itemio={} devicereads={} devicefailed={}",
             counts.rounds,
             counts.failures,
             counts.add_items,
             counts.validate_items,
             counts.writes,
-            counts.item_io
+            counts.item_io,
+            counts.device_reads,
+            counts.device_failed
         );
         Ok(())
     }
 
     fn one_round(
         items: usize,
+        ids: &[String],
         calls: &Calls,
         kept: Option<&Kept>,
         counts: &mut Counts,
@@ -229,7 +268,7 @@ mod soak {
         let server = Server::connect(PROGID).map_err(|e| format!("connect: {e}"))?;
         server.status().map_err(|e| format!("GetStatus: {e}"))?;
         let (own, own_handle) = add_group(&server)?;
-        let defs = defs(items);
+        let defs = defs(items, ids);
         let mut handles: Vec<u32> = Vec::new();
         if calls.add {
             counts.add_items += items as u64;
@@ -254,6 +293,34 @@ mod soak {
             let _ =
                 client::sync_read(&io, OPC_DS_CACHE, handles).map_err(|e| format!("Read: {e}"))?;
         }
+        if calls.device {
+            let (hr, got) = client::sync_read(&io, OPC_DS_DEVICE, handles)
+                .map_err(|e| format!("Read (device): {e}"))?;
+            counts.device_reads += 1;
+            if hr.is_ok() && hr != windows::Win32::Foundation::S_OK {
+                counts.device_failed += 1;
+                if counts.device_failed <= DEVICE_FAILURES_SHOWN {
+                    let mut codes: std::collections::BTreeMap<(String, u32), u32> =
+                        Default::default();
+                    for (i, r) in got.iter().enumerate() {
+                        if r.error.is_err() {
+                            let id = defs.get(i).map_or("?", |d| d.item_id.as_str());
+                            *codes.entry((id.to_owned(), r.error.0 as u32)).or_default() += 1;
+                        }
+                    }
+                    let list: Vec<String> = codes
+                        .iter()
+                        .map(|((id, c), n)| format!("{id}:0x{c:08X}x{n}"))
+                        .collect();
+                    println!(
+                        "soak-client: device failure {} of {}: {hr:?} items {}",
+                        counts.device_failed,
+                        counts.device_reads,
+                        list.join(" ")
+                    );
+                }
+            }
+        }
         if calls.write {
             let writes: Vec<(u32, Value)> = defs
                 .iter()
@@ -265,8 +332,9 @@ mod soak {
             let _ = client::sync_write(&io, &writes).map_err(|e| format!("Write: {e}"))?;
         }
         if calls.itemio {
-            let ids: Vec<(&str, u32)> =
-                (0..items).map(|i| (IDS[i % IDS.len()], u32::MAX)).collect();
+            let ids: Vec<(&str, u32)> = (0..items)
+                .map(|i| (ids[i % ids.len()].as_str(), u32::MAX))
+                .collect();
             counts.item_io += items as u64;
             let _ = server
                 .item_read(&ids)
