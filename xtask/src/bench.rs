@@ -10,6 +10,11 @@
 //! `MinUpdateRate = 250`, written as `bench-ServerCTOPC.ini` beside it, handed over in
 //! `SERVERCTOPC_INI`), so the registered server's own ini is not involved.
 //!
+//! Then it runs bench-com.exe again with `--distinct`, against a server of a synthetic
+//! database of 100,000 variables (`target/scale/db-100000`, written on first use): reads
+//! of 10,000 and 80,000 distinct variables from cache and from device, their ratio, and
+//! the transport floor (the same call with invalid handles).
+//!
 //! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`).
 
 use crate::{build, setup, util, wine};
@@ -20,6 +25,15 @@ const LIMIT: Duration = Duration::from_secs(20 * 60);
 
 fn prefix() -> PathBuf {
     util::root().join("target/wine/bench-prefix")
+}
+
+/// Variables of the database the distinct reads use (at least the 80,000 they read).
+const DISTINCT_DB_SIZE: usize = 100_000;
+
+/// The synthetic database's variable set, as the Windows path bench-com.exe gets.
+fn distinct_db() -> Result<String, String> {
+    let db = crate::scale::synthetic_db(DISTINCT_DB_SIZE)?;
+    Ok(wine::windows_path(&db.join("synthetic.zez")))
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
@@ -40,11 +54,28 @@ pub fn run(args: &[String]) -> Result<(), String> {
             exe.display(),
             pfx.display()
         );
-        let status = util::run_with_timeout(wine::wine_in(&pfx, &exe).args(args), LIMIT)?;
+        let distinct_loop = args.iter().any(|a| a.ends_with("-distinct"));
+        let mut first: Vec<String> = args.to_vec();
+        if distinct_loop {
+            first.extend(["--distinct".to_owned(), distinct_db()?]);
+        }
+        let status = util::run_with_timeout(wine::wine_in(&pfx, &exe).args(&first), LIMIT)?;
+        if !status.success() {
+            return Err(format!("bench-com.exe failed: {status}"));
+        }
+        if distinct_loop || args.iter().any(|a| a == "--loop") {
+            return Ok(());
+        }
+        // The reads of distinct variables: a server of the synthetic database (the
+        // first run's server has left with its last client).
+        wine::wineserver_in(&pfx, "-w", Duration::from_secs(30));
+        let mut second: Vec<String> = args.to_vec();
+        second.extend(["--distinct".to_owned(), distinct_db()?]);
+        let status = util::run_with_timeout(wine::wine_in(&pfx, &exe).args(&second), LIMIT)?;
         if status.success() {
             Ok(())
         } else {
-            Err(format!("bench-com.exe failed: {status}"))
+            Err(format!("bench-com.exe --distinct failed: {status}"))
         }
     })();
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));

@@ -329,6 +329,30 @@ fn write_ini(path: &Path, database: &Path, log: &Path) -> Result<(), String> {
     std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
 }
 
+/// The folder of the synthetic database of `n` variables (`synthetic.zez` and
+/// `atrybuty.csv`, `asix_model::synthetic`), written on first use under `target/scale`.
+pub fn synthetic_db(n: usize) -> Result<PathBuf, String> {
+    let db = scale_dir().join(format!("db-{n}"));
+    if !db.join("synthetic.zez").is_file() || !db.join("atrybuty.csv").is_file() {
+        println!(
+            "scale: writing a database of {n} variables in {}",
+            db.display()
+        );
+        util::run(
+            util::cargo()
+                .args(["run", "--release", "-p", "asix-model"])
+                .args([
+                    "--example",
+                    "synthetic_db",
+                    "--",
+                    &n.to_string(),
+                    &db.display().to_string(),
+                ]),
+        )?;
+    }
+    Ok(db)
+}
+
 fn configs(o: &Options) -> Result<Vec<Config>, String> {
     let dir = scale_dir();
     let log = dir.join("log");
@@ -343,24 +367,7 @@ fn configs(o: &Options) -> Result<Vec<Config>, String> {
         ini: demo_ini,
     }];
     for &n in &o.sizes {
-        let db = dir.join(format!("db-{n}"));
-        if !db.join("synthetic.zez").is_file() || !db.join("atrybuty.csv").is_file() {
-            println!(
-                "scale: writing a database of {n} variables in {}",
-                db.display()
-            );
-            util::run(
-                util::cargo()
-                    .args(["run", "--release", "-p", "asix-model"])
-                    .args([
-                        "--example",
-                        "synthetic_db",
-                        "--",
-                        &n.to_string(),
-                        &db.display().to_string(),
-                    ]),
-            )?;
-        }
+        let db = synthetic_db(n)?;
         let ini = db.join("scale.ini");
         write_ini(&ini, &db.join("synthetic.zez"), &log)?;
         out.push(Config {

@@ -64,13 +64,16 @@ mod bench {
     fn bench_config() -> Res<std::path::PathBuf> {
         let exe = std::env::current_exe().map_err(|e| format!("current_exe: {e}"))?;
         let dir = exe.parent().ok_or("no folder")?;
-        let db = dir
-            .join("..")
-            .join("..")
-            .join("..")
-            .join("demo")
-            .join("wytwornia_kwasu")
-            .join("wytwornia_kwasu.zez");
+        let db = match distinct_db() {
+            Some(db) => std::path::PathBuf::from(db),
+            None => dir
+                .join("..")
+                .join("..")
+                .join("..")
+                .join("demo")
+                .join("wytwornia_kwasu")
+                .join("wytwornia_kwasu.zez"),
+        };
         let ini = format!(
             "; Written by bench-com.exe: the embedded demo with a faster MinUpdateRate.\r\n[Server]\r\nSimulateCurrentData = tak\r\nMinUpdateRate = {RATE_MS}\r\nLogLevel = warn\r\n[Channel:*]\r\nItemsDatabase = {}\r\nCheckLimits = tak\r\nCheckControlVariables = tak\r\n",
             db.display()
@@ -81,6 +84,81 @@ mod bench {
     }
 
     type Res<T> = Result<T, String>;
+
+    /// `--distinct ZEZ`: the variable set of a large database (the synthetic one `cargo
+    /// xtask bench` writes, variables `SC_0000000`...) the server serves instead of the
+    /// demo, for the reads of distinct variables.
+    fn distinct_db() -> Option<String> {
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        let i = args.iter().position(|a| a == "--distinct")?;
+        args.get(i + 1).cloned()
+    }
+
+    /// The item IDs of `n` distinct variables of the synthetic database.
+    fn distinct_ids(n: usize) -> Vec<String> {
+        (0..n).map(|i| format!("SC_{i:07}")).collect()
+    }
+
+    /// `--distinct ZEZ`: reads of 10,000 and of 80,000 distinct variables (one source
+    /// variable each) from cache and from device, in one active group each, with the
+    /// device/cache ratio (goal: at most 1.2) and, as the transport floor, the same call
+    /// with handles the group does not have.
+    fn distinct_reads(o: &Opts) -> Res<()> {
+        let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
+        let main = Server::connect(PROGID).map_err(err("connect"))?;
+        println!(
+            "ServerCTOPC COM benchmark, distinct variables (database {}, simulated; Wine; medians of {} runs)",
+            distinct_db().unwrap_or_default(),
+            o.runs
+        );
+        for n in [N, 80_000] {
+            let g = group(&main, 1000)?;
+            let handles = add_all(&g, &distinct_ids(n))?;
+            let sync: IOPCSyncIO = g.unknown.cast().map_err(err("IOPCSyncIO"))?;
+            // Every item has had its first sample.
+            let deadline = Instant::now() + Duration::from_secs(30);
+            while read_raw(&sync, OPC_DS_CACHE, &handles).0 != HRESULT(0)
+                && Instant::now() < deadline
+            {
+                std::thread::sleep(Duration::from_millis(200));
+            }
+            let invalid: Vec<u32> = (0..n as u32).map(|i| 0xF000_0000 + i).collect();
+            let mut medians = Vec::new();
+            for (what, source, hs) in [
+                ("CACHE", OPC_DS_CACHE, &handles),
+                ("DEVICE", OPC_DS_DEVICE, &handles),
+                ("invalid handles (transport floor)", OPC_DS_CACHE, &invalid),
+            ] {
+                let _ = read_raw(&sync, source, hs);
+                let mut runs = Vec::new();
+                for _ in 0..o.runs {
+                    let t = Instant::now();
+                    let (hr, failed) = read_raw(&sync, source, hs);
+                    runs.push(ms(t.elapsed()));
+                    if hs == &handles && (hr.is_err() || failed > 0) {
+                        return Err(format!(
+                            "Read {n} distinct from {what}: {hr:?}, {failed} items failed"
+                        ));
+                    }
+                }
+                let m = median(runs.clone());
+                medians.push(m);
+                println!(
+                    "{:<52} median {m:>9.3} ms  (n={})",
+                    format!("Read {n} distinct from {what}"),
+                    runs.len()
+                );
+            }
+            let ratio = medians[1] / medians[0];
+            println!(
+                "  device / cache read of {n} distinct: {ratio:.2}   goal <= 1.20: {}",
+                if ratio <= 1.2 { "met" } else { "NOT met" }
+            );
+            drop(sync);
+            let _ = remove_group(&main, g.server_handle);
+        }
+        Ok(())
+    }
 
     fn err(what: &str) -> impl Fn(windows::core::Error) -> String + '_ {
         move |e| format!("{what}: {e}")
@@ -545,8 +623,10 @@ mod bench {
 
     // ---- the run ----------------------------------------------------------------------------
 
-    /// `--loop read|write N`: only repeats one call N times (10,000 demo items from cache,
-    /// or 10,000 writes), for a profiler attached to the processes; prints the median.
+    /// `--loop read|write|cache-distinct|device-distinct N`: only repeats one call N times
+    /// (10,000 demo items from cache, 10,000 writes, or a read of 10,000 distinct
+    /// variables from cache or from device, with `--distinct ZEZ`), for a profiler
+    /// attached to the processes; prints the median.
     /// After `read` it also prints the median cache read of 10 to 10,000 items, which shows
     /// the per-item cost of the transport (linear under Wine, see docs/benchmarks.md).
     fn profile_loop(what: &str, n: usize) -> Res<()> {
@@ -561,8 +641,12 @@ mod bench {
                 .collect(),
             _ => vars.iter().map(|v| v.name.clone()).collect(),
         };
+        let ids = match what {
+            "cache-distinct" | "device-distinct" => distinct_ids(N),
+            _ => cycle(&ids, N),
+        };
         let g = group(&main, 1000)?;
-        let handles = add_all(&g, &cycle(&ids, N))?;
+        let handles = add_all(&g, &ids)?;
         let sync: IOPCSyncIO = g.unknown.cast().map_err(err("IOPCSyncIO"))?;
         let values: Vec<VARIANT> = (0..N)
             .map(|i| {
@@ -576,6 +660,7 @@ mod bench {
             let t = Instant::now();
             let (hr, failed) = match what {
                 "write" => write_raw(&sync, &handles, &values),
+                "device-distinct" => read_raw(&sync, OPC_DS_DEVICE, &handles),
                 _ => read_raw(&sync, OPC_DS_CACHE, &handles),
             };
             runs.push(ms(t.elapsed()));
@@ -624,6 +709,9 @@ mod bench {
             return profile_loop(what, n);
         }
         let o = opts();
+        if distinct_db().is_some() {
+            return distinct_reads(&o);
+        }
         let _com = Apartment::mta().map_err(err("CoInitializeEx"))?;
         println!("ServerCTOPC COM benchmark (demo plant, simulated, MinUpdateRate {RATE_MS} ms, config {}; Wine; medians of {} runs unless noted)", ini.display(), o.runs);
         let t = Instant::now();
