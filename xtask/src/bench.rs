@@ -13,7 +13,8 @@
 //! Then it runs bench-com.exe again with `--distinct`, against a server of a synthetic
 //! database of 100,000 variables (`target/scale/db-100000`, written on first use): reads
 //! of 10,000 and 80,000 distinct variables from cache and from device, their ratio, and
-//! the transport floor (the same call with invalid handles).
+//! the transport floor (the same call with invalid handles). `--only-distinct` runs only
+//! that part.
 //!
 //! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`).
 
@@ -54,8 +55,23 @@ pub fn run(args: &[String]) -> Result<(), String> {
             exe.display(),
             pfx.display()
         );
+        let only_distinct = args.iter().any(|a| a == "--only-distinct");
+        let args: Vec<String> = args
+            .iter()
+            .filter(|a| *a != "--only-distinct")
+            .cloned()
+            .collect();
         let distinct_loop = args.iter().any(|a| a.ends_with("-distinct"));
         let mut first: Vec<String> = args.to_vec();
+        if only_distinct {
+            first.extend(["--distinct".to_owned(), distinct_db()?]);
+            let status = util::run_with_timeout(wine::wine_in(&pfx, &exe).args(&first), LIMIT)?;
+            return if status.success() {
+                Ok(())
+            } else {
+                Err(format!("bench-com.exe --distinct failed: {status}"))
+            };
+        }
         if distinct_loop {
             first.extend(["--distinct".to_owned(), distinct_db()?]);
         }

@@ -38,7 +38,9 @@ use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
 use ctopc_core::compact::{grow_exact, Growth, Idx, PackedValue, SideMap};
-use ctopc_core::model::datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest};
+use ctopc_core::model::datasource::{
+    ItemVqt, ReadItem, SourceItem, SourceKey, SourceReqId, SourceRequest,
+};
 use ctopc_core::source::{Backend, SourceOutput};
 use ctopc_core::{OpcError, Quality, Timestamp, Value, Vqt};
 
@@ -1052,7 +1054,7 @@ impl<S: VariableSource> AsixBackend<S> {
         self.finish(req);
     }
 
-    fn read(&mut self, now: Timestamp, req: SourceReqId, items: Vec<SourceItem>) {
+    fn read(&mut self, now: Timestamp, req: SourceReqId, items: Vec<ReadItem>) {
         let n = items.len();
         let mut p = Pending {
             write: false,
@@ -1065,9 +1067,13 @@ impl<S: VariableSource> AsixBackend<S> {
             // The subscribed item's resolution, else one made for this request; kept with
             // the request either way, since every subscriber may let the item go before
             // the device answers.
-            let own = match self.slot_of(item.key) {
-                Some(s) => s.r.clone(),
-                None => self.resolve(item),
+            let own = match (self.slot_of(item.key()), item) {
+                (Some(s), _) => s.r.clone(),
+                (None, ReadItem::Item(item)) => self.resolve(item),
+                // The engine names only keys this adapter holds subscribed.
+                (None, ReadItem::Subscribed(_)) => {
+                    ItemRes::Unserved(Arc::clone(&self.unserved.not_live))
+                }
             };
             let var = own.resolved().map(|(v, _)| v.clone());
             p.own.push(own);
@@ -1407,6 +1413,12 @@ mod tests {
             .collect()
     }
 
+    /// A device read's items, each whole (as the engine sends items the source does not
+    /// hold).
+    fn whole(items: &[SourceItem]) -> Vec<ReadItem> {
+        items.iter().cloned().map(ReadItem::Item).collect()
+    }
+
     fn backend() -> (AsixBackend<Fake>, Arc<AsixNamespace>) {
         let ns = ns();
         (AsixBackend::from_source(ns.clone(), Fake::default()), ns)
@@ -1552,7 +1564,7 @@ mod tests {
             T,
             SourceRequest::Read {
                 req_id: SourceReqId(1),
-                items: it.clone(),
+                items: whole(&it),
             },
         );
         b.request(
@@ -1609,7 +1621,7 @@ mod tests {
             T,
             SourceRequest::Read {
                 req_id: SourceReqId(7),
-                items: it.clone(),
+                items: whole(&it),
             },
         );
         let reads = std::mem::take(&mut b.source.reads);
@@ -1655,7 +1667,7 @@ mod tests {
             T,
             SourceRequest::Read {
                 req_id: SourceReqId(9),
-                items: it.clone(),
+                items: it.iter().map(|i| ReadItem::Subscribed(i.key)).collect(),
             },
         );
         let reads = std::mem::take(&mut b.source.reads);

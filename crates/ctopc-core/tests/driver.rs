@@ -51,7 +51,19 @@ impl Backend for FakeSource {
             SourceRequest::SetSamplingRate(_) => p.log.push("rate"),
             SourceRequest::Read { req_id, items } => {
                 p.log.push("read");
-                let ids = items.iter().map(|i| i.item_id.to_string()).collect();
+                // A subscribed item comes by its key: the source holds its ID.
+                let ids = items
+                    .iter()
+                    .map(|r| match r {
+                        ReadItem::Item(i) => i.item_id.to_string(),
+                        ReadItem::Subscribed(k) => p
+                            .subscribed
+                            .iter()
+                            .find(|(_, v)| *v == k)
+                            .map(|(id, _)| id.clone())
+                            .unwrap_or_default(),
+                    })
+                    .collect();
                 p.reads.push((req_id, ids));
             }
             SourceRequest::Write { .. } | SourceRequest::WriteVqt { .. } => p.log.push("write"),

@@ -118,6 +118,35 @@ fn device_read_waits_for_the_source_and_refreshes_the_cache() {
     assert_eq!(values(&dc[0]), vec![(100, Value::R8(11.0))]);
 }
 
+/// A device read names the items the source holds subscribed by their key alone (the
+/// source knows them; an item ID would cost an allocation per item), the others whole.
+#[test]
+fn device_read_sends_subscribed_items_by_key_and_the_others_whole() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let active = sim.group(s, "active", 1000, 0.0);
+    let h = sim.items(active, &["A1"]);
+    let idle = sim.group(s, "idle", 1000, 0.0);
+    let inactive = SetGroupState {
+        active: Some(false),
+        ..Default::default()
+    };
+    sim.e.set_group_state(sim.now, idle, &inactive).unwrap();
+    let h2 = sim.items(idle, &["A2"]);
+    sim.tick();
+    sim.events();
+    pending(sim.e.read(sim.now, active, DataSource::Device, &h).unwrap());
+    let (_, items) = sim.take_read_items();
+    let key = sim.keys["A1"];
+    assert_eq!(items, vec![ReadItem::Subscribed(key)]);
+    pending(sim.e.read(sim.now, idle, DataSource::Device, &h2).unwrap());
+    let (_, items) = sim.take_read_items();
+    match &items[..] {
+        [ReadItem::Item(i)] => assert_eq!(&*i.item_id, "A2"),
+        other => panic!("A2 is not subscribed, so it goes whole: {other:?}"),
+    }
+}
+
 #[test]
 fn device_read_times_out_with_net_answer_timeout() {
     let mut sim = Sim::with_config(EngineConfig {

@@ -17,7 +17,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use super::{is_diagnostic_id, Board, ChannelStatus, DiagItem, Snapshot};
-use crate::model::datasource::{SourceItem, SourceKey, SourceReqId, SourceRequest};
+use crate::model::datasource::{ReadItem, SourceItem, SourceKey, SourceReqId, SourceRequest};
 use crate::source::{Backend, SourceOutput};
 use crate::{OpcError, Quality, Timestamp, Vqt};
 
@@ -95,13 +95,20 @@ impl DiagBackend {
         (results, real)
     }
 
+    /// The diagnostic item ID of a read's item, if it is one (a subscribed one by its key).
+    fn read_diag<'a>(&'a self, r: &'a ReadItem) -> Option<&'a str> {
+        match r {
+            ReadItem::Subscribed(k) if !self.subscribed.is_empty() => {
+                self.subscribed.get(k).map(|id| &**id)
+            }
+            ReadItem::Subscribed(_) => None,
+            ReadItem::Item(i) => is_diagnostic_id(&i.item_id).then_some(&*i.item_id),
+        }
+    }
+
     fn has_diag<I>(items: &[I], item: impl Fn(&I) -> &SourceItem) -> bool {
         items.iter().any(|i| is_diagnostic_id(&item(i).item_id))
     }
-}
-
-fn itself(i: &SourceItem) -> &SourceItem {
-    i
 }
 
 fn first<T>(i: &(SourceItem, T)) -> &SourceItem {
@@ -160,8 +167,20 @@ impl Backend for DiagBackend {
                     self.inner.request(now, SourceRequest::Unsubscribe(real));
                 }
             }
-            SourceRequest::Read { req_id, items } if Self::has_diag(&items, itself) => {
-                let (results, real) = Self::split(items, itself, |i| self.vqt(&i.item_id));
+            SourceRequest::Read { req_id, items }
+                if items.iter().any(|r| self.read_diag(r).is_some()) =>
+            {
+                let mut results = Vec::with_capacity(items.len());
+                let mut real = Vec::new();
+                for r in items {
+                    match self.read_diag(&r) {
+                        Some(id) => results.push(Some(self.vqt(id))),
+                        None => {
+                            results.push(None);
+                            real.push(r);
+                        }
+                    }
+                }
                 let empty = real.is_empty();
                 if let Some(r) = route(req_id, results, empty, &mut self.reads) {
                     self.ready.read_results.push((req_id, r));
@@ -264,6 +283,7 @@ mod tests {
     use super::*;
     use crate::browse::MatchCase;
     use crate::diagnostics::{ClientCounters, Input, Sampler, ServerCounters};
+    use crate::model::datasource::Subscription;
     use crate::{Value, VarType};
     use std::sync::Mutex;
 
@@ -346,14 +366,18 @@ mod tests {
             t(5_000),
             SourceRequest::Read {
                 req_id: SourceReqId(9),
-                items: vec![clients.clone(), real.clone(), name.clone()],
+                items: vec![
+                    ReadItem::Item(clients.clone()),
+                    ReadItem::Item(real.clone()),
+                    ReadItem::Item(name.clone()),
+                ],
             },
         );
         assert_eq!(
             log.lock().unwrap().as_slice(),
             [SourceRequest::Read {
                 req_id: SourceReqId(9),
-                items: vec![real.clone()]
+                items: vec![ReadItem::Item(real.clone())]
             }]
         );
         let mut out = SourceOutput::default();
@@ -374,13 +398,55 @@ mod tests {
             t(5_002),
             SourceRequest::Read {
                 req_id: SourceReqId(10),
-                items: vec![clients.clone()],
+                items: vec![ReadItem::Item(clients.clone())],
             },
         );
         assert!(log.lock().unwrap().is_empty());
         let mut out = SourceOutput::default();
         b.poll(t(5_002), &mut out);
         assert_eq!(out.read_results.len(), 1);
+        // Subscribed items come by their key: a diagnostic one is answered here, a real
+        // one passes through by its key.
+        b.request(
+            t(5_002),
+            SourceRequest::Subscribe(vec![Subscription {
+                item: clients.clone(),
+                sampling_rate_ms: 1000,
+            }]),
+        );
+        log.lock().unwrap().clear();
+        b.request(
+            t(5_002),
+            SourceRequest::Read {
+                req_id: SourceReqId(12),
+                items: vec![
+                    ReadItem::Subscribed(real.key),
+                    ReadItem::Subscribed(clients.key),
+                ],
+            },
+        );
+        assert_eq!(
+            log.lock().unwrap().as_slice(),
+            [SourceRequest::Read {
+                req_id: SourceReqId(12),
+                items: vec![ReadItem::Subscribed(real.key)]
+            }]
+        );
+        let mut out = SourceOutput::default();
+        b.poll(t(5_003), &mut out);
+        let read = out
+            .read_results
+            .iter()
+            .find(|(id, _)| *id == SourceReqId(12));
+        let values: Vec<Value> = read
+            .map(|(_, r)| {
+                r.iter()
+                    .map(|v| v.as_ref().unwrap().value.clone())
+                    .collect()
+            })
+            .unwrap_or_default();
+        assert_eq!(values, [Value::R8(7.0), Value::I4(2)]);
+        log.lock().unwrap().clear();
         // A write of a diagnostic item is refused.
         b.request(
             t(5_002),

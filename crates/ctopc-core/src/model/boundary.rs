@@ -45,6 +45,36 @@ pub struct SourceItem {
     pub canonical_type: VarType,
 }
 
+/// An item of a device read ([`SourceRequest::Read`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ReadItem {
+    /// A key the source holds: its [`SourceRequest::Subscribe`] came before this request,
+    /// and no [`SourceRequest::Unsubscribe`] since. The engine names it by its key alone,
+    /// as the source knows it already (an item ID would cost an allocation per item and
+    /// read).
+    Subscribed(SourceKey),
+    /// An item the source does not hold.
+    Item(SourceItem),
+}
+
+impl ReadItem {
+    /// The item's key.
+    pub fn key(&self) -> SourceKey {
+        match self {
+            ReadItem::Subscribed(k) => *k,
+            ReadItem::Item(i) => i.key,
+        }
+    }
+
+    /// The whole item, when the request carries it.
+    pub fn item(&self) -> Option<&SourceItem> {
+        match self {
+            ReadItem::Subscribed(_) => None,
+            ReadItem::Item(i) => Some(i),
+        }
+    }
+}
+
 /// A subscription: push samples of `item` at least every `sampling_rate_ms`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Subscription {
@@ -80,7 +110,7 @@ pub enum SourceRequest {
     /// Read from the device; answer with `handle_source_read_result(req_id, ..)`.
     Read {
         req_id: SourceReqId,
-        items: Vec<SourceItem>,
+        items: Vec<ReadItem>,
     },
     /// Write values (already converted to the canonical type); answer with
     /// `handle_source_write_result(req_id, ..)`.

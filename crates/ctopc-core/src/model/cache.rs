@@ -581,6 +581,11 @@ impl SourceTable {
             .filter(|e| e.generation == key.generation() && e.flags.contains(EntryFlags::LIVE))
     }
 
+    /// The key of entry `idx` in its current generation.
+    pub fn key_of(&self, idx: u32) -> SourceKey {
+        SourceKey::new(idx, self.entries[idx as usize].generation)
+    }
+
     pub fn source_item(&self, idx: u32) -> SourceItem {
         let e = &self.entries[idx as usize];
         SourceItem {

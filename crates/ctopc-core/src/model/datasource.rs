@@ -27,7 +27,7 @@
 //! key are dropped.
 
 pub use super::boundary::{
-    ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription,
+    ItemVqt, ReadItem, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription,
 };
 use super::cache::{CachedValue, NEVER};
 use super::engine::Engine;

@@ -114,7 +114,9 @@ mod transactions;
 mod util;
 
 pub use buffer::{GROUP_BUFFER_SAMPLES, ITEM_BUFFER_SAMPLES};
-pub use datasource::{ItemVqt, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription};
+pub use datasource::{
+    ItemVqt, ReadItem, SourceItem, SourceKey, SourceReqId, SourceRequest, Subscription,
+};
 pub use engine::{
     Engine, EngineConfig, EngineStats, GroupHandle, SessionHandle, DEFAULT_FIRST_SAMPLE_WAIT_MS,
     DEFAULT_MAX_TRANSACTIONS_PER_GROUP, DEFAULT_MIN_UPDATE_RATE_MS, DEFAULT_SOURCE_TIMEOUT_MS,

@@ -18,7 +18,7 @@
 //! unknown cancel ID, it fails with E_FAIL.
 
 use super::cache::{CachedValue, SourceEntry};
-use super::datasource::{fresh, ItemVqt, SourceItem, SourceReqId, SourceRequest};
+use super::datasource::{fresh, ItemVqt, ReadItem, SourceItem, SourceReqId, SourceRequest};
 use super::engine::{Engine, GroupHandle, SessionHandle};
 use super::events::{
     master_codes, CancelComplete, DataChange, DataChangeKind, Event, ItemState, ItemValue,
@@ -453,9 +453,18 @@ impl Engine {
         if remote.is_empty() {
             return Err(txn);
         }
-        let items: Vec<SourceItem> = remote
+        // Items the source holds go by their key alone: a subscription announced to the
+        // source was queued before this request ([`ReadItem::Subscribed`]).
+        let items: Vec<ReadItem> = remote
             .iter()
-            .map(|&i| self.sources.source_item(txn.slots[i as usize].source))
+            .map(|&i| {
+                let idx = txn.slots[i as usize].source;
+                if self.sources.announced_rate(idx) > 0 {
+                    ReadItem::Subscribed(self.sources.key_of(idx))
+                } else {
+                    ReadItem::Item(self.sources.source_item(idx))
+                }
+            })
             .collect();
         Ok(self.launch(now, txn, remote, |req_id| SourceRequest::Read {
             req_id,

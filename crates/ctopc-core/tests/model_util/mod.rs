@@ -167,7 +167,7 @@ impl Sim {
                     self.sub_log.push(r);
                 }
                 SourceRequest::Read { items, .. } => {
-                    for i in items {
+                    for i in items.iter().filter_map(ReadItem::item) {
                         self.keys.insert(i.item_id.to_string(), i.key);
                     }
                     self.io.push(r);
@@ -211,8 +211,22 @@ impl Sim {
         self.push(id, Value::R8(x), Quality::GOOD);
     }
 
-    /// The last device read request taken from the engine.
+    /// The last device read request taken from the engine, its items whole (those sent
+    /// by key as the engine has them).
     pub fn take_read(&mut self) -> (SourceReqId, Vec<SourceItem>) {
+        let (req_id, items) = self.take_read_items();
+        let items = items
+            .into_iter()
+            .map(|r| match r {
+                ReadItem::Item(i) => i,
+                ReadItem::Subscribed(k) => self.e.source_item(k).expect("a live key"),
+            })
+            .collect();
+        (req_id, items)
+    }
+
+    /// The last device read request taken from the engine, as sent.
+    pub fn take_read_items(&mut self) -> (SourceReqId, Vec<ReadItem>) {
         self.pump();
         let pos = self
             .io
