@@ -33,6 +33,7 @@ mod csv;
 mod database;
 mod index;
 mod load;
+mod paradox;
 mod table;
 #[cfg(test)]
 mod tests;
@@ -47,8 +48,12 @@ pub use cells::MAX_ROW_BYTES;
 pub use csv::{detect_separator, for_each_csv_record, parse_csv, CsvFields, CsvRecord};
 pub use database::{GroupNode, VarDatabase};
 pub use index::hash_name;
-pub use load::load_database_file;
-pub use table::{columns, parse_attribute_table, AttributeTable};
+pub use load::{export_table_csv, load_database_file};
+pub use paradox::{
+    for_each_paradox_record, paradox_to_csv, read_paradox_header, CodePage, FieldType,
+    ParadoxField, ParadoxHeader, ParadoxSource,
+};
+pub use table::{columns, parse_attribute_table, parse_paradox_table, AttributeTable};
 pub use variables::{Limit, LimitRef, VarView, Variable, Variables};
 pub use varset::{parse_var_set, VarSetFile, VarSetGroup};
 
