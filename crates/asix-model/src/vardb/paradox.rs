@@ -739,6 +739,7 @@ pub fn paradox_to_csv(
 }
 
 fn push_csv_row<'a>(out: &mut String, cells: impl Iterator<Item = &'a str>) {
+    let start = out.len();
     for (i, c) in cells.enumerate() {
         if i > 0 {
             out.push(';');
@@ -753,6 +754,10 @@ fn push_csv_row<'a>(out: &mut String, cells: impl Iterator<Item = &'a str>) {
         } else {
             out.push_str(c);
         }
+    }
+    // A blank line would be skipped: one empty cell is written quoted.
+    if out.len() == start {
+        out.push_str("\"\"");
     }
     out.push_str("\r\n");
 }
