@@ -34,13 +34,7 @@ static void on_error(pxdoc_t *p, int type, const char *msg, void *data) {
 		exit(1);
 }
 
-/* ---- the CSV: every cell of every row, NUL-terminated strings ---- */
-
-struct csv {
-	char ***rows; /* rows[r][c] */
-	int *ncells;
-	int nrows;
-};
+/* ---- the CSV, read a row at a time (two passes at 1,000,000 rows need the text only) ---- */
 
 static char *read_file(const char *path, long *len) {
 	FILE *f = fopen(path, "rb");
@@ -58,71 +52,64 @@ static char *read_file(const char *path, long *len) {
 	return buf;
 }
 
-static void parse_csv(const char *path, struct csv *out) {
-	long len, i = 0;
-	char *text = read_file(path, &len);
-	int cap = 1024;
-	out->rows = malloc(cap * sizeof(char **));
-	out->ncells = malloc(cap * sizeof(int));
-	out->nrows = 0;
-	if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3))
-		i = 3;
-	char *cell = malloc(len + 1);
-	while (i < len) {
-		int ccap = 8, n = 0;
-		char **cells = malloc(ccap * sizeof(char *));
+struct row {
+	char *buf;    /* the cells, each NUL-terminated */
+	long *starts; /* cell k at buf + starts[k] */
+	int n, cap;
+};
+
+/* Reads the row at text[*i] into `row` (blank lines skipped); 0 at the end. */
+static int next_row(const char *text, long len, long *i, struct row *row) {
+	long k;
+	for (;;) {
+		if (*i >= len)
+			return 0;
+		k = 0;
+		row->n = 0;
 		for (;;) {
-			long k = 0;
-			if (i < len && text[i] == '"') {
-				i++;
-				while (i < len) {
-					if (text[i] == '"' && i + 1 < len && text[i + 1] == '"') {
-						cell[k++] = '"';
-						i += 2;
-					} else if (text[i] == '"') {
-						i++;
+			if (row->n == row->cap) {
+				row->cap = row->cap ? row->cap * 2 : 32;
+				row->starts = realloc(row->starts, row->cap * sizeof(long));
+			}
+			row->starts[row->n++] = k;
+			if (*i < len && text[*i] == '"') {
+				(*i)++;
+				while (*i < len) {
+					if (text[*i] == '"' && *i + 1 < len && text[*i + 1] == '"') {
+						row->buf[k++] = '"';
+						*i += 2;
+					} else if (text[*i] == '"') {
+						(*i)++;
 						break;
-					} else if (text[i] == '\r' && i + 1 < len && text[i + 1] == '\n') {
-						cell[k++] = '\n';
-						i += 2;
+					} else if (text[*i] == '\r' && *i + 1 < len && text[*i + 1] == '\n') {
+						row->buf[k++] = '\n';
+						*i += 2;
 					} else {
-						cell[k++] = text[i++];
+						row->buf[k++] = text[(*i)++];
 					}
 				}
 			} else {
-				while (i < len && text[i] != ';' && text[i] != '\r' && text[i] != '\n')
-					cell[k++] = text[i++];
+				while (*i < len && text[*i] != ';' && text[*i] != '\r' && text[*i] != '\n')
+					row->buf[k++] = text[(*i)++];
 			}
-			cell[k] = 0;
-			if (n == ccap)
-				cells = realloc(cells, (ccap *= 2) * sizeof(char *));
-			cells[n++] = strdup(cell);
-			if (i < len && text[i] == ';') {
-				i++;
+			row->buf[k++] = 0;
+			if (*i < len && text[*i] == ';') {
+				(*i)++;
 				continue;
 			}
-			if (i < len && text[i] == '\r')
-				i++;
-			if (i < len && text[i] == '\n')
-				i++;
+			if (*i < len && text[*i] == '\r')
+				(*i)++;
+			if (*i < len && text[*i] == '\n')
+				(*i)++;
 			break;
 		}
-		if (n == 1 && cells[0][0] == 0)
-			continue; /* a blank line */
-		if (out->nrows == cap) {
-			cap *= 2;
-			out->rows = realloc(out->rows, cap * sizeof(char **));
-			out->ncells = realloc(out->ncells, cap * sizeof(int));
-		}
-		out->rows[out->nrows] = cells;
-		out->ncells[out->nrows++] = n;
+		if (!(row->n == 1 && row->buf[0] == 0))
+			return 1;
 	}
-	free(cell);
-	free(text);
 }
 
-static const char *cell_of(struct csv *t, int r, int c) {
-	return c < t->ncells[r] ? t->rows[r][c] : "";
+static const char *cell_of(struct row *r, int c) {
+	return c < r->n ? r->buf + r->starts[c] : "";
 }
 
 /* ---- writing ---- */
@@ -209,15 +196,19 @@ static void put(pxdoc_t *px, char *at, pxfield_t *f, const char *v) {
 }
 
 static int csv_to_db(const char *in, const char *out, int codepage, char **specs, int nspecs) {
-	struct csv t;
-	int ncols, c, r, recsize = 0, memo = 0;
-	parse_csv(in, &t);
-	if (t.nrows < 1)
+	long len, i, body;
+	char *text = read_file(in, &len);
+	struct row row = {0};
+	int ncols, c, recsize = 0, memo = 0;
+	row.buf = malloc(len + 1);
+	i = len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3) ? 3 : 0;
+	if (!next_row(text, len, &i, &row))
 		die("no header in", in);
-	ncols = t.ncells[0];
+	body = i;
+	ncols = row.n;
 	pxfield_t *fields = calloc(ncols, sizeof(pxfield_t));
 	for (c = 0; c < ncols; c++) {
-		const char *name = t.rows[0][c];
+		const char *name = cell_of(&row, c);
 		int s, width = 1;
 		fields[c].px_fname = strdup(name);
 		fields[c].px_ftype = pxfAlpha;
@@ -239,27 +230,32 @@ static int csv_to_db(const char *in, const char *out, int codepage, char **specs
 				}
 			}
 		}
-		if (fields[c].px_ftype == pxfAlpha) {
-			for (r = 1; r < t.nrows; r++) {
-				int n = (int)strlen(cell_of(&t, r, c));
-				if (n > width)
-					width = n;
-			}
-			if (width > 255)
-				die("a cell longer than 255 bytes in column", name);
-		}
 		fields[c].px_flen = width;
-		recsize += width;
 	}
+	/* Pass 1: alpha fields as wide as their longest cell. */
+	while (next_row(text, len, &i, &row)) {
+		for (c = 0; c < ncols; c++) {
+			int n = (int)strlen(cell_of(&row, c));
+			if (fields[c].px_ftype == pxfAlpha && n > fields[c].px_flen) {
+				if (n > 255)
+					die("a cell longer than 255 bytes in column", fields[c].px_fname);
+				fields[c].px_flen = n;
+			}
+		}
+	}
+	for (c = 0; c < ncols; c++)
+		recsize += fields[c].px_flen;
 	pxdoc_t *px = create(out, fields, ncols, codepage);
 	if (memo)
 		blob_file(px, out);
 	char *rec = malloc(recsize);
-	for (r = 1; r < t.nrows; r++) {
+	/* Pass 2: the records. */
+	i = body;
+	while (next_row(text, len, &i, &row)) {
 		int at = 0;
 		memset(rec, 0, recsize);
 		for (c = 0; c < ncols; c++) {
-			put(px, rec + at, &fields[c], cell_of(&t, r, c));
+			put(px, rec + at, &fields[c], cell_of(&row, c));
 			at += fields[c].px_flen;
 		}
 		if (PX_put_record(px, rec) < 0)
