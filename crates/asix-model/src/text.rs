@@ -48,16 +48,25 @@ pub fn decode_text(bytes: &[u8]) -> (String, TextEncoding) {
 /// Decodes Windows-1250 bytes. The five bytes the code page leaves undefined
 /// (0x81, 0x83, 0x88, 0x90, 0x98) become U+FFFD.
 pub fn decode_windows_1250(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|&b| {
-            if b < 0x80 {
-                b as char
-            } else {
-                char::from_u32(CP1250_HIGH[(b - 0x80) as usize] as u32).unwrap_or('\u{FFFD}')
-            }
-        })
-        .collect()
+    let mut s = String::with_capacity(bytes.len());
+    decode_windows_1250_into(bytes, &mut s);
+    s
+}
+
+/// [`decode_windows_1250`] appending to `out`.
+pub fn decode_windows_1250_into(bytes: &[u8], out: &mut String) {
+    decode_into(bytes, &CP1250_HIGH, out);
+}
+
+/// Appends single-byte text: ASCII as it is, the high half through `high`.
+fn decode_into(bytes: &[u8], high: &[u16; 128], out: &mut String) {
+    out.extend(bytes.iter().map(|&b| {
+        if b < 0x80 {
+            b as char
+        } else {
+            char::from_u32(u32::from(high[usize::from(b - 0x80)])).unwrap_or('\u{FFFD}')
+        }
+    }));
 }
 
 /// Windows-1250 bytes 0x80..=0xFF as Unicode scalar values.
@@ -83,16 +92,14 @@ const CP1250_HIGH: [u16; 128] = [
 /// Decodes CP852 (DOS Latin-2) bytes, the code page of Polish DOS-era Paradox tables.
 /// Every byte decodes.
 pub fn decode_cp852(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|&b| {
-            if b < 0x80 {
-                b as char
-            } else {
-                char::from_u32(CP852_HIGH[(b - 0x80) as usize] as u32).unwrap_or('\u{FFFD}')
-            }
-        })
-        .collect()
+    let mut s = String::with_capacity(bytes.len());
+    decode_cp852_into(bytes, &mut s);
+    s
+}
+
+/// [`decode_cp852`] appending to `out`.
+pub fn decode_cp852_into(bytes: &[u8], out: &mut String) {
+    decode_into(bytes, &CP852_HIGH, out);
 }
 
 /// CP852 bytes 0x80..=0xFF as Unicode scalar values (the code page as glibc's iconv and

@@ -14,11 +14,11 @@
 //! used, and memory is bounded by one block and the header (both at most 64 KB) plus the
 //! cells themselves: any input gives a table or an error, never a panic.
 
-use std::fmt::Write as _;
+use std::io::Write as _;
 
 use super::csv::CsvFields;
 use super::DbError;
-use crate::text::{decode_cp852, decode_windows_1250, trim, Warning};
+use crate::text::{decode_cp852_into, decode_windows_1250_into, Warning};
 
 /// Where the reader takes the table's bytes from: a file (read block by block) or bytes
 /// in memory.
@@ -173,11 +173,17 @@ impl CodePage {
         }
     }
 
-    fn decode(self, bytes: &[u8]) -> String {
+    fn decode_into(self, bytes: &[u8], out: &mut String) {
         match self {
-            CodePage::Cp852 => decode_cp852(bytes),
-            CodePage::Windows1250 | CodePage::Other(_) => decode_windows_1250(bytes),
+            CodePage::Cp852 => decode_cp852_into(bytes, out),
+            CodePage::Windows1250 | CodePage::Other(_) => decode_windows_1250_into(bytes, out),
         }
+    }
+
+    fn decode(self, bytes: &[u8]) -> String {
+        let mut s = String::with_capacity(bytes.len());
+        self.decode_into(bytes, &mut s);
+        s
     }
 }
 
@@ -378,7 +384,6 @@ pub fn for_each_paradox_record(
     let mut block = vec![0u8; header.block_size];
     let mut visited = vec![false; usize::from(header.file_blocks) + 1];
     let mut fields = CsvFields::default();
-    let mut scratch = Vec::new();
     let mut non_ascii_seen = false;
     let mut n = 0usize;
     let mut next = header.first_block;
@@ -445,7 +450,11 @@ pub fn for_each_paradox_record(
         let records = block.get(BLOCK_HEADER..used).unwrap_or_default();
         for bytes in records.chunks_exact(header.record_size) {
             n += 1;
-            fields.clear();
+            // The record's cells are built as bytes (valid UTF-8 by construction) in the
+            // fields' own buffer and checked as text once, not once per cell.
+            let mut row = std::mem::take(&mut fields.buf).into_bytes();
+            row.clear();
+            fields.ends.clear();
             let mut rest = bytes;
             for f in &header.fields {
                 // The sizes add up to the record's (checked with the header).
@@ -462,34 +471,29 @@ pub fn for_each_paradox_record(
                         ),
                     )
                 };
-                let start = fields.buf.len();
+                let start = row.len();
                 match f.field_type {
                     FieldType::Alpha => {
-                        let text = v.split(|&b| b == 0).next().unwrap_or(&[]);
-                        push_text(&mut fields.buf, header.code_page, text, &mut scratch);
-                        non_ascii_seen |= !text.is_ascii();
+                        let end = v.iter().position(|&b| b == 0).unwrap_or(v.len());
+                        let text = v.get(..end).unwrap_or_default();
+                        non_ascii_seen |= push_text(&mut row, header.code_page, text);
+                        trim_cell(&mut row, start);
                     }
                     FieldType::Memo => {
                         let text = memo_text(v, memo).map_err(err)?;
                         let text = match text.iter().rposition(|&b| b != 0) {
-                            Some(last) => &text[..=last],
+                            Some(last) => text.get(..=last).unwrap_or_default(),
                             None => &[],
                         };
-                        push_text(&mut fields.buf, header.code_page, text, &mut scratch);
-                        non_ascii_seen |= !text.is_ascii();
+                        non_ascii_seen |= push_text(&mut row, header.code_page, text);
+                        trim_cell(&mut row, start);
                     }
-                    _ => write_value(&mut fields.buf, f.field_type, v).map_err(err)?,
+                    _ => write_value(&mut row, f.field_type, v).map_err(err)?,
                 }
-                // Surrounding blanks go, as from an unquoted CSV cell.
-                let cell = &fields.buf[start..];
-                let trimmed = trim(cell);
-                if trimmed.len() != cell.len() {
-                    let (lead, keep) = (cell.len() - cell.trim_start().len(), trimmed.len());
-                    fields.buf.drain(start..start + lead);
-                    fields.buf.truncate(start + keep);
-                }
-                fields.ends.push(fields.buf.len());
+                fields.ends.push(row.len());
             }
+            fields.buf = String::from_utf8(row)
+                .map_err(|e| DbError::invalid(file, n, format!("record {n}: {e}")))?;
             record(n, &fields).map_err(|(line, m)| DbError::invalid(file, line, m))?;
         }
     }
@@ -517,23 +521,68 @@ pub fn for_each_paradox_record(
     Ok(())
 }
 
-/// Appends `text` decoded from the code page (ASCII without a copy).
-/// Line breaks become `\n`, as the CSV reader reads them in a quoted cell.
-fn push_text(buf: &mut String, cp: CodePage, text: &[u8], scratch: &mut Vec<u8>) {
-    let start = buf.len();
-    match std::str::from_utf8(text) {
-        Ok(s) if s.is_ascii() => buf.push_str(s),
-        _ => {
-            scratch.clear();
-            scratch.extend_from_slice(text);
-            buf.push_str(&cp.decode(scratch));
+/// Appends `text` decoded from the code page as UTF-8 (ASCII as it is); whether it held
+/// anything but ASCII. Line breaks become `\n`, as the CSV reader reads them in a quoted
+/// cell.
+fn push_text(row: &mut Vec<u8>, cp: CodePage, text: &[u8]) -> bool {
+    let start = row.len();
+    let ascii = text.is_ascii();
+    if ascii {
+        row.extend_from_slice(text);
+    } else {
+        row.extend_from_slice(cp.decode(text).as_bytes());
+    }
+    if text.contains(&b'\r') {
+        let mut out = Vec::with_capacity(row.len() - start);
+        let mut bytes = row[start..].iter().peekable();
+        while let Some(&b) = bytes.next() {
+            if b == b'\r' {
+                out.push(b'\n');
+                bytes.next_if_eq(&&b'\n');
+            } else {
+                out.push(b);
+            }
+        }
+        row.truncate(start);
+        row.extend_from_slice(&out);
+    }
+    !ascii
+}
+
+/// Removes the blanks around the cell that starts at `start` (valid UTF-8, as
+/// [`push_text`] writes it), as from an unquoted CSV cell: nothing to do when both ends
+/// are ASCII and not blank, the usual cell.
+fn trim_cell(row: &mut Vec<u8>, start: usize) {
+    let plain = |b: Option<&u8>| b.is_some_and(|&b| b.is_ascii() && !b.is_ascii_whitespace());
+    let cell = row.get(start..).unwrap_or_default();
+    if cell.is_empty() || plain(cell.first()) && plain(cell.last()) {
+        return;
+    }
+    let Ok(text) = std::str::from_utf8(cell) else {
+        return;
+    };
+    let (lead, keep) = (text.len() - text.trim_start().len(), text.trim().len());
+    row.drain(start..start + lead);
+    row.truncate(start + keep);
+}
+
+/// Appends the decimal digits of `n` (the integers of the table, without the formatter).
+fn push_int(buf: &mut Vec<u8>, n: i64) {
+    let mut digits = [0u8; 20];
+    let mut i = digits.len();
+    let mut m = n.unsigned_abs();
+    loop {
+        i -= 1;
+        digits[i] = b'0' + (m % 10) as u8;
+        m /= 10;
+        if m == 0 {
+            break;
         }
     }
-    if buf[start..].contains('\r') {
-        let text = buf[start..].replace("\r\n", "\n").replace('\r', "\n");
-        buf.truncate(start);
-        buf.push_str(&text);
+    if n < 0 {
+        buf.push(b'-');
     }
+    buf.extend_from_slice(&digits[i..]);
 }
 
 /// A big-endian field with the sign bit flipped, as an unsigned value; `None` when blank
@@ -580,7 +629,7 @@ fn civil(day: i64) -> (i64, u32, u32) {
 const LAST_DAY: i64 = 3_652_059;
 const DAY_MS: i64 = 86_400_000;
 
-fn write_time(buf: &mut String, ms: i64) {
+fn write_time(buf: &mut Vec<u8>, ms: i64) {
     let (h, m, s, f) = (ms / 3_600_000, ms / 60_000 % 60, ms / 1000 % 60, ms % 1000);
     let _ = write!(buf, "{h:02}:{m:02}:{s:02}");
     if f != 0 {
@@ -588,7 +637,7 @@ fn write_time(buf: &mut String, ms: i64) {
     }
 }
 
-fn write_date(buf: &mut String, day: i64) -> Result<(), String> {
+fn write_date(buf: &mut Vec<u8>, day: i64) -> Result<(), String> {
     if !(1..=LAST_DAY).contains(&day) {
         return Err(format!("day {day} is not a date of years 1 to 9999"));
     }
@@ -598,7 +647,7 @@ fn write_date(buf: &mut String, day: i64) -> Result<(), String> {
 }
 
 /// Appends the text of a field that is not text (empty when blank).
-fn write_value(buf: &mut String, t: FieldType, v: &[u8]) -> Result<(), String> {
+fn write_value(buf: &mut Vec<u8>, t: FieldType, v: &[u8]) -> Result<(), String> {
     match t {
         FieldType::Short | FieldType::Long | FieldType::AutoInc => {
             if let Some(u) = flipped(v) {
@@ -607,7 +656,7 @@ fn write_value(buf: &mut String, t: FieldType, v: &[u8]) -> Result<(), String> {
                 } else {
                     i64::from(u as u32 as i32)
                 };
-                let _ = write!(buf, "{n}");
+                push_int(buf, n);
             }
         }
         FieldType::Number | FieldType::Currency => {
@@ -615,13 +664,19 @@ fn write_value(buf: &mut String, t: FieldType, v: &[u8]) -> Result<(), String> {
                 if !x.is_finite() {
                     return Err(format!("{x} is not a number"));
                 }
-                let _ = write!(buf, "{x}");
+                // Whole numbers (most limits and ranges) without the float formatter;
+                // the same text as `{x}` (`-0` included).
+                if x.fract() == 0.0 && x.abs() < 1e15 && !(x == 0.0 && x.is_sign_negative()) {
+                    push_int(buf, x as i64);
+                } else {
+                    let _ = write!(buf, "{x}");
+                }
             }
         }
         FieldType::Logical => match v.first() {
             Some(0) | None => {}
-            Some(0x80) => buf.push_str("nie"),
-            Some(0x81) => buf.push_str("tak"),
+            Some(0x80) => buf.extend_from_slice(b"nie"),
+            Some(0x81) => buf.extend_from_slice(b"tak"),
             Some(b) => return Err(format!("0x{b:02X} is neither true nor false")),
         },
         FieldType::Date => {
@@ -646,7 +701,7 @@ fn write_value(buf: &mut String, t: FieldType, v: &[u8]) -> Result<(), String> {
                 }
                 let ms = x.round() as i64;
                 write_date(buf, ms / DAY_MS)?;
-                buf.push(' ');
+                buf.push(b' ');
                 write_time(buf, ms % DAY_MS);
             }
         }
@@ -766,17 +821,21 @@ fn push_csv_row<'a>(out: &mut String, cells: impl Iterator<Item = &'a str>) {
 mod tests {
     use super::*;
 
+    fn text(b: &[u8]) -> &str {
+        std::str::from_utf8(b).unwrap()
+    }
+
     #[test]
     fn numbers_decode_with_the_sign_bit_flipped() {
-        let mut s = String::new();
+        let mut s = Vec::new();
         write_value(&mut s, FieldType::Short, &[0x80, 0x01]).unwrap();
-        s.push(' ');
+        s.push(b' ');
         write_value(&mut s, FieldType::Short, &[0x7F, 0xFF]).unwrap();
-        s.push(' ');
+        s.push(b' ');
         write_value(&mut s, FieldType::Long, &[0x80, 0, 1, 0]).unwrap();
-        s.push(' ');
+        s.push(b' ');
         write_value(&mut s, FieldType::Short, &[0, 0]).unwrap();
-        s.push('|');
+        s.push(b'|');
         let n = |x: f64| {
             let b = x.to_bits();
             (if x.is_sign_negative() {
@@ -788,30 +847,92 @@ mod tests {
         };
         for x in [0.5, 8.0, -20.0, 1e-7, -0.25] {
             write_value(&mut s, FieldType::Number, &n(x)).unwrap();
-            s.push(' ');
+            s.push(b' ');
         }
         write_value(&mut s, FieldType::Number, &[0; 8]).unwrap();
-        assert_eq!(s, "1 -1 256 |0.5 8 -20 0.0000001 -0.25 ");
+        assert_eq!(text(&s), "1 -1 256 |0.5 8 -20 0.0000001 -0.25 ");
+    }
+
+    #[test]
+    fn whole_numbers_read_as_the_formatter_writes_them() {
+        let n = |x: f64| {
+            let b = x.to_bits();
+            (if x.is_sign_negative() {
+                !b
+            } else {
+                b | 1 << 63
+            })
+            .to_be_bytes()
+        };
+        for x in [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            10.0,
+            99.0,
+            1e14,
+            -1e14 + 1.0,
+            1e15,
+            1e16,
+            2.5,
+        ] {
+            let mut s = Vec::new();
+            write_value(&mut s, FieldType::Number, &n(x)).unwrap();
+            assert_eq!(text(&s), format!("{x}"));
+        }
+        for i in [
+            0i64,
+            7,
+            -7,
+            32767,
+            -32767,
+            i64::from(i32::MAX),
+            i64::from(i32::MIN),
+        ] {
+            let mut s = Vec::new();
+            push_int(&mut s, i);
+            assert_eq!(text(&s), i.to_string());
+        }
     }
 
     #[test]
     fn dates_and_times() {
-        let mut s = String::new();
+        let mut s = Vec::new();
         let d = |day: u32| (day ^ 1 << 31).to_be_bytes();
         write_value(&mut s, FieldType::Date, &d(1)).unwrap();
-        s.push(' ');
+        s.push(b' ');
         // 2024-02-29: day 738,945 (the proleptic Gregorian ordinal).
         write_value(&mut s, FieldType::Date, &d(738_945)).unwrap();
-        s.push(' ');
+        s.push(b' ');
         write_value(
             &mut s,
             FieldType::Time,
             &d(13 * 3_600_000 + 5 * 60_000 + 250),
         )
         .unwrap();
-        assert_eq!(s, "0001-01-01 2024-02-29 13:05:00.250");
+        assert_eq!(text(&s), "0001-01-01 2024-02-29 13:05:00.250");
         assert!(write_value(&mut s, FieldType::Date, &d(0x7FFF_FFFF)).is_err());
         assert!(write_value(&mut s, FieldType::Time, &d(86_400_000)).is_err());
+    }
+
+    #[test]
+    fn cells_are_trimmed_as_unquoted_csv_cells() {
+        for (cell, want) in [
+            ("abc", "abc"),
+            ("  abc ", "abc"),
+            ("\u{A0}x\u{A0}", "x"),
+            ("   ", ""),
+            ("a b", "a b"),
+        ] {
+            let mut row = b"pre".to_vec();
+            row.extend_from_slice(cell.as_bytes());
+            trim_cell(&mut row, 3);
+            assert_eq!(text(&row), format!("pre{want}"), "{cell:?}");
+        }
+        let mut row = Vec::new();
+        push_text(&mut row, CodePage::Windows1250, b"a\r\nb\rc\n");
+        assert_eq!(text(&row), "a\nb\nc\n");
     }
 
     #[test]
