@@ -173,8 +173,9 @@ pub fn export_table_csv(path: &Path) -> Result<(String, PathBuf, Vec<Warning>), 
 }
 
 /// Loads a database: `path` is a variable-set file (its `Attributes` setting names the
-/// table, relative to the set's folder; without it see [`table_path`]), or an attribute
-/// table used without a tree: `.csv`, or a Paradox `.DB` (with its `.MB` memo file).
+/// table, relative to the set's folder; without it the set's name with `.csv`, else with
+/// `.DB`, else the folder's only `.DB`), or an attribute table used without a tree:
+/// `.csv`, or a Paradox `.DB` (with its `.MB` memo file).
 pub fn load_database_file(
     path: &Path,
     alias: Option<&str>,

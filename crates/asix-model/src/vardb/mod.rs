@@ -1,6 +1,6 @@
-//! The variable database: the attribute table (CSV) and the variable set (the browse
-//! tree, a `.zez` text file). The format is specified for users in
-//! `docs/variable-database.md`; this module is its reference implementation.
+//! The variable database: the attribute table (CSV, or the original's Paradox `.DB`) and
+//! the variable set (the browse tree, a `.zez` text file). The format is specified for
+//! users in `docs/variable-database.md`; this module is its reference implementation.
 //!
 //! All logic is in the pure `parse_*` functions and [`VarDatabase::build`];
 //! [`load_database_file`] only reads the files.
@@ -23,10 +23,14 @@
 //! into the table ([`for_each_csv_record`], reading bytes); [`VarView`] reads a variable's
 //! attributes in place.
 //!
-//! One file per concern: `csv` (the CSV reader), `table` (the attribute table), `varset`
-//! (the variable set, `.zez`), `cells` (`CellTable`), `index` (the name index),
-//! `variables` ([`Variables`], [`VarView`], [`Variable`]), `database`
-//! ([`VarDatabase::build`] and the look-ups), `load` (the files).
+//! A Paradox table is read by a second reader (`paradox`, block by block from the file)
+//! that hands each record out as text cells like a CSV record, into the same table and
+//! the same checks.
+//!
+//! One file per concern: `csv` (the CSV reader), `paradox` (the Paradox reader), `table`
+//! (the attribute table), `varset` (the variable set, `.zez`), `cells` (`CellTable`),
+//! `index` (the name index), `variables` ([`Variables`], [`VarView`], [`Variable`]),
+//! `database` ([`VarDatabase::build`] and the look-ups), `load` (the files).
 
 mod cells;
 mod csv;
@@ -63,7 +67,8 @@ pub use varset::{parse_var_set, VarSetFile, VarSetGroup};
 pub struct DbError {
     pub code: OpcError,
     pub file: String,
-    /// 1-based line; 0 when the error concerns the whole file.
+    /// 1-based line (the record in a Paradox table); 0 when the error concerns the whole
+    /// file.
     pub line: usize,
     pub message: String,
 }
