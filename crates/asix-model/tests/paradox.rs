@@ -502,6 +502,23 @@ fn every_field_type_reads_as_text() {
     }
 }
 
+#[test]
+fn records_sharing_a_memo_are_refused() {
+    // Every record pointing at the 4,999-byte memo of record 2: more memo text than the
+    // .MB file holds, which a table with a memo per record cannot have.
+    let mut db = std::fs::read(fixtures().join("types.DB")).unwrap();
+    let mb = std::fs::read(fixtures().join("types.MB")).unwrap();
+    let (record_size, first) = (le16(&db, 0), le16(&db, 2) + 6);
+    let memo_ref = |r: usize| first + (r + 1) * record_size - 10;
+    let big: Vec<u8> = db[memo_ref(1)..memo_ref(1) + 10].to_vec();
+    for r in [0, 2, 3] {
+        db[memo_ref(r)..memo_ref(r) + 10].copy_from_slice(&big);
+    }
+    let e = parse_paradox_table(&db, Some(&mb), "types.DB").unwrap_err();
+    assert!(e.message.contains("records share memos"), "{e}");
+    assert!(e.message.contains("field `Note` (M)"), "{e}");
+}
+
 /// The table without the bytes pxlib writes from its memory, the clock and the path:
 /// the run-time pointers (0x30, and the table-name and field-name pointers after the
 /// field descriptors), the update time (0x60) and the table name (the path given).

@@ -12,10 +12,13 @@
 //!
 //! Every size and offset from the file is checked against the file's length before it is
 //! used, and memory is bounded by one block and the header (both at most 64 KB) plus the
-//! cells themselves: any input gives a table or an error, never a panic.
+//! cells themselves, which grow at most linearly with the files (a record's text is at
+//! most [`MAX_ROW_BYTES`], the memos together at most the `.MB` file): any input gives a
+//! table or an error, never a panic.
 
 use std::io::Write as _;
 
+use super::cells::MAX_ROW_BYTES;
 use super::csv::CsvFields;
 use super::DbError;
 use crate::text::{decode_cp852_into, decode_windows_1250_into, Warning};
@@ -385,6 +388,7 @@ pub fn for_each_paradox_record(
     let mut visited = vec![false; usize::from(header.file_blocks) + 1];
     let mut fields = CsvFields::default();
     let mut non_ascii_seen = false;
+    let mut memo_bytes = 0usize;
     let mut n = 0usize;
     let mut next = header.first_block;
     while next != 0 {
@@ -481,6 +485,19 @@ pub fn for_each_paradox_record(
                     }
                     FieldType::Memo => {
                         let text = memo_text(v, memo).map_err(err)?;
+                        // Each memo of the .MB file belongs to one record: memos taking
+                        // more than the file holds are references shared (or damaged),
+                        // which would multiply the text without bound.
+                        if text.len() > v.len() {
+                            memo_bytes += text.len();
+                            if memo_bytes > memo.map_or(0, <[u8]>::len) {
+                                return Err(err(
+                                    "the memos take more bytes than the .MB file holds: \
+                                     records share memos (a damaged table)"
+                                        .into(),
+                                ));
+                            }
+                        }
                         let text = match text.iter().rposition(|&b| b != 0) {
                             Some(last) => text.get(..=last).unwrap_or_default(),
                             None => &[],
@@ -491,6 +508,13 @@ pub fn for_each_paradox_record(
                     _ => write_value(&mut row, f.field_type, v).map_err(err)?,
                 }
                 fields.ends.push(row.len());
+            }
+            if row.len() > MAX_ROW_BYTES {
+                return Err(DbError::invalid(
+                    file,
+                    n,
+                    format!("record {n} holds more than {MAX_ROW_BYTES} bytes of text"),
+                ));
             }
             fields.buf = String::from_utf8(row)
                 .map_err(|e| DbError::invalid(file, n, format!("record {n}: {e}")))?;
@@ -745,7 +769,7 @@ fn memo_text<'a>(v: &'a [u8], mb: Option<&'a [u8]>) -> Result<&'a [u8], String> 
                 return Err(bad("its block holds another length"));
             }
             block
-                .get(9..9 + len)
+                .get(9..len.saturating_add(9))
                 .ok_or_else(|| bad("its block ends past the end of the file"))
         }
         3 => {
