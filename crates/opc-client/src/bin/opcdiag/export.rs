@@ -36,3 +36,29 @@ fn export(source: &str, out: Option<&str>) -> Result<(), String> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_the_table_as_csv_and_fails_on_a_missing_one() {
+        let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("../asix-model/tests/paradox");
+        let out = std::env::temp_dir().join(format!("opcdiag-export-{}.csv", std::process::id()));
+        let table = fixtures.join("types.DB");
+        assert_eq!(
+            run(table.to_str().unwrap_or_default(), out.to_str()),
+            EXIT_OK
+        );
+        let csv = std::fs::read_to_string(&out).unwrap_or_default();
+        let _ = std::fs::remove_file(&out);
+        assert!(
+            csv.starts_with(
+                "\u{FEFF}Name;Count;Total;Ratio;Price;Flag;Day;At;Stamp;Serial;Note\r\n"
+            ),
+            "{csv}"
+        );
+        assert!(csv.contains("KW_ŻÓŁW;32767;4000000;0.5;12.99;tak;2024-02-29;13:05:07;"));
+        assert_eq!(run("no-such-table.DB", None), EXIT_FAILED);
+    }
+}
