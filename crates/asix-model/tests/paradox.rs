@@ -502,6 +502,80 @@ fn every_field_type_reads_as_text() {
     }
 }
 
+/// xorshift64*: the random values below, the same on every run.
+fn next(state: &mut u64) -> u64 {
+    *state ^= *state >> 12;
+    *state ^= *state << 25;
+    *state ^= *state >> 27;
+    state.wrapping_mul(0x2545_F491_4F6C_DD1D)
+}
+
+#[test]
+fn random_values_written_by_pxlib_read_back_in_both_code_pages() {
+    let Some(mkpx) = mkpx() else { return };
+    let dir = work_dir("random");
+    let letters: Vec<char> = "abcxyzKW_019-. ;\"ąćęłńóśźżĄĆĘŁŃÓŚŹŻ°".chars().collect();
+    let mut state = 0x1234_5678_9ABC_DEF0u64;
+    let mut csv = String::from("Name;Text;Real;Small;Big;Flag\n");
+    let mut expected: Vec<Vec<String>> = Vec::new();
+    for i in 0..3000 {
+        let len = (next(&mut state) % 40) as usize;
+        let text: String = (0..len)
+            .map(|_| letters[(next(&mut state) % letters.len() as u64) as usize])
+            .collect();
+        // Any finite double but -0 (which Paradox stores as 0), and plain ones.
+        let real = match next(&mut state) % 3 {
+            0 => f64::from_bits(next(&mut state)),
+            1 => (next(&mut state) % 20_001) as f64 / 8.0 - 1250.0,
+            _ => f64::NAN,
+        };
+        let real = if real.is_finite() && real.to_bits() != (-0.0f64).to_bits() {
+            real.to_string()
+        } else {
+            String::new()
+        };
+        // Blank is the lowest value of the type (-32768, i32::MIN): never written.
+        let small = (next(&mut state) as i16).max(i16::MIN + 1).to_string();
+        let big = (next(&mut state) as i32).max(i32::MIN + 1).to_string();
+        let flag = ["tak", "nie", ""][(next(&mut state) % 3) as usize];
+        let quoted = format!("\"{}\"", text.replace('"', "\"\""));
+        csv.push_str(&format!("V{i};{quoted};{real};{small};{big};{flag}\n"));
+        expected.push(vec![
+            format!("V{i}"),
+            text.trim().to_owned(),
+            real,
+            small,
+            big,
+            flag.to_owned(),
+        ]);
+    }
+    let csv_path = dir.join("random.csv");
+    std::fs::write(&csv_path, csv).unwrap();
+    for code_page in ["1250", "852"] {
+        let db = dir.join(format!("random{code_page}.DB"));
+        run_mkpx(
+            mkpx,
+            &[
+                "csv",
+                csv_path.to_str().unwrap(),
+                db.to_str().unwrap(),
+                code_page,
+                "Real=N",
+                "Small=S",
+                "Big=I",
+                "Flag=L",
+            ],
+        );
+        let (t, warnings) =
+            parse_paradox_table(&std::fs::read(&db).unwrap(), None, "r.DB").unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(t.rows.len(), expected.len());
+        for ((n, row), want) in t.rows.iter().zip(&expected) {
+            assert_eq!(row, want, "{code_page}: record {n}");
+        }
+    }
+}
+
 #[test]
 fn records_sharing_a_memo_are_refused() {
     // Every record pointing at the 4,999-byte memo of record 2: more memo text than the
