@@ -103,6 +103,10 @@ fn libfuzzer(seconds: u32, names: &[String]) -> Result<(), String> {
         if matches!(*t, "ini" | "csv_attributes" | "zez_varset") {
             c.arg(root.join("demo/wytwornia_kwasu"));
         }
+        // The committed pxlib table seeds the Paradox reader.
+        if *t == "paradox" {
+            c.arg(root.join("crates/asix-model/tests/paradox"));
+        }
         c.arg("--")
             .arg(format!("-max_total_time={seconds}"))
             .arg("-rss_limit_mb=2048")
