@@ -577,6 +577,25 @@ fn random_values_written_by_pxlib_read_back_in_both_code_pages() {
 }
 
 #[test]
+fn another_code_page_is_read_as_windows_1250_with_a_warning() {
+    let mut db = std::fs::read(fixtures().join("types.DB")).unwrap();
+    let mb = std::fs::read(fixtures().join("types.MB")).unwrap();
+    db[0x6A..0x6C].copy_from_slice(&1252u16.to_le_bytes());
+    let (t, warnings) = parse_paradox_table(&db, Some(&mb), "types.DB").unwrap();
+    assert_eq!(t.rows[0].1[0], "KW_ŻÓŁW");
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert!(
+        warnings[0].message.contains("code page is 1252"),
+        "{warnings:?}"
+    );
+    // The header decides: the same bytes as CP852 are other letters, without a warning.
+    db[0x6A..0x6C].copy_from_slice(&852u16.to_le_bytes());
+    let (t, warnings) = parse_paradox_table(&db, Some(&mb), "types.DB").unwrap();
+    assert!(warnings.is_empty());
+    assert_ne!(t.rows[0].1[0], "KW_ŻÓŁW");
+}
+
+#[test]
 fn records_sharing_a_memo_are_refused() {
     // Every record pointing at the 4,999-byte memo of record 2: more memo text than the
     // .MB file holds, which a table with a memo per record cannot have.
