@@ -27,6 +27,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("asix_datagram", targets::asix_datagram),
     ("ini", targets::ini),
     ("csv_attributes", targets::csv_attributes),
+    ("paradox", targets::paradox),
     ("zez_varset", targets::zez_varset),
     ("item_id", targets::item_id),
     ("match_pattern", targets::match_pattern),
@@ -51,6 +52,10 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
             b"[Server]\r\nMinUpdateRate = 250\r\nLogLevel = debug\r\n[Channel:K1]\r\nItemsDatabase = a.csv\r\n[AsixCTServers]\r\nS1 = 10.0.0.1\r\n".to_vec(),
         ],
         "csv_attributes" => vec![DEMO_TABLE.to_vec(), DEMO_TABLE[..DEMO_TABLE.len().min(600)].to_vec()],
+        "paradox" => {
+            let db: &[u8] = include_bytes!("../../crates/asix-model/tests/paradox/types.DB");
+            vec![db.to_vec(), db[..db.len().min(0x800)].to_vec()]
+        }
         "zez_varset" => vec![DEMO_SET.to_vec(), DEMO_SET[..DEMO_SET.len().min(600)].to_vec()],
         "item_id" => text(&[
             "KW_A000",

@@ -64,6 +64,27 @@ pub fn csv_attributes(data: &[u8]) {
     let _ = asix_model::vardb::parse_csv(&text, sep);
 }
 
+/// The memo file of the committed Paradox fixture (written by pxlib), for memo references.
+pub const PARADOX_MB: &[u8] = include_bytes!("../../crates/asix-model/tests/paradox/types.MB");
+
+/// The Paradox attribute table (`.DB` bytes), without and with a memo file; a table it
+/// reads exports to a CSV that reads back to the same table.
+pub fn paradox(data: &[u8]) {
+    use asix_model::vardb::{paradox_to_csv, parse_attribute_table, parse_paradox_table};
+    let _ = parse_paradox_table(data, None, "fuzz.DB");
+    let table = parse_paradox_table(data, Some(PARADOX_MB), "fuzz.DB");
+    let csv = paradox_to_csv(data, Some(PARADOX_MB), "fuzz.DB", &mut Vec::new());
+    if let (Ok((table, _)), Ok(csv)) = (table, csv) {
+        let again = parse_attribute_table(csv.as_bytes(), "fuzz.csv")
+            .unwrap_or_else(|e| panic!("the export does not read back: {e}"));
+        assert_eq!(again.columns, table.columns, "exported columns");
+        let cells = |t: &asix_model::vardb::AttributeTable| -> Vec<Vec<String>> {
+            t.rows.iter().map(|(_, r)| r.clone()).collect()
+        };
+        assert_eq!(cells(&again), cells(&table), "exported cells");
+    }
+}
+
 /// The `.zez` variable-set tree of the variable database.
 pub fn zez_varset(data: &[u8]) {
     let _ = asix_model::vardb::parse_var_set(data, "fuzz.zez");

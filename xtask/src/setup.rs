@@ -11,7 +11,7 @@ use std::process::Command;
 /// toolchains of both bitnesses (linkers for the Rust windows-gnu targets, the shims and
 /// the proxy/stub DLLs), widl (both `x86_64-` and `i686-w64-mingw32-widl` come with
 /// mingw-w64-tools), the system IDL files widl imports (only libwine-dev ships them), and
-/// wixl + msitools for the MSI.
+/// wixl + msitools for the MSI, and pxlib-dev for the Paradox tests.
 /// wine32 must be installed before a prefix is made (see [`wine::ensure_prefix`] for
 /// prefixes made earlier).
 pub const PACKAGES: &[&str] = &[
@@ -25,6 +25,9 @@ pub const PACKAGES: &[&str] = &[
     // msiinfo (msitools) reads its tables back for the tests.
     "wixl",
     "msitools",
+    // Paradox tables written by another implementation than the reader's
+    // (crates/asix-model/tests/paradox.rs compiles tests/paradox/mkpx.c against it).
+    "pxlib-dev",
 ];
 /// The server's target (64-bit): what `cargo xtask build` builds everything for.
 pub const TARGET: &str = "x86_64-pc-windows-gnu";

@@ -14,6 +14,10 @@
 //!   each run is a child process of its own, so this is what a server would hold).
 //!
 //! The baseline of the same run is the demo plant (228 variables) loaded the same way.
+//!
+//! `-- --paradox` also loads the same tables as Paradox `.DB` files (the original's
+//! format), written from the synthetic CSV by pxlib (`tests/paradox/mkpx.c`, compiled
+//! with `cc -lpx`; Debian's `pxlib-dev`) and reported beside the CSV.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -166,6 +170,56 @@ fn write_db(dir: &Path, n: usize) -> PathBuf {
     zez
 }
 
+/// The synthetic table of `zez`'s folder as a Paradox table (numbers as `N`, `Writable`
+/// as a logical) and a variable set naming it, written once.
+fn write_paradox(dir: &Path, zez: &Path) -> PathBuf {
+    let d = zez.parent().expect("folder").join("paradox");
+    let db = d.join("atrybuty.DB");
+    let set = d.join("synthetic.zez");
+    if !set.exists() {
+        std::fs::create_dir_all(&d).expect("paradox dir");
+        let mkpx = dir.join("mkpx");
+        let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/paradox/mkpx.c");
+        let ok = std::process::Command::new("cc")
+            .args(["-O2", "-o"])
+            .arg(&mkpx)
+            .arg(src)
+            .arg("-lpx")
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "cc mkpx.c -lpx failed: is pxlib-dev installed?");
+        let csv = zez.with_file_name("atrybuty.csv");
+        let status = std::process::Command::new(&mkpx)
+            .arg("csv")
+            .arg(&csv)
+            .arg(&db)
+            .args([
+                "1250",
+                "RangeFrom=N",
+                "RangeTo=N",
+                "WarnLow=N",
+                "WarnHigh=N",
+            ])
+            .args(["AlarmLow=N", "AlarmHigh=N", "Writable=L"])
+            .status()
+            .expect("mkpx");
+        assert!(status.success(), "mkpx failed");
+        let text = std::fs::read_to_string(zez).expect("zez");
+        std::fs::write(
+            &set,
+            text.replace("Attributes = atrybuty.csv", "Attributes = atrybuty.DB"),
+        )
+        .expect("zez");
+    }
+    let size = |p: &Path| std::fs::metadata(p).map_or(0, |m| m.len()) as f64 / 1e6;
+    println!(
+        "  (files: CSV {:.1} MB, Paradox .DB {:.1} MB)",
+        size(&zez.with_file_name("atrybuty.csv")),
+        size(&db)
+    );
+    set
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if let Some(i) = args.iter().position(|a| a == "--child") {
@@ -197,8 +251,13 @@ fn main() {
     } else {
         &[(100_000, 5), (1_000_000, 3)]
     };
+    let paradox = std::env::args().any(|a| a == "--paradox");
     for &(n, runs) in sizes {
         let zez = write_db(&dir, n);
         report(&format!("synthetic {n}"), &zez, runs);
+        if paradox {
+            let set = write_paradox(&dir, &zez);
+            report(&format!("synthetic {n} as Paradox"), &set, runs);
+        }
     }
 }

@@ -48,16 +48,25 @@ pub fn decode_text(bytes: &[u8]) -> (String, TextEncoding) {
 /// Decodes Windows-1250 bytes. The five bytes the code page leaves undefined
 /// (0x81, 0x83, 0x88, 0x90, 0x98) become U+FFFD.
 pub fn decode_windows_1250(bytes: &[u8]) -> String {
-    bytes
-        .iter()
-        .map(|&b| {
-            if b < 0x80 {
-                b as char
-            } else {
-                char::from_u32(CP1250_HIGH[(b - 0x80) as usize] as u32).unwrap_or('\u{FFFD}')
-            }
-        })
-        .collect()
+    let mut s = String::with_capacity(bytes.len());
+    decode_windows_1250_into(bytes, &mut s);
+    s
+}
+
+/// [`decode_windows_1250`] appending to `out`.
+pub fn decode_windows_1250_into(bytes: &[u8], out: &mut String) {
+    decode_into(bytes, &CP1250_HIGH, out);
+}
+
+/// Appends single-byte text: ASCII as it is, the high half through `high`.
+fn decode_into(bytes: &[u8], high: &[u16; 128], out: &mut String) {
+    out.extend(bytes.iter().map(|&b| {
+        if b < 0x80 {
+            b as char
+        } else {
+            char::from_u32(u32::from(high[usize::from(b - 0x80)])).unwrap_or('\u{FFFD}')
+        }
+    }));
 }
 
 /// Windows-1250 bytes 0x80..=0xFF as Unicode scalar values.
@@ -78,6 +87,40 @@ const CP1250_HIGH: [u16; 128] = [
     0x010D, 0x00E9, 0x0119, 0x00EB, 0x011B, 0x00ED, 0x00EE, 0x010F, //
     0x0111, 0x0144, 0x0148, 0x00F3, 0x00F4, 0x0151, 0x00F6, 0x00F7, //
     0x0159, 0x016F, 0x00FA, 0x0171, 0x00FC, 0x00FD, 0x0163, 0x02D9, //
+];
+
+/// Decodes CP852 (DOS Latin-2) bytes, the code page of Polish DOS-era Paradox tables.
+/// Every byte decodes.
+pub fn decode_cp852(bytes: &[u8]) -> String {
+    let mut s = String::with_capacity(bytes.len());
+    decode_cp852_into(bytes, &mut s);
+    s
+}
+
+/// [`decode_cp852`] appending to `out`.
+pub fn decode_cp852_into(bytes: &[u8], out: &mut String) {
+    decode_into(bytes, &CP852_HIGH, out);
+}
+
+/// CP852 bytes 0x80..=0xFF as Unicode scalar values (the code page as glibc's iconv and
+/// Python's `cp852` codec map it).
+const CP852_HIGH: [u16; 128] = [
+    0x00C7, 0x00FC, 0x00E9, 0x00E2, 0x00E4, 0x016F, 0x0107, 0x00E7, //
+    0x0142, 0x00EB, 0x0150, 0x0151, 0x00EE, 0x0179, 0x00C4, 0x0106, //
+    0x00C9, 0x0139, 0x013A, 0x00F4, 0x00F6, 0x013D, 0x013E, 0x015A, //
+    0x015B, 0x00D6, 0x00DC, 0x0164, 0x0165, 0x0141, 0x00D7, 0x010D, //
+    0x00E1, 0x00ED, 0x00F3, 0x00FA, 0x0104, 0x0105, 0x017D, 0x017E, //
+    0x0118, 0x0119, 0x00AC, 0x017A, 0x010C, 0x015F, 0x00AB, 0x00BB, //
+    0x2591, 0x2592, 0x2593, 0x2502, 0x2524, 0x00C1, 0x00C2, 0x011A, //
+    0x015E, 0x2563, 0x2551, 0x2557, 0x255D, 0x017B, 0x017C, 0x2510, //
+    0x2514, 0x2534, 0x252C, 0x251C, 0x2500, 0x253C, 0x0102, 0x0103, //
+    0x255A, 0x2554, 0x2569, 0x2566, 0x2560, 0x2550, 0x256C, 0x00A4, //
+    0x0111, 0x0110, 0x010E, 0x00CB, 0x010F, 0x0147, 0x00CD, 0x00CE, //
+    0x011B, 0x2518, 0x250C, 0x2588, 0x2584, 0x0162, 0x016E, 0x2580, //
+    0x00D3, 0x00DF, 0x00D4, 0x0143, 0x0144, 0x0148, 0x0160, 0x0161, //
+    0x0154, 0x00DA, 0x0155, 0x0170, 0x00FD, 0x00DD, 0x0163, 0x00B4, //
+    0x00AD, 0x02DD, 0x02DB, 0x02C7, 0x02D8, 0x00A7, 0x00F7, 0x00B8, //
+    0x00B0, 0x00A8, 0x02D9, 0x0171, 0x0158, 0x0159, 0x25A0, 0x00A0, //
 ];
 
 /// A problem that did not stop a reader (unknown option, duplicate key, ...). The caller
@@ -207,6 +250,20 @@ mod tests {
         for (bytes, text, enc) in cases {
             assert_eq!(decode_text(bytes), (text.to_string(), *enc), "{bytes:?}");
         }
+    }
+
+    #[test]
+    fn decodes_cp852() {
+        // "Zażółć gęślą jaźń" and the Polish capitals in CP852 (iconv -t CP852).
+        assert_eq!(
+            decode_cp852(b"Za\xBE\xA2\x88\x86 g\xA9\x98l\xA5 ja\xAB\xE4"),
+            "Zażółć gęślą jaźń"
+        );
+        assert_eq!(
+            decode_cp852(b"\xA4\x8F\xA8\x9D\xE3\xE0\x97\x8D\xBD"),
+            "ĄĆĘŁŃÓŚŹŻ"
+        );
+        assert_eq!(decode_cp852(b"abc\xFF"), "abc\u{A0}");
     }
 
     #[test]

@@ -85,7 +85,7 @@ impl CsvFields {
         self.ends.push(self.buf.len());
     }
 
-    fn clear(&mut self) {
+    pub(super) fn clear(&mut self) {
         self.buf.clear();
         self.ends.clear();
     }

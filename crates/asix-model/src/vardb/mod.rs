@@ -1,6 +1,6 @@
-//! The variable database: the attribute table (CSV) and the variable set (the browse
-//! tree, a `.zez` text file). The format is specified for users in
-//! `docs/variable-database.md`; this module is its reference implementation.
+//! The variable database: the attribute table (CSV, or the original's Paradox `.DB`) and
+//! the variable set (the browse tree, a `.zez` text file). The format is specified for
+//! users in `docs/variable-database.md`; this module is its reference implementation.
 //!
 //! All logic is in the pure `parse_*` functions and [`VarDatabase::build`];
 //! [`load_database_file`] only reads the files.
@@ -23,16 +23,21 @@
 //! into the table ([`for_each_csv_record`], reading bytes); [`VarView`] reads a variable's
 //! attributes in place.
 //!
-//! One file per concern: `csv` (the CSV reader), `table` (the attribute table), `varset`
-//! (the variable set, `.zez`), `cells` (`CellTable`), `index` (the name index),
-//! `variables` ([`Variables`], [`VarView`], [`Variable`]), `database`
-//! ([`VarDatabase::build`] and the look-ups), `load` (the files).
+//! A Paradox table is read by a second reader (`paradox`, block by block from the file)
+//! that hands each record out as text cells like a CSV record, into the same table and
+//! the same checks.
+//!
+//! One file per concern: `csv` (the CSV reader), `paradox` (the Paradox reader), `table`
+//! (the attribute table), `varset` (the variable set, `.zez`), `cells` (`CellTable`),
+//! `index` (the name index), `variables` ([`Variables`], [`VarView`], [`Variable`]),
+//! `database` ([`VarDatabase::build`] and the look-ups), `load` (the files).
 
 mod cells;
 mod csv;
 mod database;
 mod index;
 mod load;
+mod paradox;
 mod table;
 #[cfg(test)]
 mod tests;
@@ -47,8 +52,12 @@ pub use cells::MAX_ROW_BYTES;
 pub use csv::{detect_separator, for_each_csv_record, parse_csv, CsvFields, CsvRecord};
 pub use database::{GroupNode, VarDatabase};
 pub use index::hash_name;
-pub use load::load_database_file;
-pub use table::{columns, parse_attribute_table, AttributeTable};
+pub use load::{export_table_csv, load_database_file};
+pub use paradox::{
+    for_each_paradox_record, paradox_to_csv, read_paradox_header, CodePage, FieldType,
+    ParadoxField, ParadoxHeader, ParadoxSource,
+};
+pub use table::{columns, parse_attribute_table, parse_paradox_table, AttributeTable};
 pub use variables::{Limit, LimitRef, VarView, Variable, Variables};
 pub use varset::{parse_var_set, VarSetFile, VarSetGroup};
 
@@ -58,7 +67,8 @@ pub use varset::{parse_var_set, VarSetFile, VarSetGroup};
 pub struct DbError {
     pub code: OpcError,
     pub file: String,
-    /// 1-based line; 0 when the error concerns the whole file.
+    /// 1-based line (the record in a Paradox table); 0 when the error concerns the whole
+    /// file.
     pub line: usize,
     pub message: String,
 }

@@ -2,8 +2,9 @@
 
 use super::cells::CellTable;
 use super::csv::{detect_separator, for_each_csv_record, CsvFields};
+use super::paradox::{for_each_paradox_record, read_paradox_header, ParadoxSource};
 use super::DbError;
-use crate::text::decode_text;
+use crate::text::{decode_text, Warning};
 
 /// The attribute table as read: column names and rows of cells (one row per variable).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -81,6 +82,64 @@ pub(super) fn read_cell_table(
     Ok((columns, cells))
 }
 
+/// Parses a Paradox attribute table (the `.DB` bytes, and its `.MB` memo file when it has
+/// one): the same table as [`parse_attribute_table`] makes of a CSV, the line of a row
+/// being its record number. Warnings: a code page read as Windows-1250.
+pub fn parse_paradox_table(
+    bytes: &[u8],
+    memo: Option<&[u8]>,
+    file: &str,
+) -> Result<(AttributeTable, Vec<Warning>), DbError> {
+    let mut rows = Vec::new();
+    let mut warnings = Vec::new();
+    let columns = read_paradox(bytes, memo, file, &mut warnings, |n, fields, ncols| {
+        rows.push((n, (0..ncols).map(|i| fields.get(i).to_owned()).collect()));
+        Ok(())
+    })?;
+    let table = AttributeTable {
+        file: file.to_owned(),
+        columns,
+        rows,
+    };
+    Ok((table, warnings))
+}
+
+/// [`parse_paradox_table`] streamed into a [`CellTable`], from a file or bytes.
+pub(super) fn read_paradox_cell_table(
+    src: impl ParadoxSource,
+    memo: Option<&[u8]>,
+    file: &str,
+    warnings: &mut Vec<Warning>,
+) -> Result<(Vec<String>, CellTable), DbError> {
+    let mut cells = CellTable::default();
+    let columns = read_paradox(src, memo, file, warnings, |n, fields, ncols| {
+        cells.ncols = ncols;
+        cells.push_fields(n, fields, ncols)
+    })?;
+    cells.ncols = columns.len();
+    Ok((columns, cells))
+}
+
+/// Reads a Paradox table's header, checks its field names as a CSV header's, then hands
+/// each record with the number of columns to `row`. Returns the columns.
+fn read_paradox(
+    mut src: impl ParadoxSource,
+    memo: Option<&[u8]>,
+    file: &str,
+    warnings: &mut Vec<Warning>,
+    mut row: impl FnMut(usize, &CsvFields, usize) -> Result<(), (usize, String)>,
+) -> Result<Vec<String>, DbError> {
+    let header = read_paradox_header(&mut src, file)?;
+    let names = header.fields.iter().map(|f| f.name.clone()).collect();
+    let columns = check_columns(0, names)
+        .map_err(|(line, m)| DbError::invalid(file, line, format!("the field names: {m}")))?;
+    let ncols = columns.len();
+    for_each_paradox_record(src, &header, memo, file, warnings, |n, fields| {
+        row(n, fields, ncols)
+    })?;
+    Ok(columns)
+}
+
 /// Reads the header (checked) and hands each row with the number of columns to `row`
 /// (cells past the header's are empty: [`CsvFields::get`]). Returns the columns.
 fn read_table(
@@ -121,6 +180,11 @@ fn check_header(line: usize, fields: &CsvFields) -> Result<Vec<String>, (usize, 
     while columns.last().is_some_and(|c| c.is_empty()) && columns.len() > 1 {
         columns.pop();
     }
+    check_columns(line, columns)
+}
+
+/// The rules of column names, for the CSV header and the Paradox fields alike.
+fn check_columns(line: usize, columns: Vec<String>) -> Result<Vec<String>, (usize, String)> {
     for (i, c) in columns.iter().enumerate() {
         if c.is_empty() {
             return Err((line, format!("column {} has no name", i + 1)));

@@ -50,7 +50,7 @@ pub struct Variable {
     pub name: String,
     /// The name clients use: the alias in alias mode, else `name`.
     pub public_name: String,
-    /// Line in the attribute table.
+    /// Line in the attribute table (the record in a Paradox table).
     pub line: usize,
     pub description: String,
     /// `DescriptionEn`; empty when not given.

@@ -244,6 +244,24 @@ pub enum Command {
     /// reads one item and receives one callback. Exit code 0 when nothing failed, else 1.
     #[command(verbatim_doc_comment)]
     Doctor(DoctorOptions),
+    /// the Paradox attribute table as the CSV the server reads
+    ///
+    /// Reads the original's Paradox attribute table (a .DB with its .MB memos, or the table of a
+    /// variable set, as the server finds it) and writes it as the CSV attribute table
+    /// (docs/variable-database.md): ';'-separated, UTF-8, the text decoded from the table's code
+    /// page, numbers, logicals (tak/nie), dates and times as text. Point the set's
+    /// `Attributes =` at the CSV, or name it after the set (zestaw.csv beside zestaw.zez): a set
+    /// without `Attributes =` takes that CSV before a .DB.
+    /// --server is not used (no server connection); this command also runs on Linux.
+    #[command(verbatim_doc_comment)]
+    ExportDb {
+        /// a variable set (.zez) or a Paradox table (.DB)
+        #[arg(value_name = "SET_OR_TABLE")]
+        source: String,
+        /// write the CSV to FILE (default: standard output)
+        #[arg(long, value_name = "FILE")]
+        out: Option<String>,
+    },
 }
 
 /// The options of `opcdiag doctor`.
@@ -311,6 +329,7 @@ const COMMANDS: &[&str] = &[
     "subscribe",
     "demo",
     "doctor",
+    "export-db",
 ];
 
 /// What a command's arguments must be, for the message when they are not.
@@ -323,6 +342,7 @@ fn needs(command: &str) -> &'static str {
         "write" => "ITEMID and VALUE",
         "demo" => "no arguments besides --for",
         "doctor" => "no arguments besides its options",
+        "export-db" => "one variable set or Paradox table",
         _ => "other arguments",
     }
 }
@@ -761,6 +781,24 @@ mod tests {
         assert!(usage_error("status --lang klingon").contains("unknown language"));
         assert!(usage_error("status --host plc1").contains("remote servers are not supported"));
         assert!(usage_error("browse --depth 0").contains("--depth"));
+    }
+
+    #[test]
+    fn export_db_takes_a_table_and_an_output_file() {
+        assert_eq!(
+            parse(&args("export-db D:\\baza\\zestaw.zez --out atrybuty.csv")),
+            Ok(Parsed::Run(
+                Global {
+                    server: DEFAULT_SERVER.into(),
+                    lcid: None
+                },
+                Command::ExportDb {
+                    source: "D:\\baza\\zestaw.zez".into(),
+                    out: Some("atrybuty.csv".into())
+                }
+            ))
+        );
+        assert!(usage_error("export-db").contains("one variable set or Paradox table"));
     }
 
     #[test]

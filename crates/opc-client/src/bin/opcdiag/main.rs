@@ -1,9 +1,11 @@
 //! `opcdiag`: a diagnostic OPC DA client shipped with ServerCTOPC, usable against any
 //! OPC DA 2.05a/3.0 server on the same computer: status, browse, properties, read, write,
-//! subscribe, and the demo plant tour. `opcdiag --help` lists the commands.
+//! subscribe, and the demo plant tour; and `export-db`, the original's Paradox attribute
+//! table as the CSV the server reads. `opcdiag --help` lists the commands.
 //!
 //! The command line and every formatting rule are plain Rust (`cli`, `text`: tested
-//! natively); the COM calls (`win`, `demo`) exist on Windows only and go through the safe
+//! natively; `export` reads files only and runs everywhere); the COM calls (`win`, `demo`)
+//! exist on Windows only and go through the safe
 //! client wrapper `opc_client`.
 
 /// `println!` that does not panic when stdout is gone (piped into `head`, say): the
@@ -18,6 +20,7 @@ mod cli;
 #[cfg(windows)]
 mod demo;
 mod doctor;
+mod export;
 #[cfg(windows)]
 mod out;
 mod text;
@@ -32,6 +35,10 @@ fn main() -> ExitCode {
         Ok(cli::Parsed::Help(text)) => {
             print!("{text}");
             ExitCode::from(cli::EXIT_OK)
+        }
+        // Reads files only: runs on every host.
+        Ok(cli::Parsed::Run(_, cli::Command::ExportDb { source, out })) => {
+            ExitCode::from(export::run(&source, out.as_deref()))
         }
         Ok(cli::Parsed::Run(global, command)) => run(global, command),
         Err(e) => {

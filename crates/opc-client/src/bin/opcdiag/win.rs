@@ -112,6 +112,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
         Command::Demo { .. } => Err("demo runs from main".into()),
         Command::Servers => servers(),
         Command::Doctor(_) => Err("doctor runs without a session".into()),
+        Command::ExportDb { .. } => Err("export-db runs from main".into()),
     }
 }
 
