@@ -284,3 +284,34 @@ fn error_text(e: &reqwest::Error) -> String {
     }
     s
 }
+
+/// Asks every station of a REST link for its attribute list (`GET
+/// /asix/v1/server/variable/attribute`, bounded as a poll is): whether each answers, in
+/// the configured order (`opcdiag doctor`).
+pub async fn probe(s: &RestSettings) -> Vec<(String, Result<(), FetchError>)> {
+    let http = match client(s) {
+        Ok(h) => h,
+        Err(e) => {
+            let e = FetchError::Transport(e.to_string());
+            return s
+                .core
+                .stations
+                .iter()
+                .map(|u| (u.clone(), Err(e.clone())))
+                .collect();
+        }
+    };
+    let g = Get {
+        id: 0,
+        station: 0,
+        path: "/asix/v1/server/variable/attribute".into(),
+        names: Vec::new(),
+    };
+    let mut out = Vec::new();
+    for u in &s.core.stations {
+        let url = format!("{u}{}", g.path);
+        let r = fetch(&http, &url, &s.auth, &g, s.request_timeout, s.max_body).await;
+        out.push((u.clone(), r.map(|_| ())));
+    }
+    out
+}

@@ -16,7 +16,7 @@ pub const MAX_BODY: usize = 4 << 20;
 
 pub mod link;
 
-pub use self::link::{Auth, RestLink, RestSettings, StartError};
+pub use self::link::{probe, Auth, RestLink, RestSettings, StartError};
 
 use std::time::Duration;
 
