@@ -131,7 +131,7 @@ impl Resolver for NamespaceResolver {
             rc.name,
             rc.options,
             cfg.server.source_timeout_ms,
-            self.base.reconnect_interval,
+            std::time::Duration::from_millis(u64::from(cfg.server.reconnect_interval_ms.max(100))),
         )
     }
 }

@@ -19,7 +19,7 @@
 //!   and the next station is polled at once; when every station failed in a row, the next
 //!   round starts after `retry_interval`. While not on the first station, the preferred
 //!   stations are probed every `come_back_interval` and the link comes back to the first
-//!   that answers, as the asix client returns to a preferred server.
+//!   that answers.
 //! - **Quality**: the answer's OPC quality as it is (vendor and limit bits too) with its
 //!   time; `readSucceeded: false` is BAD Config Error, logged once per variable with the
 //!   server's text; a value the variable's type cannot hold is BAD Config Error for that
