@@ -236,6 +236,45 @@ async fn bad_answers_are_bad_quality_without_a_hang() {
     .expect("in time");
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tls_failures_and_refused_connections_are_bad_quality() {
+    tokio::time::timeout(TEST_LIMIT, async {
+        let (_sim, rest) = station("EVO1").await;
+        // HTTPS to a plain HTTP server: the TLS handshake fails.
+        let https = rest.url().replace("http://", "https://");
+        // A port nobody listens on: the connection is refused.
+        let closed = {
+            let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+            format!("http://{}", l.local_addr().unwrap())
+        };
+        // What the log line says (the probe makes the same requests as a poll).
+        for url in [&https, &closed] {
+            let r = asix_net::rest::probe(&settings(std::slice::from_ref(url), 2000)).await;
+            let Err(FetchError::Transport(text)) = &r[0].1 else {
+                panic!("{url}: {r:?}")
+            };
+            println!("{url}: {text}");
+            assert!(!text.is_empty() && !text.contains(url.as_str()), "{text}");
+        }
+        for url in [https, closed] {
+            let (l, mut ev) = link(settings(std::slice::from_ref(&url), 2000));
+            l.subscribe(typed(&VARS[..1]), 100);
+            let v = ev
+                .vqt_of(&k(VARS[0]), Duration::from_secs(10), &url, |q| {
+                    q == Quality::BAD_COMM_FAILURE
+                })
+                .await;
+            assert_eq!(v.value, Value::Empty, "{url}: no value yet");
+            assert!(ev
+                .seen
+                .iter()
+                .all(|e| !matches!(e, ClientEvent::ChannelUp { .. })));
+        }
+    })
+    .await
+    .expect("in time");
+}
+
 #[test]
 fn no_credential_in_settings_or_errors() {
     let mut s = settings(&["https://evo".into()], 100);

@@ -144,8 +144,6 @@ struct Var {
     last: Option<Vqt>,
     /// A failure quality was reported since the last answer.
     down: bool,
-    /// A readSucceeded=false or unconvertible value was logged.
-    logged: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -193,6 +191,24 @@ pub struct RestCore {
     logged_single: HashSet<usize>,
     /// Every station failed in a row: nothing is asked until the next poll.
     resting: bool,
+    /// Variables whose readSucceeded=false or unconvertible value was logged (at most
+    /// [`MAX_LOGGED`]; past that, no more such lines).
+    logged: HashSet<ItemKey>,
+}
+
+/// The most variables whose failure [`RestCore`] remembers having logged.
+const MAX_LOGGED: usize = 65_536;
+
+/// `s` cut to at most `max` bytes (on a character boundary), for a log line.
+fn cut(s: &str, max: usize) -> &str {
+    if s.len() <= max {
+        return s;
+    }
+    let mut end = max;
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    &s[..end]
 }
 
 impl RestCore {
@@ -219,6 +235,7 @@ impl RestCore {
             updates: Vec::new(),
             logged_single: HashSet::new(),
             resting: false,
+            logged: HashSet::new(),
         }
     }
 
@@ -255,7 +272,6 @@ impl RestCore {
                             rate,
                             last: None,
                             down: false,
-                            logged: false,
                         },
                     );
                 }
@@ -423,8 +439,17 @@ impl RestCore {
         self.start_requests();
     }
 
-    fn start_probes(&mut self, _now: Now) {
+    fn start_probes(&mut self, now: Now) {
         if self.station == 0 {
+            return;
+        }
+        if self
+            .in_flight
+            .values()
+            .any(|r| matches!(r.purpose, Purpose::Probe))
+        {
+            // The last probes are still under way (a slow station): ask again later.
+            self.next_probe = Some(now.mono + self.cfg.come_back_interval);
             return;
         }
         // One subscribed name (any answer with one state will do), else the attribute list.
@@ -565,15 +590,15 @@ impl RestCore {
         st: VarState,
     ) {
         let channel = &self.cfg.channel;
-        let log_once = |var: Option<&mut Var>, what: &str, text: &str| {
-            let first = var.is_none_or(|v| !std::mem::replace(&mut v.logged, true));
-            if first {
+        let logged = &mut self.logged;
+        let mut log_once = |what: &str, text: &str| {
+            if logged.len() < MAX_LOGGED && logged.insert(key.clone()) {
+                let text = cut(text, 200);
                 warn!(%channel, variable = %key.variable, status = %text, "Asix.Evo REST: {what}");
             }
         };
         let vqt = if !st.read_succeeded {
             log_once(
-                self.vars.get_mut(&key),
                 "the station cannot read the variable (BAD Config Error)",
                 &st.status,
             );
@@ -583,7 +608,6 @@ impl RestCore {
                 Ok(value) => Vqt::new(value, Quality(st.quality), st.time.unwrap_or(now.wall)),
                 Err(why) => {
                     log_once(
-                        self.vars.get_mut(&key),
                         "the value does not fit the variable's type (BAD Config Error)",
                         &why,
                     );

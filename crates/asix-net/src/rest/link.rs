@@ -255,10 +255,11 @@ fn transport(e: reqwest::Error) -> FetchError {
     if e.is_timeout() {
         return FetchError::Timeout;
     }
-    FetchError::Transport(error_text(&e))
+    // The station is named by the log line; the URL (with its names) is left out.
+    FetchError::Transport(error_text(&e.without_url()))
 }
 
-/// An error and its causes on one line, without the URL, cut to a log line's size.
+/// An error and its causes on one line, cut to a log line's size.
 fn error_text(e: &reqwest::Error) -> String {
     let mut s = String::new();
     let mut cur: Option<&dyn std::error::Error> = Some(e);
@@ -271,9 +272,6 @@ fn error_text(e: &reqwest::Error) -> String {
             s.push_str(&t);
         }
         cur = x.source();
-    }
-    if let Some(url) = e.url() {
-        s = s.replace(url.as_str(), "");
     }
     if s.len() > 300 {
         let mut end = 300;
