@@ -653,22 +653,15 @@ impl RestCore {
             keys,
         } = r;
         // The items of the request: BAD Comm Failure keeping the last value.
-        for (pos, key, _) in &keys {
-            let last = self.vars.get(key).and_then(|v| v.last.clone());
-            let value = last.map_or(Value::Empty, |l| l.value);
-            let bad = Vqt::new(value, Quality::BAD_COMM_FAILURE, now.wall);
-            match purpose {
-                Purpose::Poll => {
-                    if let Some(v) = self.vars.get_mut(key) {
-                        if !v.down {
-                            v.down = true;
-                            self.updates.push((key.clone(), bad));
-                        }
-                    }
+        match purpose {
+            Purpose::Poll => self.mark_down(now, &keys),
+            Purpose::Read(id) => {
+                for (pos, key, _) in &keys {
+                    let bad = self.comm_failure(now, key);
+                    self.read_result(id, *pos, key.clone(), Ok(bad));
                 }
-                Purpose::Read(id) => self.read_result(id, *pos, key.clone(), Ok(bad)),
-                Purpose::Probe => {}
             }
+            Purpose::Probe => {}
         }
         let n = self.stations();
         if station == self.station && !self.resting {
@@ -702,6 +695,16 @@ impl RestCore {
                 if !self.vars.is_empty() {
                     self.next_poll = Some(now.mono + self.cfg.retry_interval);
                 }
+                // The poll's requests not sent yet wait for the next round too.
+                let queued = std::mem::take(&mut self.queue);
+                for (id, q) in queued {
+                    if matches!(q.purpose, Purpose::Poll) {
+                        self.poll_left = self.poll_left.saturating_sub(1);
+                        self.mark_down(now, &q.keys);
+                    } else {
+                        self.queue.push_back((id, q));
+                    }
+                }
             } else {
                 self.station = (self.station + 1) % n;
             }
@@ -722,6 +725,28 @@ impl RestCore {
                 .collect();
             if !keys.is_empty() {
                 self.enqueue(Purpose::Poll, self.station, keys);
+            }
+        }
+    }
+}
+
+impl RestCore {
+    /// BAD Comm Failure with the variable's last value.
+    fn comm_failure(&self, now: Now, key: &ItemKey) -> Vqt {
+        let last = self.vars.get(key).and_then(|v| v.last.as_ref());
+        let value = last.map_or(Value::Empty, |l| l.value.clone());
+        Vqt::new(value, Quality::BAD_COMM_FAILURE, now.wall)
+    }
+
+    /// Reports subscribed variables BAD Comm Failure (once until their next answer).
+    fn mark_down(&mut self, now: Now, keys: &[(usize, ItemKey, VarType)]) {
+        for (_, key, _) in keys {
+            let bad = self.comm_failure(now, key);
+            if let Some(v) = self.vars.get_mut(key) {
+                if !v.down {
+                    v.down = true;
+                    self.updates.push((key.clone(), bad));
+                }
             }
         }
     }

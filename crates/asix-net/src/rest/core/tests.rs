@@ -365,3 +365,22 @@ fn names_are_percent_encoded() {
         "/asix/v1/variable/value?name=A%20B&name=%C5%BB%26%3D%3F"
     );
 }
+
+#[test]
+fn the_pause_after_every_station_failed_holds_the_queued_requests_too() {
+    let mut t = T::new(cfg(1, 1, 1));
+    t.core.subscribe(t.at(0), keys(&["A", "B", "C"]), 100);
+    t.core.handle_timeout(t.at(0));
+    let g = t.gets();
+    assert_eq!(g.len(), 1, "one at a time");
+    t.fail(1, &g[0], FetchError::Timeout);
+    assert!(t.gets().is_empty(), "nothing asked during the pause");
+    let u = t.updates();
+    assert_eq!(u.len(), 3, "every variable BAD: {u:?}");
+    assert!(u
+        .iter()
+        .all(|(_, v)| v.quality == Quality::BAD_COMM_FAILURE));
+    assert_eq!(t.core.poll_timeout(), Some(t.at(1001).mono));
+    t.core.handle_timeout(t.at(1001));
+    assert_eq!(t.gets().len(), 1, "the next round");
+}
