@@ -132,7 +132,7 @@ fn copy(from: &Path, to: &Path) -> Result<(), String> {
 }
 
 /// Stages the demo install folder; returns it.
-fn stage(a: &build::Artifacts, rest: bool) -> Result<PathBuf, String> {
+fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
     let root = util::root();
     let dir = root.join("target/demo/ServerCTOPC");
     copy(&a.server, &dir.join("ServerCTOPC.exe"))?;
@@ -145,7 +145,7 @@ fn stage(a: &build::Artifacts, rest: bool) -> Result<PathBuf, String> {
         )?;
     }
     let ini = dir.join("ASIXConnect.ini");
-    std::fs::write(&ini, ini_text(rest)).map_err(|e| format!("{}: {e}", ini.display()))?;
+    std::fs::write(&ini, ini_text(false)).map_err(|e| format!("{}: {e}", ini.display()))?;
     println!("demo: staged {}", dir.display());
     Ok(dir)
 }
@@ -180,7 +180,17 @@ fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
 struct Sim(Child);
 
 impl Sim {
-    fn start(exe: &Path, db: &Path, rest: bool) -> Result<Sim, String> {
+    /// The simulator on the demo's asix ports.
+    fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
+        Self::spawn(exe, db, false)
+    }
+
+    /// The same, also serving the Asix.Evo REST API on the demo's REST port.
+    fn start_rest(exe: &Path, db: &Path) -> Result<Sim, String> {
+        Self::spawn(exe, db, true)
+    }
+
+    fn spawn(exe: &Path, db: &Path, rest: bool) -> Result<Sim, String> {
         let mut cmd = Command::new(exe);
         cmd.arg("--demo-db").arg(db).args([
             "--udp",
@@ -327,7 +337,11 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::ensure_prefix(&pfx)?;
     // A clean start: nothing of an earlier demo may hold the staged files or the ports.
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-    let dir = stage(&artifacts, rest)?;
+    let dir = stage(&artifacts)?;
+    if rest {
+        let ini = dir.join("ASIXConnect.ini");
+        std::fs::write(&ini, ini_text(true)).map_err(|e| format!("{}: {e}", ini.display()))?;
+    }
     if stop.load(Ordering::SeqCst) {
         return Err("interrupted".into());
     }
@@ -335,11 +349,12 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let mut sim = None;
     let result = (|| {
         register(&pfx, &dir)?;
-        sim = Some(Sim::start(
-            &sim_exe,
-            &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
-            rest,
-        )?);
+        let db = dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        sim = Some(if rest {
+            Sim::start_rest(&sim_exe, &db)?
+        } else {
+            Sim::start(&sim_exe, &db)?
+        });
         println!(
             "demo: starting `opcdiag demo` under Wine{}\n",
             if for_secs.is_none() {
