@@ -104,7 +104,7 @@ fn browse_read_subscribe_and_failover_through_asix_evo_rest() {
     )
     .unwrap();
     std::env::set_var("SERVERCTOPC_INI", &ini);
-    let _com = Apartment::mta().expect("MTA");
+    let com = Apartment::mta().expect("MTA");
     let server = Server::connect(PROGID).expect("connect");
     std::env::remove_var("SERVERCTOPC_INI");
 
@@ -192,13 +192,17 @@ fn browse_read_subscribe_and_failover_through_asix_evo_rest() {
         "no GOOD OnDataChange after the failover"
     );
 
+    drop((io, group, server));
+    drop(com);
+    assert!(
+        wait_until_no_server(Duration::from_secs(60)),
+        "the test's server did not exit"
+    );
     let log = read_log(&dir);
     assert!(
         log.contains("read-only"),
         "the log says the items are read-only:\n{log}"
     );
-    drop(io);
-    drop(group);
-    drop(server);
-    assert!(wait_until_no_server(Duration::from_secs(20)));
+    assert!(!log.contains("panicked"), "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
