@@ -301,7 +301,7 @@ impl RestCore {
     }
 
     /// Reads variables from the station now; completes with [`ClientEvent::ReadDone`].
-    pub fn read(&mut self, now: Now, id: RequestId, keys: Vec<(ItemKey, VarType)>) {
+    pub fn read(&mut self, _now: Now, id: RequestId, keys: Vec<(ItemKey, VarType)>) {
         if keys.is_empty() || self.stations() == 0 {
             let results = keys
                 .into_iter()
@@ -324,7 +324,6 @@ impl RestCore {
             .collect();
         self.enqueue(Purpose::Read(id), self.station, keys);
         self.start_requests();
-        let _ = now;
     }
 
     /// When [`RestCore::handle_timeout`] is next due.
@@ -359,8 +358,9 @@ impl RestCore {
         (!self.updates.is_empty()).then(|| ClientEvent::Updates(std::mem::take(&mut self.updates)))
     }
 
-    /// Requests under way (the shell's concurrency is this, bounded by `max_in_flight`
-    /// plus the probes).
+    /// Requests under way, probes included (the shell's concurrency: polls and reads
+    /// start only while fewer than `max_in_flight` are under way; a round of probes, one
+    /// per preferred station, may add to that).
     pub fn in_flight(&self) -> usize {
         self.in_flight.len()
     }
