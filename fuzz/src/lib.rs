@@ -33,6 +33,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("match_pattern", targets::match_pattern),
     ("format", targets::format),
     ("value_convert", targets::value_convert),
+    ("asix_rest_answer", targets::asix_rest_answer),
 ];
 
 /// The target called `name`.
@@ -47,6 +48,7 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
     match name {
         "asix_frame" => targets::sample_frames(),
         "asix_datagram" => targets::sample_datagrams(),
+        "asix_rest_answer" => targets::sample_rest_answers(),
         "ini" => vec![
             DEMO_INI.as_bytes().to_vec(),
             b"[Server]\r\nMinUpdateRate = 250\r\nLogLevel = debug\r\n[Channel:K1]\r\nItemsDatabase = a.csv\r\n[AsixCTServers]\r\nS1 = 10.0.0.1\r\n".to_vec(),

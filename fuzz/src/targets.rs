@@ -289,3 +289,76 @@ pub fn sample_datagrams() -> Vec<Vec<u8>> {
     });
     discovery::encode_datagram(&d).into_iter().collect()
 }
+
+/// Asix.Evo REST answers: the decoder of `variable/value` answers, the ISO 8601 times,
+/// and the REST link's core fed the decoded states (conversion to each variable type,
+/// quality, the batch check) as the answer to a poll of as many names.
+pub fn asix_rest_answer(data: &[u8]) {
+    use asix_net::rest::core::{convert, RestCore, RestCoreConfig};
+    use asix_net::rest::decode::{decode_values, format_iso8601, parse_iso8601};
+    if let Ok(s) = std::str::from_utf8(data) {
+        if let Some(t) = parse_iso8601(s) {
+            assert_eq!(
+                parse_iso8601(&format_iso8601(t)),
+                Some(t),
+                "time round trip"
+            );
+        }
+    }
+    let Ok(states) = decode_values(data) else {
+        return;
+    };
+    for s in &states {
+        for vt in [
+            VarType::EMPTY,
+            VarType::R4,
+            VarType::I2,
+            VarType::BOOL,
+            VarType::BSTR,
+        ] {
+            let _ = convert(s.value.clone(), vt);
+        }
+    }
+    let t0 = std::time::Instant::now();
+    let now = asix_net::client::core::Now {
+        mono: t0,
+        wall: Timestamp::from_unix_millis(0),
+    };
+    let mut core = RestCore::new(RestCoreConfig {
+        channel: "F".into(),
+        stations: vec!["http://a".into(), "http://b".into()],
+        max_batch: 1000,
+        max_in_flight: 1,
+        retry_interval: std::time::Duration::from_millis(10),
+        come_back_interval: std::time::Duration::from_millis(10),
+    });
+    let n = states.len().clamp(1, 64);
+    let keys = (0..n)
+        .map(|i| {
+            let name = states
+                .get(i)
+                .and_then(|s| s.id.clone())
+                .unwrap_or_else(|| format!("V{i}"));
+            (asix_model::ItemKey::new("", &name), VarType::R8)
+        })
+        .collect();
+    core.subscribe(now, keys, 100);
+    core.handle_timeout(now);
+    while let Some(g) = core.poll_get() {
+        core.handle_answer(now, g.id, Ok(states.clone()));
+    }
+    while core.poll_event().is_some() {}
+}
+
+/// Asix.Evo REST answers to start from: the shapes the server and the simulator give.
+pub fn sample_rest_answers() -> Vec<Vec<u8>> {
+    [
+        r#"[{"id":"A000","readSucceeded":true,"readStatusString":"","timeStamp":"2024-05-01T10:00:00.1234567Z","quality":192,"value":12.5}]"#,
+        r#"[{"Id":"A004","ReadSucceeded":false,"ReadStatusString":"Unknown variable","TimeStamp":"2024-05-01T12:00:00+02:00","Quality":0,"Value":null}]"#,
+        r#"[{"id":"A","value":true,"quality":216},{"id":"B","value":"tekst","quality":65},{"id":"C","value":-7,"quality":192}]"#,
+        r#"[]"#,
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect()
+}

@@ -11,6 +11,8 @@
 //!    `regsvr32 opc_ps.dll` and `ServerCTOPC.exe /RegServer` of the staged server;
 //! 4. asix-sim in the background serving the demo database; `opcdiag demo` in the
 //!    foreground: status, plant tree, live values;
+//!    With `--rest` the plant comes from asix-sim's Asix.Evo REST server instead
+//!    (`AsixEvoRest` in the basic channel; `docs/asix-evo-rest.md`);
 //! 5. on Ctrl+C (or when opcdiag exits, or after `--for SECONDS`): opcdiag is asked to
 //!    stop (it removes its group), asix-sim quits (killed if it does not), and
 //!    `wineserver -k` ends every Wine process of the demo prefix (the server too).
@@ -35,24 +37,36 @@ use std::time::{Duration, Instant};
 /// answer, nor the demo disturb it.
 const DISCOVERY_PORT: u16 = 48170;
 const DATA_PORT: u16 = 48171;
+/// The port of asix-sim's Asix.Evo REST server with `--rest`, on loopback.
+const REST_PORT: u16 = 48172;
 
 const USAGE: &str = "\
-usage: cargo xtask demo [--for SECONDS]
+usage: cargo xtask demo [--for SECONDS] [--rest]
 
 Builds everything, stages target/demo/ServerCTOPC/ (server, opc_ps.dll, opcdiag, the demo
 database, an ASIXConnect.ini reading the plant over the asix network), registers it in the
 Wine prefix target/wine/demo-prefix, starts the asix simulator (asix-sim) on loopback and
 runs `opcdiag demo`: the server status, the plant tree and live values. Ctrl+C stops
-everything; --for SECONDS stops after SECONDS (for a non-interactive run).
+everything; --for SECONDS stops after SECONDS (for a non-interactive run). --rest reads
+the plant through asix-sim's Asix.Evo REST server instead of the asix network (the items
+are then read-only).
 ";
+
+/// What the command line asks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Options {
+    for_secs: Option<u64>,
+    rest: bool,
+}
 
 pub fn prefix() -> PathBuf {
     util::root().join("target/wine/demo-prefix")
 }
 
-/// Options: `--for SECONDS`.
-fn parse(args: &[String]) -> Result<Option<u64>, String> {
+/// Options: `--for SECONDS`, `--rest`.
+fn parse(args: &[String]) -> Result<Options, String> {
     let mut for_secs = None;
+    let mut rest = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -65,6 +79,7 @@ fn parse(args: &[String]) -> Result<Option<u64>, String> {
                         .ok_or_else(|| format!("--for: expected whole seconds > 0, got {v:?}"))?,
                 );
             }
+            "--rest" => rest = true,
             "-h" | "--help" => {
                 print!("{USAGE}");
                 std::process::exit(0);
@@ -72,11 +87,19 @@ fn parse(args: &[String]) -> Result<Option<u64>, String> {
             other => return Err(format!("demo: unknown argument {other:?}\n{USAGE}")),
         }
     }
-    Ok(for_secs)
+    Ok(Options { for_secs, rest })
 }
 
-/// The ASIXConnect.ini of the demo install folder.
-pub fn ini_text() -> String {
+/// The ASIXConnect.ini of the demo install folder (`rest`: the basic channel reads from
+/// asix-sim's Asix.Evo REST server).
+pub fn ini_text(rest: bool) -> String {
+    let rest_lines = if rest {
+        format!(
+            "; The plant through asix-sim's Asix.Evo REST server (read-only items).\nAsixEvoRest = http://127.0.0.1:{REST_PORT}\n"
+        )
+    } else {
+        String::new()
+    };
     format!(
         "\
 ; ASIXConnect.ini written by `cargo xtask demo`: the demo plant Wytwornia_Kwasu, read over
@@ -95,7 +118,7 @@ ReconnectInterval = 1000
 ItemsDatabase = demo/wytwornia_kwasu/wytwornia_kwasu.zez
 CheckLimits = tak
 CheckControlVariables = tak
-"
+{rest_lines}"
     )
 }
 
@@ -122,7 +145,7 @@ pub fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
         )?;
     }
     let ini = dir.join("ASIXConnect.ini");
-    std::fs::write(&ini, ini_text()).map_err(|e| format!("{}: {e}", ini.display()))?;
+    std::fs::write(&ini, ini_text(false)).map_err(|e| format!("{}: {e}", ini.display()))?;
     println!("demo: staged {}", dir.display());
     Ok(dir)
 }
@@ -157,16 +180,28 @@ fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
 pub struct Sim(Child);
 
 impl Sim {
+    /// The simulator on the demo's asix ports.
     pub fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
-        let mut child = Command::new(exe)
-            .arg("--demo-db")
-            .arg(db)
-            .args([
-                "--udp",
-                &format!("127.0.0.1:{DISCOVERY_PORT}"),
-                "--tcp",
-                &format!("127.0.0.1:{DATA_PORT}"),
-            ])
+        Self::spawn(exe, db, false)
+    }
+
+    /// The same, also serving the Asix.Evo REST API on the demo's REST port.
+    fn start_rest(exe: &Path, db: &Path) -> Result<Sim, String> {
+        Self::spawn(exe, db, true)
+    }
+
+    fn spawn(exe: &Path, db: &Path, rest: bool) -> Result<Sim, String> {
+        let mut cmd = Command::new(exe);
+        cmd.arg("--demo-db").arg(db).args([
+            "--udp",
+            &format!("127.0.0.1:{DISCOVERY_PORT}"),
+            "--tcp",
+            &format!("127.0.0.1:{DATA_PORT}"),
+        ]);
+        if rest {
+            cmd.args(["--rest", &format!("127.0.0.1:{REST_PORT}")]);
+        }
+        let mut child = cmd
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             // Its own process group: Ctrl+C in the terminal reaches xtask and opcdiag, not
@@ -285,7 +320,7 @@ fn run_opcdiag(
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
-    let for_secs = parse(args)?;
+    let Options { for_secs, rest } = parse(args)?;
     // Ctrl+C must not end xtask before it has cleaned up: it only raises this flag (the
     // terminal's SIGINT reaches opcdiag too, which stops by itself).
     let stop = Arc::new(AtomicBool::new(false));
@@ -303,6 +338,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
     // A clean start: nothing of an earlier demo may hold the staged files or the ports.
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     let dir = stage(&artifacts)?;
+    if rest {
+        let ini = dir.join("ASIXConnect.ini");
+        std::fs::write(&ini, ini_text(true)).map_err(|e| format!("{}: {e}", ini.display()))?;
+    }
     if stop.load(Ordering::SeqCst) {
         return Err("interrupted".into());
     }
@@ -310,10 +349,12 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let mut sim = None;
     let result = (|| {
         register(&pfx, &dir)?;
-        sim = Some(Sim::start(
-            &sim_exe,
-            &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
-        )?);
+        let db = dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        sim = Some(if rest {
+            Sim::start_rest(&sim_exe, &db)?
+        } else {
+            Sim::start(&sim_exe, &db)?
+        });
         println!(
             "demo: starting `opcdiag demo` under Wine{}\n",
             if for_secs.is_none() {
@@ -343,7 +384,8 @@ mod tests {
 
     #[test]
     fn the_ini_reads_the_demo_database_over_the_loopback_asix_network() {
-        let ini = ini_text();
+        let ini = ini_text(false);
+        assert!(!ini.contains("AsixEvoRest"));
         for line in [
             "SimulateCurrentData = nie",
             "BroadcastAddress = 127.0.0.1",
@@ -368,7 +410,13 @@ mod tests {
             )
             .unwrap();
         }
-        std::fs::write(dir.join("ASIXConnect.ini"), ini_text()).unwrap();
+        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(true)).unwrap();
+        let (rest, _) = asix_model::load_config_file(&dir.join("ASIXConnect.ini")).unwrap();
+        assert_eq!(
+            rest.basic().asix_evo_rest,
+            [format!("http://127.0.0.1:{REST_PORT}")]
+        );
+        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(false)).unwrap();
         let loaded = asix_model::load_config_file(&dir.join("ASIXConnect.ini"));
         let (cfg, warnings) = loaded.unwrap();
         assert!(warnings.is_empty(), "{warnings:?}");
@@ -385,8 +433,14 @@ mod tests {
 
     #[test]
     fn for_takes_whole_seconds() {
-        assert_eq!(parse(&[]), Ok(None));
-        assert_eq!(parse(&["--for".into(), "15".into()]), Ok(Some(15)));
+        assert_eq!(parse(&[]), Ok(Options::default()));
+        assert_eq!(
+            parse(&["--for".into(), "15".into(), "--rest".into()]),
+            Ok(Options {
+                for_secs: Some(15),
+                rest: true
+            })
+        );
         assert!(parse(&["--for".into(), "0".into()]).is_err());
         assert!(parse(&["--for".into()]).is_err());
         assert!(parse(&["--bogus".into()]).is_err());

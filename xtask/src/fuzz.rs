@@ -29,6 +29,7 @@ const TARGETS: &[&str] = &[
     "match_pattern",
     "format",
     "value_convert",
+    "asix_rest_answer",
 ];
 
 pub fn run(args: &[String]) -> Result<(), String> {

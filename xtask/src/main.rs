@@ -10,6 +10,7 @@ mod dist;
 mod fuzz;
 mod msi;
 mod proxy;
+mod rest_stations;
 mod scale;
 mod setup;
 mod soak;

@@ -11,7 +11,8 @@
 //!    third-party client's builds (both bitnesses, in `target/thirdparty`, which cargo
 //!    locks apart from `target/`) and step 8;
 //! 5. registration of the proxy/stub DLLs (64-bit and 32-bit) and the server in the
-//!    project's Wine prefix;
+//!    project's Wine prefix; two native `asix-sim --rest` stations for the Asix.Evo REST
+//!    test (`rest_stations.rs`), up until the end-to-end tests end;
 //! 6. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner) and the COM
 //!    crate's unit tests (Windows-only), then the third-party client;
 //! 7. the end-to-end tests again as a **32-bit client** ([`E2E_32`]: built for
@@ -35,7 +36,7 @@
 
 use crate::arch::Arch;
 use crate::wine::{self, forgiven, guard};
-use crate::{build, fuzz, setup, util};
+use crate::{build, fuzz, rest_stations, setup, util};
 use std::time::Duration;
 
 /// The whole end-to-end run may not take longer than this.
@@ -88,6 +89,8 @@ fn run_all(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
+        // For tests/tests/rest_source.rs (both bitnesses): ended when the phase ends.
+        let _stations = rest_stations::Stations::start()?;
         println!("test: end-to-end tests under Wine (one binary at a time, wine/guard.rs)");
         let units = units_64()?;
         let plan = guard::Plan {
@@ -226,6 +229,7 @@ pub const E2E_32: &[&str] = &[
     "ops_metrics",
     "ops_slow_clients",
     "registration",
+    "rest_source",
     "server_browse",
     "server_groups",
     "server_itemio",
@@ -359,6 +363,7 @@ fn e2e_only(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
+        let _stations = rest_stations::Stations::start()?;
         let units = if !cargo_args.is_empty() {
             vec![guard::Unit {
                 label: cargo_args.join(" "),

@@ -78,6 +78,12 @@ pub const CHANNEL_OPTIONS: &[&str] = &[
     "AlarmsSystemNetworkName",
     "ReportsDirectory",
     "IniFilePath",
+    "AsixEvoRest",
+    "AsixEvoUser",
+    "AsixEvoPassword",
+    "AsixEvoHeader",
+    "AsixEvoPollTimeout",
+    "AsixEvoMaxBatch",
 ];
 
 /// The language the server uses when a client sets none.
@@ -276,6 +282,49 @@ pub struct ChannelOptions {
     pub reports_directory: Option<String>,
     /// `IniFilePath`: the asix application's ini file.
     pub ini_file_path: Option<String>,
+    /// `AsixEvoRest`: the base URLs (`http://` or `https://`, no credential in them) of
+    /// the Asix.Evo REST servers the channel reads from, in order of preference
+    /// (hot-standby stations); empty: the channel uses the asix network.
+    pub asix_evo_rest: Vec<String>,
+    /// `AsixEvoUser`: the user of HTTP basic authentication.
+    pub asix_evo_user: Option<String>,
+    /// `AsixEvoPassword`: its password.
+    pub asix_evo_password: Option<Secret>,
+    /// `AsixEvoHeader`: `Name: value`, a header sent with every request (an API key).
+    pub asix_evo_header: Option<Secret>,
+    /// `AsixEvoPollTimeout`, ms (default 3000, 100..=600000): the longest a poll request
+    /// may take, body included.
+    pub asix_evo_poll_timeout_ms: u32,
+    /// `AsixEvoMaxBatch` (default 100, 1..=1000): the most names in one request.
+    pub asix_evo_max_batch: u32,
+}
+
+impl ChannelOptions {
+    /// Does the channel read from Asix.Evo REST servers (its items are then read-only)?
+    pub fn is_asix_evo_rest(&self) -> bool {
+        !self.asix_evo_rest.is_empty()
+    }
+}
+
+/// A credential from the configuration: its `Debug` shows no character of it, so that no
+/// log line or error message built from the options can hold it.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(String);
+
+impl Secret {
+    pub fn new(s: impl Into<String>) -> Self {
+        Secret(s.into())
+    }
+    /// The credential itself, for the one place that sends it.
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Secret(..)")
+    }
 }
 
 impl Default for ChannelOptions {
@@ -294,6 +343,12 @@ impl Default for ChannelOptions {
             alarms_system_network_name: None,
             reports_directory: None,
             ini_file_path: None,
+            asix_evo_rest: Vec::new(),
+            asix_evo_user: None,
+            asix_evo_password: None,
+            asix_evo_header: None,
+            asix_evo_poll_timeout_ms: 3000,
+            asix_evo_max_batch: 100,
         }
     }
 }
@@ -635,9 +690,78 @@ fn apply_channel_option(
         "alarmssystemnetworkname" => o.alarms_system_network_name = text(e),
         "reportsdirectory" => o.reports_directory = text(e),
         "inifilepath" => o.ini_file_path = text(e),
+        "asixevorest" => o.asix_evo_rest = rest_urls(file, e)?,
+        "asixevouser" => o.asix_evo_user = text(e),
+        "asixevopassword" => o.asix_evo_password = text(e).map(Secret),
+        "asixevoheader" => {
+            o.asix_evo_header = match text(e) {
+                None => None,
+                Some(h) => match h.split_once(':') {
+                    Some((name, _)) if is_header_name(name.trim()) => Some(Secret(h)),
+                    // The value is not quoted back: it is a credential.
+                    _ => {
+                        return Err(ConfigError {
+                            kind: ConfigErrorKind::Invalid,
+                            file: file.to_owned(),
+                            line: e.line,
+                            option: Some(e.key.clone()),
+                            message: "invalid value: expected `Name: value` (a header name of letters, digits and `-`)".into(),
+                        })
+                    }
+                },
+            }
+        }
+        "asixevopolltimeout" => set_number(&mut o.asix_evo_poll_timeout_ms, file, e, 100, 600_000)?,
+        "asixevomaxbatch" => set_number(&mut o.asix_evo_max_batch, file, e, 1, 1000)?,
         _ => return Ok(false),
     }
     Ok(true)
+}
+
+/// An HTTP header name (RFC 9110 token characters).
+fn is_header_name(s: &str) -> bool {
+    !s.is_empty()
+        && s.bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"!#$%&'*+-.^_`|~".contains(&b))
+}
+
+/// `AsixEvoRest`: a comma-separated list of `http://` or `https://` base URLs. A URL with
+/// a user or password in it is refused (without quoting it): the credential has options
+/// of its own, which no log line shows.
+fn rest_urls(file: &str, e: &IniEntry) -> Result<Vec<String>, ConfigError> {
+    let mut out = Vec::new();
+    for u in split_list(&e.value) {
+        let lower = u.to_ascii_lowercase();
+        let rest = lower
+            .strip_prefix("http://")
+            .or_else(|| lower.strip_prefix("https://"));
+        let Some(rest) = rest else {
+            return Err(invalid(
+                file,
+                e,
+                "http:// or https:// base URLs separated by commas",
+            ));
+        };
+        let authority = rest.split(['/', '?', '#']).next().unwrap_or("");
+        if authority.contains('@') {
+            return Err(ConfigError {
+                kind: ConfigErrorKind::Invalid,
+                file: file.to_owned(),
+                line: e.line,
+                option: Some(e.key.clone()),
+                message: "a URL holds a credential: give it in AsixEvoUser/AsixEvoPassword or AsixEvoHeader instead".into(),
+            });
+        }
+        if authority.is_empty() || u.contains(char::is_whitespace) {
+            return Err(invalid(
+                file,
+                e,
+                "http:// or https:// base URLs separated by commas",
+            ));
+        }
+        out.push(u.trim_end_matches('/').to_owned());
+    }
+    Ok(out)
 }
 
 fn server_list(
@@ -763,6 +887,65 @@ mod tests {
 
     fn parse(text: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
         parse_config(text.as_bytes(), "ASIXConnect.ini")
+    }
+
+    #[test]
+    fn asix_evo_rest_options() {
+        let (c, w) = parse(
+            "[Channel:EVO]\nAsixEvoRest = http://evo1:8080/, HTTPS://evo2\nAsixEvoUser = opc\nAsixEvoPassword = s3cr3t-pw\nAsixEvoHeader = X-Api-Key: k3y-s3cr3t\nAsixEvoPollTimeout = 1500\nAsixEvoMaxBatch = 20\n[Channel:NET]\n",
+        )
+        .unwrap();
+        assert!(w.is_empty(), "{w:?}");
+        let o = &c.channels["EVO"];
+        assert_eq!(o.asix_evo_rest, ["http://evo1:8080", "HTTPS://evo2"]);
+        assert!(o.is_asix_evo_rest());
+        assert_eq!(o.asix_evo_user.as_deref(), Some("opc"));
+        assert_eq!(
+            o.asix_evo_password.as_ref().map(Secret::expose),
+            Some("s3cr3t-pw")
+        );
+        assert_eq!(
+            o.asix_evo_header.as_ref().map(Secret::expose),
+            Some("X-Api-Key: k3y-s3cr3t")
+        );
+        assert_eq!(
+            (o.asix_evo_poll_timeout_ms, o.asix_evo_max_batch),
+            (1500, 20)
+        );
+        let n = &c.channels["NET"];
+        assert!(!n.is_asix_evo_rest());
+        assert_eq!(
+            (n.asix_evo_poll_timeout_ms, n.asix_evo_max_batch),
+            (3000, 100)
+        );
+        // No credential in the options' Debug (what a log line of them would show).
+        let dbg = format!("{c:?}");
+        assert!(
+            !dbg.contains("s3cr3t") && dbg.contains("Secret(..)"),
+            "{dbg}"
+        );
+    }
+
+    #[test]
+    fn invalid_asix_evo_rest_values_never_quote_a_credential() {
+        for (key, value, secret) in [
+            ("AsixEvoRest", "ftp://x", None),
+            ("AsixEvoRest", "evo1:8080", None),
+            ("AsixEvoRest", "http://", None),
+            ("AsixEvoRest", "http://user:pa55word@evo1", Some("pa55word")),
+            ("AsixEvoHeader", "no colon pa55word", Some("pa55word")),
+            ("AsixEvoHeader", "Bad Name: pa55word", Some("pa55word")),
+            ("AsixEvoPollTimeout", "99", None),
+            ("AsixEvoMaxBatch", "0", None),
+            ("AsixEvoMaxBatch", "1001", None),
+        ] {
+            let err = parse(&format!("[Channel:E]\n{key} = {value}\n")).unwrap_err();
+            assert_eq!(err.option.as_deref(), Some(key), "{key}={value}");
+            if let Some(s) = secret {
+                assert!(!err.to_string().contains(s), "{err}");
+                assert!(!format!("{err:?}").contains(s), "{err:?}");
+            }
+        }
     }
 
     #[test]

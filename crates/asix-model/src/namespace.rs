@@ -232,8 +232,27 @@ impl AsixNamespace {
         }
     }
 
-    /// Resolves an item and its attribute values (see the module documentation).
+    /// Resolves an item and its attribute values (see the module documentation). The
+    /// items of a channel that reads from Asix.Evo REST servers are read-only
+    /// (`OPC_READABLE`): the REST API documents no write request.
     pub fn resolve_with_attributes(
+        &self,
+        item_id: &str,
+        access_path: &str,
+    ) -> OpcResult<(ItemDef, PropertyAttributes)> {
+        let (mut def, attrs) = self.resolve_item(item_id, access_path)?;
+        if self
+            .config
+            .resolve_channel(access_path)?
+            .options
+            .is_asix_evo_rest()
+        {
+            def.access_rights &= !OPC_WRITEABLE;
+        }
+        Ok((def, attrs))
+    }
+
+    fn resolve_item(
         &self,
         item_id: &str,
         access_path: &str,
@@ -726,6 +745,35 @@ mod tests {
 
     fn demo() -> AsixNamespace {
         crate::embedded_demo().expect("the embedded demo").namespace
+    }
+
+    #[test]
+    fn items_of_an_asix_evo_rest_channel_are_read_only() {
+        let base = demo();
+        let mut cfg = base.config().clone();
+        let mut evo = cfg.basic().clone();
+        evo.asix_evo_rest = vec!["http://evo".into()];
+        cfg.channels.insert("EVO".into(), evo);
+        let mut ns = AsixNamespace::new(cfg);
+        ns.set_database("*", base.database_state("*").clone());
+        ns.set_database("EVO", base.database_state("*").clone());
+        let writable = base
+            .database("*")
+            .unwrap()
+            .variables
+            .views()
+            .map(|v| v.public_name().to_owned())
+            .find(|n| {
+                ns.resolve_with_attributes(n, "*")
+                    .is_ok_and(|(d, _)| d.access_rights == OPC_READABLE | OPC_WRITEABLE)
+            })
+            .expect("a writable demo variable");
+        for id in [writable.as_str(), "ASMEN.K.v.ui1"] {
+            let (net, _) = ns.resolve_with_attributes(id, "*").unwrap();
+            assert_eq!(net.access_rights, OPC_READABLE | OPC_WRITEABLE, "{id}");
+            let (rest, _) = ns.resolve_with_attributes(id, "EVO").unwrap();
+            assert_eq!(rest.access_rights, OPC_READABLE, "{id}");
+        }
     }
 
     #[test]

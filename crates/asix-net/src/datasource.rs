@@ -20,7 +20,7 @@ use asix_model::{ServerOptions, ServerSelection};
 use ctopc_core::diagnostics::{ChannelStatus, LinkState};
 use ctopc_core::model::datasource::ItemVqt;
 use ctopc_core::source::{Backend, Wake};
-use ctopc_core::{OpcError, Quality, Timestamp};
+use ctopc_core::{OpcError, Quality, Timestamp, VarType};
 use tokio::runtime::{Handle, Runtime};
 use tracing::{info, warn};
 
@@ -30,6 +30,7 @@ use crate::config::{ClientConfig, ConnectOptions, ExternalServerLists};
 use crate::naming::asix_client_name;
 use crate::proto::frame::ReadSource;
 use crate::proto::DEFAULT_DISCOVERY_PORT;
+use crate::rest::{RestLink, RestSettings};
 use crate::Vqt;
 use asix_model::ItemKey;
 
@@ -42,6 +43,11 @@ pub trait Resolver: Send {
     fn namespace(&self) -> Arc<AsixNamespace>;
     /// The client configuration for an AsixConnect channel.
     fn client_config(&self, channel: &str) -> ClientConfig;
+    /// The REST link settings of a channel that reads from Asix.Evo REST servers
+    /// (`AsixEvoRest`); `None`: the channel uses the asix network.
+    fn rest_settings(&self, _channel: &str) -> Option<RestSettings> {
+        None
+    }
 }
 
 /// The client configuration the `[Server]` options of `ASIXConnect.ini` give: `ClientName`
@@ -117,6 +123,17 @@ impl Resolver for NamespaceResolver {
         }
         c
     }
+
+    fn rest_settings(&self, channel: &str) -> Option<RestSettings> {
+        let cfg = self.ns.config();
+        let rc = cfg.resolve_channel(channel).ok()?;
+        crate::rest::settings_from_options(
+            rc.name,
+            rc.options,
+            cfg.server.source_timeout_ms,
+            std::time::Duration::from_millis(u64::from(cfg.server.reconnect_interval_ms.max(100))),
+        )
+    }
 }
 
 /// An asix variable on the client of an AsixConnect channel: the network's handle of a
@@ -144,6 +161,16 @@ impl<R: Resolver> AsixBackend<NetSource<R>> {
     }
 }
 
+/// How an AsixConnect channel reaches its data: the asix network, or Asix.Evo REST
+/// servers.
+enum Link {
+    Asix(AsixClient),
+    Rest(RestLink),
+}
+
+/// The warning of a refused write to a channel that reads from Asix.Evo REST servers.
+const REST_READ_ONLY: &str = "write refused (OPC_E_BADRIGHTS): the items of a channel that reads from Asix.Evo REST servers are read-only, because the Asix.Evo REST API documents no write request";
+
 /// The asix network as a raw variable source: one [`AsixClient`] per AsixConnect channel
 /// (started when first used), variables as [`NetVar`]s, device requests in one part per
 /// channel.
@@ -153,7 +180,9 @@ pub struct NetSource<R: Resolver> {
     /// The runtime when the source owns one ([`NetSource::with_own_runtime`]).
     own_rt: Option<Runtime>,
     wake: Arc<dyn Wake>,
-    clients: HashMap<Arc<str>, AsixClient>,
+    /// The namespace (the canonical types of REST variables).
+    ns: Arc<AsixNamespace>,
+    clients: HashMap<Arc<str>, Link>,
     tx: mpsc::Sender<(Arc<str>, ClientEvent)>,
     rx: mpsc::Receiver<(Arc<str>, ClientEvent)>,
     /// (client channel, client request) -> raw request.
@@ -173,6 +202,7 @@ impl<R: Resolver> NetSource<R> {
     pub fn new(resolver: R, rt: Handle, wake: Arc<dyn Wake>) -> Self {
         let (tx, rx) = mpsc::channel();
         NetSource {
+            ns: resolver.namespace(),
             resolver,
             rt,
             own_rt: None,
@@ -198,9 +228,8 @@ impl<R: Resolver> NetSource<R> {
         Ok(s)
     }
 
-    fn client(&mut self, channel: &Arc<str>) -> Option<&AsixClient> {
+    fn client(&mut self, channel: &Arc<str>) -> Option<&Link> {
         if !self.clients.contains_key(channel) {
-            let cfg = self.resolver.client_config(channel);
             let tx = self.tx.clone();
             let wake = self.wake.clone();
             let ch = channel.clone();
@@ -208,10 +237,26 @@ impl<R: Resolver> NetSource<R> {
                 let _ = tx.send((ch.clone(), ev));
                 wake.wake();
             };
-            match AsixClient::start(cfg, sink, &self.rt) {
-                Ok(c) => {
-                    info!(channel = %channel, "asix client started");
-                    self.clients.insert(channel.clone(), c);
+            let link = match self.resolver.rest_settings(channel) {
+                Some(s) => {
+                    let stations = s.core.stations.join(", ");
+                    RestLink::start(s, sink, &self.rt)
+                        .map(|l| {
+                            info!(channel = %channel, %stations, "Asix.Evo REST link started; the channel's items are read-only (the Asix.Evo REST API documents no write request)");
+                            Link::Rest(l)
+                        })
+                        .map_err(|e| e.to_string())
+                }
+                None => AsixClient::start(self.resolver.client_config(channel), sink, &self.rt)
+                    .map(|c| {
+                        info!(channel = %channel, "asix client started");
+                        Link::Asix(c)
+                    })
+                    .map_err(|e| e.to_string()),
+            };
+            match link {
+                Ok(l) => {
+                    self.clients.insert(channel.clone(), l);
                 }
                 Err(e) => {
                     warn!(channel = %channel, error = %e, "asix client cannot start");
@@ -220,6 +265,26 @@ impl<R: Resolver> NetSource<R> {
             }
         }
         self.clients.get(channel)
+    }
+
+    /// The canonical type of a variable of a REST channel (EMPTY, as answered, when the
+    /// channel's database does not know it).
+    fn var_type(&self, channel: &str, key: &ItemKey) -> VarType {
+        self.ns
+            .database(channel)
+            .and_then(|db| {
+                db.find_real_index(&key.variable)
+                    .map(|i| db.variables.view(i).data_type())
+            })
+            .unwrap_or(VarType::EMPTY)
+    }
+
+    /// Does the channel read from Asix.Evo REST servers?
+    fn is_rest(&self, channel: &str) -> bool {
+        match self.clients.get(channel) {
+            Some(l) => matches!(l, Link::Rest(_)),
+            None => self.resolver.rest_settings(channel).is_some(),
+        }
     }
 
     fn event(&mut self, channel: Arc<str>, ev: ClientEvent, out: &mut RawOutput<NetVar>) {
@@ -314,8 +379,14 @@ impl<R: Resolver> VariableSource for NetSource<R> {
     /// until the first report), its subscribed variables.
     fn channels(&self, subscribed: &mut dyn Iterator<Item = &NetVar>) -> Vec<ChannelStatus> {
         let mut counts: BTreeMap<&str, u64> = BTreeMap::new();
-        for (_, key) in subscribed {
-            *counts.entry(&key.channel).or_default() += 1;
+        for (channel, key) in subscribed {
+            // A REST link reports under its AsixConnect channel, an asix client under
+            // the asix channels of its variables.
+            let name = match self.clients.get(channel) {
+                Some(Link::Rest(_)) => &**channel,
+                _ => &*key.channel,
+            };
+            *counts.entry(name).or_default() += 1;
         }
         for c in self.links.keys() {
             counts.entry(c).or_default();
@@ -343,8 +414,22 @@ impl<R: Resolver> VariableSource for NetSource<R> {
             by.entry((channel, rate)).or_default().push(key);
         }
         for ((channel, rate), keys) in by {
-            if let Some(c) = self.client(&channel) {
-                c.subscribe(keys, rate);
+            let typed: Vec<(ItemKey, VarType)> = if self.is_rest(&channel) {
+                keys.into_iter()
+                    .map(|k| {
+                        let t = self.var_type(&channel, &k);
+                        (k, t)
+                    })
+                    .collect()
+            } else {
+                keys.into_iter().map(|k| (k, VarType::EMPTY)).collect()
+            };
+            match self.client(&channel) {
+                Some(Link::Asix(c)) => {
+                    c.subscribe(typed.into_iter().map(|(k, _)| k).collect(), rate)
+                }
+                Some(Link::Rest(l)) => l.subscribe(typed, rate),
+                None => {}
             }
         }
     }
@@ -355,8 +440,10 @@ impl<R: Resolver> VariableSource for NetSource<R> {
             by.entry(channel).or_default().push(key);
         }
         for (channel, keys) in by {
-            if let Some(c) = self.clients.get(&channel) {
-                c.unsubscribe(keys);
+            match self.clients.get(&channel) {
+                Some(Link::Asix(c)) => c.unsubscribe(keys),
+                Some(Link::Rest(l)) => l.unsubscribe(keys),
+                None => {}
             }
         }
     }
@@ -367,14 +454,30 @@ impl<R: Resolver> VariableSource for NetSource<R> {
             return;
         };
         let n = vars.len();
-        let keys = vars.into_iter().map(|(_, k)| k).collect();
-        match self.client(&channel) {
-            Some(c) => {
-                let rid = c.read(keys, ReadSource::Device);
-                self.parts.insert((channel, rid), id);
+        let rest = self.is_rest(&channel);
+        let keys: Vec<(ItemKey, VarType)> = vars
+            .into_iter()
+            .map(|(_, k)| {
+                let t = if rest {
+                    self.var_type(&channel, &k)
+                } else {
+                    VarType::EMPTY
+                };
+                (k, t)
+            })
+            .collect();
+        let rid = match self.client(&channel) {
+            Some(Link::Asix(c)) => c.read(
+                keys.into_iter().map(|(k, _)| k).collect(),
+                ReadSource::Device,
+            ),
+            Some(Link::Rest(l)) => l.read(keys),
+            None => {
+                self.ready.reads.push((id, vec![Err(OpcError::NetInit); n]));
+                return;
             }
-            None => self.ready.reads.push((id, vec![Err(OpcError::NetInit); n])),
-        }
+        };
+        self.parts.insert((channel, rid), id);
     }
 
     fn write(&mut self, now: Timestamp, id: RawId, items: Vec<(NetVar, ItemVqt)>) {
@@ -386,10 +489,20 @@ impl<R: Resolver> VariableSource for NetSource<R> {
         let simple = items
             .iter()
             .all(|(_, v)| v.quality.is_none() && v.timestamp.is_none());
-        let Some(c) = self.client(&channel) else {
-            let e = Err(OpcError::WriteErrorNetworkServerNotFound);
-            self.ready.writes.push((id, vec![e; n]));
-            return;
+        let c = match self.client(&channel) {
+            Some(Link::Asix(c)) => c,
+            Some(Link::Rest(_)) => {
+                warn!(%channel, items = n, "{REST_READ_ONLY}");
+                self.ready
+                    .writes
+                    .push((id, vec![Err(OpcError::BadRights); n]));
+                return;
+            }
+            None => {
+                let e = Err(OpcError::WriteErrorNetworkServerNotFound);
+                self.ready.writes.push((id, vec![e; n]));
+                return;
+            }
         };
         let rid = if simple {
             c.write(items.into_iter().map(|((_, k), v)| (k, v.value)).collect())

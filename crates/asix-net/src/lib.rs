@@ -27,6 +27,7 @@ pub mod discovery;
 pub mod naming;
 pub mod pipeline;
 pub mod proto;
+pub mod rest;
 pub mod sim;
 
 pub use sim::inproc;

@@ -2,7 +2,12 @@
 //!
 //! Runs until `quit` on stdin, `--run-for-ms` elapses, or the process is killed. Other stdin
 //! lines are control commands (`drop-links`, `stop-answering`, `answer`, `fail-source`,
-//! `restore-source`, `status`); each is answered with one line on stdout.
+//! `restore-source`, `status`, and with `--rest` `rest-mode SWITCHES`); each is answered
+//! with one line on stdout.
+//!
+//! `--rest ADDR` also serves the plant through the Asix.Evo REST API
+//! (`asix_net::sim::rest`), with its misbehaviour switches from `--rest-mode`, stdin or
+//! `POST /sim/mode?...`.
 
 use std::io::BufRead;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
@@ -38,8 +43,21 @@ usage: asix-sim [options]
   --extra-clients N       add N to the announced client count
   --driver-delay-ms N     delay of reads from the driver (default 20)
   --run-for-ms N          exit after N ms
-stdin commands: drop-links stop-answering answer fail-source restore-source status quit
+  --rest ADDR             also serve the Asix.Evo REST API on ADDR (e.g. 127.0.0.1:0); the
+                          asix ports then default to ephemeral loopback ports
+  --rest-mode SWITCHES    REST misbehaviour: fail=1 slow_ms=N single=1 malformed=1 huge=1
+                          slow_body_ms=N redirect=1 (joined with &)
+stdin commands: drop-links stop-answering answer fail-source restore-source status
+                rest-mode SWITCHES quit
 ";
+
+/// What the command line asks besides the simulator's settings.
+#[derive(Default)]
+struct Extra {
+    run_for: Option<u64>,
+    rest: Option<SocketAddr>,
+    rest_mode: Option<String>,
+}
 
 fn addr(s: &str) -> Result<SocketAddr, String> {
     if let Ok(p) = s.parse::<u16>() {
@@ -90,13 +108,14 @@ fn read_var_list(text: &str) -> Result<Vec<VarSpec>, String> {
     Ok(out)
 }
 
-fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
+fn parse(args: Vec<String>) -> Result<(SimConfig, Extra), String> {
     let mut cfg = SimConfig::new("ASIX-SIM");
     cfg.host_name = asix_net::computer_name();
     cfg.discovery_addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), DEFAULT_DISCOVERY_PORT);
     cfg.tcp_addr = SocketAddr::new(IpAddr::V4(Ipv4Addr::UNSPECIFIED), DEFAULT_TCP_PORT);
     cfg.channels.clear();
-    let mut run_for = None;
+    let mut extra = Extra::default();
+    let (mut udp_set, mut tcp_set) = (false, false);
     let mut it = args.into_iter();
     while let Some(a) = it.next() {
         let mut val = || it.next().ok_or_else(|| format!("{a} needs a value"));
@@ -104,8 +123,16 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
         match a.as_str() {
             "--name" => cfg.server_name = val()?,
             "--host" => cfg.host_name = val()?,
-            "--udp" => cfg.discovery_addr = addr(&val()?)?,
-            "--tcp" => cfg.tcp_addr = addr(&val()?)?,
+            "--udp" => {
+                cfg.discovery_addr = addr(&val()?)?;
+                udp_set = true;
+            }
+            "--tcp" => {
+                cfg.tcp_addr = addr(&val()?)?;
+                tcp_set = true;
+            }
+            "--rest" => extra.rest = Some(addr(&val()?)?),
+            "--rest-mode" => extra.rest_mode = Some(val()?),
             "--channel" => {
                 let v = val()?;
                 match v.split_once('=') {
@@ -156,7 +183,7 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
             "--source-failed" => cfg.source_failed = true,
             "--extra-clients" => cfg.extra_clients = num(val()?)? as u32,
             "--driver-delay-ms" => cfg.driver_delay = Duration::from_millis(num(val()?)?),
-            "--run-for-ms" => run_for = Some(num(val()?)?),
+            "--run-for-ms" => extra.run_for = Some(num(val()?)?),
             "-h" | "--help" => return Err(String::new()),
             other => return Err(format!("unknown option {other}")),
         }
@@ -166,11 +193,21 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Option<u64>), String> {
         c.name = ACID_PLANT_CHANNEL.to_owned();
         cfg.channels.push(c);
     }
-    Ok((cfg, run_for))
+    if extra.rest.is_some() {
+        // Several REST stations on one computer: their asix ports must not collide.
+        let lo = SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), 0);
+        if !udp_set {
+            cfg.discovery_addr = lo;
+        }
+        if !tcp_set {
+            cfg.tcp_addr = lo;
+        }
+    }
+    Ok((cfg, extra))
 }
 
 fn main() -> ExitCode {
-    let (cfg, run_for) = match parse(std::env::args().skip(1).collect()) {
+    let (cfg, extra) = match parse(std::env::args().skip(1).collect()) {
         Ok(x) => x,
         Err(e) if e.is_empty() => {
             print!("{USAGE}");
@@ -199,8 +236,28 @@ fn main() -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
+        let rest = match extra.rest {
+            Some(a) => match sim.serve_rest(a).await {
+                Ok(r) => Some(r),
+                Err(e) => {
+                    eprintln!("asix-sim: REST server on {a}: {e}");
+                    return ExitCode::FAILURE;
+                }
+            },
+            None => None,
+        };
+        if let (Some(r), Some(m)) = (&rest, &extra.rest_mode) {
+            if let Err(e) = r.mode().apply(m) {
+                eprintln!("asix-sim: --rest-mode: {e}");
+                return ExitCode::from(2);
+            }
+        }
+        let rest_text = rest
+            .as_ref()
+            .map(|r| format!(" rest={}", r.url()))
+            .unwrap_or_default();
         println!(
-            "asix-sim {} udp={} tcp={}",
+            "asix-sim {} udp={} tcp={}{rest_text}",
             sim.server_name(),
             sim.discovery_addr(),
             sim.tcp_addr()
@@ -215,7 +272,9 @@ fn main() -> ExitCode {
                 }
             }
         });
-        let deadline = run_for.map(|ms| tokio::time::Instant::now() + Duration::from_millis(ms));
+        let deadline = extra
+            .run_for
+            .map(|ms| tokio::time::Instant::now() + Duration::from_millis(ms));
         let mut stdin_open = true;
         loop {
             let sleep = async {
@@ -227,6 +286,14 @@ fn main() -> ExitCode {
             tokio::select! {
                 line = rx.recv(), if stdin_open => match line {
                     Some(l) if l.trim() == "quit" => break,
+                    Some(l) if l.trim_start().starts_with("rest-mode") => {
+                        let q = l.trim_start()["rest-mode".len()..].trim();
+                        match rest.as_ref().map(|r| r.mode().apply(q)) {
+                            Some(Ok(())) => println!("ok rest-mode {q}"),
+                            Some(Err(e)) => println!("error: {e}"),
+                            None => println!("error: no --rest"),
+                        }
+                    }
                     Some(l) => match sim.control(&l) {
                         Ok(s) => println!("{s}"),
                         Err(e) => println!("error: {e}"),

@@ -5,6 +5,7 @@
 
 pub mod inproc;
 pub mod plant;
+pub mod rest;
 pub mod rights;
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};

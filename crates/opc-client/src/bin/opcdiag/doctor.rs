@@ -592,11 +592,14 @@ pub fn database_checks(ns: &AsixNamespace) -> Vec<Check> {
 }
 
 /// The asix channels (the `Channel` attribute) of each OPC channel's database, in order,
-/// without duplicates: what the network client discovers servers for.
+/// without duplicates: what the network client discovers servers for (not for a channel
+/// that reads from Asix.Evo REST servers, [`rest_channels`]).
 pub fn asix_channels(ns: &AsixNamespace) -> Vec<(String, Vec<String>)> {
     ns.config()
         .channels
-        .keys()
+        .iter()
+        .filter(|(_, o)| !o.is_asix_evo_rest())
+        .map(|(ch, _)| ch)
         .filter_map(|ch| {
             let db = ns.database(ch)?;
             let mut names: Vec<String> = Vec::new();
@@ -611,6 +614,40 @@ pub fn asix_channels(ns: &AsixNamespace) -> Vec<(String, Vec<String>)> {
             Some((ch.clone(), names))
         })
         .collect()
+}
+
+/// The OPC channels that read from Asix.Evo REST servers (`AsixEvoRest`), with their
+/// stations in order of preference.
+pub fn rest_channels(ns: &AsixNamespace) -> Vec<(String, Vec<String>)> {
+    ns.config()
+        .channels
+        .iter()
+        .filter(|(_, o)| o.is_asix_evo_rest())
+        .map(|(ch, o)| (ch.clone(), o.asix_evo_rest.clone()))
+        .collect()
+}
+
+/// Whether one Asix.Evo REST station answered (`index` in the channel's list; `any`: some
+/// station of the channel answered, so that a standby down is a warning, not a failure).
+pub fn rest_check(
+    opc_channel: &str,
+    station: &str,
+    index: usize,
+    any: bool,
+    result: &Result<(), String>,
+) -> Check {
+    let name = format!("Asix.Evo REST [Channel:{opc_channel}] {station}");
+    let role = if index == 0 {
+        "the preferred station".to_owned()
+    } else {
+        format!("standby station {index}")
+    };
+    let fix = "check that Asix.Evo's REST server runs at this address and is reachable (firewall, HTTPS certificate), and the AsixEvoUser/AsixEvoPassword or AsixEvoHeader credential";
+    match result {
+        Ok(()) => Check::ok(name, format!("{role} answers; the channel's items are read-only (the REST API documents no write)")),
+        Err(e) if any => Check::warn(name, format!("{role} does not answer: {e}"), fix),
+        Err(e) => Check::fail(name, format!("{role} does not answer: {e}; no station of the channel answers"), fix),
+    }
 }
 
 /// `asix_net::pipeline::CHANNEL_ATTRIBUTE` (asix-net is a Windows dependency here).
@@ -1095,6 +1132,42 @@ mod tests {
         sorted.dedup();
         assert_eq!(sorted.len(), asix.len(), "no duplicates: {asix:?}");
         assert_eq!(first_item(&demo.namespace).as_deref(), Some("KW_A000"));
+    }
+
+    #[test]
+    fn rest_stations_are_checked_instead_of_discovery() {
+        let demo = asix_model::embedded_demo().unwrap();
+        let mut cfg = demo.namespace.config().clone();
+        let mut evo = cfg.basic().clone();
+        evo.asix_evo_rest = vec!["http://evo1".into(), "http://evo2".into()];
+        cfg.channels.insert("EVO".into(), evo);
+        let mut ns = AsixNamespace::new(cfg);
+        ns.set_database("EVO", demo.namespace.database_state("*").clone());
+        assert_eq!(
+            rest_channels(&ns),
+            [(
+                "EVO".to_owned(),
+                vec!["http://evo1".to_owned(), "http://evo2".to_owned()]
+            )]
+        );
+        assert!(asix_channels(&ns).iter().all(|(c, _)| c != "EVO"));
+        let c = rest_check("EVO", "http://evo1", 0, true, &Ok(()));
+        assert_eq!(c.status, Status::Ok);
+        assert!(c.detail.contains("read-only"), "{c:?}");
+        let c = rest_check(
+            "EVO",
+            "http://evo2",
+            1,
+            true,
+            &Err("HTTP status 503".into()),
+        );
+        assert_eq!(c.status, Status::Warn);
+        assert!(
+            c.detail.contains("standby station 1") && c.detail.contains("503"),
+            "{c:?}"
+        );
+        let c = rest_check("EVO", "http://evo1", 0, false, &Err("timeout".into()));
+        assert_eq!(c.status, Status::Fail);
     }
 
     #[test]

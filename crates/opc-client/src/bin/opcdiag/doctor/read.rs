@@ -221,6 +221,59 @@ fn link_checks(ns: Arc<AsixNamespace>) -> Vec<Check> {
         )];
     }
     let channels = asix_channels(&ns);
+    let rest = rest_channels(&ns);
+    let mut out = rest_link_checks(&ns, &rest);
+    if !rest.is_empty() && channels.iter().all(|(_, a)| a.is_empty()) {
+        return out;
+    }
+    out.extend(asix_link_checks(&ns, &channels));
+    out
+}
+
+/// Every station of each Asix.Evo REST channel, asked once (bounded as the link's polls).
+fn rest_link_checks(ns: &AsixNamespace, rest: &[(String, Vec<String>)]) -> Vec<Check> {
+    if rest.is_empty() {
+        return Vec::new();
+    }
+    let Ok(rt) = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    else {
+        return vec![Check::fail(
+            "Asix.Evo REST",
+            "cannot start the network runtime",
+            "",
+        )];
+    };
+    let cfg = ns.config();
+    let mut out = Vec::new();
+    for (opc, _) in rest {
+        let Some(settings) = cfg.resolve_channel(opc).ok().and_then(|rc| {
+            asix_net::rest::settings_from_options(
+                rc.name,
+                rc.options,
+                cfg.server.source_timeout_ms,
+                Duration::from_secs(1),
+            )
+        }) else {
+            continue;
+        };
+        let results: Vec<(String, Result<(), String>)> = rt
+            .block_on(asix_net::rest::probe(&settings))
+            .into_iter()
+            .map(|(u, r)| (u, r.map_err(|e| e.to_string())))
+            .collect();
+        let any = results.iter().any(|(_, r)| r.is_ok());
+        for (i, (station, r)) in results.iter().enumerate() {
+            out.push(rest_check(opc, station, i, any, r));
+        }
+    }
+    out
+}
+
+/// One discovery per asix channel of each OPC channel on the asix network.
+fn asix_link_checks(ns: &Arc<AsixNamespace>, channels: &[(String, Vec<String>)]) -> Vec<Check> {
+    let cfg = ns.config();
     if channels.iter().all(|(_, a)| a.is_empty()) {
         return vec![Check::warn(
             "asix link",
@@ -239,9 +292,9 @@ fn link_checks(ns: Arc<AsixNamespace>) -> Vec<Check> {
         )];
     };
     let base = client_config_from_server_options(&cfg.server, &asix_net::computer_name());
-    let resolver = NamespaceResolver::new(Arc::clone(&ns), base);
+    let resolver = NamespaceResolver::new(Arc::clone(ns), base);
     let mut jobs = Vec::new();
-    for (opc, asix) in &channels {
+    for (opc, asix) in channels {
         let client = resolver.client_config(opc);
         let timeout_ms = client.options.find_server_timeout.as_millis() as u32;
         for a in asix {
