@@ -203,6 +203,13 @@ fn browse_read_subscribe_and_failover_through_asix_evo_rest() {
         log.contains("read-only"),
         "the log says the items are read-only:\n{log}"
     );
+    // The refused write has a WARN that says why.
+    assert!(
+        log.lines().any(|l| l.contains("WARN")
+            && l.contains("write refused (OPC_E_BADRIGHTS)")
+            && l.contains("Asix.Evo REST")),
+        "a WARN for the refused write:\n{log}"
+    );
     assert!(!log.contains("panicked"), "{log}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -610,6 +610,19 @@ impl Namespace for AsixNamespace {
             .map(|(def, _)| def)
     }
 
+    /// The items of a channel that reads from Asix.Evo REST servers: the REST API
+    /// documents no write request.
+    fn write_refusal(&self, _item_id: &str, access_path: &str) -> Option<String> {
+        let channel = self.config.resolve_channel(access_path).ok()?;
+        channel.options.is_asix_evo_rest().then(|| {
+            format!(
+                "channel {} reads from Asix.Evo REST servers, whose API documents no write \
+                 request: its items are read-only",
+                channel.name
+            )
+        })
+    }
+
     fn resolve_with_attributes(
         &self,
         item_id: &str,
@@ -773,6 +786,14 @@ mod tests {
             assert_eq!(net.access_rights, OPC_READABLE | OPC_WRITEABLE, "{id}");
             let (rest, _) = ns.resolve_with_attributes(id, "EVO").unwrap();
             assert_eq!(rest.access_rights, OPC_READABLE, "{id}");
+            // The log says why a write of it is refused; the network channel's items
+            // have no such reason.
+            let why = Namespace::write_refusal(&ns, id, "EVO").expect("a reason");
+            assert!(
+                why.contains("EVO") && why.contains("Asix.Evo REST"),
+                "{why}"
+            );
+            assert_eq!(Namespace::write_refusal(&ns, id, "*"), None);
         }
     }
 

@@ -79,6 +79,13 @@ pub trait Namespace: Send + Sync {
         Ok(())
     }
 
+    /// Why writes of an item are refused by design, if they are (an item of a data source
+    /// that takes no writes): the reason the log gives beside a refused write. `item_id`
+    /// as the source knows it, `access_path` its channel. The default: none.
+    fn write_refusal(&self, _item_id: &str, _access_path: &str) -> Option<String> {
+        None
+    }
+
     /// Resolves an item with the attribute values behind its OPC item properties
     /// (descriptions, EU units, limits). The default has none.
     fn resolve_with_attributes(

@@ -147,6 +147,37 @@ fn device_read_sends_subscribed_items_by_key_and_the_others_whole() {
     }
 }
 
+/// The namespace's reason for refusing writes by design, for the log line of a refused
+/// write: given for the items that have one, by handle (unknown handles have none).
+#[test]
+fn write_refusals_name_the_items_refused_by_design() {
+    let mut sim = Sim::new();
+    let s = sim.session();
+    let g = sim.group(s, "g", 1000, 0.0);
+    let defs: Vec<ItemDefinition> = [("RO", "Camac"), ("RO", ""), ("A1", "Camac")]
+        .iter()
+        .map(|(id, path)| ItemDefinition {
+            item_id: id,
+            access_path: path,
+            active: true,
+            client_handle: 0,
+            requested_type: VarType::EMPTY,
+        })
+        .collect();
+    let h: Vec<u32> = sim
+        .e
+        .add_items(sim.now, g, &defs)
+        .unwrap()
+        .into_iter()
+        .map(|r| r.unwrap().server_handle)
+        .collect();
+    let got = sim.e.write_refusals(g, &[h[0], h[1], h[2], 4711]);
+    assert_eq!(
+        got,
+        vec![("RO".to_owned(), "Camac takes no writes".to_owned())]
+    );
+}
+
 #[test]
 fn device_read_times_out_with_net_answer_timeout() {
     let mut sim = Sim::with_config(EngineConfig {

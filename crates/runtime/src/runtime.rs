@@ -256,6 +256,35 @@ impl Runtime {
         }
     }
 
+    /// Logs a WARN for the items of a write (`handles` of `group`, with their `results`)
+    /// that the namespace refuses by design (OPC_E_BADRIGHTS with a
+    /// [`ctopc_core::namespace::Namespace::write_refusal`] reason): one line per call,
+    /// with how many, the first item and why. Nothing when no item was refused so.
+    pub fn warn_refused_writes(
+        &self,
+        group: GroupHandle,
+        handles: &[u32],
+        results: &[Result<(), ctopc_core::OpcError>],
+    ) {
+        let refused: Vec<u32> = handles
+            .iter()
+            .zip(results)
+            .filter(|(_, r)| matches!(r, Err(ctopc_core::OpcError::BadRights)))
+            .map(|(h, _)| *h)
+            .collect();
+        if refused.is_empty() {
+            return;
+        }
+        let reasons = self.lock().engine.write_refusals(group, &refused);
+        if let Some((item, why)) = reasons.first() {
+            tracing::warn!(
+                "write refused (OPC_E_BADRIGHTS) for {} item(s) of group {}, {item} first: {why}",
+                reasons.len(),
+                group.0
+            );
+        }
+    }
+
     /// Wakes the driver thread for a step now.
     pub fn wake(&self) {
         self.signal.wake();

@@ -290,6 +290,11 @@ impl SourceTable {
     }
 
     /// An entry's key.
+    /// The access path (asix channel) of entry `idx`.
+    pub fn channel(&self, idx: u32) -> &str {
+        self.paths.get(self.entries[idx as usize].channel)
+    }
+
     pub fn key(&self, idx: u32) -> &str {
         let e = &self.entries[idx as usize];
         Self::key_in(&self.keys.text, e)

@@ -609,6 +609,25 @@ impl Engine {
         Ok((g.name.clone(), ids))
     }
 
+    /// Why the namespace refuses writes of these items by design
+    /// ([`crate::namespace::Namespace::write_refusal`]): (item ID, reason) of each handle of
+    /// the group that has one.
+    pub fn write_refusals(&self, group: GroupHandle, handles: &[u32]) -> Vec<(String, String)> {
+        let Ok(slot) = self.live_slot(group) else {
+            return Vec::new();
+        };
+        let g = self.group(slot);
+        handles
+            .iter()
+            .filter_map(|&h| {
+                let it = &g.items[g.find(h)?];
+                let id = self.sources.key(it.source);
+                let why = self.ns.write_refusal(id, self.sources.channel(it.source))?;
+                Some((id.to_owned(), why))
+            })
+            .collect()
+    }
+
     /// The group's name, for the write audit of its OnWriteComplete.
     pub fn audit_group_name(&self, group: GroupHandle) -> Option<String> {
         let g = self.group(self.live_slot(group).ok()?);

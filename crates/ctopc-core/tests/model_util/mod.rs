@@ -66,6 +66,11 @@ impl Namespace for FakeNs {
             _ => Err(OpcError::UnknownItemId),
         }
     }
+
+    /// `RO` on channel `Camac`: read-only by design (a source that takes no writes).
+    fn write_refusal(&self, item_id: &str, access_path: &str) -> Option<String> {
+        (item_id == "RO" && access_path == "Camac").then(|| "Camac takes no writes".to_owned())
+    }
 }
 
 pub const T0: Timestamp = Timestamp::from_unix_millis(1_700_000_000_000);

@@ -244,7 +244,19 @@ impl Group_Impl {
         pre.apply(&mut results);
         self.ctx.runtime.metrics.written(items.len() as u64);
         self.audit(method, names, &items, None, &results);
+        self.warn_refused(&items, &results);
         errors_out(pp_errors, &results)
+    }
+
+    /// A WARN for the items the namespace refuses to write by design (read-only sources).
+    fn warn_refused(&self, items: &[(u32, ItemVqt)], results: &[Result<(), OpcError>]) {
+        if !results.contains(&Err(OpcError::BadRights)) {
+            return;
+        }
+        let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
+        self.ctx
+            .runtime
+            .warn_refused_writes(self.handle, &handles, results);
     }
 
     /// What the write audit needs of the engine (`None` when auditing is off).
@@ -342,6 +354,7 @@ impl Group_Impl {
         if let Ok(s) = &started {
             self.ctx.runtime.metrics.written(items.len() as u64);
             self.audit(method, names, &items, Some(s.cancel_id), &s.results);
+            self.warn_refused(&items, &s.results);
         }
         // SAFETY: the caller's contract.
         unsafe { self.async_out(started, p_cancel, pp_errors) }
