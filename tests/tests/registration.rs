@@ -135,9 +135,10 @@ fn regserver_writes_every_key_and_unregserver_removes_them_idempotently() {
     }
     let exe = default_value(&format!("CLSID\\{CLSID}\\LocalServer32")).expect("LocalServer32");
     assert!(exe.contains("ServerCTOPC.exe"), "{exe}");
+    // The class's ProgID is the original's (what a browsing client matches by name).
     assert_eq!(
         default_value(&format!("CLSID\\{CLSID}\\ProgID")).as_deref(),
-        Some("ServerCTOPC.App.1")
+        Some("ServerCTOPC.App")
     );
     assert_eq!(
         default_value(&format!("CLSID\\{CLSID}\\VersionIndependentProgID")).as_deref(),
@@ -187,7 +188,7 @@ fn regserver_writes_every_key_and_unregserver_removes_them_idempotently() {
         );
         assert_eq!(
             value_in(rrf, &format!("CLSID\\{CLSID}\\ProgID"), "").as_deref(),
-            Some("ServerCTOPC.App.1"),
+            Some("ServerCTOPC.App"),
             "{what}"
         );
         for (path, expect) in [
