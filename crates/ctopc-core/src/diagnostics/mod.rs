@@ -736,6 +736,13 @@ impl Namespace for DiagNamespace {
         }
         self.inner.property_item_id(item_id, def, property_id)
     }
+
+    fn write_refusal(&self, item_id: &str, access_path: &str) -> Option<String> {
+        if is_diagnostic_id(item_id) {
+            return None;
+        }
+        self.inner.write_refusal(item_id, access_path)
+    }
 }
 
 #[cfg(test)]

@@ -228,6 +228,10 @@ impl Namespace for Real {
             Err(OpcError::UnknownItemId)
         }
     }
+
+    fn write_refusal(&self, item_id: &str, access_path: &str) -> Option<String> {
+        (access_path == "EVO").then(|| format!("{item_id} of EVO takes no writes"))
+    }
 }
 
 #[test]
@@ -246,6 +250,12 @@ fn the_namespace_resolves_diagnostic_items_read_only_and_passes_the_rest_on() {
         ns.resolve("KW_A000", "").unwrap().canonical_type,
         VarType::R4
     );
+    // The real namespace's reasons for read-only items pass through too.
+    assert_eq!(
+        ns.write_refusal("KW_A000", "EVO").as_deref(),
+        Some("KW_A000 of EVO takes no writes")
+    );
+    assert_eq!(ns.write_refusal("_Diagnostics.Server.Uptime", "EVO"), None);
     let (def, attrs) = ns
         .resolve_with_attributes("_Diagnostics.Clients.HMI.LastCallbackLatency", "")
         .unwrap();
