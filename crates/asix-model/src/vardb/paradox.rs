@@ -634,19 +634,10 @@ fn paradox_double(v: &[u8]) -> Option<f64> {
     Some(f64::from_bits(bits))
 }
 
-/// The civil date of Paradox day `day` (day 1 is 1 January of year 1).
+/// The civil date of Paradox day `day` (day 1 is 1 January of year 1; day 719,163 is
+/// 1970-01-01).
 fn civil(day: i64) -> (i64, u32, u32) {
-    // Days from 1970-01-01, then H. Hinnant's `civil_from_days`.
-    let z = day - 719_163 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    (y, m, d)
+    ctopc_core::time::civil_from_days(day - 719_163)
 }
 
 /// The highest Paradox day written (31 December 9999).
