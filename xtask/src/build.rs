@@ -16,6 +16,13 @@ pub struct Artifacts {
     pub proxy32: PathBuf,
 }
 
+/// Builds the native asix simulator (`asix-sim`, release) for the demo, the soak's `--net`
+/// and the end-to-end tests' Asix.Evo REST stations; its path.
+pub fn asix_sim() -> Result<std::path::PathBuf, String> {
+    util::run(util::cargo().args(["build", "--release", "-p", "asix-net", "--bin", "asix-sim"]))?;
+    Ok(util::root().join("target/release/asix-sim"))
+}
+
 /// Builds the binary `name` of the crate `tests/` (e2e-tests) for the server's target: the
 /// marshal probe, the COM benchmark, the soak client.
 pub fn e2e_bin(name: &str) -> Result<(), String> {

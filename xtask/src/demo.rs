@@ -330,8 +330,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
 
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
-    util::run(util::cargo().args(["build", "--release", "-p", "asix-net", "--bin", "asix-sim"]))?;
-    let sim_exe = util::root().join("target/release/asix-sim");
+    let sim_exe = build::asix_sim()?;
 
     let pfx = prefix();
     wine::ensure_prefix(&pfx)?;

@@ -29,15 +29,7 @@ impl Stations {
     /// Builds asix-sim (release) and starts two stations on loopback serving the demo
     /// database; sets [`ENV`] for this process and its children.
     pub fn start() -> Result<Stations, String> {
-        util::run(util::cargo().args([
-            "build",
-            "--release",
-            "-p",
-            "asix-net",
-            "--bin",
-            "asix-sim",
-        ]))?;
-        let exe = util::root().join("target/release/asix-sim");
+        let exe = crate::build::asix_sim()?;
         let db = util::root().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
         let mut s = Stations {
             children: Vec::new(),

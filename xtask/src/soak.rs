@@ -594,17 +594,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
     let mut sim = None;
     let server = if o.net {
-        util::run(util::cargo().args([
-            "build",
-            "--release",
-            "-p",
-            "asix-net",
-            "--bin",
-            "asix-sim",
-        ]))?;
+        let sim_exe = build::asix_sim()?;
         let dir = crate::demo::stage(&artifacts)?;
         sim = Some(crate::demo::Sim::start(
-            &util::root().join("target/release/asix-sim"),
+            &sim_exe,
             &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
         )?);
         dir.join("ServerCTOPC.exe")
