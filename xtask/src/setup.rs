@@ -74,14 +74,85 @@ fn apt_packages() -> Result<(), String> {
         util::run(Command::new("dpkg").args(["--add-architecture", "i386"]))?;
     }
     println!("setup: installing {}", missing.join(" "));
-    util::run(Command::new("apt-get").args(["update", "-q"]))?;
-    util::run(
-        Command::new("apt-get")
-            .args(["install", "-y", "-q", "--no-install-recommends"])
+    // A Debian mirror answers "File has unexpected size … Mirror sync in progress?" for a
+    // few seconds while it syncs: try the update again, and when it still fails, install
+    // from the indexes it did fetch (the install then says which package is missing).
+    let mut tries = 0;
+    while let Err(e) = util::run(Command::new("apt-get").args(["update", "-q"])) {
+        tries += 1;
+        if tries == APT_UPDATE_TRIES {
+            println!("setup: apt-get update failed {tries} times ({e}); installing from the indexes fetched");
+            break;
+        }
+        println!("setup: apt-get update failed ({e}); trying again in {APT_RETRY_SECS} s");
+        std::thread::sleep(std::time::Duration::from_secs(APT_RETRY_SECS));
+    }
+    // A dry run first: when the indexes lack the i386 build of a library at the version
+    // installed for amd64 (an image newer than its mirror, or an index the update could not
+    // fetch), a Multi-Arch: same pair cannot be installed; both halves then go to the
+    // version the i386 index offers.
+    let install = |extra: &[String], dry: bool| {
+        let mut cmd = Command::new("apt-get");
+        cmd.args(["install", "-y", "-q", "--no-install-recommends"])
             .args(&missing)
-            .env("DEBIAN_FRONTEND", "noninteractive"),
-    )
+            .args(extra)
+            .env("DEBIAN_FRONTEND", "noninteractive");
+        if dry {
+            cmd.arg("-s");
+        }
+        if !extra.is_empty() {
+            cmd.arg("--allow-downgrades");
+        }
+        cmd
+    };
+    let mut extra = Vec::new();
+    let dry = install(&[], true)
+        .output()
+        .map_err(|e| format!("cannot start apt-get: {e}"))?;
+    if !dry.status.success() {
+        // apt prints the resolver's report on stdout and the verdict on stderr.
+        let report = String::from_utf8_lossy(&dry.stdout) + String::from_utf8_lossy(&dry.stderr);
+        for name in not_installable(&report) {
+            let policy =
+                util::output(Command::new("apt-cache").args(["policy", &format!("{name}:i386")]))?;
+            if let Some(version) = candidate(&policy) {
+                println!("setup: {name} is not installable at its amd64 version; both architectures get {version}");
+                extra.push(format!("{name}:amd64={version}"));
+                extra.push(format!("{name}:i386={version}"));
+            }
+        }
+    }
+    util::run(&mut install(&extra, false))
 }
+
+/// The packages apt's resolver names as "… Depends: NAME (…) but it is not installable".
+fn not_installable(report: &str) -> Vec<String> {
+    let mut names: Vec<String> = report
+        .lines()
+        .filter(|l| l.contains("but it is not installable"))
+        .filter_map(|l| l.split("Depends: ").nth(1))
+        .filter_map(|rest| rest.split_whitespace().next())
+        .map(|n| n.split(':').next().unwrap_or(n).to_string())
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
+/// The "Candidate:" version of an `apt-cache policy` answer, unless it is "(none)".
+fn candidate(policy: &str) -> Option<String> {
+    policy
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("Candidate:"))
+        .map(str::trim)
+        .filter(|v| !v.is_empty() && *v != "(none)")
+        .map(str::to_string)
+}
+
+/// How often `apt_packages` runs `apt-get update` before it goes on without a clean one.
+const APT_UPDATE_TRIES: u32 = 4;
+/// The wait between two `apt-get update` runs (a mirror sync takes seconds to minutes).
+const APT_RETRY_SECS: u64 = 20;
 
 fn rust_targets() -> Result<(), String> {
     let list = util::output(Command::new("rustup").args(["target", "list", "--installed"]))?;
@@ -122,4 +193,28 @@ pub fn build_shim(arch: Arch) -> Result<(), String> {
     util::run(gcc.arg("-lbcrypt"))?;
     println!("setup: built {}", out.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_resolvers_report_names_each_uninstallable_package_once() {
+        let report = " grep : PreDepends: libpcre2-8-0 (>= 10.32) but it is not installable
+ libglib2.0-0 : Depends: libpcre2-8-0 (>= 10.22) but it is not installable
+ libpcre2-dev : Depends: libpcre2-8-0 (= 10.42-1) but it is not installable
+                Depends: libpcre2-posix3 (= 10.42-1) but it is not going to be installed
+ wine32:i386 : Depends: libwine:i386 (= 8.0~repack-4) but it is not installable
+E: Error, pkgProblemResolver::Resolve generated breaks";
+        assert_eq!(not_installable(report), ["libpcre2-8-0", "libwine"]);
+    }
+
+    #[test]
+    fn the_candidate_is_read_from_apt_cache_policy() {
+        let policy =
+            "libpcre2-8-0:i386:\n  Installed: (none)\n  Candidate: 10.42-1\n  Version table:\n";
+        assert_eq!(candidate(policy).as_deref(), Some("10.42-1"));
+        assert_eq!(candidate("x:\n  Candidate: (none)\n"), None);
+    }
 }
