@@ -8,21 +8,36 @@
 //! request that breaks a bound is a failed request ([`FetchError`]) for the core: BAD
 //! quality and failover, never a panic or a blocked driver. The credential (basic or a
 //! header) is sent marked sensitive and is in no log line or error text.
+//!
+//! The HTTP client is the crate feature `rest`; without it ([`CLIENT_BUILT`] false)
+//! [`RestLink::start`] refuses with [`StartError::NotBuilt`] and [`probe`] asks nobody.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use asix_model::{ItemKey, Secret};
 use ctopc_core::VarType;
+#[cfg(feature = "rest")]
 use reqwest::header::{HeaderMap, HeaderName, HeaderValue};
 use tokio::runtime::Handle;
 use tokio::sync::mpsc;
-use tokio::task::{JoinHandle, JoinSet};
+use tokio::task::JoinHandle;
+#[cfg(feature = "rest")]
+use tokio::task::JoinSet;
+#[cfg(feature = "rest")]
 use tracing::debug;
 
-use super::core::{FetchError, Get, GetId, RestCore, RestCoreConfig};
+use super::core::{FetchError, RestCoreConfig};
+#[cfg(feature = "rest")]
+use super::core::{Get, GetId, RestCore};
+#[cfg(feature = "rest")]
 use super::decode::{decode_values, VarState};
-use crate::client::{now, EventSink, RequestId};
+#[cfg(feature = "rest")]
+use crate::client::now;
+use crate::client::{EventSink, RequestId};
+
+/// Whether this build has the REST link's HTTP client (the crate feature `rest`).
+pub const CLIENT_BUILT: bool = cfg!(feature = "rest");
 
 /// How a REST link authenticates.
 #[derive(Clone, Default)]
@@ -59,6 +74,7 @@ pub struct RestSettings {
     pub max_body: usize,
 }
 
+#[cfg_attr(not(feature = "rest"), allow(dead_code))]
 enum Command {
     Subscribe(Vec<(ItemKey, VarType)>, u32),
     Unsubscribe(Vec<ItemKey>),
@@ -81,8 +97,11 @@ pub enum StartError {
     NoStation,
     #[error("HTTP client: {0}")]
     Client(String),
+    #[error("this program is built without the Asix.Evo REST client")]
+    NotBuilt,
 }
 
+#[cfg(feature = "rest")]
 fn client(s: &RestSettings) -> Result<reqwest::Client, StartError> {
     let mut headers = HeaderMap::new();
     if let Auth::Header(h) = &s.auth {
@@ -117,15 +136,23 @@ impl RestLink {
         if s.core.stations.is_empty() {
             return Err(StartError::NoStation);
         }
-        let http = client(&s)?;
-        let (tx, rx) = mpsc::unbounded_channel();
-        let core = RestCore::new(s.core.clone());
-        let task = rt.spawn(run(core, http, s, rx, sink));
-        Ok(RestLink {
-            tx,
-            ids: AtomicU64::new(0),
-            task: Some(task),
-        })
+        #[cfg(not(feature = "rest"))]
+        {
+            let _ = (sink, rt);
+            Err(StartError::NotBuilt)
+        }
+        #[cfg(feature = "rest")]
+        {
+            let http = client(&s)?;
+            let (tx, rx) = mpsc::unbounded_channel();
+            let core = RestCore::new(s.core.clone());
+            let task = rt.spawn(run(core, http, s, rx, sink));
+            Ok(RestLink {
+                tx,
+                ids: AtomicU64::new(0),
+                task: Some(task),
+            })
+        }
     }
 
     /// Subscribes variables (or changes their rate), each with its canonical type.
@@ -153,6 +180,7 @@ impl Drop for RestLink {
     }
 }
 
+#[cfg(feature = "rest")]
 async fn run(
     mut core: RestCore,
     http: reqwest::Client,
@@ -194,6 +222,7 @@ async fn run(
     requests.abort_all();
 }
 
+#[cfg(feature = "rest")]
 async fn sleep_until(t: Option<std::time::Instant>) {
     match t {
         Some(t) => tokio::time::sleep_until(t.into()).await,
@@ -201,6 +230,7 @@ async fn sleep_until(t: Option<std::time::Instant>) {
     }
 }
 
+#[cfg(feature = "rest")]
 /// One GET with its bounds; the decoded states (a probe of the attribute list: none).
 async fn fetch(
     http: &reqwest::Client,
@@ -251,6 +281,7 @@ async fn fetch(
     })
 }
 
+#[cfg(feature = "rest")]
 fn transport(e: reqwest::Error) -> FetchError {
     if e.is_timeout() {
         return FetchError::Timeout;
@@ -259,6 +290,7 @@ fn transport(e: reqwest::Error) -> FetchError {
     FetchError::Transport(error_text(&e.without_url()))
 }
 
+#[cfg(feature = "rest")]
 /// An error and its causes on one line, cut to a log line's size.
 fn error_text(e: &reqwest::Error) -> String {
     let mut s = String::new();
@@ -287,6 +319,21 @@ fn error_text(e: &reqwest::Error) -> String {
 /// /asix/v1/server/variable/attribute`, bounded as a poll is): whether each answers, in
 /// the configured order (`opcdiag doctor`).
 pub async fn probe(s: &RestSettings) -> Vec<(String, Result<(), FetchError>)> {
+    #[cfg(not(feature = "rest"))]
+    {
+        let e = FetchError::Transport(StartError::NotBuilt.to_string());
+        s.core
+            .stations
+            .iter()
+            .map(|u| (u.clone(), Err(e.clone())))
+            .collect()
+    }
+    #[cfg(feature = "rest")]
+    probe_each(s).await
+}
+
+#[cfg(feature = "rest")]
+async fn probe_each(s: &RestSettings) -> Vec<(String, Result<(), FetchError>)> {
     let http = match client(s) {
         Ok(h) => h,
         Err(e) => {

@@ -5,6 +5,7 @@
 
 pub mod inproc;
 pub mod plant;
+#[cfg(feature = "rest")]
 pub mod rest;
 pub mod rights;
 

@@ -235,6 +235,13 @@ fn rest_link_checks(ns: &AsixNamespace, rest: &[(String, Vec<String>)]) -> Vec<C
     if rest.is_empty() {
         return Vec::new();
     }
+    if !asix_net::rest::link::CLIENT_BUILT {
+        return vec![Check::warn(
+            "Asix.Evo REST",
+            "this opcdiag is built without the REST client (the 32-bit build): the stations are not asked",
+            "run the 64-bit opcdiag doctor",
+        )];
+    }
     let Ok(rt) = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
