@@ -84,6 +84,11 @@ pub const CHANNEL_OPTIONS: &[&str] = &[
     "AsixEvoHeader",
     "AsixEvoPollTimeout",
     "AsixEvoMaxBatch",
+    "AsixNetServerFingerprint",
+    "AsixNetCaFile",
+    "AsixNetCertFile",
+    "AsixNetKeyFile",
+    "AsixNetPlaintext",
 ];
 
 /// The language the server uses when a client sets none.
@@ -297,6 +302,19 @@ pub struct ChannelOptions {
     pub asix_evo_poll_timeout_ms: u32,
     /// `AsixEvoMaxBatch` (default 100, 1..=1000): the most names in one request.
     pub asix_evo_max_batch: u32,
+    /// `AsixNetServerFingerprint`: the SHA-256 fingerprints (64 hex digits each, `:` and
+    /// blanks allowed, comma-separated) of the asix servers' certificates the channel
+    /// accepts.
+    pub asix_net_server_fingerprints: Vec<String>,
+    /// `AsixNetCaFile`: a PEM file of the CA certificates whose servers the channel accepts.
+    pub asix_net_ca_file: Option<String>,
+    /// `AsixNetCertFile`: the PEM certificate the server presents to asix servers.
+    pub asix_net_cert_file: Option<String>,
+    /// `AsixNetKeyFile`: its private key (PEM).
+    pub asix_net_key_file: Option<String>,
+    /// `AsixNetPlaintext` (default nie): plaintext links, no authentication, no encryption
+    /// (a closed test network only).
+    pub asix_net_plaintext: bool,
 }
 
 impl ChannelOptions {
@@ -349,6 +367,11 @@ impl Default for ChannelOptions {
             asix_evo_header: None,
             asix_evo_poll_timeout_ms: 3000,
             asix_evo_max_batch: 100,
+            asix_net_server_fingerprints: Vec::new(),
+            asix_net_ca_file: None,
+            asix_net_cert_file: None,
+            asix_net_key_file: None,
+            asix_net_plaintext: false,
         }
     }
 }
@@ -713,9 +736,31 @@ fn apply_channel_option(
         }
         "asixevopolltimeout" => set_number(&mut o.asix_evo_poll_timeout_ms, file, e, 100, 600_000)?,
         "asixevomaxbatch" => set_number(&mut o.asix_evo_max_batch, file, e, 1, 1000)?,
+        "asixnetserverfingerprint" => {
+            let list = split_list(&e.value);
+            if !list.iter().all(|f| is_fingerprint(f)) {
+                return Err(invalid(
+                    file,
+                    e,
+                    "SHA-256 fingerprints (64 hex digits each, `:` allowed), comma-separated",
+                ));
+            }
+            o.asix_net_server_fingerprints = list;
+        }
+        "asixnetcafile" => o.asix_net_ca_file = text(e),
+        "asixnetcertfile" => o.asix_net_cert_file = text(e),
+        "asixnetkeyfile" => o.asix_net_key_file = text(e),
+        "asixnetplaintext" => set_bool(&mut o.asix_net_plaintext, file, e)?,
         _ => return Ok(false),
     }
     Ok(true)
+}
+
+/// A SHA-256 fingerprint as certificate tools print it: 64 hex digits, optionally
+/// separated by `:` or blanks.
+fn is_fingerprint(s: &str) -> bool {
+    let digits: Vec<u8> = s.bytes().filter(|b| !matches!(b, b':' | b' ')).collect();
+    digits.len() == 64 && digits.iter().all(u8::is_ascii_hexdigit)
 }
 
 /// An HTTP header name (RFC 9110 token characters).
@@ -1042,6 +1087,22 @@ mod tests {
             ("IniFilePath", "C:\\asix\\kwas.ini", |o| {
                 o.ini_file_path.as_deref() == Some("C:\\asix\\kwas.ini")
             }),
+            (
+                "AsixNetServerFingerprint",
+                "9F:86:D0:81:88:4C:7D:65:9A:2F:EA:A0:C5:5A:D0:15:A3:BF:4F:1B:2B:0B:82:2C:D1:5D:6C:15:B0:F0:0A:08, 9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08",
+                |o| o.asix_net_server_fingerprints.len() == 2,
+            ),
+            ("AsixNetCaFile", "certs\\ca.pem", |o| {
+                o.asix_net_ca_file.as_deref() == Some("certs\\ca.pem")
+            }),
+            ("AsixNetCertFile", "certs\\opc.pem", |o| {
+                o.asix_net_cert_file.as_deref() == Some("certs\\opc.pem")
+            }),
+            ("AsixNetKeyFile", "certs\\opc-key.pem", |o| {
+                o.asix_net_key_file.as_deref() == Some("certs\\opc-key.pem")
+            }),
+            ("AsixNetPlaintext", "1", |o| o.asix_net_plaintext),
+            ("AsixNetPlaintext", "nie", |o| !o.asix_net_plaintext),
         ];
         for (key, value, check) in rows {
             let (c, w) = parse(&format!("[Channel:Kanal]\n{key} = {value}\n")).unwrap();
@@ -1063,6 +1124,8 @@ mod tests {
             ("NetTimeout", "99999999999"),
             ("AggregateMode", "2"),
             ("QualityGoodThreshold", "101"),
+            ("AsixNetServerFingerprint", "9f86d081"),
+            ("AsixNetPlaintext", "maybe"),
         ];
         for (key, value) in rows {
             let err = parse(&format!("; c\n[Channel:*]\n{key} = {value}\n")).unwrap_err();

@@ -2,7 +2,8 @@
 //!
 //! 1. VQT updates per second from a simulator to a client on loopback: one link, N noisy
 //!    variables sampled every 10 ms (every sample sent), counted at the client's event sink.
-//!    Median of several one-second windows.
+//!    Median of several one-second windows, over a plaintext link and over a TLS 1.3 link,
+//!    and their ratio (goal: TLS within 20 % of plaintext).
 //! 2. Failover time after a simulator process is killed (SIGKILL; the kernel closes its
 //!    sockets): from the kill to the first GOOD value from the other simulator, for
 //!    StopAfterFirstServerFound = tak and nie, against FindServerTimeout. Also a hung
@@ -13,15 +14,18 @@
 
 use std::io::{BufRead, BufReader, Write};
 use std::net::{Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use asix_model::ItemKey;
 use asix_net::client::ClientEvent;
+use asix_net::secure::{ClientSecurity, ServerSecurity, ServerTls};
 use asix_net::sim::plant::ChannelDef;
 use asix_net::sim::{self, SimConfig};
+use asix_net::tls;
 use asix_net::{AsixClient, ClientConfig};
 use tokio::runtime::{Builder, Runtime};
 
@@ -46,14 +50,52 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn client_cfg(targets: Vec<SocketAddr>) -> ClientConfig {
+/// The benchmark's certificates: the simulators' (also in files, for the asix-sim
+/// processes) and the client's.
+struct Pki {
+    server: tls::Generated,
+    client: tls::Generated,
+    cert_file: PathBuf,
+    key_file: PathBuf,
+}
+
+fn pki() -> &'static Pki {
+    static PKI: OnceLock<Pki> = OnceLock::new();
+    PKI.get_or_init(|| {
+        let server = tls::generate("BENCH-SIM", None).unwrap();
+        let dir = std::env::temp_dir().join(format!("asix-net-bench-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cert_file = dir.join("asix-cert.pem");
+        let key_file = dir.join("asix-key.pem");
+        std::fs::write(&cert_file, &server.cert_pem).unwrap();
+        std::fs::write(&key_file, &server.key_pem).unwrap();
+        Pki {
+            server,
+            client: tls::generate("BENCH", None).unwrap(),
+            cert_file,
+            key_file,
+        }
+    })
+}
+
+fn client_cfg(targets: Vec<SocketAddr>, plaintext: bool) -> ClientConfig {
     let mut c = ClientConfig::new("BENCH.", "BENCH");
     c.discovery_targets = targets;
     c.discovery_bind = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+    c.security = if plaintext {
+        ClientSecurity::Plaintext
+    } else {
+        ClientSecurity::tls(
+            &pki().client.identity,
+            tls::Trust::Fingerprints(vec![pki().server.identity.fingerprint()]),
+        )
+        .unwrap()
+    };
     c
 }
 
-fn throughput() {
+/// The median VQT/s of one link, plaintext or TLS.
+fn throughput(plaintext: bool) -> f64 {
     let n = env("BENCH_VARS", 20_000);
     let runs = env("BENCH_RUNS", 5);
     let sampling_ms = 10u32;
@@ -63,6 +105,13 @@ fn throughput() {
     let mut cfg = SimConfig::new("BENCH-SIM");
     cfg.channels = vec![ChannelDef::noisy("BENCH", n)];
     cfg.tick_ms = 10;
+    cfg.security = if plaintext {
+        ServerSecurity::plaintext()
+    } else {
+        ServerSecurity::tls(
+            ServerTls::new(&pki().server.identity, tls::Trust::AnyCertificate).unwrap(),
+        )
+    };
     let sim = sim_rt.block_on(sim::start(cfg)).unwrap();
     let count = Arc::new(AtomicU64::new(0));
     let c2 = count.clone();
@@ -78,7 +127,7 @@ fn throughput() {
         _ => {}
     };
     let client = AsixClient::start(
-        client_cfg(vec![sim.discovery_addr()]),
+        client_cfg(vec![sim.discovery_addr()], plaintext),
         sink,
         cli_rt.handle(),
     )
@@ -102,8 +151,9 @@ fn throughput() {
         rates.push(got as f64 / t.elapsed().as_secs_f64());
     }
     let med = median(rates.clone());
+    let link = if plaintext { "plaintext" } else { "TLS 1.3" };
     println!(
-        "throughput: {n} variables sampled every {sampling_ms} ms = {offered:.0} VQT/s offered"
+        "throughput ({link} link): {n} variables sampled every {sampling_ms} ms = {offered:.0} VQT/s offered"
     );
     println!(
         "  runs (VQT/s): {}",
@@ -121,6 +171,7 @@ fn throughput() {
     drop(sim);
     cli_rt.shutdown_timeout(Duration::from_secs(1));
     sim_rt.shutdown_timeout(Duration::from_secs(1));
+    med
 }
 
 /// A simulator process.
@@ -145,6 +196,10 @@ impl SimProc {
                 "--run-for-ms",
                 "120000",
             ])
+            .arg("--cert")
+            .arg(&pki().cert_file)
+            .arg("--key")
+            .arg(&pki().key_file)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .spawn()
@@ -196,7 +251,7 @@ fn failover_once(
 ) -> Option<Duration> {
     let mut a = SimProc::spawn("FA");
     let mut b = SimProc::spawn("FB");
-    let mut cfg = client_cfg(vec![a.udp, b.udp]);
+    let mut cfg = client_cfg(vec![a.udp, b.udp], false);
     cfg.options.stop_after_first_server_found = stop_after_first;
     cfg.options.find_server_timeout = Duration::from_millis(find_ms);
     cfg.options.net_timeout = Duration::from_millis(net_ms);
@@ -320,7 +375,13 @@ fn main() {
     let filter: Option<String> = std::env::args().skip(1).find(|a| !a.starts_with('-'));
     let want = |name: &str| filter.as_deref().is_none_or(|f| name.contains(f));
     if want("throughput") {
-        throughput();
+        let plain = throughput(true);
+        let tls = throughput(false);
+        println!(
+            "throughput TLS / plaintext: {tls:.0} / {plain:.0} VQT/s = {:.1} % (goal >= 80 %: {})",
+            tls * 100.0 / plain,
+            if tls >= 0.8 * plain { "met" } else { "NOT met" }
+        );
     }
     if want("failover") {
         failover();

@@ -6,10 +6,14 @@ use std::net::{Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
 use asix_model::ini::split_list;
-use asix_model::AsixConfig;
+use std::path::PathBuf;
+
+use asix_model::{AsixConfig, ChannelOptions};
 
 use crate::proto::discovery::{Announce, Resource, ResourceKind};
 use crate::proto::DEFAULT_DISCOVERY_PORT;
+use crate::secure::ClientSecurity;
+use crate::tls::{self, Identity, Trust};
 
 /// Which servers a channel may use (the `AsixServerName` option, or an external list).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -112,6 +116,55 @@ impl ExternalServerLists {
     }
 }
 
+/// How a channel's links are secured, from its options (`AsixNetPlaintext`,
+/// `AsixNetCertFile`/`AsixNetKeyFile`, `AsixNetServerFingerprint` or `AsixNetCaFile`);
+/// `resolve` makes a path option a file path (relative to the configuration's folder).
+/// Without a usable certificate and pin the channel links to no server, and says why.
+pub fn security_from_options(
+    channel: &str,
+    o: &ChannelOptions,
+    resolve: impl Fn(&str) -> PathBuf,
+) -> ClientSecurity {
+    if o.asix_net_plaintext {
+        return ClientSecurity::Plaintext;
+    }
+    let unconfigured =
+        |why: String| ClientSecurity::Unconfigured(format!("channel {channel}: {why}"));
+    let (Some(cert), Some(key)) = (&o.asix_net_cert_file, &o.asix_net_key_file) else {
+        return unconfigured(
+            "no client certificate (AsixNetCertFile and AsixNetKeyFile), and plaintext is not allowed (AsixNetPlaintext)".into(),
+        );
+    };
+    let trust = match (&o.asix_net_server_fingerprints[..], &o.asix_net_ca_file) {
+        ([], None) => {
+            return unconfigured(
+                "no pinned asix server (AsixNetServerFingerprint or AsixNetCaFile)".into(),
+            )
+        }
+        ([], Some(ca)) => match Trust::ca_file(&resolve(ca)) {
+            Ok(t) => t,
+            Err(e) => return unconfigured(format!("AsixNetCaFile: {e}")),
+        },
+        (fps, None) => match fps
+            .iter()
+            .map(|f| tls::parse_fingerprint(f))
+            .collect::<Result<Vec<_>, _>>()
+        {
+            Ok(v) => Trust::Fingerprints(v),
+            Err(e) => return unconfigured(format!("AsixNetServerFingerprint: {e}")),
+        },
+        (_, Some(_)) => {
+            return unconfigured("give AsixNetServerFingerprint or AsixNetCaFile, not both".into())
+        }
+    };
+    match Identity::load(&resolve(cert), &resolve(key))
+        .and_then(|id| ClientSecurity::tls(&id, trust))
+    {
+        Ok(s) => s,
+        Err(e) => unconfigured(format!("AsixNetCertFile/AsixNetKeyFile: {e}")),
+    }
+}
+
 /// Everything the client needs.
 #[derive(Debug, Clone)]
 pub struct ClientConfig {
@@ -137,6 +190,9 @@ pub struct ClientConfig {
     /// Ask servers for changed values only (default: every sample, as the engine's
     /// data-source boundary wants them for MaxAge).
     pub changes_only: bool,
+    /// How links are secured: TLS with the client's certificate and the pinned servers,
+    /// or (only where a channel allows it) plaintext. The default links to no server.
+    pub security: ClientSecurity,
 }
 
 impl ClientConfig {
@@ -156,6 +212,7 @@ impl ClientConfig {
             reconnect_interval: Duration::from_millis(1000),
             retry_failed_items: Duration::from_secs(10),
             changes_only: false,
+            security: ClientSecurity::default(),
         }
     }
 

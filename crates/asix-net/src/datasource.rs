@@ -26,7 +26,7 @@ use tracing::{info, warn};
 
 use crate::backend::{AsixBackend, RawId, RawOutput, VariableSource};
 use crate::client::{AsixClient, ClientEvent, RequestId};
-use crate::config::{ClientConfig, ConnectOptions, ExternalServerLists};
+use crate::config::{security_from_options, ClientConfig, ConnectOptions, ExternalServerLists};
 use crate::naming::asix_client_name;
 use crate::proto::frame::ReadSource;
 use crate::proto::DEFAULT_DISCOVERY_PORT;
@@ -120,6 +120,16 @@ impl Resolver for NamespaceResolver {
                 )),
                 net_timeout: std::time::Duration::from_millis(u64::from(o.net_timeout_ms)),
             };
+            // A channel that says nothing of its links keeps the base's setting (in the
+            // server, none: such a channel links to no server).
+            let says = o.asix_net_plaintext
+                || o.asix_net_cert_file.is_some()
+                || o.asix_net_key_file.is_some()
+                || o.asix_net_ca_file.is_some()
+                || !o.asix_net_server_fingerprints.is_empty();
+            if says {
+                c.security = security_from_options(rc.name, o, |p| cfg.resolve_path(p));
+            }
         }
         c
     }

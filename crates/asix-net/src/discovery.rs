@@ -128,6 +128,7 @@ mod tests {
             flags: ServerFlags(flags),
             clients,
             tcp_port: 1000,
+            fingerprint: None,
             resources: vec![Resource::channel("K")],
         }
     }

@@ -28,7 +28,9 @@ pub mod naming;
 pub mod pipeline;
 pub mod proto;
 pub mod rest;
+pub mod secure;
 pub mod sim;
+pub mod tls;
 
 pub use sim::inproc;
 

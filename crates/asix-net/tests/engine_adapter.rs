@@ -369,10 +369,20 @@ fn the_network_backend_runs_from_a_plain_thread() {
         .unwrap();
     let sim = rt.block_on(sim("PLAIN"));
     let db = repo().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+    // The client's certificate in files, the simulator's pinned by fingerprint: what a
+    // plant's ASIXConnect.ini says.
+    let dir = std::env::temp_dir().join(format!("asix-net-plain-thread-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("opc.pem"), &pki().client.cert_pem).unwrap();
+    std::fs::write(dir.join("opc-key.pem"), &pki().client.key_pem).unwrap();
     let ini = format!(
-        "[Server]\nBroadcastAddress = 127.0.0.1\nDiscoveryPort = {}\n[Channel:*]\nItemsDatabase = {}\n",
+        "[Server]\nBroadcastAddress = 127.0.0.1\nDiscoveryPort = {}\n[Channel:*]\nItemsDatabase = {}\n\
+         AsixNetCertFile = {}\nAsixNetKeyFile = {}\nAsixNetServerFingerprint = {}\n",
         sim.discovery_addr().port(),
-        db.display()
+        db.display(),
+        dir.join("opc.pem").display(),
+        dir.join("opc-key.pem").display(),
+        asix_net::tls::fingerprint_hex(&sim.fingerprint().unwrap()),
     );
     let (config, warnings) = asix_model::parse_config(ini.as_bytes(), "test.ini").unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
@@ -435,6 +445,7 @@ fn the_network_backend_runs_from_a_plain_thread() {
     drop(backend); // shuts its runtime down without blocking or panicking
     drop(sim);
     rt.shutdown_timeout(Duration::from_secs(1));
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The demo plant on the asix network for the limit tests, with `KW_A100 = 1000`,

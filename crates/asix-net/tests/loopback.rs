@@ -426,7 +426,10 @@ async fn write_vqt_results(
     .await
 }
 
-const APP_INI: &str = "[ASMEN]\n\
+/// The write rights name the test client by its authenticated identity
+/// (`cert:<fingerprint>`), which replaces the name it declares (`CLI.`).
+fn app_ini() -> String {
+    "[ASMEN]\n\
     Demo_Wytwornia_Kwasu = MODBUS, COM1\n\
     KANAL1 = NONE\n\
     KANAL2 = NONE\n\
@@ -434,13 +437,15 @@ const APP_INI: &str = "[ASMEN]\n\
     ZEZWOLENIE_ZAPISU = KANAL1, OTHER., CLI.\n\
     ZEZWOLENIE_ZAPISU = KANAL2, CLI.\n\
     [KANAL1]\nZAPIS_CZASU_I_STATUSU = TAK\n\
-    [Demo_Wytwornia_Kwasu]\nZAPIS_CZASU_I_STATUSU = TAK\n";
+    [Demo_Wytwornia_Kwasu]\nZAPIS_CZASU_I_STATUSU = TAK\n"
+        .replace("CLI.", &client_identity())
+}
 
 fn with_rights(c: &mut asix_net::sim::SimConfig) {
     use asix_net::sim::plant::{ChannelDef, VarSpec};
     use asix_net::sim::rights::WriteRights;
     use ctopc_core::VarType;
-    let (rights, warnings) = WriteRights::from_app_ini(APP_INI.as_bytes(), "app.ini");
+    let (rights, warnings) = WriteRights::from_app_ini(app_ini().as_bytes(), "app.ini");
     assert!(warnings.is_empty(), "{warnings:?}");
     c.write_rights = rights;
     let specs = || {
@@ -497,14 +502,14 @@ async fn simple_write_allowed_and_denied() {
         assert_eq!(r, vec![Err(OpcError::TheSameItemWrittenMoreThanOnce); 2]);
 
         // A remote client without a ZEZWOLENIE_ZAPISU entry is refused...
-        let mut cfg = client_cfg(&[a.discovery_addr()]);
-        cfg.client_name = "STRANGER.".into();
+        // Another certificate: the name it declares does not matter.
+        let mut cfg = stranger_cfg(&[a.discovery_addr()]);
+        cfg.client_name = CLIENT_NAME.into();
         let (c2, mut ev2) = client(cfg);
         let r = write_results(&c2, &mut ev2, vec![(sp.clone(), Value::R4(1000.0))]).await;
         assert_eq!(r, vec![Err(OpcError::WriteErrorIllegalCommand)]);
         // ...but a client on the server's computer may always write.
-        let mut cfg = client_cfg(&[a.discovery_addr()]);
-        cfg.client_name = "STRANGER.".into();
+        let mut cfg = stranger_cfg(&[a.discovery_addr()]);
         cfg.client_host = "A-HOST".into();
         let (c3, mut ev3) = client(cfg);
         let r = write_results(&c3, &mut ev3, vec![(sp.clone(), Value::UI2(1001))]).await;
@@ -558,8 +563,9 @@ async fn extended_write_allowed_and_denied() {
         .await;
         assert_eq!(r, vec![Ok(())]);
         // A client without permission on KANAL1 is refused the extended write.
-        let mut cfg = client_cfg(&[a.discovery_addr()]);
-        cfg.client_name = "STRANGER.".into();
+        // Another certificate: the name it declares does not matter.
+        let mut cfg = stranger_cfg(&[a.discovery_addr()]);
+        cfg.client_name = CLIENT_NAME.into();
         let (c2, mut ev2) = client(cfg);
         let r = write_vqt_results(
             &c2,
@@ -625,9 +631,26 @@ async fn the_binary_serves_and_takes_fault_commands_on_stdin() {
             .unwrap()
             .parse()
             .unwrap();
-        let cfg = client_cfg(&[udp]);
+        // The ready line names the certificate to pin.
+        let fp = line
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix("fingerprint="))
+            .unwrap();
+        let fp = asix_net::tls::parse_fingerprint(fp).unwrap();
+        let mut cfg = client_cfg(&[udp]);
+        // Pinned to another server, the client does not take its announcements.
+        assert_eq!(
+            discover(&cfg, Resource::channel(CH)).await.unwrap_err(),
+            OpcError::NetFindServerNotFound
+        );
+        cfg.security = asix_net::secure::ClientSecurity::tls(
+            &pki().client.identity,
+            asix_net::tls::Trust::Fingerprints(vec![fp]),
+        )
+        .unwrap();
         let found = discover(&cfg, Resource::channel(CH)).await.unwrap();
         assert_eq!(found[0].name(), "BIN");
+        assert_eq!(found[0].announce.fingerprint, Some(fp));
         assert!(!found[0].announce.flags.source_failed());
         writeln!(stdin, "fail-source").unwrap();
         line.clear();
@@ -649,4 +672,26 @@ async fn the_binary_serves_and_takes_fault_commands_on_stdin() {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     })
+}
+
+/// `asix-sim --gen-cert DIR`: a key pair and certificate in DIR, and the fingerprint to
+/// paste into the other side, which is the certificate's.
+#[test]
+fn gen_cert_writes_a_usable_identity_and_prints_its_fingerprint() {
+    let dir = std::env::temp_dir().join(format!("asix-sim-gen-cert-{}", std::process::id()));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_asix-sim"))
+        .args(["--name", "GATE1", "--gen-cert"])
+        .arg(&dir)
+        .output()
+        .expect("asix-sim runs");
+    assert!(out.status.success(), "{out:?}");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let printed = text
+        .lines()
+        .find_map(|l| l.strip_prefix("fingerprint "))
+        .expect("a fingerprint line");
+    let id = asix_net::tls::Identity::load(&dir.join("asix-cert.pem"), &dir.join("asix-key.pem"))
+        .unwrap();
+    assert_eq!(printed, asix_net::tls::fingerprint_hex(&id.fingerprint()));
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -161,19 +161,23 @@ fn datagram() -> impl Strategy<Value = Datagram> {
             0u8..8,
             any::<u32>(),
             any::<u16>(),
+            prop::option::of(any::<[u8; 32]>()),
             prop::collection::vec(resource(), 0..6)
         )
-            .prop_map(|(request, n, h, f, clients, port, resources)| {
-                Datagram::Announce(Announce {
-                    request,
-                    server_name: n,
-                    server_host: h,
-                    flags: ServerFlags(f),
-                    clients,
-                    tcp_port: port,
-                    resources,
-                })
-            }),
+            .prop_map(
+                |(request, n, h, f, clients, port, fingerprint, resources)| {
+                    Datagram::Announce(Announce {
+                        request,
+                        server_name: n,
+                        server_host: h,
+                        flags: ServerFlags(f),
+                        clients,
+                        tcp_port: port,
+                        fingerprint,
+                        resources,
+                    })
+                }
+            ),
     ]
 }
 

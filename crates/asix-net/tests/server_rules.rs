@@ -13,7 +13,7 @@ use asix_net::proto::frame::{
 use asix_net::sim::plant::{channels_from_database, ACID_PLANT_CHANNEL};
 use common::*;
 use ctopc_core::{OpcError, Quality};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
 macro_rules! bounded {
@@ -27,7 +27,7 @@ macro_rules! bounded {
 const SHORT: Duration = Duration::from_secs(3);
 
 /// Reads one frame, or None at end of stream.
-async fn read_frame(s: &mut TcpStream) -> Option<Frame> {
+async fn read_frame(s: &mut (impl AsyncRead + Unpin)) -> Option<Frame> {
     let mut len = [0u8; 4];
     tokio::time::timeout(SHORT, s.read_exact(&mut len))
         .await
@@ -39,7 +39,7 @@ async fn read_frame(s: &mut TcpStream) -> Option<Frame> {
     Some(decode_body(&body).expect("valid frame"))
 }
 
-async fn closed(s: &mut TcpStream) -> bool {
+async fn closed(s: &mut (impl AsyncRead + Unpin)) -> bool {
     let mut b = [0u8; 1];
     matches!(
         tokio::time::timeout(SHORT, s.read(&mut b)).await,
@@ -60,9 +60,9 @@ fn hello() -> Message {
 async fn a_frame_of_another_version_is_refused_with_an_error_and_a_close() {
     bounded!(async {
         let a = sim("A").await;
-        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut s = raw_link(a.tcp_addr()).await;
         let mut f = frame_bytes(1, &hello()).unwrap();
-        f[4] = 2; // version 2
+        f[4] = 3; // version 3
         s.write_all(&f).await.unwrap();
         let Frame {
             msg: Message::Error { code, message },
@@ -77,11 +77,44 @@ async fn a_frame_of_another_version_is_refused_with_an_error_and_a_close() {
     })
 }
 
+/// A version-1 client (a plaintext Hello as its first bytes) reads a version-1 Error frame
+/// saying why, and the link closes: no hang, no TLS garbage.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_version_1_client_reads_why_it_is_refused() {
+    bounded!(async {
+        let a = sim("A").await;
+        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut f = frame_bytes(1, &hello()).unwrap();
+        f[4] = 1; // what a version-1 client sends
+        s.write_all(&f).await.unwrap();
+        let mut len = [0u8; 4];
+        tokio::time::timeout(SHORT, s.read_exact(&mut len))
+            .await
+            .expect("an answer in time")
+            .unwrap();
+        let mut body = vec![0u8; body_len(len).unwrap()];
+        s.read_exact(&mut body).await.unwrap();
+        assert_eq!(body[0], 1, "a version-1 frame");
+        body[0] = asix_net::proto::PROTOCOL_VERSION; // the encoding is the same
+        let Frame {
+            msg: Message::Error { code, message },
+            ..
+        } = decode_body(&body).unwrap()
+        else {
+            panic!("an Error frame")
+        };
+        assert_eq!(code, OpcError::NetLinkToServerNegativeAnswer.hresult());
+        assert!(message.contains("version 2"), "{message}");
+        assert!(closed(&mut s).await);
+        assert_eq!(a.handshakes(), 0);
+    })
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn anything_before_hello_is_refused_and_a_bad_length_closes_the_link() {
     bounded!(async {
         let a = sim("A").await;
-        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut s = raw_link(a.tcp_addr()).await;
         s.write_all(&frame_bytes(5, &Message::Ping { nonce: 1 }).unwrap())
             .await
             .unwrap();
@@ -92,7 +125,7 @@ async fn anything_before_hello_is_refused_and_a_bad_length_closes_the_link() {
         );
         assert!(closed(&mut s).await);
 
-        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut s = raw_link(a.tcp_addr()).await;
         s.write_all(&u32::MAX.to_le_bytes()).await.unwrap();
         assert!(matches!(
             read_frame(&mut s).await.map(|f| f.msg),
@@ -106,7 +139,7 @@ async fn anything_before_hello_is_refused_and_a_bad_length_closes_the_link() {
 async fn subscribe_acks_then_sends_initial_values_then_every_sample_until_unsubscribed() {
     bounded!(async {
         let a = sim("A").await;
-        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut s = raw_link(a.tcp_addr()).await;
         s.write_all(&frame_bytes(1, &hello()).unwrap())
             .await
             .unwrap();
@@ -193,7 +226,7 @@ async fn subscribe_acks_then_sends_initial_values_then_every_sample_until_unsubs
 async fn changes_only_subscriptions_get_the_initial_value_and_then_only_changes() {
     bounded!(async {
         let a = sim("A").await;
-        let mut s = TcpStream::connect(a.tcp_addr()).await.unwrap();
+        let mut s = raw_link(a.tcp_addr()).await;
         s.write_all(&frame_bytes(1, &hello()).unwrap())
             .await
             .unwrap();

@@ -32,7 +32,7 @@ fn document_examples() {
             client_host: "CLI".into(),
         }))
         .unwrap(),
-        "41 53 58 44 01 01 00 00 01 00 00 00 01 02 00 4B 31 04 00 43 4C 49 2E 03 00 43 4C 49",
+        "41 53 58 44 02 01 00 00 01 00 00 00 01 02 00 4B 31 04 00 43 4C 49 2E 03 00 43 4C 49",
     );
     check(
         "Announce",
@@ -43,10 +43,11 @@ fn document_examples() {
             flags: ServerFlags(ServerFlags::LOCAL),
             clients: 2,
             tcp_port: 48101,
+            fingerprint: None,
             resources: vec![Resource::channel("K1")],
         }))
         .unwrap(),
-        "41 53 58 44 01 02 00 00 01 00 00 00 02 00 53 31 01 00 48 01 02 00 00 00 E5 BB 01 00 01 02 00 4B 31",
+        "41 53 58 44 02 02 00 00 01 00 00 00 02 00 53 31 01 00 48 01 02 00 00 00 E5 BB 00 01 00 01 02 00 4B 31",
     );
     check(
         "Hello",
@@ -55,7 +56,7 @@ fn document_examples() {
             &Message::Hello(Hello { client_name: "CLI.".into(), client_host: "CLI".into(), keepalive_ms: 1000, net_timeout_ms: 3000 }),
         )
         .unwrap(),
-        "1F 00 00 00 01 01 00 00 01 00 00 00 41 53 58 4E 04 00 43 4C 49 2E 03 00 43 4C 49 E8 03 00 00 B8 0B 00 00",
+        "1F 00 00 00 02 01 00 00 01 00 00 00 41 53 58 4E 04 00 43 4C 49 2E 03 00 43 4C 49 E8 03 00 00 B8 0B 00 00",
     );
     check(
         "Subscribe",
@@ -68,7 +69,7 @@ fn document_examples() {
             },
         )
         .unwrap(),
-        "1C 00 00 00 01 10 00 00 02 00 00 00 E8 03 00 00 00 01 00 00 00 07 00 00 00 02 00 4B 31 01 00 56",
+        "1C 00 00 00 02 10 00 00 02 00 00 00 E8 03 00 00 00 01 00 00 00 07 00 00 00 02 00 4B 31 01 00 56",
     );
     check(
         "Update",
@@ -77,7 +78,7 @@ fn document_examples() {
             &Message::Update { items: vec![(7, Vqt::new(Value::R4(1.5), Quality::GOOD, Timestamp(0x01DA_0000_0000_0000)))] },
         )
         .unwrap(),
-        "20 00 00 00 01 20 00 00 00 00 00 00 01 00 00 00 07 00 00 00 C0 00 00 00 00 00 00 00 DA 01 04 00 00 00 C0 3F",
+        "20 00 00 00 02 20 00 00 00 00 00 00 01 00 00 00 07 00 00 00 C0 00 00 00 00 00 00 00 DA 01 04 00 00 00 C0 3F",
     );
     check(
         "WriteResult",
@@ -88,6 +89,6 @@ fn document_examples() {
             },
         )
         .unwrap(),
-        "14 00 00 00 01 42 00 00 03 00 00 00 02 00 00 00 00 00 00 00 2A 81 04 C0",
+        "14 00 00 00 02 42 00 00 03 00 00 00 02 00 00 00 00 00 00 00 2A 81 04 C0",
     );
 }

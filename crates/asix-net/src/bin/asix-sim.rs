@@ -11,15 +11,18 @@
 
 use std::io::BufRead;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use asix_net::proto::{DEFAULT_DISCOVERY_PORT, DEFAULT_TCP_PORT};
+use asix_net::secure::ServerTls;
 use asix_net::sim::plant::{
     acid_plant, channels_from_database, ChannelDef, VarSpec, ACID_PLANT_CHANNEL,
 };
 use asix_net::sim::rights::WriteRights;
 use asix_net::sim::{self, SimConfig};
+use asix_net::tls::{self, Fingerprint, Identity, Trust};
 use ctopc_core::VarType;
 
 const USAGE: &str = "\
@@ -43,6 +46,18 @@ usage: asix-sim [options]
   --extra-clients N       add N to the announced client count
   --driver-delay-ms N     delay of reads from the driver (default 20)
   --run-for-ms N          exit after N ms
+  --cert FILE --key FILE  TLS identity, PEM (default: a self-signed one made at start); the
+                          certificate's SHA-256 fingerprint is printed on the ready line
+  --allow-client FP       accept only clients with this certificate fingerprint (repeatable;
+                          default: any client certificate, still required)
+  --client-ca FILE        accept only clients whose certificate a CA of FILE (PEM) issued
+  --allow-writer FP       only these client identities may write (repeatable; default: the
+                          --app-ini rule with the identity cert:<FP> as the client's name)
+  --plaintext             also accept plaintext links (closed test network only; warned)
+  --max-handshakes N      handshakes under way at once, more are refused as busy (default 64)
+  --handshake-timeout-ms N  the longest a handshake may take (default 5000)
+  --gen-cert DIR          write a key pair and self-signed certificate for --name to
+                          DIR/asix-cert.pem and DIR/asix-key.pem, print the fingerprint, exit
   --rest ADDR             also serve the Asix.Evo REST API on ADDR (e.g. 127.0.0.1:0); the
                           asix ports then default to ephemeral loopback ports
   --rest-mode SWITCHES    REST misbehaviour: fail=1 slow_ms=N single=1 malformed=1 huge=1
@@ -55,6 +70,11 @@ stdin commands: drop-links stop-answering answer fail-source restore-source stat
 #[derive(Default)]
 struct Extra {
     run_for: Option<u64>,
+    cert: Option<String>,
+    key: Option<String>,
+    allow_clients: Vec<Fingerprint>,
+    client_ca: Option<String>,
+    gen_cert: Option<String>,
     rest: Option<SocketAddr>,
     rest_mode: Option<String>,
 }
@@ -184,6 +204,22 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Extra), String> {
             "--extra-clients" => cfg.extra_clients = num(val()?)? as u32,
             "--driver-delay-ms" => cfg.driver_delay = Duration::from_millis(num(val()?)?),
             "--run-for-ms" => extra.run_for = Some(num(val()?)?),
+            "--cert" => extra.cert = Some(val()?),
+            "--key" => extra.key = Some(val()?),
+            "--allow-client" => extra.allow_clients.push(tls::parse_fingerprint(&val()?)?),
+            "--client-ca" => extra.client_ca = Some(val()?),
+            "--allow-writer" => {
+                let fp = tls::parse_fingerprint(&val()?)?;
+                cfg.allow_writers
+                    .get_or_insert_with(Vec::new)
+                    .push(tls::identity_of(&fp));
+            }
+            "--plaintext" => cfg.security.allow_plaintext = true,
+            "--max-handshakes" => cfg.security.max_handshakes = num(val()?)?.max(1) as usize,
+            "--handshake-timeout-ms" => {
+                cfg.security.handshake_timeout = Duration::from_millis(num(val()?)?)
+            }
+            "--gen-cert" => extra.gen_cert = Some(val()?),
             "-h" | "--help" => return Err(String::new()),
             other => return Err(format!("unknown option {other}")),
         }
@@ -192,6 +228,27 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Extra), String> {
         let mut c = acid_plant();
         c.name = ACID_PLANT_CHANNEL.to_owned();
         cfg.channels.push(c);
+    }
+    // The TLS identity and the clients accepted.
+    if extra.gen_cert.is_none() {
+        let trust = match (&extra.client_ca, extra.allow_clients.is_empty()) {
+            (Some(_), false) => return Err("--allow-client and --client-ca: give one".into()),
+            (Some(ca), true) => Trust::ca_file(Path::new(ca)).map_err(|e| e.to_string())?,
+            (None, false) => Trust::Fingerprints(extra.allow_clients.clone()),
+            (None, true) => Trust::AnyCertificate,
+        };
+        let identity = match (&extra.cert, &extra.key) {
+            (Some(c), Some(k)) => {
+                Identity::load(Path::new(c), Path::new(k)).map_err(|e| e.to_string())?
+            }
+            (None, None) => {
+                tls::generate(&cfg.server_name, None)
+                    .map_err(|e| e.to_string())?
+                    .identity
+            }
+            _ => return Err("--cert and --key go together".into()),
+        };
+        cfg.security.tls = Some(ServerTls::new(&identity, trust).map_err(|e| e.to_string())?);
     }
     if extra.rest.is_some() {
         // Several REST stations on one computer: their asix ports must not collide.
@@ -206,6 +263,24 @@ fn parse(args: Vec<String>) -> Result<(SimConfig, Extra), String> {
     Ok((cfg, extra))
 }
 
+/// `--gen-cert DIR`: the key pair and certificate files, and the fingerprint to paste into
+/// the other side (`AsixNetServerFingerprint` of ServerCTOPC's channel).
+fn gen_cert(dir: &str, name: &str) -> Result<String, String> {
+    let g = tls::generate(name, None).map_err(|e| e.to_string())?;
+    let dir = Path::new(dir);
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let cert = dir.join("asix-cert.pem");
+    let key = dir.join("asix-key.pem");
+    std::fs::write(&cert, &g.cert_pem).map_err(|e| format!("{}: {e}", cert.display()))?;
+    std::fs::write(&key, &g.key_pem).map_err(|e| format!("{}: {e}", key.display()))?;
+    Ok(format!(
+        "certificate {}\nprivate key {} (keep it secret)\nfingerprint {}",
+        cert.display(),
+        key.display(),
+        tls::fingerprint_hex(&g.identity.fingerprint())
+    ))
+}
+
 fn main() -> ExitCode {
     let (cfg, extra) = match parse(std::env::args().skip(1).collect()) {
         Ok(x) => x,
@@ -218,6 +293,18 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if let Some(dir) = &extra.gen_cert {
+        return match gen_cert(dir, &cfg.server_name) {
+            Ok(text) => {
+                println!("{text}");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("asix-sim: --gen-cert: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -256,8 +343,12 @@ fn main() -> ExitCode {
             .as_ref()
             .map(|r| format!(" rest={}", r.url()))
             .unwrap_or_default();
+        let fp = sim
+            .fingerprint()
+            .map(|f| tls::fingerprint_hex(&f))
+            .unwrap_or_else(|| "none".into());
         println!(
-            "asix-sim {} udp={} tcp={}{rest_text}",
+            "asix-sim {} udp={} tcp={} fingerprint={fp}{rest_text}",
             sim.server_name(),
             sim.discovery_addr(),
             sim.tcp_addr()

@@ -24,6 +24,8 @@ use crate::proto::frame::{
     encode_frame, Frame, Hello, Message, ReadSource, ServerFlags, SubscribeItem, VarRef,
 };
 use crate::proto::MAX_FRAME;
+use crate::secure::ClientSecurity;
+use crate::tls::{fingerprint_hex, Fingerprint};
 use crate::Vqt;
 
 /// Identifies a read or write request of the user; chosen by the caller, echoed in the result.
@@ -80,8 +82,13 @@ pub enum ClientEvent {
 pub enum Action {
     /// Send this FindServer to every discovery target.
     SendFindServer(FindServer),
-    /// Open a TCP link; report with `handle_connected` or `handle_link_failed`.
-    Connect { link: LinkId, addr: SocketAddr },
+    /// Open a TCP link and secure it (preamble, TLS whose server certificate must have
+    /// the announced `fingerprint`); report with `handle_connected` or `handle_link_failed`.
+    Connect {
+        link: LinkId,
+        addr: SocketAddr,
+        fingerprint: Option<Fingerprint>,
+    },
     /// Write these bytes (whole frames) on the link.
     Send { link: LinkId, bytes: Vec<u8> },
     /// Close the link (after sending what is queued); no further reports are wanted.
@@ -258,6 +265,9 @@ fn estimate_value(v: &Value) -> usize {
 
 impl ClientCore {
     pub fn new(cfg: ClientConfig) -> Self {
+        if let ClientSecurity::Unconfigured(why) = &cfg.security {
+            warn!(reason = %why, "asix client links to no server");
+        }
         ClientCore {
             cfg,
             items: HashMap::new(),
@@ -544,6 +554,15 @@ impl ClientCore {
             return;
         }
         debug!(channel = %ch, server = %ann.server_name, flags = ann.flags.0, clients = ann.clients, "announcement");
+        if !self
+            .cfg
+            .security
+            .accepts_announcement(ann.fingerprint.as_ref())
+        {
+            let fp = ann.fingerprint.as_ref().map(fingerprint_hex);
+            warn!(channel = %ch, server = %ann.server_name, %from, fingerprint = fp.as_deref().unwrap_or("none"), "announcement ignored: the server's certificate is not pinned for this channel");
+            return;
+        }
         if search.offer(ann, from) {
             self.finish_search(now, &ch);
         }
@@ -891,6 +910,11 @@ impl ClientCore {
     }
 
     fn start_search(&mut self, now: Now, ch: &Arc<str>) {
+        if matches!(self.cfg.security, ClientSecurity::Unconfigured(_)) {
+            // Said once at start; nothing can be linked.
+            self.channel_failed(now, ch, OpcError::NetLinkToServer);
+            return;
+        }
         self.next_search = self.next_search.wrapping_add(1).max(1);
         let id = self.next_search;
         let resource = Resource::channel(&**ch);
@@ -977,6 +1001,7 @@ impl ClientCore {
                 self.actions.push_back(Action::Connect {
                     link,
                     addr: first.addr,
+                    fingerprint: first.announce.fingerprint,
                 });
                 self.channel_mut(ch).state = ChanState::Connecting {
                     link,

@@ -15,7 +15,6 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use asix_model::ItemKey;
 use ctopc_core::{OpcError, Timestamp, Value};
 use tokio::io::{AsyncWriteExt, BufWriter};
-use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::net::{TcpStream, UdpSocket};
 use tokio::runtime::Handle;
 use tokio::sync::mpsc;
@@ -29,6 +28,7 @@ use crate::proto::codec::{frames, next_frame, ReadError};
 use crate::proto::discovery::{decode_datagram, encode_datagram, Datagram, FindServer, Resource};
 use crate::proto::frame::{Frame, ReadSource};
 use crate::proto::{DecodeError, MAX_DATAGRAM};
+use crate::secure::{client_handshake, ClientSecurity, LinkRead, LinkWrite, Secured};
 use crate::Vqt;
 
 /// Receives the client's events. Called from the client's task, never while it holds a
@@ -193,30 +193,54 @@ impl<S: EventSink> Shell<S> {
                         io.close();
                     }
                 }
-                Action::Connect { link, addr } => {
+                Action::Connect {
+                    link,
+                    addr,
+                    fingerprint,
+                } => {
                     let timeout = self.core.config().options.net_timeout;
+                    let security = self.core.config().security.clone();
                     let internal = self.internal.clone();
                     tokio::spawn(async move {
-                        let ev = match tokio::time::timeout(timeout, TcpStream::connect(addr)).await
-                        {
-                            Ok(Ok(stream)) => match open_link(link, stream, internal.clone()) {
-                                Ok(io) => Internal::Connected { link, io },
-                                Err(_) => Internal::Failed {
-                                    link,
-                                    error: OpcError::NetLinkToServer,
-                                },
-                            },
-                            Ok(Err(e)) => {
+                        // Connection, preamble and TLS handshake, bounded together.
+                        let made = tokio::time::timeout(timeout, async {
+                            let stream = TcpStream::connect(addr).await.map_err(|e| {
                                 debug!(%addr, error = %e, "connect failed");
-                                Internal::Failed {
+                                None
+                            })?;
+                            client_handshake(stream, &security, fingerprint)
+                                .await
+                                .map_err(Some)
+                        })
+                        .await;
+                        let ev = match made {
+                            Ok(Ok(secured)) => {
+                                if matches!(security, ClientSecurity::Plaintext) {
+                                    warn!(%addr, "plaintext asix link: no authentication, no encryption (AsixNetPlaintext; closed test network only)");
+                                }
+                                Internal::Connected {
                                     link,
-                                    error: OpcError::NetLinkToServer,
+                                    io: open_link(link, secured, internal.clone()),
                                 }
                             }
-                            Err(_) => Internal::Failed {
+                            Ok(Err(None)) => Internal::Failed {
                                 link,
-                                error: OpcError::NetLinkToServerTimeout,
+                                error: OpcError::NetLinkToServer,
                             },
+                            Ok(Err(Some(r))) => {
+                                warn!(%addr, error = %r.error, reason = %r.reason, "asix link refused");
+                                Internal::Failed {
+                                    link,
+                                    error: r.error,
+                                }
+                            }
+                            Err(_) => {
+                                warn!(%addr, "asix link not established within NetTimeout (connection, preamble or TLS handshake)");
+                                Internal::Failed {
+                                    link,
+                                    error: OpcError::NetLinkToServerTimeout,
+                                }
+                            }
                         };
                         let _ = internal.send(ev).await;
                     });
@@ -342,20 +366,14 @@ async fn run<S: EventSink>(
     }
 }
 
-fn open_link(
-    link: LinkId,
-    stream: TcpStream,
-    internal: mpsc::Sender<Internal>,
-) -> io::Result<LinkIo> {
-    stream.set_nodelay(true)?;
-    let (rd, wr) = stream.into_split();
+fn open_link(link: LinkId, secured: Secured, internal: mpsc::Sender<Internal>) -> LinkIo {
     let (tx, rx) = mpsc::unbounded_channel();
-    tokio::spawn(write_loop(link, wr, rx, internal.clone()));
-    let reader = tokio::spawn(read_loop(link, rd, internal));
-    Ok(LinkIo { tx, reader })
+    tokio::spawn(write_loop(link, secured.wr, rx, internal.clone()));
+    let reader = tokio::spawn(read_loop(link, secured.rd, internal));
+    LinkIo { tx, reader }
 }
 
-async fn read_loop(link: LinkId, rd: OwnedReadHalf, internal: mpsc::Sender<Internal>) {
+async fn read_loop(link: LinkId, rd: LinkRead, internal: mpsc::Sender<Internal>) {
     let mut rd = frames(rd);
     let error = loop {
         match next_frame(&mut rd).await {
@@ -384,7 +402,7 @@ async fn read_loop(link: LinkId, rd: OwnedReadHalf, internal: mpsc::Sender<Inter
 
 async fn write_loop(
     link: LinkId,
-    wr: OwnedWriteHalf,
+    wr: LinkWrite,
     mut rx: mpsc::UnboundedReceiver<Vec<u8>>,
     internal: mpsc::Sender<Internal>,
 ) {
@@ -449,7 +467,8 @@ pub async fn discover(cfg: &ClientConfig, resource: Resource) -> Result<Vec<Cand
             tokio::time::timeout_at(until.into(), udp.recv_from(&mut buf)).await
         {
             if let Ok(Datagram::Announce(a)) = decode_datagram(&buf[..n]) {
-                if a.request == request {
+                if a.request == request && cfg.security.accepts_announcement(a.fingerprint.as_ref())
+                {
                     search.offer(a, from);
                 }
             }

@@ -79,6 +79,9 @@ pub struct Announce {
     pub clients: u32,
     /// TCP port of the link, on the datagram's source address.
     pub tcp_port: u16,
+    /// SHA-256 fingerprint of the server's TLS certificate; `None` for a server that
+    /// serves plaintext links only.
+    pub fingerprint: Option<[u8; 32]>,
     /// Resources offered; the requested one first.
     pub resources: Vec<Resource>,
 }
@@ -118,6 +121,13 @@ pub fn encode_datagram(d: &Datagram) -> Result<Vec<u8>, EncodeError> {
             out.push(a.flags.0);
             put_u32(&mut out, a.clients);
             put_u16(&mut out, a.tcp_port);
+            match &a.fingerprint {
+                Some(fp) => {
+                    out.push(32);
+                    out.extend_from_slice(fp);
+                }
+                None => out.push(0),
+            }
             let count_at = out.len();
             put_u16(&mut out, 0);
             let mut n: u16 = 0;
@@ -177,6 +187,15 @@ pub fn decode_datagram(buf: &[u8]) -> Result<Datagram, DecodeError> {
             let flags = ServerFlags(r.u8()?);
             let clients = r.u32()?;
             let tcp_port = r.u16()?;
+            let fingerprint = match r.u8()? {
+                0 => None,
+                32 => {
+                    let mut fp = [0u8; 32];
+                    fp.copy_from_slice(r.take(32)?);
+                    Some(fp)
+                }
+                _ => return Err(DecodeError::Invalid("fingerprint length")),
+            };
             let n = r.u16()? as usize;
             if n.saturating_mul(3) > r.remaining() {
                 return Err(DecodeError::Truncated);
@@ -197,6 +216,7 @@ pub fn decode_datagram(buf: &[u8]) -> Result<Datagram, DecodeError> {
                 flags,
                 clients,
                 tcp_port,
+                fingerprint,
                 resources,
             })
         }
@@ -222,6 +242,7 @@ mod tests {
             flags: ServerFlags(ServerFlags::LOCAL),
             clients: 3,
             tcp_port: 1,
+            fingerprint: Some([7; 32]),
             resources,
         };
         let bytes = encode_datagram(&Datagram::Announce(a)).unwrap();
@@ -230,6 +251,7 @@ mod tests {
             panic!()
         };
         assert!(back.flags.local());
+        assert_eq!(back.fingerprint, Some([7; 32]));
         assert_ne!(back.flags.0 & ServerFlags::TRUNCATED, 0);
         assert!(back.resources.len() < 2000 && !back.resources.is_empty());
         assert_eq!(back.resources[0].name, "CHANNEL_00000");

@@ -1,5 +1,5 @@
-//! The asix network protocol, version 1: discovery datagrams ([`discovery`]) and the
-//! framed TCP link ([`frame`]). Documented for gateway writers in `docs/asix-net-protocol.md`.
+//! The asix network protocol, version 2: discovery datagrams ([`discovery`]), the link
+//! preamble that starts TLS ([`link`]) and the framed TCP link ([`frame`]). Documented for gateway writers in `docs/asix-net-protocol.md`.
 //!
 //! Everything is little-endian. Decoding is total: any byte sequence yields a value or a
 //! [`DecodeError`], never a panic, and never an allocation larger than the input justifies.
@@ -7,14 +7,16 @@
 pub mod codec;
 pub mod discovery;
 pub mod frame;
+pub mod link;
 
 use ctopc_core::value::ArrayValue;
 use ctopc_core::{Quality, Timestamp, Value, VarType};
 
 use crate::Vqt;
 
-/// The protocol version this crate speaks (frame header byte 4, datagram byte 4).
-pub const PROTOCOL_VERSION: u8 = 1;
+/// The protocol version this crate speaks (frame header byte 4, datagram byte 4, the
+/// link preamble's byte 4).
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Largest TCP frame, length field included (1 MiB). Larger frames are a protocol error.
 pub const MAX_FRAME: usize = 1 << 20;
 /// Size of the TCP frame header (length, version, type, flags, request id).

@@ -9,7 +9,7 @@ pub mod plant;
 pub mod rest;
 pub mod rights;
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::io;
 use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -18,9 +18,8 @@ use std::time::{Duration, Instant};
 
 use ctopc_core::{OpcError, Quality, Timestamp, Value, VarType};
 use tokio::io::{AsyncWriteExt, BufWriter};
-use tokio::net::tcp::OwnedReadHalf;
 use tokio::net::{TcpListener, TcpStream, UdpSocket};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, watch, OwnedSemaphorePermit, Semaphore};
 use tokio::task::JoinHandle;
 use tracing::{debug, info, warn};
 
@@ -35,6 +34,8 @@ use crate::proto::frame::{
     encode_frame, Frame, HelloAck, Message, ReadSource, ServerFlags, UpdateEncoder, VarRef,
 };
 use crate::proto::{DecodeError, MAX_DATAGRAM};
+use crate::secure::{refuse_busy, server_handshake, LinkRead, ServerSecurity, ServerTls};
+use crate::tls::{self, Fingerprint, Trust};
 use crate::Vqt;
 
 /// Simulator settings.
@@ -67,6 +68,13 @@ pub struct SimConfig {
     pub driver_delay: Duration,
     /// Shorter sampling periods are raised to this.
     pub min_sampling_ms: u32,
+    /// How links are secured: the server's TLS identity and the clients it accepts, or
+    /// plaintext where allowed; handshake bounds.
+    pub security: ServerSecurity,
+    /// The writer identities (`cert:<fingerprint>`) whose writes are accepted; `None`: the
+    /// asix application's rule ([`WriteRights`]) with the authenticated identity as the
+    /// client's name (on a plaintext link, the name the client declared).
+    pub allow_writers: Option<Vec<String>>,
 }
 
 impl SimConfig {
@@ -87,6 +95,26 @@ impl SimConfig {
             write_rights: WriteRights::default(),
             driver_delay: Duration::from_millis(20),
             min_sampling_ms: 10,
+            security: ephemeral_security(server_name),
+            allow_writers: None,
+        }
+    }
+}
+
+/// A TLS identity made for this run (self-signed), accepting any client certificate: the
+/// simulator's default. Clients must pin its fingerprint ([`SimHandle::fingerprint`]).
+pub fn ephemeral_security(server_name: &str) -> ServerSecurity {
+    let made = tls::generate(server_name, None)
+        .and_then(|g| ServerTls::new(&g.identity, Trust::AnyCertificate));
+    match made {
+        Ok(t) => ServerSecurity::tls(t),
+        Err(e) => {
+            warn!(error = %e, "no TLS identity: the simulator accepts no link");
+            ServerSecurity {
+                tls: None,
+                allow_plaintext: false,
+                ..ServerSecurity::plaintext()
+            }
         }
     }
 }
@@ -99,6 +127,10 @@ struct Shared {
     tcp_port: u16,
     resources: Vec<Resource>,
     rights: WriteRights,
+    allow_writers: Option<HashSet<String>>,
+    security: ServerSecurity,
+    /// Permits of the handshakes under way.
+    handshakes: Arc<Semaphore>,
     driver_delay: Duration,
     min_sampling_ms: u32,
     plant: Mutex<Plant>,
@@ -210,6 +242,12 @@ pub async fn start(cfg: SimConfig) -> io::Result<SimHandle> {
         tcp_port: tcp_addr.port(),
         resources,
         rights,
+        allow_writers: cfg
+            .allow_writers
+            .as_ref()
+            .map(|v| v.iter().map(|w| w.to_ascii_lowercase()).collect()),
+        handshakes: Arc::new(Semaphore::new(cfg.security.max_handshakes.max(1))),
+        security: cfg.security.clone(),
         driver_delay: cfg.driver_delay,
         min_sampling_ms: cfg.min_sampling_ms.max(1),
         plant: Mutex::new(plant),
@@ -245,6 +283,14 @@ impl SimHandle {
     }
     pub fn tcp_addr(&self) -> SocketAddr {
         self.tcp_addr
+    }
+    /// The SHA-256 fingerprint of the server's TLS certificate (what clients pin).
+    pub fn fingerprint(&self) -> Option<Fingerprint> {
+        self.shared.security.fingerprint()
+    }
+    /// Handshakes under way now (at most the configured cap).
+    pub fn handshakes(&self) -> usize {
+        self.shared.security.max_handshakes.max(1) - self.shared.handshakes.available_permits()
     }
     /// Linked clients (without the configured extra ones).
     pub fn client_count(&self) -> u32 {
@@ -397,6 +443,7 @@ fn announce(shared: &Shared, f: &FindServer) -> Announce {
         flags: shared.flags(&f.client_host),
         clients: shared.clients(),
         tcp_port: shared.tcp_port,
+        fingerprint: shared.security.fingerprint(),
         resources,
     }
 }
@@ -407,10 +454,16 @@ async fn accept_loop(shared: Arc<Shared>, listener: TcpListener) {
         tokio::select! {
             _ = shut.changed() => break,
             r = listener.accept() => match r {
-                Ok((stream, peer)) => {
-                    debug!(%peer, "link accepted");
-                    tokio::spawn(serve_link(shared.clone(), stream));
-                }
+                Ok((stream, peer)) => match shared.handshakes.clone().try_acquire_owned() {
+                    Ok(permit) => {
+                        debug!(%peer, "connection accepted");
+                        tokio::spawn(serve_link(shared.clone(), stream, peer, permit));
+                    }
+                    Err(_) => {
+                        debug!(%peer, "too many handshakes under way: connection refused as busy");
+                        refuse_busy(&stream);
+                    }
+                },
                 Err(e) => {
                     debug!(error = %e, "accept failed");
                     tokio::time::sleep(Duration::from_millis(10)).await;
@@ -436,6 +489,8 @@ struct Group {
 
 struct LinkState {
     client: Option<(String, bool)>,
+    /// The client's authenticated identity (`cert:<fingerprint>`); `None` on plaintext.
+    identity: Option<String>,
     subs: HashMap<u32, Sub>,
     groups: BTreeMap<u32, Group>,
     last_rx: Instant,
@@ -448,7 +503,7 @@ enum Step {
     Close,
 }
 
-async fn read_frames(rd: OwnedReadHalf, tx: mpsc::Sender<Result<Frame, DecodeError>>) {
+async fn read_frames(rd: LinkRead, tx: mpsc::Sender<Result<Frame, DecodeError>>) {
     let mut rd = frames(rd);
     loop {
         let r = match next_frame(&mut rd).await {
@@ -463,18 +518,42 @@ async fn read_frames(rd: OwnedReadHalf, tx: mpsc::Sender<Result<Frame, DecodeErr
     }
 }
 
-async fn serve_link(shared: Arc<Shared>, stream: TcpStream) {
-    let _ = stream.set_nodelay(true);
-    let (rd, wr) = stream.into_split();
+async fn serve_link(
+    shared: Arc<Shared>,
+    stream: TcpStream,
+    peer: SocketAddr,
+    permit: OwnedSemaphorePermit,
+) {
+    let mut shut_rx = shared.shutdown.subscribe();
+    let handshake = tokio::time::timeout(
+        shared.security.handshake_timeout,
+        server_handshake(stream, peer, &shared.security),
+    );
+    let secured = tokio::select! {
+        r = handshake => match r {
+            Ok(Ok(s)) => s,
+            Ok(Err(reason)) => {
+                warn!(%peer, %reason, "asix link refused");
+                return;
+            }
+            Err(_) => {
+                warn!(%peer, timeout_ms = shared.security.handshake_timeout.as_millis() as u64, "asix link refused: handshake not finished in time");
+                return;
+            }
+        },
+        _ = shut_rx.changed() => return,
+    };
+    drop(permit);
+    debug!(%peer, identity = secured.peer.as_deref().unwrap_or("none (plaintext)"), "link secured");
     let (ftx, mut frx) = mpsc::channel(64);
-    let reader = tokio::spawn(read_frames(rd, ftx));
+    let reader = tokio::spawn(read_frames(secured.rd, ftx));
     let (dtx, mut drx) = mpsc::unbounded_channel::<Vec<u8>>();
-    let mut w = BufWriter::with_capacity(64 * 1024, wr);
+    let mut w = BufWriter::with_capacity(64 * 1024, secured.wr);
     let mut drop_rx = shared.drop_epoch.subscribe();
     let mut status_rx = shared.status.subscribe();
-    let mut shut_rx = shared.shutdown.subscribe();
     let mut st = LinkState {
         client: None,
+        identity: secured.peer,
         subs: HashMap::new(),
         groups: BTreeMap::new(),
         last_rx: Instant::now(),
@@ -745,7 +824,12 @@ fn handle_frame(
         }
         Message::Write { items } => {
             let items = items.into_iter().map(|(v, x)| (v, x, None)).collect();
-            let results = write(shared, &client_name, local, items);
+            let writer = Writer {
+                name: &client_name,
+                identity: st.identity.as_deref(),
+                local,
+            };
+            let results = write(shared, &writer, items);
             reply(out, request, &Message::WriteResult { results });
         }
         Message::WriteVqt { items } => {
@@ -753,7 +837,12 @@ fn handle_frame(
                 .into_iter()
                 .map(|(v, x)| (v, x.value, Some((x.quality, x.timestamp))))
                 .collect();
-            let results = write(shared, &client_name, local, items);
+            let writer = Writer {
+                name: &client_name,
+                identity: st.identity.as_deref(),
+                local,
+            };
+            let results = write(shared, &writer, items);
             reply(out, request, &Message::WriteResult { results });
         }
         other => reply(
@@ -794,8 +883,53 @@ fn read(shared: &Shared, source: ReadSource, items: &[VarRef]) -> Message {
 
 type WriteItem = (VarRef, Value, Option<(Quality, Timestamp)>);
 
+/// Who writes, as the link knows the client: the hook of every write right.
+#[derive(Debug, Clone, Copy)]
+pub struct Writer<'a> {
+    /// The asix name the client declared in Hello (not authenticated).
+    pub name: &'a str,
+    /// The authenticated identity (`cert:<fingerprint>`), `None` on a plaintext link.
+    pub identity: Option<&'a str>,
+    /// The client declared this computer's name.
+    pub local: bool,
+}
+
+impl Shared {
+    /// The write right of `writer` on `channel` (section 8 of the protocol document):
+    /// with `--allow-writer`, only the listed identities; else the asix application's
+    /// rule with the authenticated identity in place of the declared name.
+    fn check_writer(
+        &self,
+        writer: &Writer<'_>,
+        channel: &str,
+        extended: bool,
+    ) -> Result<(), Denied> {
+        let client = writer.identity.unwrap_or(writer.name);
+        match &self.allow_writers {
+            Some(allowed) => {
+                let listed = writer
+                    .identity
+                    .is_some_and(|id| allowed.contains(&id.to_ascii_lowercase()));
+                if !listed {
+                    return Err(Denied::NoPermission);
+                }
+                if extended {
+                    // The identity is the permission; the channel's conditions still hold.
+                    self.rights.check_write_extended(channel, client, true)?;
+                }
+                Ok(())
+            }
+            None if extended => self
+                .rights
+                .check_write_extended(channel, client, writer.local),
+            None => self.rights.check_write(channel, client, writer.local),
+        }
+    }
+}
+
 /// Checks and applies writes; one HRESULT per item (see the protocol document, "Writes").
-fn write(shared: &Shared, client: &str, local: bool, items: Vec<WriteItem>) -> Vec<i32> {
+fn write(shared: &Shared, writer: &Writer<'_>, items: Vec<WriteItem>) -> Vec<i32> {
+    let client = writer.identity.unwrap_or(writer.name);
     let mut seen: HashMap<(&str, &str), usize> = HashMap::new();
     for (v, _, _) in &items {
         *seen
@@ -813,18 +947,13 @@ fn write(shared: &Shared, client: &str, local: bool, items: Vec<WriteItem>) -> V
             let i = p
                 .lookup(&v.channel, &v.variable)
                 .ok_or(OpcError::ItemUnknown)?;
-            let check = if ext.is_some() {
-                shared
-                    .rights
-                    .check_write_extended(&v.channel, client, local)
-            } else {
-                shared.rights.check_write(&v.channel, client, local)
-            };
-            check.map_err(|d| match d {
-                Denied::NoPermission | Denied::NoExtendedWrite => {
-                    OpcError::WriteErrorIllegalCommand
-                }
-            })?;
+            shared
+                .check_writer(writer, &v.channel, ext.is_some())
+                .map_err(|d| match d {
+                    Denied::NoPermission | Denied::NoExtendedWrite => {
+                        OpcError::WriteErrorIllegalCommand
+                    }
+                })?;
             if !p.vars()[i].spec().writable {
                 return Err(OpcError::WriteErrorDeviceRequestIllegal);
             }

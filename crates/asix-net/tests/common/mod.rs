@@ -3,11 +3,14 @@
 #![allow(dead_code)]
 
 use std::net::{Ipv4Addr, SocketAddr};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use asix_model::ItemKey;
 use asix_net::client::ClientEvent;
+use asix_net::secure::{ClientSecurity, ServerSecurity, ServerTls};
 use asix_net::sim::{self, SimConfig, SimHandle};
+use asix_net::tls;
 use asix_net::{channel_sink, AsixClient, ClientConfig};
 use ctopc_core::Quality;
 use tokio::sync::mpsc::UnboundedReceiver;
@@ -19,9 +22,60 @@ pub const CLIENT_NAME: &str = "CLI.";
 /// Every test body runs under this limit.
 pub const TEST_LIMIT: Duration = Duration::from_secs(30);
 
+/// The test PKI, made once per test binary: the servers' identity (every simulator of a
+/// test uses it unless the test says otherwise) and the clients'.
+pub struct Pki {
+    pub server: tls::Generated,
+    pub client: tls::Generated,
+}
+
+pub fn pki() -> &'static Pki {
+    static PKI: OnceLock<Pki> = OnceLock::new();
+    PKI.get_or_init(|| Pki {
+        server: tls::generate("ASIX-TEST-SERVER", None).expect("server certificate"),
+        client: tls::generate("ASIX-TEST-CLIENT", None).expect("client certificate"),
+    })
+}
+
+/// TLS with the test server identity, accepting any client certificate.
+pub fn server_security() -> ServerSecurity {
+    ServerSecurity::tls(
+        ServerTls::new(&pki().server.identity, tls::Trust::AnyCertificate).expect("server TLS"),
+    )
+}
+
+/// TLS with the test client identity, pinning the test server's fingerprint.
+pub fn client_security() -> ClientSecurity {
+    ClientSecurity::tls(
+        &pki().client.identity,
+        tls::Trust::Fingerprints(vec![pki().server.identity.fingerprint()]),
+    )
+    .expect("client TLS")
+}
+
+/// The test client's authenticated identity, as servers know it.
+pub fn client_identity() -> String {
+    tls::identity_of(&pki().client.identity.fingerprint())
+}
+
+/// A client with a certificate of its own (not the test client's), pinning the test server.
+pub fn stranger_cfg(targets: &[SocketAddr]) -> ClientConfig {
+    static STRANGER: OnceLock<tls::Generated> = OnceLock::new();
+    let me = STRANGER.get_or_init(|| tls::generate("STRANGER", None).expect("certificate"));
+    let mut c = client_cfg(targets);
+    c.client_name = "STRANGER.".into();
+    c.security = ClientSecurity::tls(
+        &me.identity,
+        tls::Trust::Fingerprints(vec![pki().server.identity.fingerprint()]),
+    )
+    .expect("client TLS");
+    c
+}
+
 pub async fn sim_with(name: &str, f: impl FnOnce(&mut SimConfig)) -> SimHandle {
     let mut cfg = SimConfig::new(name);
     cfg.tick_ms = 20;
+    cfg.security = server_security();
     f(&mut cfg);
     sim::start(cfg).await.expect("simulator starts")
 }
@@ -41,6 +95,7 @@ pub fn client_cfg(targets: &[SocketAddr]) -> ClientConfig {
     c.keepalive = Duration::from_millis(100);
     c.reconnect_interval = Duration::from_millis(200);
     c.retry_failed_items = Duration::from_millis(300);
+    c.security = client_security();
     c
 }
 
@@ -141,4 +196,26 @@ fn tail(v: &[ClientEvent]) -> Vec<String> {
             s.chars().take(300).collect()
         })
         .collect()
+}
+
+/// A link to a simulator at the byte level, as the test client: preamble, TLS.
+pub async fn raw_link(addr: SocketAddr) -> tokio_rustls::client::TlsStream<tokio::net::TcpStream> {
+    use asix_net::proto::link::{encode_preamble, LinkMode, LinkStatus};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr)
+        .await
+        .expect("connects");
+    s.write_all(&encode_preamble(LinkMode::Tls, LinkStatus::Accepted))
+        .await
+        .expect("preamble sent");
+    let mut answer = [0u8; 8];
+    s.read_exact(&mut answer).await.expect("preamble answered");
+    assert_eq!(answer, encode_preamble(LinkMode::Tls, LinkStatus::Accepted));
+    let ClientSecurity::Tls { config, .. } = client_security() else {
+        unreachable!()
+    };
+    tokio_rustls::TlsConnector::from(config)
+        .connect(tls::sni(), s)
+        .await
+        .expect("TLS handshake")
 }

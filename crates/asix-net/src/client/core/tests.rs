@@ -15,6 +15,8 @@ struct Harness {
     events: Vec<ClientEvent>,
     sent: Vec<(LinkId, Frame)>,
     connects: Vec<(LinkId, SocketAddr)>,
+    /// The fingerprint each connection must find (the announced one).
+    connect_fps: Vec<Option<Fingerprint>>,
     closed: Vec<LinkId>,
     finds: Vec<FindServer>,
 }
@@ -27,8 +29,14 @@ fn cfg() -> ClientConfig {
     c.reconnect_interval = Duration::from_millis(300);
     c.retry_failed_items = Duration::from_millis(2000);
     c.discovery_resend = Duration::from_millis(250);
+    let me = crate::tls::generate("CLI", None).unwrap();
+    c.security =
+        ClientSecurity::tls(&me.identity, crate::tls::Trust::Fingerprints(vec![PINNED])).unwrap();
     c
 }
+
+/// The fingerprint the test client pins and its servers announce.
+const PINNED: Fingerprint = [0xA5; 32];
 
 fn addr(port: u16) -> SocketAddr {
     SocketAddr::from((Ipv4Addr::LOCALHOST, port))
@@ -45,6 +53,7 @@ impl Harness {
             events: Vec::new(),
             sent: Vec::new(),
             connects: Vec::new(),
+            connect_fps: Vec::new(),
             closed: Vec::new(),
             finds: Vec::new(),
         }
@@ -61,7 +70,14 @@ impl Harness {
                         pos += n;
                     }
                 }
-                Action::Connect { link, addr } => self.connects.push((link, addr)),
+                Action::Connect {
+                    link,
+                    addr,
+                    fingerprint,
+                } => {
+                    self.connects.push((link, addr));
+                    self.connect_fps.push(fingerprint);
+                }
                 Action::Close { link } => self.closed.push(link),
                 Action::SendFindServer(f) => self.finds.push(f),
             }
@@ -91,6 +107,10 @@ impl Harness {
     }
 
     fn announce(&mut self, name: &str, flags: u8, port: u16) {
+        self.announce_fp(name, flags, port, Some(PINNED));
+    }
+
+    fn announce_fp(&mut self, name: &str, flags: u8, port: u16, fingerprint: Option<Fingerprint>) {
         let find = self.finds.last().expect("a search is running").clone();
         let request = find.request;
         let a = Announce {
@@ -100,6 +120,7 @@ impl Harness {
             flags: ServerFlags(flags),
             clients: 0,
             tcp_port: port,
+            fingerprint,
             resources: vec![Resource::channel(CH), find.resource],
         };
         self.core.handle_announce(self.now, a, addr(9));
@@ -524,4 +545,35 @@ fn requests_spanning_channels_complete_once_in_request_order() {
     assert_eq!(r[1].1, Ok(good(1.0)));
     assert_eq!(r[2].1, Ok(good(2.0)));
     assert_eq!(h.connects.len(), 1);
+}
+
+#[test]
+fn only_pinned_announcements_lead_to_a_link_and_the_link_must_show_the_announced_certificate() {
+    let mut h = Harness::new(cfg());
+    h.core.subscribe(h.now, vec![ItemKey::new(CH, "V")], 1000);
+    h.pump();
+    // A server announcing another certificate, or none, is never tried.
+    h.announce_fp("S1", 0, 1000, Some([0x5A; 32]));
+    h.announce_fp("S1", 0, 1001, None);
+    assert!(h.connects.is_empty());
+    h.announce("S1", 0, 1002);
+    assert_eq!(h.connects, [(1, addr(1002))]);
+    assert_eq!(h.connect_fps, [Some(PINNED)]);
+}
+
+#[test]
+fn a_client_without_tls_settings_links_to_nothing() {
+    let mut c = cfg();
+    c.security = ClientSecurity::default();
+    let mut h = Harness::new(c);
+    h.core.subscribe(h.now, vec![ItemKey::new(CH, "V")], 1000);
+    h.pump();
+    assert!(h.finds.is_empty(), "no search without a way to link");
+    assert!(h.events.iter().any(|e| matches!(
+        e,
+        ClientEvent::ChannelDown {
+            error: OpcError::NetLinkToServer,
+            ..
+        }
+    )));
 }
