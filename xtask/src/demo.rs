@@ -92,7 +92,29 @@ fn parse(args: &[String]) -> Result<Options, String> {
 
 /// The ASIXConnect.ini of the demo install folder (`rest`: the basic channel reads from
 /// asix-sim's Asix.Evo REST server).
-pub fn ini_text(rest: bool) -> String {
+/// The demo's certificates, in the staged folder: `certs/opc` (the server's, as an asix
+/// client) and `certs/asix-sim` (the simulator's), each `asix-cert.pem` + `asix-key.pem`.
+const CERTS: &str = "certs";
+
+/// Makes a key pair and certificate with `asix-sim --gen-cert`; returns the fingerprint.
+fn gen_cert(sim_exe: &Path, name: &str, dir: &Path) -> Result<String, String> {
+    let out = Command::new(sim_exe)
+        .args(["--name", name, "--gen-cert"])
+        .arg(dir)
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", sim_exe.display()))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    match text.lines().find_map(|l| l.strip_prefix("fingerprint ")) {
+        Some(fp) if out.status.success() => Ok(fp.trim().to_owned()),
+        _ => Err(format!(
+            "asix-sim --gen-cert {} failed: {}",
+            dir.display(),
+            String::from_utf8_lossy(&out.stderr)
+        )),
+    }
+}
+
+pub fn ini_text(rest: bool, server_fingerprint: &str) -> String {
     let rest_lines = if rest {
         format!(
             "; The plant through asix-sim's Asix.Evo REST server (read-only items).\nAsixEvoRest = http://127.0.0.1:{REST_PORT}\n"
@@ -118,6 +140,11 @@ ReconnectInterval = 1000
 ItemsDatabase = demo/wytwornia_kwasu/wytwornia_kwasu.zez
 CheckLimits = tak
 CheckControlVariables = tak
+; The asix link: TLS 1.3, this server's certificate, the simulator's pinned (both made by
+; `asix-sim --gen-cert` when the demo was staged).
+AsixNetCertFile = {CERTS}/opc/asix-cert.pem
+AsixNetKeyFile = {CERTS}/opc/asix-key.pem
+AsixNetServerFingerprint = {server_fingerprint}
 {rest_lines}"
     )
 }
@@ -132,7 +159,7 @@ fn copy(from: &Path, to: &Path) -> Result<(), String> {
 }
 
 /// Stages the demo install folder; returns it.
-pub fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
+pub fn stage(a: &build::Artifacts, sim_exe: &Path) -> Result<PathBuf, String> {
     let root = util::root();
     let dir = root.join("target/demo/ServerCTOPC");
     copy(&a.server, &dir.join("ServerCTOPC.exe"))?;
@@ -144,9 +171,19 @@ pub fn stage(a: &build::Artifacts) -> Result<PathBuf, String> {
             &dir.join("demo/wytwornia_kwasu").join(f),
         )?;
     }
+    let certs = dir.join(CERTS);
+    let _ = std::fs::remove_dir_all(&certs);
+    let sim_fp = gen_cert(sim_exe, "ASIX-SIM", &certs.join("asix-sim"))?;
+    gen_cert(sim_exe, "OPC-DEMO", &certs.join("opc"))?;
+    std::fs::write(certs.join("asix-sim.fingerprint"), &sim_fp)
+        .map_err(|e| format!("{}: {e}", certs.display()))?;
     let ini = dir.join("ASIXConnect.ini");
-    std::fs::write(&ini, ini_text(false)).map_err(|e| format!("{}: {e}", ini.display()))?;
-    println!("demo: staged {}", dir.display());
+    std::fs::write(&ini, ini_text(false, &sim_fp))
+        .map_err(|e| format!("{}: {e}", ini.display()))?;
+    println!(
+        "demo: staged {} (asix-sim's certificate {sim_fp})",
+        dir.display()
+    );
     Ok(dir)
 }
 
@@ -180,18 +217,25 @@ fn register(pfx: &Path, dir: &Path) -> Result<(), String> {
 pub struct Sim(Child);
 
 impl Sim {
-    /// The simulator on the demo's asix ports.
-    pub fn start(exe: &Path, db: &Path) -> Result<Sim, String> {
-        Self::spawn(exe, db, false)
+    /// The simulator on the demo's asix ports, serving the database of the staged folder
+    /// `dir` with the certificate staged for it.
+    pub fn start(exe: &Path, dir: &Path) -> Result<Sim, String> {
+        Self::spawn(exe, dir, false)
     }
 
     /// The same, also serving the Asix.Evo REST API on the demo's REST port.
-    fn start_rest(exe: &Path, db: &Path) -> Result<Sim, String> {
-        Self::spawn(exe, db, true)
+    fn start_rest(exe: &Path, dir: &Path) -> Result<Sim, String> {
+        Self::spawn(exe, dir, true)
     }
 
-    fn spawn(exe: &Path, db: &Path, rest: bool) -> Result<Sim, String> {
+    fn spawn(exe: &Path, dir: &Path, rest: bool) -> Result<Sim, String> {
+        let db = dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
+        let certs = dir.join(CERTS).join("asix-sim");
         let mut cmd = Command::new(exe);
+        cmd.arg("--cert")
+            .arg(certs.join("asix-cert.pem"))
+            .arg("--key")
+            .arg(certs.join("asix-key.pem"));
         cmd.arg("--demo-db").arg(db).args([
             "--udp",
             &format!("127.0.0.1:{DISCOVERY_PORT}"),
@@ -336,10 +380,12 @@ pub fn run(args: &[String]) -> Result<(), String> {
     wine::ensure_prefix(&pfx)?;
     // A clean start: nothing of an earlier demo may hold the staged files or the ports.
     wine::wineserver_in(&pfx, "-k", Duration::from_secs(20));
-    let dir = stage(&artifacts)?;
+    let dir = stage(&artifacts, &sim_exe)?;
     if rest {
         let ini = dir.join("ASIXConnect.ini");
-        std::fs::write(&ini, ini_text(true)).map_err(|e| format!("{}: {e}", ini.display()))?;
+        let fp = std::fs::read_to_string(dir.join(CERTS).join("asix-sim.fingerprint"))
+            .map_err(|e| format!("{}: {e}", dir.display()))?;
+        std::fs::write(&ini, ini_text(true, &fp)).map_err(|e| format!("{}: {e}", ini.display()))?;
     }
     if stop.load(Ordering::SeqCst) {
         return Err("interrupted".into());
@@ -348,11 +394,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let mut sim = None;
     let result = (|| {
         register(&pfx, &dir)?;
-        let db = dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
         sim = Some(if rest {
-            Sim::start_rest(&sim_exe, &db)?
+            Sim::start_rest(&sim_exe, &dir)?
         } else {
-            Sim::start(&sim_exe, &db)?
+            Sim::start(&sim_exe, &dir)?
         });
         println!(
             "demo: starting `opcdiag demo` under Wine{}\n",
@@ -381,9 +426,11 @@ pub fn run(args: &[String]) -> Result<(), String> {
 mod tests {
     use super::*;
 
+    const FP: &str = "9f86d081884c7d659a2feaa0c55ad015a3bf4f1b2b0b822cd15d6c15b0f00a08";
+
     #[test]
     fn the_ini_reads_the_demo_database_over_the_loopback_asix_network() {
-        let ini = ini_text(false);
+        let ini = ini_text(false, FP);
         assert!(!ini.contains("AsixEvoRest"));
         for line in [
             "SimulateCurrentData = nie",
@@ -392,6 +439,9 @@ mod tests {
             "DataPort = 48171",
             "[Channel:*]",
             "ItemsDatabase = demo/wytwornia_kwasu/wytwornia_kwasu.zez",
+            "AsixNetCertFile = certs/opc/asix-cert.pem",
+            "AsixNetKeyFile = certs/opc/asix-key.pem",
+            &format!("AsixNetServerFingerprint = {FP}"),
         ] {
             assert!(ini.lines().any(|l| l == line), "missing {line:?} in\n{ini}");
         }
@@ -409,17 +459,18 @@ mod tests {
             )
             .unwrap();
         }
-        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(true)).unwrap();
+        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(true, FP)).unwrap();
         let (rest, _) = asix_model::load_config_file(&dir.join("ASIXConnect.ini")).unwrap();
         assert_eq!(
             rest.basic().asix_evo_rest,
             [format!("http://127.0.0.1:{REST_PORT}")]
         );
-        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(false)).unwrap();
+        std::fs::write(dir.join("ASIXConnect.ini"), ini_text(false, FP)).unwrap();
         let loaded = asix_model::load_config_file(&dir.join("ASIXConnect.ini"));
         let (cfg, warnings) = loaded.unwrap();
         assert!(warnings.is_empty(), "{warnings:?}");
         assert!(!cfg.server.simulate_current_data);
+        assert_eq!(cfg.basic().asix_net_server_fingerprints, [FP]);
         assert_eq!(cfg.server.broadcast_address.as_deref(), Some("127.0.0.1"));
         assert_eq!(
             (cfg.server.discovery_port, cfg.server.data_port),

@@ -595,11 +595,8 @@ pub fn run(args: &[String]) -> Result<(), String> {
     let mut sim = None;
     let server = if o.net {
         let sim_exe = build::asix_sim()?;
-        let dir = crate::demo::stage(&artifacts)?;
-        sim = Some(crate::demo::Sim::start(
-            &sim_exe,
-            &dir.join("demo/wytwornia_kwasu/wytwornia_kwasu.zez"),
-        )?);
+        let dir = crate::demo::stage(&artifacts, &sim_exe)?;
+        sim = Some(crate::demo::Sim::start(&sim_exe, &dir)?);
         dir.join("ServerCTOPC.exe")
     } else {
         artifacts.server.clone()

@@ -685,7 +685,7 @@ pub fn link_check(
                 "no asix server answered within FindServerTimeout ({timeout_ms} ms){}",
                 result.as_ref().err().map(|e| format!(": {e}")).unwrap_or_default()
             ),
-            "check that the asix data server runs and serves this channel, AsixServerName/[AsixCTServers], BroadcastAddress and DiscoveryPort, and that UDP discovery is allowed through the firewall",
+            "check that the asix data server runs and serves this channel, AsixServerName/[AsixCTServers], BroadcastAddress and DiscoveryPort, that UDP discovery is allowed through the firewall, and that the server's certificate is pinned (AsixNetServerFingerprint or AsixNetCaFile, with AsixNetCertFile/AsixNetKeyFile): announcements of an unpinned certificate are ignored",
         ),
     }
 }
