@@ -46,6 +46,8 @@ pub struct Search {
     first_wins: bool,
     deadline: Instant,
     found: Vec<Candidate>,
+    /// An announcement of an unpinned certificate was reported in this search.
+    unpinned_reported: bool,
 }
 
 impl Search {
@@ -63,6 +65,7 @@ impl Search {
             first_wins,
             deadline: now + find_server_timeout,
             found: Vec::new(),
+            unpinned_reported: false,
         }
     }
 
@@ -96,6 +99,12 @@ impl Search {
             self.found.push(Candidate { announce: a, addr });
         }
         self.is_done()
+    }
+
+    /// True the first time in this search: an announcement of an unpinned certificate is
+    /// worth one warning per search, not one per resent request.
+    pub fn first_unpinned(&mut self) -> bool {
+        !std::mem::replace(&mut self.unpinned_reported, true)
     }
 
     /// Complete: the first acceptable answer arrived and it wins.

@@ -560,7 +560,12 @@ impl ClientCore {
             .accepts_announcement(ann.fingerprint.as_ref())
         {
             let fp = ann.fingerprint.as_ref().map(fingerprint_hex);
-            warn!(channel = %ch, server = %ann.server_name, %from, fingerprint = fp.as_deref().unwrap_or("none"), "announcement ignored: the server's certificate is not pinned for this channel");
+            let fp = fp.as_deref().unwrap_or("none (a plaintext-only server)");
+            if search.first_unpinned() {
+                warn!(channel = %ch, server = %ann.server_name, %from, fingerprint = fp, "announcement ignored: the server's certificate is not pinned for this channel");
+            } else {
+                debug!(channel = %ch, server = %ann.server_name, %from, fingerprint = fp, "announcement ignored: not pinned");
+            }
             return;
         }
         if search.offer(ann, from) {
