@@ -386,3 +386,42 @@ async fn a_silent_server_costs_the_client_net_timeout_not_a_hang() {
         refused(&mut ev, OpcError::NetLinkToServer).await;
     })
 }
+
+/// A version-1 server takes the preamble for a frame too long, answers a version-1 Error
+/// frame and closes: the client recognises it and refuses the link at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_version_1_server_is_refused_without_waiting() {
+    bounded!(async {
+        let listener = tokio::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0))
+            .await
+            .unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let answered = std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0));
+        let seen = answered.clone();
+        tokio::spawn(async move {
+            while let Ok((mut s, _)) = listener.accept().await {
+                // What a version-1 server does with a length it cannot take.
+                let mut len = [0u8; 4];
+                if s.read_exact(&mut len).await.is_ok() {
+                    let frame = asix_net::secure::version1_error_frame(
+                        OpcError::NetSendData,
+                        "frame length 1280856897 out of range",
+                    );
+                    let _ = s.write_all(&frame).await;
+                    seen.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                }
+            }
+        });
+        let pinned = pki().server.identity.fingerprint();
+        let udp = forger(move |r| announce(r, "OLD", Some(pinned), port)).await;
+        let mut cfg = client_cfg(&[udp]);
+        // Longer than the test's wait: the refusal must come from the answer, not a timeout.
+        cfg.options.net_timeout = Duration::from_secs(30);
+        let (c, mut ev) = client(cfg);
+        c.subscribe(vec![key("ZB1_POZIOM")], 100);
+        let t0 = Instant::now();
+        refused(&mut ev, OpcError::NetLinkToServer).await;
+        assert!(t0.elapsed() < Duration::from_secs(5), "{:?}", t0.elapsed());
+        assert!(answered.load(std::sync::atomic::Ordering::SeqCst) >= 1);
+    })
+}
