@@ -386,4 +386,7 @@ fn main() {
     if want("failover") {
         failover();
     }
+    if let Some(dir) = pki().cert_file.parent() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
