@@ -43,7 +43,9 @@ impl EngineClient {
         let limit = self.wait_limit();
         let r = self.runtime.wait_for(limit, |e| e.take_sync_result(id));
         if r.is_none() {
-            tracing::warn!("OPC UA: a request got no answer from the data source within {limit:?}; abandoned");
+            tracing::warn!(
+                "OPC UA: a request got no answer from the data source within {limit:?}; abandoned"
+            );
             self.runtime.with_engine(|e, _| e.abandon_sync(id));
         }
         r

@@ -12,13 +12,12 @@
 
 use crate::status::quality_to_status;
 use crate::value::{timestamp_to_ua, to_variant};
-use opcua::server::SubscriptionCache;
-use opcua::types::{AttributeId, DataValue, NodeId, UAString};
 use ctopc_core::model::{
     DataChangeKind, Event, GroupHandle, GroupParams, ItemDefinition, ItemState,
 };
 use ctopc_core::{OpcError, VarType};
 use ctopc_runtime::{Delivery, GroupSink, Runtime};
+use opcua::types::{AttributeId, DataValue, NodeId, UAString};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
@@ -34,6 +33,23 @@ pub fn state_to_data_value(s: &ItemState) -> DataValue {
         source_picoseconds: None,
         server_timestamp: Some(now),
         server_picoseconds: None,
+    }
+}
+
+/// Where data changes go: async-opcua's subscription cache (the server), or a test's
+/// recorder.
+pub trait Notify: Send + Sync {
+    /// Changes of the Value attribute of nodes.
+    fn data_changes(&self, changes: Vec<(NodeId, DataValue)>);
+}
+
+impl Notify for opcua::server::SubscriptionCache {
+    fn data_changes(&self, changes: Vec<(NodeId, DataValue)>) {
+        self.notify_data_change(
+            changes
+                .iter()
+                .map(|(id, dv)| (dv.clone(), id, AttributeId::Value)),
+        );
     }
 }
 
@@ -60,7 +76,7 @@ pub struct Monitor {
     ns: u16,
     client: Arc<EngineClient>,
     /// async-opcua's subscription cache (known once the server is built).
-    subscriptions: OnceLock<Arc<SubscriptionCache>>,
+    subscriptions: OnceLock<Arc<dyn Notify>>,
     state: Mutex<State>,
     me: std::sync::Weak<Monitor>,
 }
@@ -80,7 +96,7 @@ impl Monitor {
         })
     }
 
-    pub fn set_subscriptions(&self, cache: Arc<SubscriptionCache>) {
+    pub fn set_subscriptions(&self, cache: Arc<dyn Notify>) {
         let _ = self.subscriptions.set(cache);
     }
 
@@ -256,7 +272,7 @@ impl Monitor {
         let Some(cache) = self.subscriptions.get() else {
             return;
         };
-        let changes: Vec<(DataValue, NodeId)> = {
+        let changes: Vec<(NodeId, DataValue)> = {
             let st = lock(&self.state);
             dc.items
                 .iter()
@@ -272,15 +288,13 @@ impl Monitor {
                         dv.value = None;
                         dv.status = Some(crate::status::error_to_status(e, false));
                     }
-                    Some((dv, NodeId::new(self.ns, UAString::from(item_id.as_str()))))
+                    Some((NodeId::new(self.ns, UAString::from(item_id.as_str())), dv))
                 })
                 .collect()
         };
-        cache.notify_data_change(
-            changes
-                .iter()
-                .map(|(dv, id)| (dv.clone(), id, AttributeId::Value)),
-        );
+        if !changes.is_empty() {
+            cache.data_changes(changes);
+        }
     }
 }
 

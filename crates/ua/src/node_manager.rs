@@ -11,6 +11,11 @@ use crate::monitor::{state_to_data_value, Monitor};
 use crate::space::{Meta, Resolved, Space, NAMESPACE_URI};
 use crate::status::error_to_status;
 use crate::value::{from_variant, timestamp_from_ua};
+use ctopc_core::browse::AddressSpace;
+use ctopc_core::lang::Lang;
+use ctopc_core::model::{ItemVqt, MAX_AGE_CACHE};
+use ctopc_core::namespace::{Namespace, OPC_WRITEABLE};
+use ctopc_core::OpcError;
 use opcua::nodes::{DefaultTypeTree, ReferenceDirection};
 use opcua::server::authenticator::UserToken;
 use opcua::server::diagnostics::NamespaceMetadata;
@@ -25,11 +30,6 @@ use opcua::types::{
     AttributeId, DataValue, ExpandedNodeId, IdType, NodeId, NumericRange, ObjectId,
     ReferenceDescription, ReferenceTypeId, StatusCode, TimestampsToReturn,
 };
-use ctopc_core::browse::AddressSpace;
-use ctopc_core::lang::Lang;
-use ctopc_core::model::{ItemVqt, MAX_AGE_CACHE};
-use ctopc_core::namespace::{Namespace, OPC_WRITEABLE};
-use ctopc_core::OpcError;
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
 
@@ -88,23 +88,8 @@ impl NodeManagerBuilder for AsixNodeManagerBuilder {
             .write()
             .namespaces_mut()
             .add_namespace(NAMESPACE_URI);
-        let setup = self.setup;
-        let scan_rate_ms = setup.engine.runtime.lock().engine.config().min_update_rate_ms;
-        let monitor = Monitor::new(ns, Arc::clone(&setup.engine));
-        monitor.set_subscriptions(Arc::clone(&context.subscriptions));
-        let nm = Arc::new(AsixNodeManager {
-            space: Arc::new(Space {
-                ns,
-                namespace: setup.namespace,
-                tree: setup.tree,
-                scan_rate_ms,
-            }),
-            engine: setup.engine,
-            monitor,
-            roles: setup.roles,
-            lang: setup.lang,
-            items: Mutex::new(HashMap::new()),
-        });
+        let notify = Arc::clone(&context.subscriptions) as Arc<dyn crate::monitor::Notify>;
+        let nm = Arc::new(AsixNodeManager::new(self.setup, ns, notify));
         *self.out.lock().unwrap_or_else(|p| p.into_inner()) = Some(Arc::clone(&nm));
         nm
     }
@@ -154,6 +139,32 @@ pub fn max_age_ms(max_age: f64) -> u32 {
 }
 
 impl AsixNodeManager {
+    /// The node manager of namespace index `ns`, its data changes going to `notify`.
+    pub fn new(setup: Setup, ns: u16, notify: Arc<dyn crate::monitor::Notify>) -> Self {
+        let scan_rate_ms = setup
+            .engine
+            .runtime
+            .lock()
+            .engine
+            .config()
+            .min_update_rate_ms;
+        let monitor = Monitor::new(ns, Arc::clone(&setup.engine));
+        monitor.set_subscriptions(notify);
+        AsixNodeManager {
+            space: Arc::new(Space {
+                ns,
+                namespace: setup.namespace,
+                tree: setup.tree,
+                scan_rate_ms,
+            }),
+            engine: setup.engine,
+            monitor,
+            roles: setup.roles,
+            lang: setup.lang,
+            items: Mutex::new(HashMap::new()),
+        }
+    }
+
     fn items(&self) -> std::sync::MutexGuard<'_, HashMap<MonitoredItemHandle, (String, u32)>> {
         self.items.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -427,8 +438,13 @@ impl NodeManager for AsixNodeManager {
         let mut writes: Vec<(usize, (String, ItemVqt))> = Vec::new();
         for (i, node) in nodes_to_write.iter_mut().enumerate() {
             let v = node.value();
-            match self.check_write(&v.node_id, v.attribute_id, &v.index_range, &v.value, may_write)
-            {
+            match self.check_write(
+                &v.node_id,
+                v.attribute_id,
+                &v.index_range,
+                &v.value,
+                may_write,
+            ) {
                 Ok(w) => writes.push((i, w)),
                 Err(e) => node.set_status(e),
             }
@@ -480,7 +496,10 @@ impl NodeManager for AsixNodeManager {
                         Err(e) => item.set_status(error_to_status(e, false)),
                     }
                 }
-                r => match self.space.attribute(&r, target.attribute_id, may_write, self.lang) {
+                r => match self
+                    .space
+                    .attribute(&r, target.attribute_id, may_write, self.lang)
+                {
                     Ok(v) => {
                         item.set_initial_value(DataValue::value_only(v));
                         item.set_status(StatusCode::Good);

@@ -15,16 +15,16 @@
 //!   DataType, Value, AccessLevel, MinimumSamplingInterval; 101: Description).
 
 use crate::value::{data_type, to_variant};
-use opcua::nodes::AccessLevel;
-use opcua::types::{
-    AttributeId, ByteString, DataValue, EUInformation, ExtensionObject, Identifier,
-    LocalizedText, NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName, Range,
-    ReferenceTypeId, StatusCode, UAString, VariableTypeId, Variant,
-};
 use ctopc_core::browse::{AddressSpace, NodeRef};
 use ctopc_core::lang::Lang;
 use ctopc_core::namespace::{EuInfo, Namespace, OPC_WRITEABLE};
 use ctopc_core::properties::{self as props, ItemInfo, PropertyContext};
+use opcua::nodes::AccessLevel;
+use opcua::types::{
+    AttributeId, ByteString, DataValue, EUInformation, ExtensionObject, Identifier, LocalizedText,
+    NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName, Range, ReferenceTypeId, StatusCode,
+    UAString, VariableTypeId, Variant,
+};
 use std::sync::Arc;
 
 /// The numeric id of the `ServerCTOPC` folder in our namespace.
@@ -168,7 +168,11 @@ impl Space {
 
     fn is_analog(info: &ItemInfo) -> bool {
         matches!(info.attrs.eu, EuInfo::Analog { .. })
-            || info.attrs.eu_units.as_deref().is_some_and(|u| !u.is_empty())
+            || info
+                .attrs
+                .eu_units
+                .as_deref()
+                .is_some_and(|u| !u.is_empty())
     }
 
     fn property_name(pid: u32) -> String {
@@ -439,9 +443,7 @@ impl Space {
         let value = self.property_value(pid, info, lang)?;
         let (dt, rank) = match pid {
             props::OPC_PROPERTY_HIGH_EU => (opcua::types::DataTypeId::Range.into(), -1),
-            props::OPC_PROPERTY_EU_UNITS => {
-                (opcua::types::DataTypeId::EUInformation.into(), -1)
-            }
+            props::OPC_PROPERTY_EU_UNITS => (opcua::types::DataTypeId::EUInformation.into(), -1),
             _ => {
                 let vt = props::property_info(pid)
                     .map(|p| p.var_type)
@@ -471,22 +473,34 @@ impl Space {
     }
 
     /// The value of a property node.
-    pub fn property_value(&self, pid: u32, info: &ItemInfo, lang: Lang) -> Result<Variant, StatusCode> {
+    pub fn property_value(
+        &self,
+        pid: u32,
+        info: &ItemInfo,
+        lang: Lang,
+    ) -> Result<Variant, StatusCode> {
         match pid {
             props::OPC_PROPERTY_HIGH_EU => match info.attrs.eu {
                 EuInfo::Analog { low, high } => {
-                    Ok(Variant::from(ExtensionObject::from_message(Range { low, high })))
+                    Ok(Variant::from(ExtensionObject::from_message(Range {
+                        low,
+                        high,
+                    })))
                 }
                 _ => Err(StatusCode::BadNodeIdUnknown),
             },
             props::OPC_PROPERTY_EU_UNITS => {
                 let unit = info.attrs.eu_units.clone().unwrap_or_default();
-                Ok(Variant::from(ExtensionObject::from_message(EUInformation {
-                    namespace_uri: UAString::from("http://www.opcfoundation.org/UA/units/un/cefact"),
-                    unit_id: -1,
-                    display_name: LocalizedText::new("", &unit),
-                    description: LocalizedText::new("", &unit),
-                })))
+                Ok(Variant::from(ExtensionObject::from_message(
+                    EUInformation {
+                        namespace_uri: UAString::from(
+                            "http://www.opcfoundation.org/UA/units/un/cefact",
+                        ),
+                        unit_id: -1,
+                        display_name: LocalizedText::new("", &unit),
+                        description: LocalizedText::new("", &unit),
+                    },
+                )))
             }
             _ => {
                 let p = props::property(info, pid, true, &self.cx(lang));
@@ -507,7 +521,11 @@ impl Space {
 /// The item's description in `lang` (the other language's when it has none).
 pub fn description(info: &ItemInfo, lang: Lang) -> LocalizedText {
     let pl = info.attrs.description.as_deref().filter(|s| !s.is_empty());
-    let en = info.attrs.description_en.as_deref().filter(|s| !s.is_empty());
+    let en = info
+        .attrs
+        .description_en
+        .as_deref()
+        .filter(|s| !s.is_empty());
     let pick = match lang {
         Lang::English => en.map(|t| ("en", t)).or(pl.map(|t| ("pl", t))),
         Lang::Polish => pl.map(|t| ("pl", t)).or(en.map(|t| ("en", t))),

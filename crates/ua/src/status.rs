@@ -11,8 +11,8 @@
 //! constant) become the status code's limit bits. The vendor byte (asix: the Second Limit
 //! bit) has no place in a status code and is dropped.
 
-use opcua::types::{StatusCode, StatusCodeLimit};
 use ctopc_core::{OpcError, Quality};
+use opcua::types::{StatusCode, StatusCodeLimit};
 
 /// The status code of a DA quality word.
 pub fn quality_to_status(q: Quality) -> StatusCode {
@@ -73,12 +73,18 @@ mod tests {
         let cases = [
             (Quality::GOOD, StatusCode::Good),
             (Quality::GOOD_LOCAL_OVERRIDE, StatusCode::GoodLocalOverride),
-            (Quality::UNCERTAIN_SUB_NORMAL, StatusCode::UncertainSubNormal),
+            (
+                Quality::UNCERTAIN_SUB_NORMAL,
+                StatusCode::UncertainSubNormal,
+            ),
             (
                 Quality::UNCERTAIN_EU_EXCEEDED,
                 StatusCode::UncertainEngineeringUnitsExceeded,
             ),
-            (Quality::UNCERTAIN_LAST_USABLE, StatusCode::UncertainLastUsableValue),
+            (
+                Quality::UNCERTAIN_LAST_USABLE,
+                StatusCode::UncertainLastUsableValue,
+            ),
             (Quality::BAD_COMM_FAILURE, StatusCode::BadNoCommunication),
             (Quality::BAD_NOT_CONNECTED, StatusCode::BadNotConnected),
             (Quality::BAD_OUT_OF_SERVICE, StatusCode::BadOutOfService),
@@ -117,11 +123,29 @@ mod tests {
 
     #[test]
     fn errors_map_as_annex_a_says() {
-        assert_eq!(error_to_status(OpcError::BadRights, true), StatusCode::BadNotWritable);
-        assert_eq!(error_to_status(OpcError::BadRights, false), StatusCode::BadNotReadable);
-        assert_eq!(error_to_status(OpcError::BadType, true), StatusCode::BadTypeMismatch);
-        assert_eq!(error_to_status(OpcError::UnknownItemId, false), StatusCode::BadNodeIdUnknown);
-        assert_eq!(error_to_status(OpcError::Range, true), StatusCode::BadOutOfRange);
-        assert_eq!(error_to_status(OpcError::Clamp, true), StatusCode::GoodClamped);
+        assert_eq!(
+            error_to_status(OpcError::BadRights, true),
+            StatusCode::BadNotWritable
+        );
+        assert_eq!(
+            error_to_status(OpcError::BadRights, false),
+            StatusCode::BadNotReadable
+        );
+        assert_eq!(
+            error_to_status(OpcError::BadType, true),
+            StatusCode::BadTypeMismatch
+        );
+        assert_eq!(
+            error_to_status(OpcError::UnknownItemId, false),
+            StatusCode::BadNodeIdUnknown
+        );
+        assert_eq!(
+            error_to_status(OpcError::Range, true),
+            StatusCode::BadOutOfRange
+        );
+        assert_eq!(
+            error_to_status(OpcError::Clamp, true),
+            StatusCode::GoodClamped
+        );
     }
 }

@@ -8,11 +8,11 @@
 //! canonical type; a variant with no VARIANT counterpart (Guid, ByteString, structures,
 //! matrices) is Bad_TypeMismatch.
 
+use ctopc_core::value::ArrayValue;
+use ctopc_core::{Timestamp, Value, VarType};
 use opcua::types::{
     Array, DataTypeId, DateTime, NodeId, StatusCode, UAString, Variant, VariantScalarTypeId,
 };
-use ctopc_core::value::ArrayValue;
-use ctopc_core::{Timestamp, Value, VarType};
 
 /// A DA timestamp as a UA DateTime (both are 100 ns ticks since 1601-01-01 UTC).
 pub fn timestamp_to_ua(t: Timestamp) -> DateTime {
@@ -170,7 +170,10 @@ mod tests {
             }
             other => panic!("not an array: {other:?}"),
         }
-        assert_eq!(data_type(VarType::array_of(VarType::R4)), (DataTypeId::Float.into(), 1));
+        assert_eq!(
+            data_type(VarType::array_of(VarType::R4)),
+            (DataTypeId::Float.into(), 1)
+        );
         assert_eq!(data_type(VarType::I2), (DataTypeId::Int16.into(), -1));
     }
 
