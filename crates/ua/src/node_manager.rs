@@ -197,19 +197,21 @@ impl AsixNodeManager {
                 Err(e) => node.set_status(e),
                 Ok(resolved) => {
                     for r in self.space.references(&resolved) {
+                        let direction_ok = if r.forward {
+                            node.allows_forward()
+                        } else {
+                            node.allows_inverse()
+                        };
+                        if !direction_ok {
+                            continue;
+                        }
                         if r.target.node_id.namespace == 0 {
                             let direction = if r.forward {
                                 ReferenceDirection::Forward
                             } else {
                                 ReferenceDirection::Inverse
                             };
-                            if node.allows_reference_type(&r.reference_type, type_tree)
-                                && (if r.forward {
-                                    node.allows_forward()
-                                } else {
-                                    node.allows_inverse()
-                                })
-                            {
+                            if node.allows_reference_type(&r.reference_type, type_tree) {
                                 node.push_external_reference(ExternalReference::new(
                                     r.target.node_id.into(),
                                     r.reference_type,
