@@ -9,10 +9,12 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
 `ServerCTOPC serve` and checks, over Basic256Sha256 SignAndEncrypt:
 - an untrusted client certificate is refused and saved in pki/rejected; after
   `ServerCTOPC pki trust` it is accepted;
-- browse (Objects -> ServerCTOPC -> the groups -> the variables), read (values, the
+- browse (Objects -> ServerCTOPC -> the groups -> the variables; in pages with BrowseNext),
+  read (values, the
   variable's attributes, the EURange property), write as the writer (read back),
   Bad_NotWritable for a read-only variable, subscribe (data changes arrive; an absolute
-  deadband larger than the range lets only the first one through);
+  deadband larger than the range, and a percent deadband of 100 % of EURange, let only
+  the first one through);
 - the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
   SecurityPolicy None are refused;
 - the server stops on SIGTERM with exit code 0.
@@ -71,7 +73,7 @@ def wait_port(port, proc, deadline):
     return False
 
 
-def client(url, cert, key, user=None, mode=ua.MessageSecurityMode.SignAndEncrypt):
+def client(url, user=None):
     c = Client(url, timeout=20)
     c.application_uri = CLIENT_URI
     if user:
@@ -127,7 +129,7 @@ async def scenario(url, work, server):
     )
 
     async def writer():
-        c = client(url, cert, key, "writer1")
+        c = client(url, "writer1")
         await secure(c, cert, key)
         return c
 
@@ -156,6 +158,33 @@ async def scenario(url, work, server):
         tank = tanks.get("Zbiornik siarki ciekłej Z101")
         variables = [(await n.read_browse_name()).Name for n in await tank.get_children()] if tank else []
         check("browsing reaches the variables", variables == ["KW_A000", "KW_A001", "KW_A002"], str(variables))
+
+        # Browse with continuation points: two references at a time, then BrowseNext.
+        desc = ua.BrowseDescription()
+        desc.NodeId = root.nodeid
+        desc.BrowseDirection = ua.BrowseDirection.Forward
+        desc.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
+        desc.IncludeSubtypes = True
+        desc.NodeClassMask = 0
+        desc.ResultMask = ua.BrowseResultMask.All
+        params = ua.BrowseParameters()
+        params.View.Timestamp = ua.get_win_epoch()
+        params.RequestedMaxReferencesPerNode = 2
+        params.NodesToBrowse = [desc]
+        first = (await c.uaclient.browse(params))[0]
+        paged = [r.BrowseName.Name for r in first.References]
+        cp = first.ContinuationPoint
+        pages = 1
+        while cp and pages < 100:
+            nxt = ua.BrowseNextParameters()
+            nxt.ReleaseContinuationPoints = False
+            nxt.ContinuationPoints = [cp]
+            res = (await c.uaclient.browse_next(nxt))[0]
+            paged += [r.BrowseName.Name for r in res.References]
+            cp = res.ContinuationPoint
+            pages += 1
+        check("browse in pages of 2 with BrowseNext lists every group once",
+              len(first.References) == 2 and sorted(paged) == sorted(groups), f"{pages} pages: {paged}")
 
         a000 = c.get_node(ua.NodeId("KW_A000", ns))
         dv = await a000.read_data_value()
@@ -196,11 +225,20 @@ async def scenario(url, work, server):
         await wait_for(lambda: len(changes.values) >= before + 3, 20)
         check("absolute deadband: only the first value passes", len(banded.values) == 1,
               f"{len(banded.values)} notifications while the unfiltered item got {len(changes.values) - before}")
+        # A percent deadband of 100 % of EURange (the server finds EURange itself).
+        percent = Changes()
+        sub3 = await c.create_subscription(200, percent)
+        await sub3.deadband_monitor(c.get_node(ua.NodeId("KW_A001", ns)), 100.0, deadbandtype=2)
+        before = len(changes.values)
+        await wait_for(lambda: len(changes.values) >= before + 3, 20)
+        check("percent deadband (of EURange): only the first value passes", len(percent.values) == 1,
+              f"{len(percent.values)} notifications while the unfiltered item got {len(changes.values) - before}")
         await sub.delete()
         await sub2.delete()
+        await sub3.delete()
 
     # 3. The reader: reads, but its write is refused.
-    c = client(url, cert, key, "reader1")
+    c = client(url, "reader1")
     await secure(c, cert, key)
     async with c:
         ns = await c.get_namespace_index(NAMESPACE_URI)
@@ -215,7 +253,7 @@ async def scenario(url, work, server):
 
     # 4. What is refused.
     async def anonymous():
-        c = client(url, cert, key)
+        c = client(url)
         await secure(c, cert, key)
         return c
 
@@ -228,7 +266,7 @@ async def scenario(url, work, server):
         return c
 
     async def no_security():
-        return client(url, cert, key, "writer1")
+        return client(url, "writer1")
 
     await refused("anonymous refused", anonymous)
     await refused("a wrong password refused", wrong_password)
