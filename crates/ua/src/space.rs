@@ -21,9 +21,9 @@ use ctopc_core::namespace::{EuInfo, Namespace, OPC_WRITEABLE};
 use ctopc_core::properties::{self as props, ItemInfo, PropertyContext};
 use opcua::nodes::AccessLevel;
 use opcua::types::{
-    AttributeId, ByteString, DataValue, EUInformation, ExtensionObject, Identifier, LocalizedText,
-    NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName, Range, ReferenceTypeId, StatusCode,
-    UAString, VariableTypeId, Variant,
+    AttributeId, ByteString, EUInformation, ExtensionObject, Identifier, LocalizedText, NodeClass,
+    NodeId, ObjectId, ObjectTypeId, QualifiedName, Range, ReferenceTypeId, StatusCode, UAString,
+    VariableTypeId, Variant,
 };
 use std::sync::Arc;
 
@@ -510,11 +510,6 @@ impl Space {
                 }
             }
         }
-    }
-
-    /// A DataValue with only a value (static attributes).
-    pub fn static_value(v: Variant) -> DataValue {
-        DataValue::value_only(v)
     }
 }
 
