@@ -350,3 +350,43 @@ fn monitored_items_share_one_engine_item_per_variable_and_deliver_changes() {
     assert!(m.add("NO_SUCH_VARIABLE", rate).is_err());
     assert_eq!(m.variables(), 0);
 }
+
+#[test]
+fn a_ua_monitored_item_and_a_da_group_share_one_source_subscription() {
+    use ctopc_core::model::{GroupParams, ItemDefinition};
+    use ctopc_core::VarType;
+    let f = fixture();
+    let rt = &f.nm.engine.runtime;
+    // A DA client's group with the variable.
+    let da = rt.open_session();
+    let params = GroupParams {
+        name: "DA",
+        active: true,
+        update_rate: 1000,
+        ..GroupParams::default()
+    };
+    let g = rt
+        .with_engine(|e, now| e.add_group(now, da, &params))
+        .unwrap()
+        .group;
+    let def = ItemDefinition {
+        item_id: "KW_A001",
+        access_path: "",
+        active: true,
+        client_handle: 1,
+        requested_type: VarType::EMPTY,
+    };
+    rt.with_engine(|e, now| e.add_items(now, g, std::slice::from_ref(&def)))
+        .unwrap()
+        .into_iter()
+        .for_each(|r| assert!(r.is_ok()));
+    let subscribed = || rt.lock().engine.stats().subscribed_items;
+    assert_eq!(subscribed(), 1);
+    // The UA client monitors it too: still one source subscription.
+    f.nm.monitor.add("KW_A001", 1000).unwrap();
+    assert_eq!(rt.lock().engine.stats().group_items, 2);
+    assert_eq!(subscribed(), 1);
+    f.nm.monitor.remove("KW_A001", 1000);
+    assert_eq!(subscribed(), 1, "the DA group still subscribes it");
+    rt.close_session(da);
+}
