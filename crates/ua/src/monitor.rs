@@ -9,6 +9,10 @@
 //! async-opcua hands it to every monitored item of that node, applying each item's own
 //! filter (DataChangeFilter with absolute or percent deadband), queue size and discard
 //! policy.
+//!
+//! Locks: the monitor's table is taken before the runtime's `driver` lock (placing an
+//! item calls the engine with the table held); the sink takes only the table, on a
+//! runtime callback worker, which holds no runtime lock.
 
 use crate::status::quality_to_status;
 use crate::value::{timestamp_to_ua, to_variant};
