@@ -15,6 +15,7 @@ mod scale;
 mod setup;
 mod soak;
 mod test;
+mod ua;
 mod util;
 mod wine;
 
@@ -41,6 +42,10 @@ commands:
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
           stops after SECONDS
+  ua-interop  the OPC UA front end natively against Python asyncua (venv
+          target/ua-venv): ServerCTOPC serve with the simulated demo plant over
+          Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe, users and roles,
+          anonymous, None and an untrusted certificate refused (also part of `test`)
   proxy   build only the proxy/stub DLLs from idl/ (64-bit and 32-bit)
   dist    target/dist/ServerCTOPC-<version>.zip and ServerCTOPC-<version>-x64.msi
           (installer/, xtask/src/msi.rs; needs wixl): server, proxy/stub, opcdiag (the last
@@ -93,6 +98,7 @@ fn main() -> ExitCode {
         "bench" => bench::run(rest),
         "fuzz" => fuzz::run(rest),
         "soak" => soak::run(rest),
+        "ua-interop" => ua::run(rest),
         "proxy" => proxy::build_both(&util::root()).map(|dlls| {
             for p in dlls {
                 println!("built {}", p.display());

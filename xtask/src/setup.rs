@@ -28,6 +28,8 @@ pub const PACKAGES: &[&str] = &[
     // Paradox tables written by another implementation than the reader's
     // (crates/asix-model/tests/paradox.rs compiles tests/paradox/mkpx.c against it).
     "pxlib-dev",
+    // The OPC UA interop test's client (Python asyncua, xtask/src/ua.rs) lives in a venv.
+    "python3-venv",
 ];
 /// The server's target (64-bit): what `cargo xtask build` builds everything for.
 pub const TARGET: &str = "x86_64-pc-windows-gnu";
@@ -39,6 +41,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
         build_shim(arch)?;
     }
     wine::ensure_prefix(&wine::prefix())?;
+    crate::ua::venv()?;
     println!("setup: done (prefix {})", wine::prefix().display());
     Ok(())
 }

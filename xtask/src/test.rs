@@ -5,7 +5,9 @@
 //!    `-D warnings` for the host and for Windows (the lint levels are the `[lints]` tables
 //!    of the manifests, the settings `clippy.toml`);
 //! 3. native `cargo test` of every host crate, then every fuzz target for a few seconds
-//!    (the stable runner, `xtask/src/fuzz.rs`);
+//!    (the stable runner, `xtask/src/fuzz.rs`), then the OPC UA interop test
+//!    (`cargo xtask ua-interop`, `xtask/src/ua.rs`: `ServerCTOPC serve` natively against
+//!    Python asyncua);
 //! 4. the Windows build (both bitnesses, `build.rs`); then, **in the background** beside
 //!    steps 5 to 7 (which mostly wait on Wine and the server, not the CPU), the
 //!    third-party client's builds (both bitnesses, in `target/thirdparty`, which cargo
@@ -75,6 +77,9 @@ fn run_all(args: &[String]) -> Result<(), String> {
         fuzz::CI_SECONDS.to_string(),
     ])?;
     took("the native tests and the fuzz targets", t);
+    let t = std::time::Instant::now();
+    crate::ua::run(&[])?;
+    took("the OPC UA interop test", t);
     if native_only {
         return Ok(());
     }

@@ -63,6 +63,57 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "MetricsAddress",
 ];
 
+/// Options of the `[UA]` section (the OPC UA front end), in file spelling.
+pub const UA_OPTIONS: &[&str] = &[
+    "Endpoint",
+    "AllowNone",
+    "AllowAnonymous",
+    "PkiDirectory",
+    "UsersFile",
+    "MaxSessions",
+    "MaxSubscriptionsPerSession",
+    "MaxMonitoredItemsPerSubscription",
+];
+
+/// The OPC UA front end (`[UA]`): where it listens, its security and its limits.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UaOptions {
+    /// `Endpoint`: the endpoint URL, default `opc.tcp://0.0.0.0:4840` (every interface;
+    /// the endpoints it announces name the host).
+    pub endpoint: String,
+    /// `AllowNone`: offer SecurityPolicy None (default off).
+    pub allow_none: bool,
+    /// `AllowAnonymous`: accept anonymous sessions, as readers (default off).
+    pub allow_anonymous: bool,
+    /// `PkiDirectory`: the certificate store (own, private, trusted, rejected); default
+    /// `pki` beside the configuration file.
+    pub pki_directory: Option<String>,
+    /// `UsersFile`: the users and their salted password hashes; default
+    /// `ua-users.txt` beside the configuration file.
+    pub users_file: Option<String>,
+    /// `MaxSessions` (default 100).
+    pub max_sessions: u32,
+    /// `MaxSubscriptionsPerSession` (default 100).
+    pub max_subscriptions_per_session: u32,
+    /// `MaxMonitoredItemsPerSubscription` (default 100,000).
+    pub max_monitored_items_per_subscription: u32,
+}
+
+impl Default for UaOptions {
+    fn default() -> Self {
+        UaOptions {
+            endpoint: "opc.tcp://0.0.0.0:4840".to_owned(),
+            allow_none: false,
+            allow_anonymous: false,
+            pki_directory: None,
+            users_file: None,
+            max_sessions: 100,
+            max_subscriptions_per_session: 100,
+            max_monitored_items_per_subscription: 100_000,
+        }
+    }
+}
+
 /// Options of a `[Channel:<name>]` section, in file spelling.
 pub const CHANNEL_OPTIONS: &[&str] = &[
     "AsixServerName",
@@ -424,6 +475,8 @@ pub struct AsixConfig {
     /// Directory relative paths in options are resolved against (the ini's folder).
     pub base_dir: Option<PathBuf>,
     pub server: ServerOptions,
+    /// `[UA]`: the OPC UA front end.
+    pub ua: UaOptions,
     /// Channels by name; `*` is always present.
     pub channels: BTreeMap<String, ChannelOptions>,
     /// `[AsixCTServers]`: current-data servers by channel.
@@ -445,6 +498,7 @@ impl Default for AsixConfig {
             file: "ASIXConnect.ini".to_owned(),
             base_dir: None,
             server: ServerOptions::default(),
+            ua: UaOptions::default(),
             channels,
             ct_servers: BTreeMap::new(),
             ht_servers: BTreeMap::new(),
@@ -617,6 +671,39 @@ fn text(e: &IniEntry) -> Option<String> {
 }
 
 /// Applies one `[Server]` option; `Ok(false)` for an unknown option.
+fn apply_ua_option(o: &mut UaOptions, file: &str, e: &IniEntry) -> Result<bool, ConfigError> {
+    match e.key.to_ascii_lowercase().as_str() {
+        "endpoint" => {
+            if let Some(url) = text(e) {
+                let rest = url
+                    .strip_prefix("opc.tcp://")
+                    .filter(|r| !r.is_empty() && !r.starts_with(':') && !r.starts_with('/'));
+                if rest.is_none() {
+                    return Err(invalid(file, e, "an opc.tcp://host:port URL"));
+                }
+                o.endpoint = url;
+            }
+        }
+        "allownone" => set_bool(&mut o.allow_none, file, e)?,
+        "allowanonymous" => set_bool(&mut o.allow_anonymous, file, e)?,
+        "pkidirectory" => o.pki_directory = text(e),
+        "usersfile" => o.users_file = text(e),
+        "maxsessions" => set_number(&mut o.max_sessions, file, e, 1, 10_000)?,
+        "maxsubscriptionspersession" => {
+            set_number(&mut o.max_subscriptions_per_session, file, e, 1, 10_000)?
+        }
+        "maxmonitoreditemspersubscription" => set_number(
+            &mut o.max_monitored_items_per_subscription,
+            file,
+            e,
+            1,
+            10_000_000,
+        )?,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
 fn apply_server_option(
     o: &mut ServerOptions,
     file: &str,
@@ -889,6 +976,16 @@ pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning
                 }
             }
             config.channels.insert(name.to_owned(), options);
+        } else if lower == "ua" {
+            for e in &section.entries {
+                if !apply_ua_option(&mut config.ua, file, e)? {
+                    warnings.push(Warning::new(
+                        file,
+                        e.line,
+                        format!("unknown option `{}` in [UA] ignored", e.key),
+                    ));
+                }
+            }
         } else if lower == "asixctservers" {
             config.ct_servers = server_list(section, file, &mut warnings);
         } else if lower == "asixhtservers" {
@@ -932,6 +1029,41 @@ mod tests {
 
     fn parse(text: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
         parse_config(text.as_bytes(), "ASIXConnect.ini")
+    }
+
+    #[test]
+    fn ua_section_options_and_defaults() {
+        let (c, w) = parse("").unwrap();
+        assert!(w.is_empty());
+        assert_eq!(c.ua, UaOptions::default());
+        assert!(!c.ua.allow_none && !c.ua.allow_anonymous);
+        assert_eq!(c.ua.endpoint, "opc.tcp://0.0.0.0:4840");
+        let (c, w) = parse(
+            "[UA]\nEndpoint = opc.tcp://plant:4841\nAllowNone = tak\nAllowAnonymous = 1\nPkiDirectory = certs\nUsersFile = users.txt\nMaxSessions = 5\nMaxSubscriptionsPerSession = 3\nMaxMonitoredItemsPerSubscription = 1000\nFoo = 1\n",
+        )
+        .unwrap();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(c.ua.endpoint, "opc.tcp://plant:4841");
+        assert!(c.ua.allow_none && c.ua.allow_anonymous);
+        assert_eq!(c.ua.pki_directory.as_deref(), Some("certs"));
+        assert_eq!(c.ua.users_file.as_deref(), Some("users.txt"));
+        assert_eq!(
+            (
+                c.ua.max_sessions,
+                c.ua.max_subscriptions_per_session,
+                c.ua.max_monitored_items_per_subscription
+            ),
+            (5, 3, 1000)
+        );
+        for bad in [
+            "[UA]\nEndpoint = http://plant:4840\n",
+            "[UA]\nEndpoint = opc.tcp://\n",
+            "[UA]\nMaxSessions = 0\n",
+            "[UA]\nAllowNone = maybe\n",
+        ] {
+            let e = parse(bad).unwrap_err();
+            assert_eq!(e.line, 2, "{bad}: {e}");
+        }
     }
 
     #[test]

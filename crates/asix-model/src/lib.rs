@@ -26,7 +26,8 @@ pub mod vardb;
 
 pub use config::{
     load_config_file, parse_config, AsixConfig, ChannelOptions, ConfigError, ConfigErrorKind,
-    DefaultLanguage, LogLevel, Secret, ServerOptions, ServerSelection, BASIC_CHANNEL,
+    DefaultLanguage, LogLevel, Secret, ServerOptions, ServerSelection, UaOptions, BASIC_CHANNEL,
+    UA_OPTIONS,
 };
 pub use format::FormatSpec;
 pub use itemid::{parse_item_id, AsmenType, DescriptiveId, ItemId, ItemKey, Suffix, VarItem};

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use asix_model::config::{
-    load_config_file, parse_config, AsixConfig, CHANNEL_OPTIONS, SERVER_OPTIONS,
+    load_config_file, parse_config, AsixConfig, CHANNEL_OPTIONS, SERVER_OPTIONS, UA_OPTIONS,
 };
 use asix_model::namespace::{AsixNamespace, BrowseNode, ChannelDatabase, Derivation, LimitProps};
 use asix_model::quality_rules::{apply_quality_rules, RuleOptions};
@@ -133,7 +133,11 @@ fn demo_database_in_windows_1250_reads_the_same() {
 #[test]
 fn example_ini_documents_every_option_and_parses_cleanly() {
     let text = std::fs::read_to_string(repo().join("asixconnect.ini.example")).unwrap();
-    for option in SERVER_OPTIONS.iter().chain(CHANNEL_OPTIONS) {
+    for option in SERVER_OPTIONS
+        .iter()
+        .chain(CHANNEL_OPTIONS)
+        .chain(UA_OPTIONS)
+    {
         let documented = text.lines().any(|l| {
             let l = l.trim_start_matches([';', ' ']);
             l.starts_with(option) && l[option.len()..].trim_start().starts_with('=')

@@ -14,10 +14,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 /// Seed of the simulated plant (deterministic values from start-up on).
-#[cfg(windows)]
 const SIM_SEED: u64 = 0x5EED_A51C;
 
-#[cfg(windows)]
 pub fn make(
     ns: &Arc<asix_model::AsixNamespace>,
     wake: Arc<dyn Wake>,
@@ -33,8 +31,8 @@ pub fn make(
         let ns = Arc::clone(ns);
         return Deferred::start(true, wake, move || {
             let t = std::time::Instant::now();
-            let sim =
-                InProcessSim::new(ns, SIM_SEED, ctopc_com::clock::now()).with_device_delay(delay);
+            let sim = InProcessSim::new(ns, SIM_SEED, ctopc_runtime::clock::now())
+                .with_device_delay(delay);
             tracing::info!("start: simulation ready in {} ms", t.elapsed().as_millis());
             Box::new(sim)
         });

@@ -15,6 +15,17 @@ pub enum Command {
     Service,
     /// Started by the service control manager.
     ServiceRun,
+    /// Serve OPC UA in the foreground until Ctrl+C (`serve`, `/Serve`).
+    Serve,
+    /// Add (or replace) an OPC UA user in the users file.
+    UserAdd {
+        name: String,
+        role: String,
+        /// Read the password from standard input instead of prompting.
+        password_stdin: bool,
+    },
+    /// Trust a client certificate: copy it to the PKI folder's `trusted/`.
+    PkiTrust(String),
     /// Print usage and exit 0.
     Help,
 }
@@ -32,6 +43,16 @@ usage: ServerCTOPC.exe <switch>
   -ServiceRun    (used by the service control manager) run as the NT service
   /?             this text
 Switches are case-insensitive and may start with / or -.
+
+OPC UA (on Linux; the configuration: SERVERCTOPC_INI, else ASIXConnect.ini next to the
+program, else the embedded demo plant; pki/ and ua-users.txt beside it by default):
+  serve                                   serve OPC UA ([UA] section) until Ctrl+C
+  user add NAME --role reader|writer [--password-stdin]
+                                          add or replace a user of the users file; the
+                                          password is asked for, or read from the first
+                                          line of standard input
+  pki trust FILE                          trust a client certificate (DER): copy it to
+                                          pki/trusted/ (from pki/rejected/, for example)
 ";
 
 /// Parses the arguments after the program name. `Err` carries the message for the user.
@@ -44,6 +65,22 @@ where
     let Some(first) = args.first() else {
         return Err("no switch given".into());
     };
+    match first.as_str() {
+        "serve" => {
+            return match args.get(1) {
+                Some(extra) => Err(format!("unexpected argument `{extra}` after `serve`")),
+                None => Ok(Command::Serve),
+            }
+        }
+        "user" => return parse_user(&args[1..]),
+        "pki" => {
+            return match &args[1..] {
+                [t, file] if t == "trust" => Ok(Command::PkiTrust(file.clone())),
+                _ => Err("usage: pki trust FILE".into()),
+            }
+        }
+        _ => {}
+    }
     let Some(name) = first.strip_prefix('/').or_else(|| first.strip_prefix('-')) else {
         return Err(format!("unknown argument `{first}`"));
     };
@@ -53,6 +90,7 @@ where
         "embedding" | "automation" => Command::Embedding,
         "service" => Command::Service,
         "servicerun" => Command::ServiceRun,
+        "serve" => Command::Serve,
         "?" | "h" | "help" => Command::Help,
         _ => return Err(format!("unknown switch `{first}`")),
     };
@@ -61,6 +99,36 @@ where
         return Err(format!("unexpected argument `{extra}` after `{first}`"));
     }
     Ok(cmd)
+}
+
+const USER_USAGE: &str = "usage: user add NAME --role reader|writer [--password-stdin]";
+
+fn parse_user(args: &[String]) -> Result<Command, String> {
+    let [add, name, rest @ ..] = args else {
+        return Err(USER_USAGE.into());
+    };
+    if add != "add" || name.starts_with('-') {
+        return Err(USER_USAGE.into());
+    }
+    let mut role = None;
+    let mut password_stdin = false;
+    let mut it = rest.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--role" => match it.next().map(String::as_str) {
+                Some(r @ ("reader" | "writer")) => role = Some(r.to_owned()),
+                _ => return Err("--role takes reader or writer".into()),
+            },
+            "--password-stdin" => password_stdin = true,
+            other => return Err(format!("unexpected argument `{other}`; {USER_USAGE}")),
+        }
+    }
+    let role = role.ok_or_else(|| format!("--role is required; {USER_USAGE}"))?;
+    Ok(Command::UserAdd {
+        name: name.clone(),
+        role,
+        password_stdin,
+    })
 }
 
 #[cfg(test)]
@@ -84,6 +152,50 @@ mod tests {
         ] {
             assert_eq!(parse([arg]), Ok(cmd), "{arg}");
         }
+    }
+
+    #[test]
+    fn the_ua_commands() {
+        assert_eq!(parse(["serve"]), Ok(Command::Serve));
+        assert_eq!(parse(["/Serve"]), Ok(Command::Serve));
+        assert!(parse(["serve", "now"]).is_err());
+        assert_eq!(
+            parse([
+                "user",
+                "add",
+                "anna",
+                "--role",
+                "writer",
+                "--password-stdin"
+            ]),
+            Ok(Command::UserAdd {
+                name: "anna".into(),
+                role: "writer".into(),
+                password_stdin: true
+            })
+        );
+        assert_eq!(
+            parse(["user", "add", "bob", "--role", "reader"]),
+            Ok(Command::UserAdd {
+                name: "bob".into(),
+                role: "reader".into(),
+                password_stdin: false
+            })
+        );
+        for bad in [
+            &["user", "add", "anna"][..],
+            &["user", "add", "anna", "--role", "admin"],
+            &["user", "del", "anna", "--role", "reader"],
+            &["user", "add", "--role", "reader"],
+            &["user"],
+        ] {
+            assert!(parse(bad).is_err(), "{bad:?}");
+        }
+        assert_eq!(
+            parse(["pki", "trust", "client.der"]),
+            Ok(Command::PkiTrust("client.der".into()))
+        );
+        assert!(parse(["pki", "trust"]).is_err());
     }
 
     #[test]

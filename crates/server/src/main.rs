@@ -1,14 +1,17 @@
 //! ServerCTOPC.exe: thin shell. Parse the switch, load the configuration (`config`), set
 //! up logging, choose the data source (`backend`), then hand over to the COM layer
-//! (`ctopc_com::host`) with the namespace and plain values.
+//! (`ctopc_com::host`) with the namespace and plain values. On Linux it serves OPC UA
+//! (`ua`: `serve`, `user add`, `pki trust`) over the same runtime and data source.
 
 mod cli;
-// config and logging are plain Rust, tested natively, but only the Windows server calls
-// them: on the host their items would be dead code.
+// config and logging are plain Rust, tested natively; the Windows server uses both, the
+// Linux OPC UA server the configuration lookup.
 #[cfg_attr(not(windows), allow(dead_code))]
 mod config;
 #[cfg_attr(not(windows), allow(dead_code))]
 mod logging;
+#[cfg(not(windows))]
+mod ua;
 
 use std::process::ExitCode;
 
@@ -27,8 +30,7 @@ fn main() -> ExitCode {
     run(cmd)
 }
 
-// The deferred data source is plain Rust, tested natively; only the Windows server uses it.
-#[cfg_attr(not(windows), allow(dead_code))]
+// The data source: plain Rust, tested natively.
 mod backend;
 
 #[cfg(windows)]
@@ -57,6 +59,10 @@ fn run(cmd: cli::Command) -> ExitCode {
             }
         }
         cli::Command::Help => Ok(()),
+        cli::Command::Serve | cli::Command::UserAdd { .. } | cli::Command::PkiTrust(_) => {
+            eprintln!("ServerCTOPC: OPC UA is served by the Linux build (`serve`); the Windows build serves OPC DA");
+            return ExitCode::FAILURE;
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -155,8 +161,20 @@ fn setup(ns: &std::sync::Arc<asix_model::AsixNamespace>) -> ctopc_com::context::
     }
 }
 
+/// On Linux: the OPC UA commands; the COM switches need Windows.
 #[cfg(not(windows))]
-fn run(_cmd: cli::Command) -> ExitCode {
-    eprintln!("ServerCTOPC: this is a Windows COM server; build it with `cargo xtask build` and run it on Windows or under Wine");
-    ExitCode::FAILURE
+fn run(cmd: cli::Command) -> ExitCode {
+    match cmd {
+        cli::Command::Serve => ua::serve(),
+        cli::Command::UserAdd {
+            name,
+            role,
+            password_stdin,
+        } => ua::user_add(&name, &role, password_stdin),
+        cli::Command::PkiTrust(file) => ua::pki_trust(&file),
+        _ => {
+            eprintln!("ServerCTOPC: the COM switches need Windows; build it with `cargo xtask build` and run it on Windows or under Wine (on Linux: `serve` serves OPC UA)");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -1,0 +1,203 @@
+//! The OPC UA commands of the server on Linux: `serve` (the runtime over the configured
+//! data source, the OPC UA front end over the runtime, until Ctrl+C or SIGTERM),
+//! `user add` and `pki trust`. The configuration is found as for the COM server
+//! (`config`): `SERVERCTOPC_INI`, else `ASIXConnect.ini` next to the program, else the
+//! embedded demo plant; the PKI folder and the users file are beside it by default.
+
+use crate::{backend, config};
+use asix_model::AsixNamespace;
+use ctopc_core::lang::Lang;
+use ctopc_core::namespace::Namespace;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+
+/// The folder of the program.
+fn exe_dir() -> PathBuf {
+    std::env::current_exe()
+        .ok()
+        .and_then(|p| p.parent().map(Path::to_path_buf))
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// The folder of the configuration in use (the program's for the embedded demo).
+fn config_dir(source: &config::ConfigSource) -> PathBuf {
+    match source {
+        config::ConfigSource::File(p) | config::ConfigSource::FromEnv(p) => p
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from(".")),
+        config::ConfigSource::EmbeddedDemo => exe_dir(),
+    }
+}
+
+/// `[UA]` as the front end's settings, paths resolved beside the configuration.
+fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
+    let cfg = ns.config();
+    let ua = &cfg.ua;
+    let path = |configured: &Option<String>, default: &str| {
+        let p = match configured {
+            Some(d) => cfg.resolve_path(d),
+            None => PathBuf::from(default),
+        };
+        if p.is_absolute() {
+            p
+        } else {
+            dir.join(p)
+        }
+    };
+    ctopc_ua::server::Settings {
+        endpoint: ua.endpoint.clone(),
+        allow_none: ua.allow_none,
+        allow_anonymous: ua.allow_anonymous,
+        pki_dir: path(&ua.pki_directory, "pki"),
+        users_file: path(&ua.users_file, "ua-users.txt"),
+        max_sessions: ua.max_sessions as usize,
+        max_subscriptions_per_session: ua.max_subscriptions_per_session as usize,
+        max_monitored_items_per_subscription: ua.max_monitored_items_per_subscription as usize,
+    }
+}
+
+fn load() -> Result<(config::ConfigSource, asix_model::startup::Loaded), String> {
+    config::load(&exe_dir())
+}
+
+fn fail(e: &str) -> ExitCode {
+    eprintln!("ServerCTOPC: {e}");
+    ExitCode::FAILURE
+}
+
+/// `serve`: logs to standard error (`RUST_LOG` filters; default `info`).
+pub fn serve() -> ExitCode {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,opcua=warn"));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
+    match serve_inner() {
+        Ok(()) => {
+            tracing::info!("ServerCTOPC stopped");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            tracing::error!("ServerCTOPC failed: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn serve_inner() -> Result<(), String> {
+    tracing::info!(
+        version = env!("CARGO_PKG_VERSION"),
+        "ServerCTOPC starting (OPC UA)"
+    );
+    let (source, loaded) = load()?;
+    tracing::info!("{}", source.log_line());
+    for w in &loaded.warnings {
+        tracing::warn!("{w}");
+    }
+    let dir = config_dir(&source);
+    let ns = Arc::new(loaded.namespace);
+    let settings = settings(&ns, &dir);
+    let tree = match asix_model::address_space::build_address_space(&ns) {
+        Ok(t) => t,
+        Err(e) => {
+            tracing::error!("cannot build the browse tree: {e:?}; browsing shows an empty tree");
+            ctopc_core::browse::AddressSpace::empty()
+        }
+    };
+    let server = &ns.config().server;
+    let lang = server.default_language.fixed().unwrap_or(Lang::English);
+    let for_backend = Arc::clone(&ns);
+    let started = ctopc_runtime::start(
+        Arc::clone(&ns) as Arc<dyn Namespace>,
+        tree.filter_case(),
+        server.engine_config(),
+        &server.ops_config(),
+        ctopc_runtime::frontend::no_thread_state,
+        Box::new(move |wake| backend::make(&for_backend, wake)),
+    )?;
+    let runtime = Arc::clone(&started.runtime);
+    let serve = ctopc_ua::server::Serve {
+        runtime: Arc::clone(&runtime),
+        namespace: started.namespace,
+        tree: Arc::new(tree),
+        lang,
+    };
+    let tokio = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("opc-ua")
+        .build()
+        .map_err(|e| format!("cannot start the OPC UA runtime: {e}"))?;
+    let result = tokio.block_on(ctopc_ua::server::run(&settings, serve, stop_signal()));
+    runtime.shutdown("ServerCTOPC is stopping");
+    runtime.stop_driver();
+    result
+}
+
+/// Ctrl+C or SIGTERM.
+async fn stop_signal() {
+    use tokio::signal::unix::{signal, SignalKind};
+    match signal(SignalKind::terminate()) {
+        Ok(mut term) => {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = term.recv() => {}
+            }
+        }
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}
+
+/// `user add NAME --role R [--password-stdin]`.
+pub fn user_add(name: &str, role: &str, password_stdin: bool) -> ExitCode {
+    use ctopc_ua::users::{self, Role, User};
+    let Some(role) = Role::parse(role) else {
+        return fail("--role takes reader or writer");
+    };
+    if !users::valid_name(name) {
+        return fail("a user name is 1-64 characters without `:`, blanks or control characters");
+    }
+    let (source, loaded) = match load() {
+        Ok(x) => x,
+        Err(e) => return fail(&e),
+    };
+    let path = settings(&loaded.namespace, &config_dir(&source)).users_file;
+    if !password_stdin {
+        eprint!("Password for {name}: ");
+    }
+    let mut line = String::new();
+    if let Err(e) = std::io::stdin().read_line(&mut line) {
+        return fail(&format!("cannot read the password: {e}"));
+    }
+    let password = line.trim_end_matches(['\n', '\r']);
+    if password.is_empty() {
+        return fail("the password is empty");
+    }
+    match users::add(&path, &User::new(name, role, password)) {
+        Ok(()) => {
+            println!("user {name} ({}) saved in {}", role.name(), path.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(&e),
+    }
+}
+
+/// `pki trust FILE`.
+pub fn pki_trust(file: &str) -> ExitCode {
+    let (source, loaded) = match load() {
+        Ok(x) => x,
+        Err(e) => return fail(&e),
+    };
+    let pki = settings(&loaded.namespace, &config_dir(&source)).pki_dir;
+    match ctopc_ua::pki::trust(&pki, Path::new(file)) {
+        Ok(at) => {
+            println!("trusted: {}", at.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(&e),
+    }
+}

@@ -1,0 +1,568 @@
+//! The node manager of our namespace (async-opcua's [`NodeManager`]): Browse and
+//! BrowseNext, TranslateBrowsePaths (through browse), Read, Write and monitored items,
+//! each answered from the lazy address space ([`crate::space`]) and the engine
+//! ([`crate::engine`], [`crate::monitor`]).
+//!
+//! Calls that may wait for the data source (a Value read with MaxAge 0 or a stale cache,
+//! every write) run on tokio's blocking pool, never on the runtime's worker threads.
+
+use crate::engine::EngineClient;
+use crate::monitor::{state_to_data_value, Monitor};
+use crate::space::{Meta, Resolved, Space, NAMESPACE_URI};
+use crate::status::error_to_status;
+use crate::value::{from_variant, timestamp_from_ua};
+use ctopc_core::browse::AddressSpace;
+use ctopc_core::lang::Lang;
+use ctopc_core::model::{ItemVqt, MAX_AGE_CACHE};
+use ctopc_core::namespace::{Namespace, OPC_WRITEABLE};
+use ctopc_core::OpcError;
+use opcua::nodes::{DefaultTypeTree, ReferenceDirection};
+use opcua::server::authenticator::UserToken;
+use opcua::server::diagnostics::NamespaceMetadata;
+use opcua::server::node_manager::{
+    impl_translate_browse_paths_using_browse, AddReferenceResult, BrowseNode, BrowsePathItem,
+    DynNodeManager, ExternalReference, ExternalReferenceRequest, MonitoredItemRef,
+    MonitoredItemUpdateRef, NodeManager, NodeManagerBuilder, NodeMetadata, ReadNode,
+    RequestContext, ServerContext, WriteNode,
+};
+use opcua::server::{CreateMonitoredItem, MonitoredItemHandle};
+use opcua::types::{
+    AttributeId, DataValue, ExpandedNodeId, IdType, NodeId, NumericRange, ObjectId,
+    ReferenceDescription, ReferenceTypeId, StatusCode, TimestampsToReturn,
+};
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Mutex};
+
+/// Who may write: the user a session authenticated as.
+pub trait Roles: Send + Sync {
+    /// True when `token`'s user may write variables.
+    fn may_write(&self, token: &UserToken) -> bool;
+}
+
+/// Everyone may write (in-process tests).
+pub struct AllWrite;
+
+impl Roles for AllWrite {
+    fn may_write(&self, _token: &UserToken) -> bool {
+        true
+    }
+}
+
+/// What the node manager serves: the namespace, its browse tree, the engine session and
+/// the write rights.
+pub struct Setup {
+    pub namespace: Arc<dyn Namespace>,
+    pub tree: Arc<AddressSpace>,
+    pub engine: Arc<EngineClient>,
+    pub roles: Arc<dyn Roles>,
+    /// The language of descriptions.
+    pub lang: Lang,
+}
+
+/// Builds the node manager when the server is built (it learns its namespace index and
+/// the subscription cache then).
+pub struct AsixNodeManagerBuilder {
+    setup: Setup,
+    /// Where the built node manager is handed back (the server keeps it for its tests
+    /// and its shutdown).
+    out: Arc<Mutex<Option<Arc<AsixNodeManager>>>>,
+}
+
+impl AsixNodeManagerBuilder {
+    pub fn new(setup: Setup) -> (Self, Arc<Mutex<Option<Arc<AsixNodeManager>>>>) {
+        let out = Arc::new(Mutex::new(None));
+        (
+            AsixNodeManagerBuilder {
+                setup,
+                out: Arc::clone(&out),
+            },
+            out,
+        )
+    }
+}
+
+impl NodeManagerBuilder for AsixNodeManagerBuilder {
+    fn build(self: Box<Self>, context: ServerContext) -> Arc<DynNodeManager> {
+        let ns = context
+            .type_tree
+            .write()
+            .namespaces_mut()
+            .add_namespace(NAMESPACE_URI);
+        let notify = Arc::clone(&context.subscriptions) as Arc<dyn crate::monitor::Notify>;
+        let nm = Arc::new(AsixNodeManager::new(self.setup, ns, notify));
+        *self.out.lock().unwrap_or_else(|p| p.into_inner()) = Some(Arc::clone(&nm));
+        nm
+    }
+}
+
+/// The rest of a browse result that did not fit (already filtered).
+struct BrowseRest {
+    refs: VecDeque<ReferenceDescription>,
+}
+
+/// The node manager of the `urn:askom:ServerCTOPC` namespace.
+pub struct AsixNodeManager {
+    pub space: Arc<Space>,
+    pub engine: Arc<EngineClient>,
+    pub monitor: Arc<Monitor>,
+    roles: Arc<dyn Roles>,
+    lang: Lang,
+    /// The Value monitored items: their item ID and engine rate.
+    items: Mutex<HashMap<MonitoredItemHandle, (String, u32)>>,
+}
+
+fn to_description(m: Meta, reference_type: NodeId, forward: bool) -> ReferenceDescription {
+    ReferenceDescription {
+        reference_type_id: reference_type,
+        is_forward: forward,
+        node_id: m.node_id.into(),
+        browse_name: m.browse_name,
+        display_name: m.display_name,
+        node_class: m.node_class,
+        type_definition: if m.type_definition.is_null() {
+            ExpandedNodeId::null()
+        } else {
+            m.type_definition.into()
+        },
+    }
+}
+
+/// MaxAge of a UA Read (ms, a double) as the engine's (0: the device; very large: the cache).
+pub fn max_age_ms(max_age: f64) -> u32 {
+    if !max_age.is_finite() || max_age >= f64::from(i32::MAX) {
+        MAX_AGE_CACHE
+    } else if max_age <= 0.0 {
+        0
+    } else {
+        (max_age as u32).max(1)
+    }
+}
+
+impl AsixNodeManager {
+    /// The node manager of namespace index `ns`, its data changes going to `notify`.
+    pub fn new(setup: Setup, ns: u16, notify: Arc<dyn crate::monitor::Notify>) -> Self {
+        let scan_rate_ms = setup
+            .engine
+            .runtime
+            .lock()
+            .engine
+            .config()
+            .min_update_rate_ms;
+        let monitor = Monitor::new(ns, Arc::clone(&setup.engine));
+        monitor.set_subscriptions(notify);
+        AsixNodeManager {
+            space: Arc::new(Space {
+                ns,
+                namespace: setup.namespace,
+                tree: setup.tree,
+                scan_rate_ms,
+            }),
+            engine: setup.engine,
+            monitor,
+            roles: setup.roles,
+            lang: setup.lang,
+            items: Mutex::new(HashMap::new()),
+        }
+    }
+
+    fn items(&self) -> std::sync::MutexGuard<'_, HashMap<MonitoredItemHandle, (String, u32)>> {
+        self.items.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn browse_one(&self, node: &mut BrowseNode, type_tree: &DefaultTypeTree) {
+        let mut rest = VecDeque::new();
+        if let Some(cp) = node.take_continuation_point::<BrowseRest>() {
+            for r in cp.refs {
+                if node.remaining() > 0 {
+                    node.add_unchecked(r);
+                } else {
+                    rest.push_back(r);
+                }
+            }
+            node.set_status(StatusCode::Good);
+        } else if node.node_id().namespace == 0
+            && node.node_id().as_u32() == Some(ObjectId::ObjectsFolder as u32)
+        {
+            // The Objects folder (the core's) organizes our folder.
+            let r = to_description(
+                self.space.root_meta(),
+                ReferenceTypeId::Organizes.into(),
+                true,
+            );
+            if let AddReferenceResult::Full(r) = node.add(type_tree, r) {
+                rest.push_back(r);
+            }
+        } else if self.owns_node(node.node_id()) {
+            match self.space.resolve(node.node_id()) {
+                Err(e) => node.set_status(e),
+                Ok(resolved) => {
+                    for r in self.space.references(&resolved) {
+                        let direction_ok = if r.forward {
+                            node.allows_forward()
+                        } else {
+                            node.allows_inverse()
+                        };
+                        if !direction_ok {
+                            continue;
+                        }
+                        if r.target.node_id.namespace == 0 {
+                            let direction = if r.forward {
+                                ReferenceDirection::Forward
+                            } else {
+                                ReferenceDirection::Inverse
+                            };
+                            if node.allows_reference_type(&r.reference_type, type_tree) {
+                                node.push_external_reference(ExternalReference::new(
+                                    r.target.node_id.into(),
+                                    r.reference_type,
+                                    direction,
+                                ));
+                            }
+                            continue;
+                        }
+                        let d = to_description(r.target, r.reference_type, r.forward);
+                        if let AddReferenceResult::Full(d) = node.add(type_tree, d) {
+                            rest.push_back(d);
+                        }
+                    }
+                    node.set_status(StatusCode::Good);
+                }
+            }
+        }
+        if !rest.is_empty() {
+            node.set_next_continuation_point(Box::new(BrowseRest { refs: rest }));
+        }
+    }
+
+    /// Reads the Value of items through the engine (blocking: the caller is on the
+    /// blocking pool or a test thread).
+    pub fn read_values(&self, items: &[String], max_age: u32) -> Vec<DataValue> {
+        let req: Vec<(&str, u32)> = items.iter().map(|s| (s.as_str(), max_age)).collect();
+        self.engine
+            .read(&req)
+            .into_iter()
+            .map(|r| match r {
+                Ok(s) => state_to_data_value(&s),
+                Err(e) => DataValue {
+                    status: Some(error_to_status(e, false)),
+                    server_timestamp: Some(opcua::types::DateTime::now()),
+                    ..DataValue::null()
+                },
+            })
+            .collect()
+    }
+
+    /// What a Write of one node comes to before the engine: the item and value to write,
+    /// or the node's status. `may_write`: the session's user may write.
+    pub fn check_write(
+        &self,
+        node_id: &NodeId,
+        attribute: AttributeId,
+        index_range: &NumericRange,
+        value: &DataValue,
+        may_write: bool,
+    ) -> Result<(String, ItemVqt), StatusCode> {
+        let resolved = self.space.resolve(node_id)?;
+        let Resolved::Variable(info) = resolved else {
+            return Err(StatusCode::BadNotWritable);
+        };
+        if attribute != AttributeId::Value {
+            return Err(StatusCode::BadNotWritable);
+        }
+        if info.def.access_rights & OPC_WRITEABLE == 0 {
+            if let Some(why) = self.space.namespace.write_refusal(&info.item_id, "") {
+                tracing::warn!("OPC UA: write of {} refused: {why}", info.item_id);
+            }
+            return Err(StatusCode::BadNotWritable);
+        }
+        if !may_write {
+            return Err(StatusCode::BadUserAccessDenied);
+        }
+        if !matches!(index_range, NumericRange::None) {
+            return Err(StatusCode::BadWriteNotSupported);
+        }
+        if value.status.is_some_and(|s| !s.is_good()) || value.server_timestamp.is_some() {
+            return Err(StatusCode::BadWriteNotSupported);
+        }
+        let v = match &value.value {
+            Some(v) => from_variant(v)?,
+            None => return Err(StatusCode::BadTypeMismatch),
+        };
+        let vqt = ItemVqt {
+            value: v,
+            quality: None,
+            timestamp: value.source_timestamp.as_ref().map(timestamp_from_ua),
+        };
+        Ok((info.item_id.clone(), vqt))
+    }
+}
+
+/// Writes values of items through the engine's write conversion (blocking); a write the
+/// namespace refuses by design logs why.
+pub fn write_values(
+    engine: &EngineClient,
+    ns: &dyn Namespace,
+    items: &[(String, ItemVqt)],
+    user: &str,
+) -> Vec<StatusCode> {
+    let req: Vec<(&str, ItemVqt)> = items
+        .iter()
+        .map(|(id, v)| (id.as_str(), v.clone()))
+        .collect();
+    engine
+        .write(&req, user)
+        .into_iter()
+        .zip(items)
+        .map(|(r, (id, _))| match r {
+            Ok(()) => StatusCode::Good,
+            Err(e) => {
+                if e == OpcError::BadRights {
+                    if let Some(why) = ns.write_refusal(id, "") {
+                        tracing::warn!("OPC UA: write of {id} refused: {why}");
+                    }
+                }
+                error_to_status(e, true)
+            }
+        })
+        .collect()
+}
+
+#[async_trait::async_trait]
+impl NodeManager for AsixNodeManager {
+    fn owns_node(&self, id: &NodeId) -> bool {
+        id.namespace == self.space.ns
+    }
+
+    fn name(&self) -> &str {
+        "ServerCTOPC"
+    }
+
+    fn namespaces_for_user(&self, _context: &RequestContext) -> Vec<NamespaceMetadata> {
+        vec![NamespaceMetadata {
+            is_namespace_subset: Some(false),
+            namespace_index: self.space.ns,
+            namespace_uri: NAMESPACE_URI.to_owned(),
+            static_node_id_types: Some(vec![IdType::Numeric]),
+            ..Default::default()
+        }]
+    }
+
+    async fn init(&self, _type_tree: &mut DefaultTypeTree, _context: ServerContext) {}
+
+    async fn resolve_external_references(
+        &self,
+        _context: &RequestContext,
+        items: &mut [&mut ExternalReferenceRequest],
+    ) {
+        for item in items {
+            if let Ok(r) = self.space.resolve(item.node_id()) {
+                let m = self.space.meta(&r);
+                item.set(NodeMetadata {
+                    node_id: m.node_id.into(),
+                    type_definition: m.type_definition.into(),
+                    browse_name: m.browse_name,
+                    display_name: m.display_name,
+                    node_class: m.node_class,
+                });
+            }
+        }
+    }
+
+    async fn browse(
+        &self,
+        context: &RequestContext,
+        nodes_to_browse: &mut [BrowseNode],
+    ) -> Result<(), StatusCode> {
+        let type_tree = context.type_tree.read();
+        for node in nodes_to_browse {
+            self.browse_one(node, &type_tree);
+        }
+        Ok(())
+    }
+
+    async fn translate_browse_paths_to_node_ids(
+        &self,
+        context: &RequestContext,
+        nodes: &mut [&mut BrowsePathItem],
+    ) -> Result<(), StatusCode> {
+        impl_translate_browse_paths_using_browse(self, context, nodes).await
+    }
+
+    async fn read(
+        &self,
+        context: &RequestContext,
+        max_age: f64,
+        _timestamps_to_return: TimestampsToReturn,
+        nodes_to_read: &mut [&mut ReadNode],
+    ) -> Result<(), StatusCode> {
+        let may_write = self.roles.may_write(&context.token);
+        let mut values: Vec<(usize, String)> = Vec::new();
+        for (i, node) in nodes_to_read.iter_mut().enumerate() {
+            let (id, attribute) = (node.node().node_id.clone(), node.node().attribute_id);
+            match self.space.resolve(&id) {
+                Err(e) => node.set_error(e),
+                Ok(Resolved::Variable(info)) if attribute == AttributeId::Value => {
+                    values.push((i, info.item_id.clone()))
+                }
+                Ok(r) => match self.space.attribute(&r, attribute, may_write, self.lang) {
+                    Ok(v) => node.set_result(DataValue::value_only(v)),
+                    Err(e) => node.set_error(e),
+                },
+            }
+        }
+        if values.is_empty() {
+            return Ok(());
+        }
+        let ids: Vec<String> = values.iter().map(|(_, id)| id.clone()).collect();
+        let age = max_age_ms(max_age);
+        let engine = Arc::clone(&self.engine);
+        let results = tokio::task::spawn_blocking(move || {
+            let req: Vec<(&str, u32)> = ids.iter().map(|s| (s.as_str(), age)).collect();
+            engine.read(&req)
+        })
+        .await
+        .map_err(|_| StatusCode::BadInternalError)?;
+        for ((i, _), r) in values.iter().zip(results) {
+            match r {
+                Ok(s) => nodes_to_read[*i].set_result(state_to_data_value(&s)),
+                Err(e) => nodes_to_read[*i].set_error(error_to_status(e, false)),
+            }
+        }
+        Ok(())
+    }
+
+    async fn write(
+        &self,
+        context: &RequestContext,
+        nodes_to_write: &mut [&mut WriteNode],
+    ) -> Result<(), StatusCode> {
+        let may_write = self.roles.may_write(&context.token);
+        let mut writes: Vec<(usize, (String, ItemVqt))> = Vec::new();
+        for (i, node) in nodes_to_write.iter_mut().enumerate() {
+            let v = node.value();
+            match self.check_write(
+                &v.node_id,
+                v.attribute_id,
+                &v.index_range,
+                &v.value,
+                may_write,
+            ) {
+                Ok(w) => writes.push((i, w)),
+                Err(e) => node.set_status(e),
+            }
+        }
+        if writes.is_empty() {
+            return Ok(());
+        }
+        let items: Vec<(String, ItemVqt)> = writes.iter().map(|(_, w)| w.clone()).collect();
+        let user = context.token.0.clone();
+        let engine = Arc::clone(&self.engine);
+        let ns = Arc::clone(&self.space.namespace);
+        let statuses =
+            tokio::task::spawn_blocking(move || write_values(&engine, &*ns, &items, &user))
+                .await
+                .map_err(|_| StatusCode::BadInternalError)?;
+        for ((i, _), s) in writes.iter().zip(statuses) {
+            nodes_to_write[*i].set_status(s);
+        }
+        Ok(())
+    }
+
+    async fn create_monitored_items(
+        &self,
+        context: &RequestContext,
+        items: &mut [&mut CreateMonitoredItem],
+    ) -> Result<(), StatusCode> {
+        let may_write = self.roles.may_write(&context.token);
+        let mut initial: Vec<(usize, String)> = Vec::new();
+        for (i, item) in items.iter_mut().enumerate() {
+            let target = item.item_to_monitor().clone();
+            let resolved = match self.space.resolve(&target.node_id) {
+                Ok(r) => r,
+                Err(e) => {
+                    item.set_status(e);
+                    continue;
+                }
+            };
+            match resolved {
+                Resolved::Variable(info) if target.attribute_id == AttributeId::Value => {
+                    let rate = self.monitor.revise(item.sampling_interval());
+                    match self.monitor.add(&info.item_id, rate) {
+                        Ok(()) => {
+                            item.revise_sampling_interval(f64::from(rate));
+                            self.items()
+                                .insert(item.handle(), (info.item_id.clone(), rate));
+                            item.set_status(StatusCode::Good);
+                            initial.push((i, info.item_id.clone()));
+                        }
+                        Err(e) => item.set_status(error_to_status(e, false)),
+                    }
+                }
+                r => match self
+                    .space
+                    .attribute(&r, target.attribute_id, may_write, self.lang)
+                {
+                    Ok(v) => {
+                        item.set_initial_value(DataValue::value_only(v));
+                        item.set_status(StatusCode::Good);
+                    }
+                    Err(e) => item.set_status(e),
+                },
+            }
+        }
+        if initial.is_empty() {
+            return Ok(());
+        }
+        // The cached value, when the variable already has one (another monitored item or
+        // a DA client subscribes it); otherwise the first sample comes as a data change.
+        let ids: Vec<String> = initial.iter().map(|(_, id)| id.clone()).collect();
+        let engine = Arc::clone(&self.engine);
+        let results = tokio::task::spawn_blocking(move || {
+            let req: Vec<(&str, u32)> = ids.iter().map(|s| (s.as_str(), MAX_AGE_CACHE)).collect();
+            engine.read(&req)
+        })
+        .await
+        .map_err(|_| StatusCode::BadInternalError)?;
+        for ((i, _), r) in initial.iter().zip(results) {
+            if let Ok(s) = r {
+                if s.quality != ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA {
+                    items[*i].set_initial_value(state_to_data_value(&s));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    async fn modify_monitored_items(
+        &self,
+        _context: &RequestContext,
+        items: &[&MonitoredItemUpdateRef],
+    ) {
+        for item in items {
+            if !item.status_code().is_good() {
+                continue;
+            }
+            let revised = item.update().revised_sampling_interval;
+            let change = {
+                let mut map = self.items();
+                map.get_mut(&item.handle()).map(|(id, rate)| {
+                    let to = self.monitor.revise(revised);
+                    let from = std::mem::replace(rate, to);
+                    (id.clone(), from, to)
+                })
+            };
+            if let Some((id, from, to)) = change {
+                self.monitor.change(&id, from, to);
+            }
+        }
+    }
+
+    async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
+        for item in items {
+            let removed = self.items().remove(&item.handle());
+            if let Some((id, rate)) = removed {
+                self.monitor.remove(&id, rate);
+            }
+        }
+    }
+}

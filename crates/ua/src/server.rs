@@ -1,0 +1,239 @@
+//! The OPC UA server: async-opcua's server with our node manager beside its core
+//! namespace, secure by default, run until a stop signal.
+//!
+//! - Endpoints: Basic256Sha256, Aes128_Sha256_RsaOaep and Aes256_Sha256_RsaPss, each with
+//!   Sign and SignAndEncrypt; SecurityPolicy None only with `allow_none`.
+//! - The application instance certificate and its key are made at first start in the
+//!   PKI folder (`own/cert.der`, `private/private.pem`); a client certificate not in
+//!   `trusted/` is refused and saved in `rejected/` (move it to `trusted/`, or
+//!   `ServerCTOPC pki trust FILE`).
+//! - Users: [`crate::auth::UsersAuth`] (users file; anonymous only with `allow_anonymous`).
+//! - Listening: on the endpoint's host and port; an unspecified host (`0.0.0.0`) listens
+//!   on every interface and the endpoints name the machine's host name.
+
+use crate::auth::UsersAuth;
+use crate::engine::EngineClient;
+use crate::node_manager::{AsixNodeManager, AsixNodeManagerBuilder, Setup};
+use ctopc_core::browse::AddressSpace;
+use ctopc_core::lang::Lang;
+use ctopc_core::namespace::Namespace;
+use ctopc_runtime::Runtime;
+use opcua::crypto::SecurityPolicy;
+use opcua::server::{ServerBuilder, ServerEndpoint};
+use opcua::types::MessageSecurityMode;
+use std::future::Future;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// The `[UA]` settings, as plain values (paths resolved).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// `opc.tcp://host:port`.
+    pub endpoint: String,
+    pub allow_none: bool,
+    pub allow_anonymous: bool,
+    pub pki_dir: PathBuf,
+    pub users_file: PathBuf,
+    pub max_sessions: usize,
+    pub max_subscriptions_per_session: usize,
+    pub max_monitored_items_per_subscription: usize,
+}
+
+/// What the server serves: the runtime's namespace and engine, the browse tree.
+pub struct Serve {
+    pub runtime: Arc<Runtime>,
+    pub namespace: Arc<dyn Namespace>,
+    pub tree: Arc<AddressSpace>,
+    pub lang: Lang,
+}
+
+/// The host and port of an `opc.tcp://host:port[/path]` URL.
+pub fn parse_endpoint(url: &str) -> Result<(String, u16), String> {
+    let rest = url
+        .strip_prefix("opc.tcp://")
+        .ok_or_else(|| format!("endpoint `{url}` is not an opc.tcp:// URL"))?;
+    let authority = rest.split('/').next().unwrap_or("");
+    let (host, port) = match authority.rsplit_once(':') {
+        Some((h, p)) if !h.ends_with(']') || h.starts_with('[') => {
+            let port = p
+                .parse::<u16>()
+                .map_err(|_| format!("endpoint `{url}`: bad port `{p}`"))?;
+            (h, port)
+        }
+        _ => (authority, 4840),
+    };
+    if host.is_empty() {
+        return Err(format!("endpoint `{url}` names no host"));
+    }
+    Ok((host.trim_matches(|c| c == '[' || c == ']').to_owned(), port))
+}
+
+/// The machine's host name (for the endpoints of a server listening everywhere).
+fn host_name() -> String {
+    let from_env = std::env::var("COMPUTERNAME")
+        .or_else(|_| std::env::var("HOSTNAME"))
+        .ok();
+    let from_file = || {
+        std::fs::read_to_string("/etc/hostname")
+            .ok()
+            .map(|s| s.trim().to_owned())
+    };
+    from_env
+        .or_else(from_file)
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "localhost".to_owned())
+}
+
+const POLICIES: [SecurityPolicy; 3] = [
+    SecurityPolicy::Basic256Sha256,
+    SecurityPolicy::Aes128Sha256RsaOaep,
+    SecurityPolicy::Aes256Sha256RsaPss,
+];
+
+/// A running server: stop it with [`Running::stop`].
+pub struct Running {
+    handle: opcua::server::ServerHandle,
+    task: tokio::task::JoinHandle<Result<(), String>>,
+    pub node_manager: Arc<AsixNodeManager>,
+    /// Where it listens.
+    pub address: std::net::SocketAddr,
+}
+
+impl Running {
+    /// Cancels the server (sessions are closed) and waits for it to end.
+    pub async fn stop(self) -> Result<(), String> {
+        self.handle.cancel();
+        match self.task.await {
+            Ok(r) => r,
+            Err(e) => Err(format!("the OPC UA server task failed: {e}")),
+        }
+    }
+}
+
+/// Builds the server and starts listening (on the current tokio runtime).
+pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String> {
+    let (host, port) = parse_endpoint(&settings.endpoint)?;
+    let everywhere = matches!(host.as_str(), "0.0.0.0" | "::");
+    let announced = if everywhere {
+        host_name()
+    } else {
+        host.clone()
+    };
+    std::fs::create_dir_all(&settings.pki_dir).map_err(|e| {
+        format!(
+            "cannot make the PKI folder {}: {e}",
+            settings.pki_dir.display()
+        )
+    })?;
+    let auth = Arc::new(UsersAuth::new(
+        settings.users_file.clone(),
+        settings.allow_anonymous,
+    ));
+    let engine = Arc::new(EngineClient::open(serve.runtime));
+    let (nm_builder, built) = AsixNodeManagerBuilder::new(Setup {
+        namespace: serve.namespace,
+        tree: serve.tree,
+        engine,
+        roles: Arc::clone(&auth) as Arc<dyn crate::node_manager::Roles>,
+        lang: serve.lang,
+    });
+    let mut b = ServerBuilder::new()
+        .application_name("ServerCTOPC")
+        .application_uri(format!("urn:{announced}:ASKOM:ServerCTOPC"))
+        .product_uri("urn:askom:ServerCTOPC")
+        .create_sample_keypair(true)
+        .certificate_path("own/cert.der")
+        .private_key_path("private/private.pem")
+        .pki_dir(settings.pki_dir.clone())
+        .trust_client_certs(false)
+        .check_cert_time(true)
+        .host(announced.clone())
+        .port(port)
+        .with_authenticator(auth)
+        .with_node_manager(nm_builder)
+        .max_sessions(settings.max_sessions)
+        .discovery_urls(vec!["/".to_owned()]);
+    {
+        let limits = b.limits_mut();
+        limits.subscriptions.max_subscriptions_per_session = settings.max_subscriptions_per_session;
+        limits.subscriptions.max_monitored_items_per_sub =
+            settings.max_monitored_items_per_subscription;
+    }
+    for policy in POLICIES {
+        for mode in [
+            MessageSecurityMode::Sign,
+            MessageSecurityMode::SignAndEncrypt,
+        ] {
+            let id = format!("{policy}_{mode:?}");
+            b = b.add_endpoint(id, ServerEndpoint::new("/", policy, mode, &[] as &[String]));
+        }
+    }
+    if settings.allow_none {
+        b = b.add_endpoint("none", ServerEndpoint::new_none("/", &[] as &[String]));
+    }
+    let (server, handle) = b.build()?;
+    let node_manager = built
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take()
+        .ok_or("the OPC UA node manager was not built")?;
+    let listener = tokio::net::TcpListener::bind((host.as_str(), port))
+        .await
+        .map_err(|e| {
+            format!(
+                "cannot listen on {host}:{port} ({}): {e}",
+                settings.endpoint
+            )
+        })?;
+    let address = listener
+        .local_addr()
+        .map_err(|e| format!("cannot listen on {host}:{port}: {e}"))?;
+    tracing::info!(
+        "OPC UA: listening on {address}, endpoint opc.tcp://{announced}:{port}/ (security: {}; anonymous {})",
+        if settings.allow_none { "None allowed" } else { "signed or encrypted only" },
+        if settings.allow_anonymous { "allowed" } else { "off" }
+    );
+    let task = tokio::spawn(server.run_with(listener));
+    Ok(Running {
+        handle,
+        task,
+        node_manager,
+        address,
+    })
+}
+
+/// Runs the server until `stop` completes.
+pub async fn run(
+    settings: &Settings,
+    serve: Serve,
+    stop: impl Future<Output = ()>,
+) -> Result<(), String> {
+    let running = start(settings, serve).await?;
+    stop.await;
+    tracing::info!("OPC UA: stopping");
+    running.stop().await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints_parse_to_host_and_port() {
+        assert_eq!(
+            parse_endpoint("opc.tcp://0.0.0.0:4840"),
+            Ok(("0.0.0.0".into(), 4840))
+        );
+        assert_eq!(
+            parse_endpoint("opc.tcp://plant/"),
+            Ok(("plant".into(), 4840))
+        );
+        assert_eq!(
+            parse_endpoint("opc.tcp://[::1]:4841/x"),
+            Ok(("::1".into(), 4841))
+        );
+        assert!(parse_endpoint("http://plant:4840").is_err());
+        assert!(parse_endpoint("opc.tcp://:4840").is_err());
+        assert!(parse_endpoint("opc.tcp://plant:http").is_err());
+    }
+}

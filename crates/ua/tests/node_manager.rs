@@ -1,0 +1,392 @@
+//! The node manager in process, over the runtime and the in-process simulation of the
+//! demo plant: the lazy address space (browse tree, variable types, properties, access
+//! levels), reads through the engine, the checks and results of writes, and monitored
+//! items as engine items (one per variable, whichever items ask). Every wait is on a
+//! condition, with a deadline.
+
+use asix_model::{parse_config, AsixNamespace};
+use asix_net::inproc::InProcessSim;
+use ctopc_core::browse::MatchCase;
+use ctopc_core::lang::Lang;
+use ctopc_core::ops::OpsConfig;
+use ctopc_runtime::frontend::no_thread_state;
+use ctopc_ua::engine::EngineClient;
+use ctopc_ua::monitor::Notify;
+use ctopc_ua::node_manager::{max_age_ms, write_values, AsixNodeManager, Roles, Setup};
+use ctopc_ua::space::{Resolved, ROOT_ID};
+use opcua::server::authenticator::UserToken;
+use opcua::types::{
+    AttributeId, DataValue, NodeClass, NodeId, NumericRange, ObjectId, ObjectTypeId, Range,
+    ReferenceTypeId, StatusCode, UAString, VariableTypeId, Variant,
+};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+const NS: u16 = 2;
+
+/// Data changes as the subscription cache would get them.
+#[derive(Default)]
+struct Recorder(Mutex<Vec<(NodeId, DataValue)>>);
+
+impl Notify for Recorder {
+    fn data_changes(&self, changes: Vec<(NodeId, DataValue)>) {
+        self.0.lock().unwrap().extend(changes);
+    }
+}
+
+impl Recorder {
+    fn count_for(&self, id: &NodeId) -> usize {
+        self.0
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|(n, _)| n == id)
+            .count()
+    }
+}
+
+/// Writers are the users named `writer`.
+struct ByName;
+
+impl Roles for ByName {
+    fn may_write(&self, token: &UserToken) -> bool {
+        token.0 == "writer"
+    }
+}
+
+struct Fixture {
+    nm: AsixNodeManager,
+    notes: Arc<Recorder>,
+}
+
+fn fixture() -> Fixture {
+    let db = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez"
+    );
+    let ini = format!("[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {db}\n");
+    let (cfg, warnings) = parse_config(ini.as_bytes(), "ua.ini").unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let engine_config = cfg.server.engine_config();
+    let ns = Arc::new(AsixNamespace::load(cfg).0);
+    let tree = Arc::new(asix_model::address_space::build_address_space(&ns).unwrap());
+    let for_source = Arc::clone(&ns);
+    let started = ctopc_runtime::start(
+        ns,
+        MatchCase::Insensitive,
+        engine_config,
+        &OpsConfig::default(),
+        no_thread_state,
+        Box::new(move |_wake| {
+            let sim = InProcessSim::new(for_source, 7, ctopc_runtime::clock::now());
+            Ok(Box::new(sim) as Box<dyn ctopc_core::source::Backend>)
+        }),
+    )
+    .unwrap();
+    let engine = Arc::new(EngineClient::open(Arc::clone(&started.runtime)));
+    let notes = Arc::new(Recorder::default());
+    let setup = Setup {
+        namespace: started.namespace,
+        tree,
+        engine,
+        roles: Arc::new(ByName),
+        lang: Lang::English,
+    };
+    let nm = AsixNodeManager::new(setup, NS, Arc::clone(&notes) as Arc<dyn Notify>);
+    Fixture { nm, notes }
+}
+
+fn item(id: &str) -> NodeId {
+    NodeId::new(NS, UAString::from(id))
+}
+
+fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !done() {
+        assert!(Instant::now() < deadline, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+#[test]
+fn the_browse_tree_is_folders_under_objects_and_servercctopc() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let root = space.resolve(&NodeId::new(NS, ROOT_ID)).unwrap();
+    let refs = space.references(&root);
+    assert!(refs.iter().any(|r| !r.forward
+        && r.target.node_id == ObjectId::ObjectsFolder
+        && r.reference_type == ReferenceTypeId::Organizes));
+    let groups: Vec<_> = refs
+        .iter()
+        .filter(|r| r.forward && r.reference_type == ReferenceTypeId::Organizes)
+        .collect();
+    assert!(!groups.is_empty());
+    assert!(groups
+        .iter()
+        .all(|r| r.target.node_class == NodeClass::Object
+            && r.target.type_definition == ObjectTypeId::FolderType));
+    let magazyn = groups
+        .iter()
+        .find(|r| r.target.display_name.text.as_ref() == "Magazyn siarki")
+        .expect("the group Magazyn siarki");
+    // Down to KW_A000 through the folders.
+    let m = space.resolve(&magazyn.target.node_id).unwrap();
+    assert!(matches!(m, Resolved::Folder(_)));
+    let tank = space
+        .references(&m)
+        .into_iter()
+        .find(|r| {
+            r.forward && r.target.display_name.text.as_ref() == "Zbiornik siarki ciekłej Z101"
+        })
+        .expect("the tank folder");
+    let tank = space.resolve(&tank.target.node_id).unwrap();
+    let vars: Vec<_> = space
+        .references(&tank)
+        .into_iter()
+        .filter(|r| r.forward && r.target.node_class == NodeClass::Variable)
+        .map(|r| r.target.node_id)
+        .collect();
+    assert_eq!(
+        vars,
+        vec![item("KW_A000"), item("KW_A001"), item("KW_A002")]
+    );
+}
+
+#[test]
+fn a_variable_with_a_range_is_an_analog_item_with_its_properties() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let v = space.resolve(&item("KW_A000")).unwrap();
+    let meta = space.meta(&v);
+    assert_eq!(
+        meta.type_definition,
+        NodeId::from(VariableTypeId::AnalogItemType)
+    );
+    assert_eq!(meta.browse_name.name.as_ref(), "KW_A000");
+    let refs = space.references(&v);
+    let props: Vec<_> = refs
+        .iter()
+        .filter(|r| r.forward && r.reference_type == ReferenceTypeId::HasProperty)
+        .map(|r| r.target.browse_name.name.as_ref().to_owned())
+        .collect();
+    for name in [
+        "EURange",
+        "EngineeringUnits",
+        "ItemEUType",
+        "HiHiLimit",
+        "LoLoLimit",
+    ] {
+        assert!(props.iter().any(|p| p == name), "{name} in {props:?}");
+    }
+    let eu_range = refs
+        .iter()
+        .find(|r| r.target.browse_name.name.as_ref() == "EURange")
+        .unwrap();
+    let p = space.resolve(&eu_range.target.node_id).unwrap();
+    let value = space
+        .attribute(&p, AttributeId::Value, false, Lang::English)
+        .unwrap();
+    let Variant::ExtensionObject(obj) = value else {
+        panic!("EURange is not a structure: {value:?}")
+    };
+    let range: &Range = obj.inner_as().expect("a Range");
+    assert_eq!((range.low, range.high), (0.0, 8.0));
+    let description = space
+        .attribute(&v, AttributeId::Description, false, Lang::English)
+        .unwrap();
+    assert_eq!(
+        description,
+        Variant::from(opcua::types::LocalizedText::new(
+            "en",
+            "Liquid sulphur level in tank Z101"
+        ))
+    );
+    let polish = space
+        .attribute(&v, AttributeId::Description, false, Lang::Polish)
+        .unwrap();
+    assert_eq!(
+        polish,
+        Variant::from(opcua::types::LocalizedText::new(
+            "pl",
+            "Poziom siarki ciekłej w zbiorniku Z101"
+        ))
+    );
+    // An item without EU information (the description attribute item) is a DataItemType.
+    let d = space.resolve(&item("KW_A000.DESC")).unwrap();
+    assert_eq!(
+        space.meta(&d).type_definition,
+        NodeId::from(VariableTypeId::DataItemType)
+    );
+}
+
+#[test]
+fn access_levels_follow_the_variable_and_the_user() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let read_only = space.resolve(&item("KW_A000")).unwrap();
+    let writable = space.resolve(&item("KW_A110")).unwrap();
+    let level =
+        |r: &Resolved, a: AttributeId, w: bool| space.attribute(r, a, w, Lang::English).unwrap();
+    assert_eq!(
+        level(&read_only, AttributeId::AccessLevel, true),
+        Variant::Byte(1)
+    );
+    assert_eq!(
+        level(&writable, AttributeId::AccessLevel, false),
+        Variant::Byte(3)
+    );
+    assert_eq!(
+        level(&writable, AttributeId::UserAccessLevel, false),
+        Variant::Byte(1)
+    );
+    assert_eq!(
+        level(&writable, AttributeId::UserAccessLevel, true),
+        Variant::Byte(3)
+    );
+}
+
+#[test]
+fn unknown_node_ids_are_bad_node_id_unknown() {
+    let f = fixture();
+    for id in [
+        item("NO_SUCH_VARIABLE"),
+        NodeId::new(NS, 77u32),
+        NodeId::new(NS, opcua::types::ByteString::from(vec![1u8, 2])),
+    ] {
+        assert_eq!(
+            f.nm.space.resolve(&id).err(),
+            Some(StatusCode::BadNodeIdUnknown),
+            "{id}"
+        );
+    }
+    let v = f.nm.read_values(&["NO_SUCH_VARIABLE".into()], 0);
+    assert_eq!(v[0].status, Some(StatusCode::BadNodeIdUnknown));
+}
+
+#[test]
+fn a_device_read_gives_the_simulated_value_with_good_status() {
+    let f = fixture();
+    let v =
+        f.nm.read_values(&["KW_A000".into(), "KW_A110".into()], max_age_ms(0.0));
+    for dv in &v {
+        assert_eq!(dv.status, Some(StatusCode::Good), "{dv:?}");
+        assert!(matches!(dv.value, Some(Variant::Float(_))), "{dv:?}");
+        assert!(dv.source_timestamp.is_some());
+    }
+    assert_eq!(max_age_ms(f64::MAX), u32::MAX);
+    assert_eq!(max_age_ms(500.0), 500);
+}
+
+#[test]
+fn writes_are_checked_then_converted_and_written_by_the_engine() {
+    let f = fixture();
+    let nm = &f.nm;
+    let dv = DataValue::value_only(Variant::Double(12.5));
+    let check = |id: &str, v: &DataValue, w: bool| {
+        nm.check_write(&item(id), AttributeId::Value, &NumericRange::None, v, w)
+    };
+    assert_eq!(
+        check("KW_A000", &dv, true).err(),
+        Some(StatusCode::BadNotWritable)
+    );
+    assert_eq!(
+        check("KW_A110", &dv, false).err(),
+        Some(StatusCode::BadUserAccessDenied)
+    );
+    let bytes = DataValue::value_only(Variant::ByteString(vec![1u8].into()));
+    assert_eq!(
+        check("KW_A110", &bytes, true).err(),
+        Some(StatusCode::BadTypeMismatch)
+    );
+    assert_eq!(
+        nm.check_write(
+            &item("KW_A110"),
+            AttributeId::DisplayName,
+            &NumericRange::None,
+            &dv,
+            true
+        )
+        .err(),
+        Some(StatusCode::BadNotWritable)
+    );
+    // A text that is no number: the engine's conversion refuses it.
+    let text = DataValue::value_only(Variant::from("dużo"));
+    let w = check("KW_A110", &text, true).unwrap();
+    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], "writer");
+    assert_eq!(s, vec![StatusCode::BadTypeMismatch]);
+    // A number is written and read back from the device.
+    let w = check("KW_A110", &dv, true).unwrap();
+    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], "writer");
+    assert_eq!(s, vec![StatusCode::Good]);
+    let back = nm.read_values(&["KW_A110".into()], 0);
+    assert_eq!(back[0].value, Some(Variant::Float(12.5)));
+}
+
+#[test]
+fn monitored_items_share_one_engine_item_per_variable_and_deliver_changes() {
+    let f = fixture();
+    let m = &f.nm.monitor;
+    let rate = m.revise(100.0);
+    assert_eq!(rate, 1000, "the engine's minimum update rate");
+    m.add("KW_A001", rate).unwrap();
+    m.add("KW_A001", m.revise(5000.0)).unwrap();
+    m.add("KW_A002", rate).unwrap();
+    let stats = || f.nm.engine.runtime.lock().engine.stats();
+    assert_eq!(stats().group_items, 2, "one engine item per variable");
+    assert_eq!(m.variables(), 2);
+    wait_until("data changes of both variables", || {
+        f.notes.count_for(&item("KW_A001")) >= 1 && f.notes.count_for(&item("KW_A002")) >= 1
+    });
+    let first = f.notes.0.lock().unwrap()[0].1.clone();
+    assert_eq!(first.status, Some(StatusCode::Good));
+    // The fast item goes: the variable moves to the 5 s group, still one engine item.
+    m.remove("KW_A001", rate);
+    assert_eq!(stats().group_items, 2);
+    m.remove("KW_A001", 5000);
+    m.remove("KW_A002", rate);
+    assert_eq!(stats().group_items, 0);
+    assert_eq!(m.variables(), 0);
+    assert!(m.add("NO_SUCH_VARIABLE", rate).is_err());
+    assert_eq!(m.variables(), 0);
+}
+
+#[test]
+fn a_ua_monitored_item_and_a_da_group_share_one_source_subscription() {
+    use ctopc_core::model::{GroupParams, ItemDefinition};
+    use ctopc_core::VarType;
+    let f = fixture();
+    let rt = &f.nm.engine.runtime;
+    // A DA client's group with the variable.
+    let da = rt.open_session();
+    let params = GroupParams {
+        name: "DA",
+        active: true,
+        update_rate: 1000,
+        ..GroupParams::default()
+    };
+    let g = rt
+        .with_engine(|e, now| e.add_group(now, da, &params))
+        .unwrap()
+        .group;
+    let def = ItemDefinition {
+        item_id: "KW_A001",
+        access_path: "",
+        active: true,
+        client_handle: 1,
+        requested_type: VarType::EMPTY,
+    };
+    rt.with_engine(|e, now| e.add_items(now, g, std::slice::from_ref(&def)))
+        .unwrap()
+        .into_iter()
+        .for_each(|r| assert!(r.is_ok()));
+    let subscribed = || rt.lock().engine.stats().subscribed_items;
+    assert_eq!(subscribed(), 1);
+    // The UA client monitors it too: still one source subscription.
+    f.nm.monitor.add("KW_A001", 1000).unwrap();
+    assert_eq!(rt.lock().engine.stats().group_items, 2);
+    assert_eq!(subscribed(), 1);
+    f.nm.monitor.remove("KW_A001", 1000);
+    assert_eq!(subscribed(), 1, "the DA group still subscribes it");
+    rt.close_session(da);
+}

@@ -1,0 +1,332 @@
+"""OPC UA interoperability of ServerCTOPC with an independent client (Python asyncua).
+
+Run by `cargo xtask ua-interop` (which builds the server and makes the venv):
+
+    python interop.py --server target/debug/ServerCTOPC --db demo/.../wytwornia_kwasu.zez --work DIR
+
+It writes a configuration in DIR (the demo plant simulated in process, [UA] on a free
+loopback port), adds a writer and a reader user with `ServerCTOPC user add`, starts
+`ServerCTOPC serve` and checks, over Basic256Sha256 SignAndEncrypt:
+- an untrusted client certificate is refused and saved in pki/rejected; after
+  `ServerCTOPC pki trust` it is accepted;
+- browse (Objects -> ServerCTOPC -> the groups -> the variables; in pages with BrowseNext),
+  read (values, the
+  variable's attributes, the EURange property), write as the writer (read back),
+  Bad_NotWritable for a read-only variable, subscribe (data changes arrive; an absolute
+  deadband larger than the range, and a percent deadband of 100 % of EURange, let only
+  the first one through);
+- the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
+  SecurityPolicy None are refused;
+- the server stops on SIGTERM with exit code 0.
+
+Every wait has a deadline. The last line is `N passed, M failed`.
+"""
+
+import argparse
+import asyncio
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from asyncua import Client, ua
+from asyncua.crypto.cert_gen import setup_self_signed_certificate
+from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+from cryptography.x509.oid import ExtendedKeyUsageOID
+
+NAMESPACE_URI = "urn:askom:ServerCTOPC"
+CLIENT_URI = "urn:ctopc:interop:client"
+PASSWORDS = {"writer1": "pisarz-hasło-1", "reader1": "czytelnik-hasło-2"}
+
+passed = 0
+failed = 0
+
+
+def check(name, ok, detail=""):
+    global passed, failed
+    if ok:
+        passed += 1
+        print(f"ok   {name}")
+    else:
+        failed += 1
+        print(f"FAIL {name} {detail}")
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_port(port, proc, deadline):
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return False
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=1):
+                return True
+        except OSError:
+            time.sleep(0.1)
+    return False
+
+
+def client(url, user=None):
+    c = Client(url, timeout=20)
+    c.application_uri = CLIENT_URI
+    if user:
+        c.set_user(user)
+        c.set_password(PASSWORDS.get(user, "wrong"))
+    return c
+
+
+async def secure(c, cert, key, mode=ua.MessageSecurityMode.SignAndEncrypt):
+    await c.set_security(
+        SecurityPolicyBasic256Sha256, certificate=str(cert), private_key=str(key), mode=mode
+    )
+
+
+async def refused(name, make):
+    """The connection `make()` builds must fail."""
+    c = await make()
+    try:
+        await c.connect()
+    except Exception as e:  # refused: what asyncua raises varies with the stage
+        check(name, True)
+        return str(e)
+    else:
+        check(name, False, "connected")
+        await c.disconnect()
+        return None
+
+
+class Changes:
+    def __init__(self):
+        self.values = []
+
+    def datachange_notification(self, node, val, data):
+        self.values.append((val, data.monitored_item.Value.StatusCode))
+
+
+async def wait_for(cond, seconds):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        await asyncio.sleep(0.05)
+    return cond()
+
+
+async def scenario(url, work, server):
+    pki = work / "pki"
+    cert = work / "client-cert.der"
+    key = work / "client-key.pem"
+    await setup_self_signed_certificate(
+        key, cert, CLIENT_URI, "localhost", [ExtendedKeyUsageOID.CLIENT_AUTH],
+        {"countryName": "PL", "organizationName": "ctopc", "commonName": "interop"},
+    )
+
+    async def writer():
+        c = client(url, "writer1")
+        await secure(c, cert, key)
+        return c
+
+    # 1. An unknown client certificate is refused and saved in pki/rejected.
+    await refused("untrusted client certificate refused", writer)
+    rejected = sorted((pki / "rejected").glob("*"))
+    check("the refused certificate is saved in pki/rejected", len(rejected) == 1, str(rejected))
+    if not rejected:
+        return
+    r = subprocess.run([server, "pki", "trust", str(rejected[0])], capture_output=True, text=True)
+    check("pki trust moves it to pki/trusted", r.returncode == 0 and len(list((pki / "trusted").glob("*"))) == 1,
+          r.stderr)
+
+    # 2. The writer, over Basic256Sha256 SignAndEncrypt.
+    c = await writer()
+    async with c:
+        ns = await c.get_namespace_index(NAMESPACE_URI)
+        check("our namespace is in the namespace array", ns > 0, str(ns))
+        objects = c.nodes.objects
+        names = {(await n.read_browse_name()).Name: n for n in await objects.get_children()}
+        check("Objects organizes ServerCTOPC", "ServerCTOPC" in names, str(list(names)))
+        root = names["ServerCTOPC"]
+        groups = {(await n.read_browse_name()).Name: n for n in await root.get_children()}
+        check("ServerCTOPC lists the plant's groups", "Magazyn siarki" in groups, str(list(groups)))
+        tanks = {(await n.read_browse_name()).Name: n for n in await groups["Magazyn siarki"].get_children()}
+        tank = tanks.get("Zbiornik siarki ciekłej Z101")
+        variables = [(await n.read_browse_name()).Name for n in await tank.get_children()] if tank else []
+        check("browsing reaches the variables", variables == ["KW_A000", "KW_A001", "KW_A002"], str(variables))
+
+        # Browse with continuation points: two references at a time, then BrowseNext.
+        desc = ua.BrowseDescription()
+        desc.NodeId = root.nodeid
+        desc.BrowseDirection = ua.BrowseDirection.Forward
+        desc.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
+        desc.IncludeSubtypes = True
+        desc.NodeClassMask = 0
+        desc.ResultMask = ua.BrowseResultMask.All
+        params = ua.BrowseParameters()
+        params.View.Timestamp = ua.get_win_epoch()
+        params.RequestedMaxReferencesPerNode = 2
+        params.NodesToBrowse = [desc]
+        first = (await c.uaclient.browse(params))[0]
+        paged = [r.BrowseName.Name for r in first.References]
+        cp = first.ContinuationPoint
+        pages = 1
+        while cp and pages < 100:
+            nxt = ua.BrowseNextParameters()
+            nxt.ReleaseContinuationPoints = False
+            nxt.ContinuationPoints = [cp]
+            res = (await c.uaclient.browse_next(nxt))[0]
+            paged += [r.BrowseName.Name for r in res.References]
+            cp = res.ContinuationPoint
+            pages += 1
+        check("browse in pages of 2 with BrowseNext lists every group once",
+              len(first.References) == 2 and sorted(paged) == sorted(groups), f"{pages} pages: {paged}")
+
+        a000 = c.get_node(ua.NodeId("KW_A000", ns))
+        dv = await a000.read_data_value()
+        check("read: a Float with status Good", isinstance(dv.Value.Value, float) and dv.StatusCode.is_good(),
+              str(dv))
+        dn = await a000.read_display_name()
+        check("read: DisplayName", dn.Text == "KW_A000", str(dn))
+        typedef = await a000.read_type_definition()
+        check("KW_A000 is an AnalogItemType", typedef == ua.NodeId(ua.ObjectIds.AnalogItemType), str(typedef))
+        eu = await (await a000.get_child(["0:EURange"])).read_value()
+        check("read: EURange of KW_A000 is 0..8", (eu.Low, eu.High) == (0.0, 8.0), str(eu))
+        level = await a000.read_attribute(ua.AttributeIds.AccessLevel)
+        check("KW_A000 is read-only", level.Value.Value == 1, str(level))
+
+        a110 = c.get_node(ua.NodeId("KW_A110", ns))
+        await a110.write_value(ua.DataValue(ua.Variant(12.5, ua.VariantType.Float)))
+        back = await a110.read_value()
+        check("write as the writer, read back", back == 12.5, str(back))
+        try:
+            await a000.write_value(ua.DataValue(ua.Variant(1.0, ua.VariantType.Float)))
+            check("write of a read-only variable refused", False, "accepted")
+        except ua.UaStatusCodeError as e:
+            check("write of a read-only variable is Bad_NotWritable",
+                  e.code == ua.StatusCodes.BadNotWritable, hex(e.code))
+
+        # Subscriptions: data changes arrive; a huge absolute deadband passes the first only.
+        changes = Changes()
+        sub = await c.create_subscription(200, changes)
+        await sub.subscribe_data_change(c.get_node(ua.NodeId("KW_A001", ns)))
+        got = await wait_for(lambda: len(changes.values) >= 3, 20)
+        check("subscription: data changes of KW_A001 arrive", got, str(changes.values[:3]))
+        check("subscription: values are Good", all(s.is_good() for _, s in changes.values[:3]),
+              str(changes.values[:3]))
+        banded = Changes()
+        sub2 = await c.create_subscription(200, banded)
+        await sub2.deadband_monitor(c.get_node(ua.NodeId("KW_A001", ns)), 1.0e9, deadbandtype=1)
+        before = len(changes.values)
+        await wait_for(lambda: len(changes.values) >= before + 3, 20)
+        check("absolute deadband: only the first value passes", len(banded.values) == 1,
+              f"{len(banded.values)} notifications while the unfiltered item got {len(changes.values) - before}")
+        # A percent deadband of 100 % of EURange (the server finds EURange itself).
+        percent = Changes()
+        sub3 = await c.create_subscription(200, percent)
+        await sub3.deadband_monitor(c.get_node(ua.NodeId("KW_A001", ns)), 100.0, deadbandtype=2)
+        before = len(changes.values)
+        await wait_for(lambda: len(changes.values) >= before + 3, 20)
+        check("percent deadband (of EURange): only the first value passes", len(percent.values) == 1,
+              f"{len(percent.values)} notifications while the unfiltered item got {len(changes.values) - before}")
+        await sub.delete()
+        await sub2.delete()
+        await sub3.delete()
+
+    # 3. The reader: reads, but its write is refused.
+    c = client(url, "reader1")
+    await secure(c, cert, key)
+    async with c:
+        ns = await c.get_namespace_index(NAMESPACE_URI)
+        node = c.get_node(ua.NodeId("KW_A110", ns))
+        check("the reader reads", (await node.read_value()) == 12.5)
+        try:
+            await node.write_value(ua.DataValue(ua.Variant(3.0, ua.VariantType.Float)))
+            check("the reader's write is refused", False, "accepted")
+        except ua.UaStatusCodeError as e:
+            check("the reader's write is Bad_UserAccessDenied",
+                  e.code == ua.StatusCodes.BadUserAccessDenied, hex(e.code))
+
+    # 4. What is refused.
+    async def anonymous():
+        c = client(url)
+        await secure(c, cert, key)
+        return c
+
+    async def wrong_password():
+        c = Client(url, timeout=20)
+        c.application_uri = CLIENT_URI
+        c.set_user("writer1")
+        c.set_password("not the password")
+        await secure(c, cert, key)
+        return c
+
+    async def no_security():
+        return client(url, "writer1")
+
+    await refused("anonymous refused", anonymous)
+    await refused("a wrong password refused", wrong_password)
+    await refused("SecurityPolicy None refused", no_security)
+
+
+def main():
+    p = argparse.ArgumentParser()
+    p.add_argument("--server", required=True)
+    p.add_argument("--db", required=True)
+    p.add_argument("--work", required=True)
+    a = p.parse_args()
+    work = Path(a.work).resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    for old in ("pki", "ua-users.txt"):
+        path = work / old
+        if path.is_dir():
+            import shutil
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+    port = free_port()
+    ini = work / "ASIXConnect.ini"
+    ini.write_text(
+        "[Server]\nSimulateCurrentData = tak\n"
+        f"[Channel:*]\nItemsDatabase = {Path(a.db).resolve()}\n"
+        f"[UA]\nEndpoint = opc.tcp://127.0.0.1:{port}\n",
+        encoding="utf-8",
+    )
+    env = dict(os.environ, SERVERCTOPC_INI=str(ini))
+    for user, role in (("writer1", "writer"), ("reader1", "reader")):
+        r = subprocess.run([a.server, "user", "add", user, "--role", role, "--password-stdin"],
+                           input=PASSWORDS[user] + "\n", capture_output=True, text=True, env=env)
+        check(f"user add {user}", r.returncode == 0, r.stderr)
+    log = open(work / "serve.log", "w")
+    proc = subprocess.Popen([a.server, "serve"], env=env, stdout=log, stderr=subprocess.STDOUT)
+    os.environ["SERVERCTOPC_INI"] = str(ini)
+    try:
+        up = wait_port(port, proc, time.monotonic() + 120)
+        check("serve listens", up)
+        if up:
+            asyncio.run(asyncio.wait_for(scenario(f"opc.tcp://127.0.0.1:{port}", work, a.server), 300))
+    except Exception as e:
+        check("the scenario ran to its end", False, repr(e))
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+        try:
+            code = proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            code = proc.wait()
+        check("serve stops on SIGTERM with exit code 0", code == 0, f"exit code {code}")
+        log.close()
+    if failed:
+        print(f"--- {work / 'serve.log'} (last lines)")
+        print("".join(open(work / "serve.log", encoding="utf-8", errors="replace").readlines()[-40:]))
+    print(f"{passed} passed, {failed} failed")
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()

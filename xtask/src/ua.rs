@@ -1,0 +1,83 @@
+//! `cargo xtask ua-interop`: the OPC UA front end against an independent client, Python
+//! `asyncua` (pinned [`ASYNCUA`], in the venv `target/ua-venv` that [`venv`] makes; setup
+//! makes it too). Builds `ServerCTOPC` natively (release, as `cargo xtask test` builds
+//! the workspace) and runs `tests/ua/interop.py`: the in-process simulation of the demo
+//! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
+//! users and roles; anonymous, None and an untrusted client certificate refused (what it
+//! checks: the script's docstring). Part of `cargo xtask test`'s native phase.
+
+use crate::util;
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+/// The asyncua release the test is written against (installs on Debian 12's Python 3.11).
+pub const ASYNCUA: &str = "asyncua==1.1.5";
+/// The whole interop run may not take longer than this.
+const LIMIT: Duration = Duration::from_secs(10 * 60);
+
+fn venv_dir() -> PathBuf {
+    util::root().join("target").join("ua-venv")
+}
+
+/// The venv's Python, with asyncua installed (made or completed when missing).
+pub fn venv() -> Result<PathBuf, String> {
+    let dir = venv_dir();
+    let python = dir.join("bin").join("python");
+    let version = ASYNCUA.trim_start_matches("asyncua==");
+    let check = format!(
+        "import asyncua, importlib.metadata as m; assert m.version('asyncua') == '{version}'"
+    );
+    if python.exists() && util::output(Command::new(&python).args(["-c", &check])).is_ok() {
+        println!("setup: {ASYNCUA} present in {}", dir.display());
+        return Ok(python);
+    }
+    if !python.exists() {
+        println!("setup: making the venv {}", dir.display());
+        util::run(Command::new("python3").args(["-m", "venv"]).arg(&dir))?;
+    }
+    println!("setup: pip install {ASYNCUA}");
+    util::run(Command::new(&python).args([
+        "-m",
+        "pip",
+        "install",
+        "-q",
+        "--disable-pip-version-check",
+        ASYNCUA,
+    ]))?;
+    Ok(python)
+}
+
+pub fn run(_args: &[String]) -> Result<(), String> {
+    let python = venv()?;
+    println!("ua-interop: building ServerCTOPC (native, release)");
+    util::run(util::cargo().args(["build", "--release", "-p", "serverctopc"]))?;
+    let root = util::root();
+    let server = root.join("target").join("release").join("ServerCTOPC");
+    let work = root.join("target").join("ua-interop");
+    let db = root
+        .join("demo")
+        .join("wytwornia_kwasu")
+        .join("wytwornia_kwasu.zez");
+    println!("ua-interop: tests/ua/interop.py (asyncua {ASYNCUA})");
+    let status = util::run_with_timeout(
+        Command::new(python)
+            .arg(root.join("tests").join("ua").join("interop.py"))
+            .arg("--server")
+            .arg(&server)
+            .arg("--db")
+            .arg(&db)
+            .arg("--work")
+            .arg(&work)
+            .env_remove("SERVERCTOPC_INI"),
+        LIMIT,
+    )?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "the OPC UA interop test failed ({status}); the server's log: {}",
+            work.join("serve.log").display()
+        ))
+    }
+}
