@@ -112,6 +112,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/asix-net",
         "crates/server",
         "crates/test-support",
+        "crates/ua",
         "xtask",
     ];
     let own = [
