@@ -186,7 +186,8 @@ fn the_diagnostics_branch_follows_a_working_server() {
             "Items",
             "LastCallbackLatency",
             "CallbacksPending",
-            "Failures"
+            "Failures",
+            "Identity"
         ]
     );
     assert_eq!(

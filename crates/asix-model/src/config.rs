@@ -70,6 +70,7 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "SimulationDeviceDelay",
     "FirstSampleWait",
     "AuditWrites",
+    "LegacyOpenAccess",
     "CallbackTimeout",
     "CallbackFailures",
     "MetricsAddress",
@@ -172,6 +173,12 @@ pub struct ServerOptions {
     /// item, the value and the result, under the log target `audit`
     /// (`ctopc_core::audit`); `nie` turns it off.
     pub audit_writes: bool,
+    /// `LegacyOpenAccess` (default nie): `tak` keeps the COM security of old: the server
+    /// calls `CoInitializeSecurity` with no security descriptor and authentication level
+    /// NONE, so every process that can reach DCOM may connect (logged as a WARN at every
+    /// start); `nie` lets the AppID's `AccessPermission`, `LaunchPermission` and
+    /// `AuthenticationLevel` govern (`EOAC_APPID`, as dcomcnfg shows them).
+    pub legacy_open_access: bool,
     /// `CallbackTimeout`, ms (default [`ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS`],
     /// 0..=600000, 0: no timeout): a callback to a client (OnDataChange, ...) that has not
     /// returned by then counts as failed, and what would queue behind it is not sent.
@@ -207,13 +214,15 @@ impl ServerOptions {
     }
 
     /// The COM layer's operations settings these options imply (`AuditWrites`,
-    /// `CallbackTimeout`, `CallbackFailures`).
+    /// `CallbackTimeout`, `CallbackFailures`), with open write rights: the whole file's
+    /// are [`AsixConfig::ops_config`]'s.
     pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
         ctopc_core::ops::OpsConfig {
             audit_writes: self.audit_writes,
             callback_timeout_ms: self.callback_timeout_ms,
             callback_failures: self.callback_failures,
             metrics_address: self.metrics_address.clone(),
+            write_rights: std::sync::Arc::default(),
         }
     }
 }
@@ -248,6 +257,7 @@ impl Default for ServerOptions {
             first_sample_wait_ms: ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS,
             simulation_device_delay_ms: 0,
             audit_writes: true,
+            legacy_open_access: false,
             callback_timeout_ms: ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS,
             callback_failures: ctopc_core::ops::DEFAULT_CALLBACK_FAILURES,
             metrics_address: None,
@@ -482,6 +492,15 @@ impl AsixConfig {
         }
     }
 
+    /// The operations settings of the whole file: `[Server]`'s
+    /// ([`ServerOptions::ops_config`]) and the write rights.
+    pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
+        ctopc_core::ops::OpsConfig {
+            write_rights: std::sync::Arc::new(self.write_rights.clone()),
+            ..self.server.ops_config()
+        }
+    }
+
     /// The servers the current data of `channel` may come from: its `AsixServerName`, else
     /// its `[AsixCTServers]` entry, else any server.
     pub fn current_data_servers(&self, channel: &str) -> ServerSelection {
@@ -629,6 +648,7 @@ fn apply_server_option(
         }
         "simulatecurrentdata" => set_bool(&mut o.simulate_current_data, file, e)?,
         "auditwrites" => set_bool(&mut o.audit_writes, file, e)?,
+        "legacyopenaccess" => set_bool(&mut o.legacy_open_access, file, e)?,
         "callbacktimeout" => set_number(&mut o.callback_timeout_ms, file, e, 0, 600_000)?,
         "callbackfailures" => set_number(&mut o.callback_failures, file, e, 1, 1000)?,
         "metricsaddress" => o.metrics_address = text(e),
@@ -1316,6 +1336,8 @@ mod tests {
                 !o.audit_writes && !o.ops_config().audit_writes
             }),
             ("AuditWrites", "tak", |o| o.audit_writes),
+            ("LegacyOpenAccess", "tak", |o| o.legacy_open_access),
+            ("LegacyOpenAccess", "nie", |o| !o.legacy_open_access),
             ("AuditWrites", "", |o| {
                 o.audit_writes && o.ops_config().audit_writes
             }),
@@ -1530,6 +1552,11 @@ ALARMY = AL1, AL2
     fn no_write_rights_section_leaves_writes_open() {
         let (c, _) = parse("[Server]\n[Channel:KWAS]\n").unwrap();
         assert!(c.write_rights.is_open());
+        assert!(c.ops_config().write_rights.is_open());
+        let (c, _) = parse("[Server]\nAuditWrites = nie\n[WriteRights]\n* = ua:x\n").unwrap();
+        let ops = c.ops_config();
+        assert_eq!(ops.write_rights.rules().len(), 1);
+        assert!(!ops.audit_writes);
         assert_eq!(AsixConfig::default().write_rights, WriteRights::open());
     }
 
