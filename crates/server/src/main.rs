@@ -152,6 +152,7 @@ fn setup(ns: &std::sync::Arc<asix_model::AsixNamespace>) -> ctopc_com::context::
         default_language: server.default_language.fixed(),
         no_config_reason: ns.no_config_reason(),
         ops: ns.config().ops_config(),
+        legacy_open_access: server.legacy_open_access,
     }
 }
 
