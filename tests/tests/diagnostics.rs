@@ -186,7 +186,8 @@ fn the_diagnostics_branch_follows_a_working_server() {
             "Items",
             "LastCallbackLatency",
             "CallbacksPending",
-            "Failures"
+            "Failures",
+            "Identity"
         ]
     );
     assert_eq!(
@@ -245,7 +246,7 @@ fn the_diagnostics_branch_follows_a_working_server() {
     assert_eq!(prop(&clients_el.properties, 2).value, Value::I4(2));
     assert_eq!(prop(&clients_el.properties, 5).value, Value::I4(1));
     let page = observer.browse(&BrowseArgs::all(BRANCH)).unwrap();
-    assert_eq!(page.elements.len(), 6);
+    assert_eq!(page.elements.len(), 7);
 
     // Properties: type, rights, units, descriptions in English and Polish.
     let uptime = "_Diagnostics.Server.Uptime";

@@ -108,6 +108,23 @@ fn a_working_installation_has_no_failure_and_exit_code_0() {
         .check("proxy/stub (64-bit view)")
         .detail
         .contains("opc_ps.dll"));
+    // The AppID's security as /RegServer wrote it: the defaults, nothing weaker.
+    for name in [
+        "AppID AccessPermission",
+        "AppID LaunchPermission",
+        "AppID AuthenticationLevel",
+        "COM security",
+    ] {
+        assert_eq!(run.check(name).status, "OK", "{name}: {run:?}");
+    }
+    assert!(run
+        .check("AppID AccessPermission")
+        .detail
+        .contains("(A;;0x3;;;S-1-5-32-544)"));
+    // The test configuration has no [WriteRights]: every client may write, said so.
+    let rights = run.check("write rights");
+    assert_eq!(rights.status, "WARN", "{rights:?}");
+    assert!(rights.detail.contains("every connected client may write"));
     // What Wine cannot tell is a warning, never a failure.
     for c in checks.iter().filter(|c| c.status == "WARN") {
         assert!(!c.fix.is_empty(), "a warning has its fix: {c:?}");

@@ -1,5 +1,7 @@
 //! /RegServer and /UnregServer: every key in both registry views, idempotence, switch
-//! spellings, usage errors; and that this process (the suite runs as a 64-bit and as a
+//! spellings, usage errors; the AppID's security values (AccessPermission,
+//! LaunchPermission, AuthenticationLevel) written where absent in both views, an
+//! administrator's change kept by registering again; and that this process (the suite runs as a 64-bit and as a
 //! 32-bit client, `cargo xtask test`) finds the server the ways OPC clients look for it:
 //! by category (ICatInformation::EnumClassesOfCategories, DA 2.0 and 3.0) and by ProgID.
 //!
@@ -16,8 +18,9 @@ use windows::Win32::System::Com::{
     CLSIDFromProgID, CoCreateInstance, ICatInformation, CLSCTX_INPROC_SERVER,
 };
 use windows::Win32::System::Registry::{
-    RegCloseKey, RegGetValueW, RegOpenKeyExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ, KEY_WOW64_32KEY,
-    KEY_WOW64_64KEY, REG_ROUTINE_FLAGS, REG_SAM_FLAGS, RRF_RT_REG_SZ, RRF_SUBKEY_WOW6432KEY,
+    RegCloseKey, RegGetValueW, RegOpenKeyExW, RegSetValueExW, HKEY, HKEY_CLASSES_ROOT, KEY_READ,
+    KEY_WOW64_32KEY, KEY_WOW64_64KEY, KEY_WRITE, REG_DWORD, REG_ROUTINE_FLAGS, REG_SAM_FLAGS,
+    RRF_RT_REG_BINARY, RRF_RT_REG_DWORD, RRF_RT_REG_SZ, RRF_SUBKEY_WOW6432KEY,
     RRF_SUBKEY_WOW6464KEY,
 };
 
@@ -220,6 +223,131 @@ fn regserver_writes_every_key_and_unregserver_removes_them_idempotently() {
                 "{what}: category {cat} registered"
             );
         }
+    }
+}
+
+/// A value's bytes in one view: the AppID's `AuthenticationLevel` a `REG_DWORD`, the
+/// others `REG_BINARY` (one type per read: `REG_BINARY | REG_DWORD` together would mean
+/// RRF_RT_DWORD, a 4-byte number).
+fn raw_in(view: REG_ROUTINE_FLAGS, path: &str, name: &str) -> Option<Vec<u8>> {
+    let kind = if name == ctopc_registration::security::AUTHENTICATION_LEVEL {
+        RRF_RT_REG_DWORD
+    } else {
+        RRF_RT_REG_BINARY
+    };
+    let p = wide(path);
+    let n = wide(name);
+    let mut buf = vec![0u8; 4096];
+    let mut len = buf.len() as u32;
+    // SAFETY: valid strings and buffer.
+    let r = unsafe {
+        RegGetValueW(
+            HKEY_CLASSES_ROOT,
+            PCWSTR(p.as_ptr()),
+            PCWSTR(n.as_ptr()),
+            kind | view,
+            None,
+            Some(buf.as_mut_ptr().cast()),
+            Some(&mut len),
+        )
+    };
+    r.is_ok().then(|| buf[..len as usize].to_vec())
+}
+
+/// Sets a `REG_DWORD` of `HKCR\path` in one view (as an administrator with regedit).
+fn set_dword_in(view: REG_SAM_FLAGS, path: &str, name: &str, data: u32) {
+    let p = wide(path);
+    let n = wide(name);
+    let mut k = HKEY::default();
+    // SAFETY: valid strings and out handle.
+    let r = unsafe {
+        RegOpenKeyExW(
+            HKEY_CLASSES_ROOT,
+            PCWSTR(p.as_ptr()),
+            None,
+            KEY_WRITE | view,
+            &mut k,
+        )
+    };
+    assert!(r.is_ok(), "open {path}: {r:?}");
+    // SAFETY: `k` is open; the data outlives the call.
+    let r = unsafe {
+        RegSetValueExW(
+            k,
+            PCWSTR(n.as_ptr()),
+            None,
+            REG_DWORD,
+            Some(&data.to_le_bytes()),
+        )
+    };
+    // SAFETY: opened above, closed once.
+    unsafe {
+        let _ = RegCloseKey(k);
+    }
+    assert!(r.is_ok(), "set {path} {name}: {r:?}");
+}
+
+/// Puts the default AppID security back (unregister, register) after a test changed it.
+struct RestoreDefaults;
+impl Drop for RestoreDefaults {
+    fn drop(&mut self) {
+        let _ = run(&["/UnregServer"]);
+        let _ = run(&["/RegServer"]);
+    }
+}
+
+#[test]
+fn regserver_writes_the_appid_security_where_absent_and_keeps_an_administrators_change() {
+    use ctopc_registration::security;
+    let _restore = RestoreDefaults;
+    assert!(run(&["/UnregServer"]).status.success());
+    let out = run(&["/RegServer"]);
+    assert!(out.status.success(), "{out:?}");
+    let appid = format!("AppID\\{CLSID}");
+    let clients = ctopc_com::caller::account_sid(security::CLIENTS_GROUP)
+        .and_then(|b| security::Sid::from_bytes(&b));
+    let access = security::default_access(false, clients.as_ref()).to_bytes();
+    let launch = security::default_launch(false, clients.as_ref()).to_bytes();
+    for (what, _, rrf) in VIEWS {
+        assert_eq!(
+            raw_in(rrf, &appid, security::ACCESS_PERMISSION).as_deref(),
+            Some(access.as_slice()),
+            "{what}: AccessPermission"
+        );
+        assert_eq!(
+            raw_in(rrf, &appid, security::LAUNCH_PERMISSION).as_deref(),
+            Some(launch.as_slice()),
+            "{what}: LaunchPermission"
+        );
+        assert_eq!(
+            raw_in(rrf, &appid, security::AUTHENTICATION_LEVEL).as_deref(),
+            Some(&5u32.to_le_bytes()[..]),
+            "{what}: AuthenticationLevel = packet integrity"
+        );
+        let d = security::Descriptor::from_bytes(&access).expect("a descriptor");
+        assert!(security::weaker_than_default(&d, clients.as_ref()).is_empty());
+    }
+    // An administrator lowers the level (dcomcnfg); registering again keeps it.
+    for (_, view, _) in VIEWS {
+        set_dword_in(view, &appid, security::AUTHENTICATION_LEVEL, 2);
+    }
+    let out = run(&["/RegServer"]);
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("AppID security: 0 of 6 values written"),
+        "{out:?}"
+    );
+    for (what, _, rrf) in VIEWS {
+        assert_eq!(
+            raw_in(rrf, &appid, security::AUTHENTICATION_LEVEL).as_deref(),
+            Some(&2u32.to_le_bytes()[..]),
+            "{what}: the administrator's change stays"
+        );
+        assert_eq!(
+            raw_in(rrf, &appid, security::ACCESS_PERMISSION).as_deref(),
+            Some(access.as_slice()),
+            "{what}"
+        );
     }
 }
 

@@ -241,6 +241,7 @@ pub const E2E_32: &[&str] = &[
     "server_list",
     "server_props",
     "server_shutdown",
+    "write_rights",
 ];
 
 /// The 64-bit end-to-end units: the COM crate's unit and in-process tests and the server

@@ -13,6 +13,9 @@
 //! Demo_Wytwornia_Kwasu = STACJA1, STACJA2
 //! [AsixHTServers]
 //! [AsixALServers]
+//! [WriteRights]                   ; who may write: <channel or *> = identity, identity, ...
+//! * = group:PLANT\Operators
+//! ZEZWOLENIE_ZAPISU = Demo_Wytwornia_Kwasu, KE2.   ; the original's rule, also in [ASMEN]
 //! ```
 //!
 //! Rules: option names are ASCII case-insensitive; an empty value means "not set" (the
@@ -27,13 +30,22 @@
 //! defaults and no stored options; the prefixes are case-sensitive (a channel called
 //! `Newton` is an ordinary name). Any other name must have a `[Channel:<name>]` section,
 //! else `OPC_E_UNKNOWNPATH`. Sections for `ANY...`/`NEW...` names are rejected.
+//!
+//! Write rights ([`AsixConfig::write_rights`], the policy of
+//! [`ctopc_core::write_rights`]): each line of `[WriteRights]` is `<channel> = <identity>,
+//! ...` (`*` for every channel) or `ZEZWOLENIE_ZAPISU = <channel>, <client>, ...`, the
+//! original's rule, which may also stand in an `[ASMEN]` section copied from the asix
+//! application ini; both sections keep repeated keys. An identity that cannot be read is
+//! a [`ConfigError`]; a channel that no `[Channel:]` section names (nor `*`, nor a
+//! `NEW...` name) is a [`Warning`]. Without either section every client may write.
 
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use super::ini::{parse_ini, split_list, IniEntry, IniSection};
+use super::ini::{parse_ini_with_lists, split_list, IniEntry, IniSection};
 use super::text::{parse_bool, Warning};
+use ctopc_core::write_rights::{Channels, Principal, Rule, WriteRights};
 use ctopc_core::{OpcError, OpcResult};
 
 /// The name of the basic channel.
@@ -58,6 +70,7 @@ pub const SERVER_OPTIONS: &[&str] = &[
     "SimulationDeviceDelay",
     "FirstSampleWait",
     "AuditWrites",
+    "LegacyOpenAccess",
     "CallbackTimeout",
     "CallbackFailures",
     "MetricsAddress",
@@ -216,6 +229,12 @@ pub struct ServerOptions {
     /// item, the value and the result, under the log target `audit`
     /// (`ctopc_core::audit`); `nie` turns it off.
     pub audit_writes: bool,
+    /// `LegacyOpenAccess` (default nie): `tak` keeps the COM security of old: the server
+    /// calls `CoInitializeSecurity` with no security descriptor and authentication level
+    /// NONE, so every process that can reach DCOM may connect (logged as a WARN at every
+    /// start); `nie` lets the AppID's `AccessPermission`, `LaunchPermission` and
+    /// `AuthenticationLevel` govern (`EOAC_APPID`, as dcomcnfg shows them).
+    pub legacy_open_access: bool,
     /// `CallbackTimeout`, ms (default [`ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS`],
     /// 0..=600000, 0: no timeout): a callback to a client (OnDataChange, ...) that has not
     /// returned by then counts as failed, and what would queue behind it is not sent.
@@ -251,13 +270,15 @@ impl ServerOptions {
     }
 
     /// The COM layer's operations settings these options imply (`AuditWrites`,
-    /// `CallbackTimeout`, `CallbackFailures`).
+    /// `CallbackTimeout`, `CallbackFailures`), with open write rights: the whole file's
+    /// are [`AsixConfig::ops_config`]'s.
     pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
         ctopc_core::ops::OpsConfig {
             audit_writes: self.audit_writes,
             callback_timeout_ms: self.callback_timeout_ms,
             callback_failures: self.callback_failures,
             metrics_address: self.metrics_address.clone(),
+            write_rights: std::sync::Arc::default(),
         }
     }
 }
@@ -292,6 +313,7 @@ impl Default for ServerOptions {
             first_sample_wait_ms: ctopc_core::model::DEFAULT_FIRST_SAMPLE_WAIT_MS,
             simulation_device_delay_ms: 0,
             audit_writes: true,
+            legacy_open_access: false,
             callback_timeout_ms: ctopc_core::ops::DEFAULT_CALLBACK_TIMEOUT_MS,
             callback_failures: ctopc_core::ops::DEFAULT_CALLBACK_FAILURES,
             metrics_address: None,
@@ -485,6 +507,8 @@ pub struct AsixConfig {
     pub ht_servers: BTreeMap<String, Vec<String>>,
     /// `[AsixALServers]`: alarm servers by alarm-server network name.
     pub al_servers: BTreeMap<String, Vec<String>>,
+    /// `[WriteRights]` and `ZEZWOLENIE_ZAPISU`: who may write (open without them).
+    pub write_rights: WriteRights,
 }
 
 /// The options every `NEW...` channel gets.
@@ -503,6 +527,7 @@ impl Default for AsixConfig {
             ct_servers: BTreeMap::new(),
             ht_servers: BTreeMap::new(),
             al_servers: BTreeMap::new(),
+            write_rights: WriteRights::open(),
         }
     }
 }
@@ -541,6 +566,15 @@ impl AsixConfig {
                 stored: true,
             }),
             None => Err(OpcError::UnknownPath),
+        }
+    }
+
+    /// The operations settings of the whole file: `[Server]`'s
+    /// ([`ServerOptions::ops_config`]) and the write rights.
+    pub fn ops_config(&self) -> ctopc_core::ops::OpsConfig {
+        ctopc_core::ops::OpsConfig {
+            write_rights: std::sync::Arc::new(self.write_rights.clone()),
+            ..self.server.ops_config()
         }
     }
 
@@ -724,6 +758,7 @@ fn apply_server_option(
         }
         "simulatecurrentdata" => set_bool(&mut o.simulate_current_data, file, e)?,
         "auditwrites" => set_bool(&mut o.audit_writes, file, e)?,
+        "legacyopenaccess" => set_bool(&mut o.legacy_open_access, file, e)?,
         "callbacktimeout" => set_number(&mut o.callback_timeout_ms, file, e, 0, 600_000)?,
         "callbackfailures" => set_number(&mut o.callback_failures, file, e, 1, 1000)?,
         "metricsaddress" => o.metrics_address = text(e),
@@ -917,20 +952,126 @@ fn server_list(
     map
 }
 
+/// The write-rights sections: `[WriteRights]`, and `[ASMEN]` for `ZEZWOLENIE_ZAPISU`.
+const WRITE_RIGHTS_SECTION: &str = "WriteRights";
+const ASMEN_SECTION: &str = "ASMEN";
+/// The original's write-permission key (`ZEZWOLENIE_ZAPISU = <channel>, <client>, ...`).
+pub const PERMIT_KEY: &str = "ZEZWOLENIE_ZAPISU";
+
+/// Reads one `ZEZWOLENIE_ZAPISU = <channel>, <client>, ...` line into `rules`.
+fn permit_line(file: &str, e: &IniEntry, rules: &mut Vec<Rule>) -> Result<(), ConfigError> {
+    let list = split_list(&e.value);
+    let Some((channel, clients)) = list.split_first().filter(|(_, c)| !c.is_empty()) else {
+        return Err(invalid(file, e, "<channel>, <client>[, <client>...]"));
+    };
+    let channels = if channel == BASIC_CHANNEL {
+        Channels::All
+    } else {
+        Channels::One(channel.clone())
+    };
+    for c in clients {
+        let principal = Principal::parse_asix_permit(c).map_err(|err| ConfigError {
+            kind: ConfigErrorKind::Invalid,
+            file: file.to_owned(),
+            line: e.line,
+            option: Some(e.key.clone()),
+            message: err.to_string(),
+        })?;
+        rules.push(Rule::new(channels.clone(), principal));
+    }
+    Ok(())
+}
+
+/// Reads one line of `[WriteRights]` into `rules`.
+fn write_rights_line(
+    file: &str,
+    e: &IniEntry,
+    rules: &mut Vec<Rule>,
+    warnings: &mut Vec<Warning>,
+) -> Result<(), ConfigError> {
+    if e.key.eq_ignore_ascii_case(PERMIT_KEY) {
+        return permit_line(file, e, rules);
+    }
+    let key = e.key.trim();
+    if key.starts_with("ANY") {
+        return Err(ConfigError {
+            kind: ConfigErrorKind::Invalid,
+            file: file.to_owned(),
+            line: e.line,
+            option: Some(e.key.clone()),
+            message: format!(
+                "channel name `{key}` is reserved: names starting with ANY use channel *, whose writers are the `*` line's"
+            ),
+        });
+    }
+    let channels = if key == BASIC_CHANNEL {
+        Channels::All
+    } else {
+        Channels::One(key.to_owned())
+    };
+    let identities = split_list(&e.value);
+    if identities.is_empty() {
+        warnings.push(Warning::new(
+            file,
+            e.line,
+            format!("[{WRITE_RIGHTS_SECTION}] {key}: no identity listed; the line grants nothing"),
+        ));
+    }
+    for id in identities {
+        let principal = Principal::parse(&id).map_err(|err| ConfigError {
+            kind: ConfigErrorKind::Invalid,
+            file: file.to_owned(),
+            line: e.line,
+            option: Some(e.key.clone()),
+            message: err.to_string(),
+        })?;
+        rules.push(Rule::new(channels.clone(), principal));
+    }
+    Ok(())
+}
+
+/// Warns about write-rights entries for channels the file does not configure.
+fn check_write_rights_channels(
+    config: &AsixConfig,
+    lines: &[(usize, String)],
+    file: &str,
+    warnings: &mut Vec<Warning>,
+) {
+    for (line, channel) in lines {
+        if config.channels.contains_key(channel) || channel.starts_with("NEW") {
+            continue;
+        }
+        let near = config
+            .channels
+            .keys()
+            .find(|c| c.eq_ignore_ascii_case(channel))
+            .map(|c| format!(" (channel names are case-sensitive: did you mean `{c}`?)"))
+            .unwrap_or_default();
+        warnings.push(Warning::new(
+            file,
+            *line,
+            format!("write rights for channel `{channel}`, which no [Channel:] section configures{near}"),
+        ));
+    }
+}
+
 /// Parses `ASIXConnect.ini` bytes; `file` names the file in messages. Relative paths are
 /// left unresolved ([`AsixConfig::base_dir`] is `None`).
 pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
-    let (doc, mut warnings) = parse_ini(bytes, file).map_err(|e| ConfigError {
-        kind: ConfigErrorKind::Invalid,
-        file: file.to_owned(),
-        line: e.line,
-        option: None,
-        message: e.message,
-    })?;
+    let lists = [WRITE_RIGHTS_SECTION, ASMEN_SECTION];
+    let (doc, mut warnings) =
+        parse_ini_with_lists(bytes, file, &lists).map_err(|e| ConfigError {
+            kind: ConfigErrorKind::Invalid,
+            file: file.to_owned(),
+            line: e.line,
+            option: None,
+            message: e.message,
+        })?;
     let mut config = AsixConfig {
         file: file.to_owned(),
         ..AsixConfig::default()
     };
+    let mut rules: Option<Vec<Rule>> = None;
     for section in &doc.sections {
         let lower = section.name.to_ascii_lowercase();
         if lower == "server" {
@@ -992,6 +1133,26 @@ pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning
             config.ht_servers = server_list(section, file, &mut warnings);
         } else if lower == "asixalservers" {
             config.al_servers = server_list(section, file, &mut warnings);
+        } else if lower == "writerights" {
+            let rules = rules.get_or_insert_with(Vec::new);
+            for e in &section.entries {
+                write_rights_line(file, e, rules, &mut warnings)?;
+            }
+        } else if lower == "asmen" {
+            for e in &section.entries {
+                if e.key.eq_ignore_ascii_case(PERMIT_KEY) {
+                    permit_line(file, e, rules.get_or_insert_with(Vec::new))?;
+                } else {
+                    warnings.push(Warning::new(
+                        file,
+                        e.line,
+                        format!(
+                            "`{}` in [{}] ignored: only {PERMIT_KEY} is read there",
+                            e.key, section.name
+                        ),
+                    ));
+                }
+            }
         } else {
             warnings.push(Warning::new(
                 file,
@@ -999,6 +1160,32 @@ pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning
                 format!("unknown section [{}] ignored", section.name),
             ));
         }
+    }
+    if let Some(rules) = rules {
+        let named: Vec<(usize, String)> = doc
+            .sections
+            .iter()
+            .filter(|s| {
+                s.name.eq_ignore_ascii_case(WRITE_RIGHTS_SECTION)
+                    || s.name.eq_ignore_ascii_case(ASMEN_SECTION)
+            })
+            .flat_map(|s| {
+                let asmen = s.name.eq_ignore_ascii_case(ASMEN_SECTION);
+                s.entries.iter().map(move |e| (asmen, e))
+            })
+            .filter_map(|(asmen, e)| {
+                let channel = if e.key.eq_ignore_ascii_case(PERMIT_KEY) {
+                    split_list(&e.value).into_iter().next()?
+                } else if asmen {
+                    return None;
+                } else {
+                    e.key.trim().to_owned()
+                };
+                (channel != BASIC_CHANNEL).then_some((e.line, channel))
+            })
+            .collect();
+        check_write_rights_channels(&config, &named, file, &mut warnings);
+        config.write_rights = WriteRights::new(rules);
     }
     Ok((config, warnings))
 }
@@ -1344,6 +1531,8 @@ mod tests {
                 !o.audit_writes && !o.ops_config().audit_writes
             }),
             ("AuditWrites", "tak", |o| o.audit_writes),
+            ("LegacyOpenAccess", "tak", |o| o.legacy_open_access),
+            ("LegacyOpenAccess", "nie", |o| !o.legacy_open_access),
             ("AuditWrites", "", |o| {
                 o.audit_writes && o.ops_config().audit_writes
             }),
@@ -1551,6 +1740,125 @@ ALARMY = AL1, AL2
             );
             assert_eq!(c.resolve_path(&reports), PathBuf::from("C:/Raporty"));
             assert_eq!(c.resolve_path("/abs/x.zez"), PathBuf::from("/abs/x.zez"));
+        }
+    }
+
+    #[test]
+    fn no_write_rights_section_leaves_writes_open() {
+        let (c, _) = parse("[Server]\n[Channel:KWAS]\n").unwrap();
+        assert!(c.write_rights.is_open());
+        assert!(c.ops_config().write_rights.is_open());
+        let (c, _) = parse("[Server]\nAuditWrites = nie\n[WriteRights]\n* = ua:x\n").unwrap();
+        let ops = c.ops_config();
+        assert_eq!(ops.write_rights.rules().len(), 1);
+        assert!(!ops.audit_writes);
+        assert_eq!(AsixConfig::default().write_rights, WriteRights::open());
+    }
+
+    #[test]
+    fn write_rights_entries_and_the_original_rule() {
+        use ctopc_core::write_rights::Caller;
+        let fp = "ab".repeat(32);
+        let (c, w) = parse(&format!(
+            "[Channel:KWAS]\n[Channel:SIARKA]\n[WriteRights]\n\
+             * = group:PLANT\\Operators, role:writer\n\
+             KWAS = user:PLANT\\jkowalski\n\
+             KWAS = cert:{fp}\n\
+             ZEZWOLENIE_ZAPISU = SIARKA, KE2., OP3.\n\
+             zezwolenie_zapisu = KWAS, user:PLANT\\op\n\
+             NEW_X = ua:hmi\n\
+             [ASMEN]\nZEZWOLENIE_ZAPISU = *, KE9.\nKANAL1 = NONE\n"
+        ))
+        .unwrap();
+        let r = &c.write_rights;
+        assert!(!r.is_open());
+        let shown: Vec<String> = r
+            .rules()
+            .iter()
+            .map(|r| format!("{} = {}", r.channels, r.principal))
+            .collect();
+        assert_eq!(
+            shown,
+            [
+                "* = group:PLANT\\Operators".to_owned(),
+                "* = role:writer".to_owned(),
+                "KWAS = user:PLANT\\jkowalski".to_owned(),
+                format!("KWAS = cert:{fp}"),
+                "SIARKA = asix:KE2.".to_owned(),
+                "SIARKA = asix:OP3.".to_owned(),
+                "KWAS = user:PLANT\\op".to_owned(),
+                "NEW_X = ua:hmi".to_owned(),
+                "* = asix:KE9.".to_owned(),
+            ]
+        );
+        let op = Caller::Windows {
+            account: "PLANT\\op".into(),
+            groups: vec![],
+        };
+        assert!(r.allows("KWAS", &op));
+        assert!(!r.allows("SIARKA", &op));
+        assert!(!r.allows("KWAS", &Caller::unknown("Wine")));
+        // Only the [ASMEN] line that is not ZEZWOLENIE_ZAPISU is a warning.
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].to_string().contains("`KANAL1` in [ASMEN] ignored"),
+            "{}",
+            w[0]
+        );
+    }
+
+    #[test]
+    fn write_rights_warnings() {
+        let (c, w) =
+            parse("[Channel:KWAS]\n[WriteRights]\nkwas = *\nSIARKA = ua:x\nKWAS =\n").unwrap();
+        let texts: Vec<String> = w.iter().map(ToString::to_string).collect();
+        assert_eq!(texts.len(), 3, "{texts:?}");
+        assert!(texts[0].starts_with("ASIXConnect.ini:5: [WriteRights] KWAS: no identity"));
+        assert!(texts[1].starts_with("ASIXConnect.ini:3: write rights for channel `kwas`"));
+        assert!(texts[1].contains("did you mean `KWAS`?"), "{}", texts[1]);
+        assert!(texts[2].starts_with("ASIXConnect.ini:4: write rights for channel `SIARKA`"));
+        // A section with nothing granted denies every write.
+        let (c2, _) = parse("[WriteRights]\n").unwrap();
+        assert!(!c2.write_rights.is_open());
+        assert!(c2.write_rights.rules().is_empty());
+        assert_eq!(c.write_rights.rules().len(), 2);
+    }
+
+    #[test]
+    fn invalid_write_rights_name_file_line_and_option() {
+        let cases = [
+            (
+                "[WriteRights]\nKWAS = jkowalski\n",
+                2,
+                "KWAS",
+                "is not an identity",
+            ),
+            (
+                "[WriteRights]\n\n* = user:A\\b, cert:12\n",
+                3,
+                "*",
+                "64 hexadecimal digits",
+            ),
+            ("[WriteRights]\nANY1 = *\n", 2, "ANY1", "reserved"),
+            (
+                "[WriteRights]\nZEZWOLENIE_ZAPISU = KWAS\n",
+                2,
+                "ZEZWOLENIE_ZAPISU",
+                "<channel>, <client>",
+            ),
+            (
+                "[ASMEN]\nZEZWOLENIE_ZAPISU = KWAS, role:\n",
+                2,
+                "ZEZWOLENIE_ZAPISU",
+                "names nobody",
+            ),
+        ];
+        for (text, line, option, message) in cases {
+            let e = parse(text).unwrap_err();
+            assert_eq!(e.kind, ConfigErrorKind::Invalid, "{text}");
+            assert_eq!(e.line, line, "{text}");
+            assert_eq!(e.option.as_deref(), Some(option), "{text}");
+            assert!(e.message.contains(message), "{text}: {e}");
         }
     }
 

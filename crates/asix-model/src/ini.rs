@@ -17,7 +17,9 @@
 //! - [`parse_ini`] (`ASIXConnect.ini`, one value per option): the same key twice in a
 //!   section keeps the first (as `GetPrivateProfileString`) and drops the others with a
 //!   warning; an unterminated `[header` is an error, because the keys under it would
-//!   otherwise land in the previous section.
+//!   otherwise land in the previous section. [`parse_ini_with_lists`] is the same except
+//!   that the sections it names keep every repeated key (list sections such as
+//!   `[WriteRights]`, whose lines are entries, not options).
 //! - [`parse_ini_tolerant`] (files written by the asix side, read as asix reads them):
 //!   never fails. A repeated key is kept in [`IniSection::entries`] (asix lists such as
 //!   `ZEZWOLENIE_ZAPISU` repeat a key, as `GetPrivateProfileSection` returns them), while
@@ -91,8 +93,19 @@ pub struct IniSyntaxError {
 
 /// Parses INI bytes; `file` names the file in warnings.
 pub fn parse_ini(bytes: &[u8], file: &str) -> Result<(IniDocument, Vec<Warning>), IniSyntaxError> {
+    parse_ini_with_lists(bytes, file, &[])
+}
+
+/// As [`parse_ini`], except that in the sections named in `lists` (ASCII
+/// case-insensitive) a repeated key is kept, as [`parse_ini_tolerant`] keeps it: sections
+/// whose lines are list entries (`[WriteRights]`, `ZEZWOLENIE_ZAPISU`), not options.
+pub fn parse_ini_with_lists(
+    bytes: &[u8],
+    file: &str,
+    lists: &[&str],
+) -> Result<(IniDocument, Vec<Warning>), IniSyntaxError> {
     let (text, _) = decode_text(bytes);
-    parse_ini_text(&text, file)
+    parse(&text, file, Mode::Strict, lists)
 }
 
 /// Parses INI text (see [`parse_ini`]).
@@ -100,14 +113,14 @@ pub fn parse_ini_text(
     text: &str,
     file: &str,
 ) -> Result<(IniDocument, Vec<Warning>), IniSyntaxError> {
-    parse(text, file, Mode::Strict)
+    parse(text, file, Mode::Strict, &[])
 }
 
 /// Parses INI bytes written by the asix side; never fails: what it cannot read is skipped
 /// with a warning (see the module documentation). `file` names the file in warnings.
 pub fn parse_ini_tolerant(bytes: &[u8], file: &str) -> (IniDocument, Vec<Warning>) {
     let (text, _) = decode_text(bytes);
-    match parse(&text, file, Mode::Tolerant) {
+    match parse(&text, file, Mode::Tolerant, &[]) {
         Ok(parsed) => parsed,
         // Unreachable: the tolerant mode reports every problem as a warning.
         Err(e) => (
@@ -141,6 +154,7 @@ fn parse(
     text: &str,
     file: &str,
     mode: Mode,
+    lists: &[&str],
 ) -> Result<(IniDocument, Vec<Warning>), IniSyntaxError> {
     let mut doc = IniDocument {
         file: file.to_owned(),
@@ -237,7 +251,8 @@ fn parse(
             value = &value[1..value.len() - 1];
         }
         let section = &mut doc.sections[section];
-        if mode == Mode::Strict {
+        let is_list = lists.iter().any(|l| l.eq_ignore_ascii_case(&section.name));
+        if mode == Mode::Strict && !is_list {
             if let Some(first) = section.get(key) {
                 warnings.push(Warning::new(
                     file,
@@ -445,6 +460,12 @@ ItemsDatabase=x.zez
         assert_eq!(strict.section("ASMEN").unwrap().entries.len(), 1);
         let lines: Vec<usize> = warnings.iter().map(|w| w.line).collect();
         assert_eq!(lines, [1, 5, 6, 7], "{warnings:?}");
+        // ... unless the section is a list section.
+        let (lists, warnings) =
+            parse_ini_with_lists(text.as_bytes(), "app.ini", &["asmen"]).unwrap();
+        assert_eq!(lists.section("ASMEN").unwrap().entries.len(), 3);
+        let lines: Vec<usize> = warnings.iter().map(|w| w.line).collect();
+        assert_eq!(lines, [1, 6], "{warnings:?}");
     }
 
     #[test]

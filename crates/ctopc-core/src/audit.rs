@@ -5,8 +5,8 @@
 //! A line is `key=value` pairs separated by one space, in a fixed order:
 //!
 //! ```text
-//! write time=2026-12-02T03:49:19.123Z client="Excel" method=IOPCSyncIO::Write group="G1" item="Zbiornik.Poziom" value=R8:12.5 result=S_OK
-//! write time=... client="session 3" method=IOPCAsyncIO3::WriteVQT group="G1" item="A" value=I4:7 quality=0x00C0 timestamp=2026-12-02T03:00:00.000Z cancel=12 result=S_OK
+//! write time=2026-12-02T03:49:19.123Z client="Excel" identity="user:PLANT\\op" method=IOPCSyncIO::Write group="G1" item="Zbiornik.Poziom" value=R8:12.5 result=S_OK
+//! write time=... client="session 3" identity="unknown (RPC_E_CALL_COMPLETE)" method=IOPCAsyncIO3::WriteVQT group="G1" item="A" value=I4:7 quality=0x00C0 timestamp=2026-12-02T03:00:00.000Z cancel=12 result=denied
 //! write-complete time=... client="Excel" group="G1" cancel=12 transaction=5 handle=1001 result=OPC_E_BADRIGHTS
 //! ```
 //!
@@ -17,7 +17,12 @@
 //! - `quality` and `timestamp` appear only when the client gave them (IOPCSyncIO2 and
 //!   IOPCAsyncIO3 WriteVQT, IOPCItemIO::WriteVQT, or the extended `[value, quality,
 //!   timestamp]` array write, which is logged as the array the client wrote);
-//! - `result` is the per-item HRESULT's symbolic name (`S_OK`, `OPC_E_BADRIGHTS`, ...);
+//! - `identity` is who the caller is as the front end could tell
+//!   ([`crate::write_rights::Caller`]'s text: `user:DOMAIN\name`, `unknown (<reason>)`),
+//!   beside the name the client chose for itself; absent when the front end says nothing;
+//! - `result` is the per-item HRESULT's symbolic name (`S_OK`, `OPC_E_BADRIGHTS`, ...),
+//!   or `denied` for an item the write-rights policy refused (the client got
+//!   OPC_E_BADRIGHTS);
 //!   for an asynchronous write it is the call-time result (`cancel=` names the
 //!   transaction) and the final one follows in a `write-complete` line with the item's
 //!   client handle, when OnWriteComplete is sent.
@@ -43,6 +48,8 @@ pub enum Client<'a> {
 pub struct WriteRecord<'a> {
     pub time: Timestamp,
     pub client: Client<'a>,
+    /// Who the caller is ([`crate::write_rights::Caller`]'s text), if the front end said.
+    pub identity: Option<&'a str>,
     /// The COM method, e.g. `IOPCSyncIO::Write`.
     pub method: &'a str,
     /// The group's name; `None` for IOPCItemIO (no group).
@@ -57,6 +64,8 @@ pub struct WriteRecord<'a> {
     /// The server's cancel ID of an asynchronous write (0: none was queued).
     pub cancel_id: Option<u32>,
     pub result: Result<(), OpcError>,
+    /// The write-rights policy refused the item (`result` is then OPC_E_BADRIGHTS).
+    pub denied: bool,
 }
 
 /// One item of an OnWriteComplete.
@@ -225,6 +234,10 @@ pub fn format_write(r: &WriteRecord<'_>) -> String {
     out.push_str("write time=");
     out.push_str(&iso_time(r.time));
     client(&mut out, r.client);
+    if let Some(id) = r.identity {
+        out.push_str(" identity=");
+        quoted(&mut out, id, MAX_VALUE_CHARS);
+    }
     out.push_str(" method=");
     out.push_str(r.method);
     if let Some(g) = r.group {
@@ -254,7 +267,11 @@ pub fn format_write(r: &WriteRecord<'_>) -> String {
         let _ = write!(out, " cancel={c}");
     }
     out.push_str(" result=");
-    out.push_str(result_name(r.result));
+    out.push_str(if r.denied {
+        "denied"
+    } else {
+        result_name(r.result)
+    });
     out
 }
 
@@ -294,6 +311,7 @@ mod tests {
         WriteRecord {
             time: t0(),
             client: Client::Named("Excel"),
+            identity: None,
             method: "IOPCSyncIO::Write",
             group: Some("G1"),
             item_id: Some("Zbiornik.Poziom"),
@@ -303,6 +321,7 @@ mod tests {
             timestamp: None,
             cancel_id: None,
             result: Ok(()),
+            denied: false,
         }
     }
 
@@ -334,6 +353,32 @@ mod tests {
              method=IOPCAsyncIO3::WriteVQT group=\"G1\" item=\"Zbiornik.Poziom\" value=I4:7 \
              quality=0x00C0 timestamp=1970-01-01T00:00:00.000Z cancel=12 result=OPC_E_BADRIGHTS"
         );
+    }
+
+    #[test]
+    fn identity_stands_beside_the_client_and_a_policy_refusal_is_denied() {
+        let v = Value::R8(1.0);
+        let r = WriteRecord {
+            identity: Some("user:PLANT\\op"),
+            result: Err(OpcError::BadRights),
+            denied: true,
+            ..record(&v)
+        };
+        assert_eq!(
+            format_write(&r),
+            "write time=2026-12-02T03:49:19.123Z client=\"Excel\" identity=\"user:PLANT\\\\op\" \
+             method=IOPCSyncIO::Write group=\"G1\" item=\"Zbiornik.Poziom\" value=R8:1 result=denied"
+        );
+        let r = WriteRecord {
+            identity: Some("unknown (RPC_E_CALL_COMPLETE)"),
+            ..record(&v)
+        };
+        let line = format_write(&r);
+        assert!(
+            line.contains(" identity=\"unknown (RPC_E_CALL_COMPLETE)\" method="),
+            "{line}"
+        );
+        assert!(line.ends_with(" result=S_OK"), "{line}");
     }
 
     #[test]

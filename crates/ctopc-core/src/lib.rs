@@ -23,6 +23,7 @@ pub mod source;
 pub mod stream;
 pub mod time;
 pub mod value;
+pub mod write_rights;
 
 pub use error::{OpcError, OpcResult};
 pub use lang::Lang;

@@ -25,6 +25,8 @@ pub struct OpsConfig {
     /// `MetricsAddress` (default none: off): the loopback `ip:port` the runtime shows the
     /// counters of [`crate::metrics`] on.
     pub metrics_address: Option<String>,
+    /// `[WriteRights]`: who may write ([`crate::write_rights`]; default open).
+    pub write_rights: std::sync::Arc<crate::write_rights::WriteRights>,
 }
 
 impl Default for OpsConfig {
@@ -34,6 +36,7 @@ impl Default for OpsConfig {
             callback_timeout_ms: DEFAULT_CALLBACK_TIMEOUT_MS,
             callback_failures: DEFAULT_CALLBACK_FAILURES,
             metrics_address: None,
+            write_rights: std::sync::Arc::default(),
         }
     }
 }

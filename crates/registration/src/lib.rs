@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub mod catalog;
+pub mod security;
 
 /// A registry view of 64-bit Windows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

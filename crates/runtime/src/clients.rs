@@ -1,5 +1,6 @@
-//! What the runtime keeps of each client session: its name (IOPCCommon::SetClientName),
-//! which the write audit logs, the audit's switch, and the watch over the session's
+//! What the runtime keeps of each client session: its name (IOPCCommon::SetClientName)
+//! and its identity (who the caller is, as the front end could tell:
+//! `ctopc_core::write_rights::Caller`), which the write audit logs, the audit's switch, and the watch over the session's
 //! callbacks (`ctopc_core::ops::CallbackWatch` decides; [`crate::Runtime`] tells it when a
 //! callback is queued, started and finished). The audit line format is
 //! `ctopc_core::audit`'s; this module only gathers the record's parts and logs the lines
@@ -20,10 +21,17 @@ use std::sync::Mutex;
 /// See the module doc.
 pub struct Clients {
     audit_writes: AtomicBool,
-    names: Mutex<HashMap<SessionHandle, String>>,
+    names: Mutex<HashMap<SessionHandle, Who>>,
     callback_timeout_ms: AtomicU32,
     callback_failures: AtomicU32,
     watches: Mutex<HashMap<SessionHandle, Watch>>,
+}
+
+/// A session's name and identity.
+#[derive(Default)]
+struct Who {
+    name: Option<String>,
+    identity: Option<String>,
 }
 
 /// A client's callback watch and the groups it has delivered to (whose sinks a drop
@@ -58,6 +66,9 @@ pub struct WriteCall<'a> {
     pub values: &'a [ItemVqt],
     /// The asynchronous call's cancel ID.
     pub cancel_id: Option<u32>,
+    /// Per item: the write-rights policy refused it (`Engine::denied_by_policy`); empty
+    /// when none was.
+    pub denied: &'a [bool],
 }
 
 impl Clients {
@@ -164,7 +175,8 @@ impl Clients {
                 .iter()
                 .map(|(s, groups, items)| ClientCounters {
                     session: s.0,
-                    name: names.get(s).cloned(),
+                    name: names.get(s).and_then(|w| w.name.clone()),
+                    identity: names.get(s).and_then(|w| w.identity.clone()),
                     groups: *groups as u64,
                     items: *items as u64,
                     ..ClientCounters::default()
@@ -197,12 +209,27 @@ impl Clients {
 
     /// IOPCCommon::SetClientName.
     pub fn set_client_name(&self, session: SessionHandle, name: &str) {
-        self.lock().insert(session, name.to_owned());
+        self.lock().entry(session).or_default().name = Some(name.to_owned());
     }
 
     /// The client name of `session`, if it gave one.
     pub fn client_name(&self, session: SessionHandle) -> Option<String> {
-        self.lock().get(&session).cloned()
+        self.lock().get(&session).and_then(|w| w.name.clone())
+    }
+
+    /// Who `session`'s caller is (the text of `ctopc_core::write_rights::Caller`), for the
+    /// audit and `_Diagnostics` ([`crate::Runtime::set_caller`] keeps it with the engine's).
+    pub fn set_identity(&self, session: SessionHandle, identity: &str) {
+        let mut g = self.lock();
+        let w = g.entry(session).or_default();
+        if w.identity.as_deref() != Some(identity) {
+            w.identity = Some(identity.to_owned());
+        }
+    }
+
+    /// The identity of `session`, if the front end told it.
+    pub fn identity(&self, session: SessionHandle) -> Option<String> {
+        self.lock().get(&session).and_then(|w| w.identity.clone())
     }
 
     /// The session ended.
@@ -214,7 +241,7 @@ impl Clients {
             .remove(&session);
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<SessionHandle, String>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<SessionHandle, Who>> {
         self.names.lock().unwrap_or_else(|p| p.into_inner())
     }
 
@@ -228,7 +255,14 @@ impl Clients {
         if !self.auditing() {
             return;
         }
-        let name = self.client_name(call.session);
+        let (name, identity) = {
+            let g = self.lock();
+            let w = g.get(&call.session);
+            (
+                w.and_then(|w| w.name.clone()),
+                w.and_then(|w| w.identity.clone()),
+            )
+        };
         let client = match &name {
             Some(n) => Client::Named(n),
             None => Client::Session(call.session.0),
@@ -247,6 +281,8 @@ impl Clients {
                 timestamp: v.timestamp,
                 cancel_id: call.cancel_id,
                 result: results.get(i).copied().unwrap_or(Err(OpcError::Fail)),
+                identity: identity.as_deref(),
+                denied: call.denied.get(i).copied().unwrap_or(false),
             });
             tracing::info!(target: audit::TARGET, "{line}");
         }

@@ -299,6 +299,15 @@ impl Runtime {
         s
     }
 
+    /// Who `session`'s caller is: the engine decides writes by it
+    /// (`Engine::set_session_caller`), the audit and `_Diagnostics` show it. A front end
+    /// says it when the session opens and before each write.
+    pub fn set_caller(&self, session: SessionHandle, caller: ctopc_core::write_rights::Caller) {
+        let text = caller.to_string();
+        self.lock().engine.set_session_caller(session, caller);
+        self.clients.set_identity(session, &text);
+    }
+
     /// Ends a session: its groups go, its worker finishes what is queued and exits.
     pub fn close_session(&self, s: SessionHandle) {
         let _ = self.with_engine(|e, now| e.close_session(now, s));

@@ -28,7 +28,7 @@ pub type MakeBackend<'a> = dyn FnOnce(Arc<dyn Wake>) -> Result<Box<dyn Backend>,
 /// Starts the engine over `namespace` and the data source `make_backend` makes, both
 /// with the `_Diagnostics` branch beside them (`ctopc_core::diagnostics`: they read the
 /// board the runtime publishes on; `filter_case`: how browsing matches names), applies
-/// `ops` and starts the metrics endpoint when `ops` names an address.
+/// `ops` (the write rights to the engine, the rest to the clients' table) and starts the metrics endpoint when `ops` names an address.
 pub fn start(
     namespace: Arc<dyn Namespace>,
     filter_case: MatchCase,
@@ -40,7 +40,16 @@ pub fn start(
     let board = Arc::new(Board::new());
     let sampler = Sampler::new(filter_case);
     let namespace: Arc<dyn Namespace> = Arc::new(DiagNamespace::new(namespace, Arc::clone(&board)));
-    let engine = Engine::new(engine_config, Arc::clone(&namespace));
+    let mut engine = Engine::new(engine_config, Arc::clone(&namespace));
+    engine.set_write_rights(Arc::clone(&ops.write_rights));
+    if ops.write_rights.is_open() {
+        tracing::info!("write rights: no [WriteRights] policy, every connected client may write");
+    } else {
+        tracing::info!(
+            "write rights: [WriteRights] policy with {} entries",
+            ops.write_rights.rules().len()
+        );
+    }
     let mut simulation = false;
     let for_backend = Arc::clone(&board);
     let runtime = Runtime::start(engine, (board, sampler), thread_hook, |wake| {

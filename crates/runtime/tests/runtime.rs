@@ -320,3 +320,70 @@ fn a_closed_session_gets_no_more_callbacks() {
     assert_eq!(rt.lock().engine.stats().sessions, 0);
     rt.stop_driver();
 }
+
+/// A synchronous write of one value to the writable item of `subscribe`'s group
+/// (KW_A110), waited for.
+fn write_set_point(rt: &Runtime, group: GroupHandle) -> Vec<Result<(), ctopc_core::OpcError>> {
+    let outcome = rt.with_engine(|e, now| {
+        let h = e.item_attributes(group).unwrap()[1].server_handle;
+        e.write(now, group, &[(h, ctopc_core::Value::R8(1.0))])
+            .unwrap()
+    });
+    match outcome {
+        SyncOutcome::Ready(r) => r,
+        SyncOutcome::Pending(id) => {
+            match rt.wait_for(Duration::from_secs(10), |e| e.take_sync_result(id)) {
+                Some(SyncResult::Write(r)) => r,
+                other => panic!("{other:?}"),
+            }
+        }
+    }
+}
+
+#[test]
+fn the_write_rights_policy_decides_by_the_caller_the_front_end_names() {
+    use ctopc_core::write_rights::{Caller, Channels, Principal, Rule, WriteRights};
+    let rights = WriteRights::new(vec![Rule::new(
+        Channels::All,
+        Principal::parse("group:Operators").unwrap(),
+    )]);
+    let rt = start(OpsConfig {
+        write_rights: Arc::new(rights),
+        ..OpsConfig::default()
+    });
+    let (session, group) = subscribe(&rt, 1000);
+    // Until told, the caller is unknown: refused.
+    assert_eq!(
+        write_set_point(&rt, group),
+        [Err(ctopc_core::OpcError::BadRights)]
+    );
+    rt.set_caller(
+        session,
+        Caller::Windows {
+            account: "PLANT\\op".into(),
+            groups: vec!["PLANT\\Operators".into()],
+        },
+    );
+    assert_eq!(write_set_point(&rt, group), [Ok(())]);
+    let counters = rt.clients.client_counters(&[(session, 1, 2)]);
+    assert_eq!(counters[0].identity.as_deref(), Some("user:PLANT\\op"));
+    assert_eq!(
+        rt.clients.identity(session).as_deref(),
+        Some("user:PLANT\\op")
+    );
+
+    rt.set_caller(session, Caller::unknown("RPC_E_CALL_COMPLETE"));
+    assert_eq!(
+        write_set_point(&rt, group),
+        [Err(ctopc_core::OpcError::BadRights)]
+    );
+    let h = rt.with_engine(|e, _| e.item_attributes(group).unwrap()[1].server_handle);
+    assert_eq!(rt.lock().engine.denied_by_policy(group, &[h]), [true]);
+    assert_eq!(
+        rt.clients.identity(session).as_deref(),
+        Some("unknown (RPC_E_CALL_COMPLETE)")
+    );
+    rt.close_session(session);
+    assert_eq!(rt.clients.identity(session), None);
+    rt.stop_driver();
+}

@@ -157,7 +157,8 @@ fn setup(ns: &std::sync::Arc<asix_model::AsixNamespace>) -> ctopc_com::context::
         engine_config: server.engine_config(),
         default_language: server.default_language.fixed(),
         no_config_reason: ns.no_config_reason(),
-        ops: server.ops_config(),
+        ops: ns.config().ops_config(),
+        legacy_open_access: server.legacy_open_access,
     }
 }
 

@@ -2,12 +2,14 @@
 //! (`abi`), the error mapping, FILETIME and the clock, the interface definitions (mirroring
 //! `idl/`), our raw definitions of the connection-point and enumerator interfaces
 //! (`comdef`), connection points, enumerators, the class factory, the server's lifetime,
-//! VARIANT conversion, the Windows registry, the NT service, the one apartment guard and,
-//! under it, the platform's quirks (`platform`). Nothing here imports from the DA floor
+//! VARIANT conversion, the Windows registry, the NT service, the caller's identity from the
+//! call's security context (`caller`), the one apartment guard and, under it, the
+//! platform's quirks (`platform`). Nothing here imports from the DA floor
 //! (`crate::da`); `xtask/tests/tidy.rs` checks it.
 
 pub mod abi;
 pub mod apartment;
+pub mod caller;
 pub mod clock;
 pub mod comdef;
 pub mod connpoint;

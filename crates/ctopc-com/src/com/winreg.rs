@@ -7,6 +7,7 @@
 //! ([`RegKey`], [`key_exists`], [`read_value`], [`read_default`], [`read_machine_value`]),
 //! for the server browser and `opcdiag doctor`.
 
+pub use ctopc_registration::security::{Data, DefaultValue};
 pub use ctopc_registration::{Category, Key, ServerRegistration, View};
 use windows::core::PWSTR;
 use windows::core::{GUID, HSTRING, PCWSTR};
@@ -16,8 +17,9 @@ use windows::Win32::Foundation::{
 use windows::Win32::System::Registry::{
     RegCloseKey, RegCreateKeyExW, RegDeleteKeyExW, RegDeleteTreeW, RegEnumKeyExW, RegGetValueW,
     RegOpenKeyExW, RegSetValueExW, HKEY, HKEY_CLASSES_ROOT, HKEY_LOCAL_MACHINE, KEY_ALL_ACCESS,
-    KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, KEY_WRITE, REG_OPTION_NON_VOLATILE, REG_SAM_FLAGS,
-    REG_SZ, RRF_RT_REG_DWORD, RRF_RT_REG_SZ,
+    KEY_READ, KEY_WOW64_32KEY, KEY_WOW64_64KEY, KEY_WRITE, REG_BINARY, REG_DWORD,
+    REG_OPTION_NON_VOLATILE, REG_SAM_FLAGS, REG_SZ, RRF_RT_ANY, RRF_RT_REG_BINARY,
+    RRF_RT_REG_DWORD, RRF_RT_REG_SZ,
 };
 
 pub fn guid_string(g: &GUID) -> String {
@@ -145,6 +147,58 @@ pub fn unregister(r: &ServerRegistration) -> windows::core::Result<()> {
 /// `registration::server_list_keys`.
 pub fn write_keys(keys: &[Key]) -> windows::core::Result<()> {
     keys.iter().try_for_each(set_key)
+}
+
+/// Writes each value of `values` (`REG_BINARY` / `REG_DWORD`) only where its key does not
+/// have a value of that name yet, creating the key if needed: what an administrator set
+/// stays. Returns how many were written.
+pub fn write_absent(values: &[DefaultValue]) -> windows::core::Result<usize> {
+    let mut written = 0;
+    for v in values {
+        let wpath = HSTRING::from(v.path.as_str());
+        let mut hkey = HKEY::default();
+        check(
+            // SAFETY: all pointers are valid for the call; `hkey` receives an open handle.
+            unsafe {
+                RegCreateKeyExW(
+                    HKEY_CLASSES_ROOT,
+                    &wpath,
+                    None,
+                    PCWSTR::null(),
+                    REG_OPTION_NON_VOLATILE,
+                    KEY_READ | KEY_WRITE | view_flag(v.view),
+                    None,
+                    &mut hkey,
+                    None,
+                )
+            },
+            &v.path,
+        )?;
+        let key = RegKey(hkey);
+        let wname = HSTRING::from(v.name);
+        // SAFETY: `key` is open; a size-only query of a value (no data buffer).
+        let present =
+            unsafe { RegGetValueW(key.0, PCWSTR::null(), &wname, RRF_RT_ANY, None, None, None) }
+                == ERROR_SUCCESS;
+        if present {
+            continue;
+        }
+        let dword;
+        let (kind, bytes): (_, &[u8]) = match &v.data {
+            Data::Binary(b) => (REG_BINARY, b),
+            Data::Dword(d) => {
+                dword = d.to_le_bytes();
+                (REG_DWORD, &dword)
+            }
+        };
+        check(
+            // SAFETY: `key` is open; `bytes` outlives the call.
+            unsafe { RegSetValueExW(key.0, &wname, None, kind, Some(bytes)) },
+            &v.path,
+        )?;
+        written += 1;
+    }
+    Ok(written)
 }
 
 /// Deletes each tree of `trees` in its view (absent ones are fine).
@@ -309,6 +363,51 @@ pub fn read_machine_value(view: View, path: &str, name: &str) -> Option<String> 
     let key = RegKey::open(HKEY_LOCAL_MACHINE, path, view)?;
     key.text_value("", name)
         .or_else(|| key.dword_value(name).map(|d| d.to_string()))
+}
+
+/// The `REG_BINARY` value `name` of `HKCR\path` in `view` (at most 64 KiB).
+pub fn read_binary(view: View, path: &str, name: &str) -> Option<Vec<u8>> {
+    let key = RegKey::open(HKEY_CLASSES_ROOT, path, view)?;
+    let wname = HSTRING::from(name);
+    let mut len = 0u32;
+    // SAFETY: `key` is open; a size query.
+    let err = unsafe {
+        RegGetValueW(
+            key.0,
+            PCWSTR::null(),
+            &wname,
+            RRF_RT_REG_BINARY,
+            None,
+            None,
+            Some(&mut len),
+        )
+    };
+    if err != ERROR_SUCCESS || len > 65_536 {
+        return None;
+    }
+    let mut buf = vec![0u8; len as usize];
+    // SAFETY: `buf` has room for `len` bytes.
+    let err = unsafe {
+        RegGetValueW(
+            key.0,
+            PCWSTR::null(),
+            &wname,
+            RRF_RT_REG_BINARY,
+            None,
+            Some(buf.as_mut_ptr().cast()),
+            Some(&mut len),
+        )
+    };
+    if err != ERROR_SUCCESS {
+        return None;
+    }
+    buf.truncate(len as usize);
+    Some(buf)
+}
+
+/// The `REG_DWORD` value `name` of `HKCR\path` in `view`.
+pub fn read_dword(view: View, path: &str, name: &str) -> Option<u32> {
+    RegKey::open(HKEY_CLASSES_ROOT, path, view)?.dword_value(name)
 }
 
 /// The default value of `HKCR\path` in `view`.

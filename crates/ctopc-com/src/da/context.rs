@@ -44,8 +44,11 @@ pub struct Setup {
     pub default_language: Option<Lang>,
     /// Why the server has no configuration (OPC_STATUS_NOCONFIG), if it has none.
     pub no_config_reason: Option<String>,
-    /// The operations settings (write audit, ...).
+    /// The operations settings (write audit, write rights, ...).
     pub ops: ctopc_core::ops::OpsConfig,
+    /// `[Server] LegacyOpenAccess`: the old open COM security instead of the AppID's
+    /// (`host::init_server_security`).
+    pub legacy_open_access: bool,
 }
 
 /// Everything the COM objects of one server share (made by `host::start`).

@@ -58,10 +58,38 @@ fn with_registration<R>(
     Ok(f(&registration::serverctopc(&exe, service)))
 }
 
+/// The AppID's security values where absent (`ctopc_registration::security`), both
+/// views: what an administrator set (dcomcnfg) stays. The clients' group
+/// (`ServerCTOPC Clients`) is granted when it exists.
+fn write_appid_security(service: bool) -> windows::core::Result<()> {
+    use registration::security;
+    let clients = crate::com::caller::account_sid(security::CLIENTS_GROUP)
+        .and_then(|b| security::Sid::from_bytes(&b));
+    match &clients {
+        Some(sid) => println!(
+            "ServerCTOPC: the local group \"{}\" ({sid}) may use the server, also remotely",
+            security::CLIENTS_GROUP
+        ),
+        None => println!(
+            "ServerCTOPC: no local group \"{}\": remote clients are not granted access (create it and register again, or use dcomcnfg)",
+            security::CLIENTS_GROUP
+        ),
+    }
+    let values =
+        security::appid_defaults(registration::CLSID_SERVERCTOPC, service, clients.as_ref());
+    let written = winreg::write_absent(&values)?;
+    println!(
+        "ServerCTOPC: AppID security: {written} of {} values written (the others were set already)",
+        values.len()
+    );
+    Ok(())
+}
+
 /// `/RegServer`.
 pub fn register() -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     with_registration(None, winreg::register)??;
+    write_appid_security(false)?;
     println!(
         "ServerCTOPC: registered {PROGID} ({})",
         winreg::guid_string(&CLSID_SERVERCTOPC)
@@ -77,6 +105,7 @@ pub fn register_service() -> windows::core::Result<()> {
     crate::com::service::install(std::path::Path::new(&exe))
         .map_err(|e| crate::com::error::error(E_FAIL, &e))?;
     with_registration(Some(crate::com::service::SERVICE_NAME), winreg::register)??;
+    write_appid_security(true)?;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
         crate::com::service::SERVICE_NAME
@@ -137,6 +166,53 @@ pub fn init_security() {
             None,
         )
     };
+}
+
+/// ServerCTOPC's process-wide COM security. By default from its AppID (`EOAC_APPID`): the
+/// `AccessPermission`, `LaunchPermission` and `AuthenticationLevel` that registration
+/// writes where absent and administrators change with dcomcnfg govern who may start and
+/// call the server. `legacy` (`[Server] LegacyOpenAccess`): the open call of
+/// [`init_security`] instead, with a WARN (at every start). Should COM refuse the AppID
+/// call, the open call is made with an ERROR naming why, so that the server still serves.
+pub fn init_server_security(legacy: bool) {
+    if legacy {
+        tracing::warn!(
+            "LegacyOpenAccess = tak: COM security without a security descriptor and with authentication level None; every process that can reach DCOM may connect, the AppID's AccessPermission is not used"
+        );
+        init_security();
+        return;
+    }
+    let appid = CLSID_SERVERCTOPC;
+    // SAFETY: with EOAC_APPID the first argument points to the AppID's GUID (a local,
+    // alive for the call, only read); the other pointers are null, as the flag requires.
+    let r = unsafe {
+        CoInitializeSecurity(
+            Some(windows::Win32::Security::PSECURITY_DESCRIPTOR(
+                (&raw const appid).cast_mut().cast(),
+            )),
+            -1,
+            None,
+            None,
+            windows::Win32::System::Com::RPC_C_AUTHN_LEVEL_DEFAULT,
+            windows::Win32::System::Com::RPC_C_IMP_LEVEL_DEFAULT,
+            None,
+            windows::Win32::System::Com::EOAC_APPID,
+            None,
+        )
+    };
+    match r {
+        Ok(()) => tracing::info!(
+            "COM security from the AppID {} (AccessPermission, LaunchPermission, AuthenticationLevel)",
+            winreg::guid_string(&appid)
+        ),
+        Err(e) => {
+            tracing::error!(
+                "CoInitializeSecurity(EOAC_APPID) failed: {:#010x}; falling back to the open call (LegacyOpenAccess)",
+                e.code().0 as u32
+            );
+            init_security();
+        }
+    }
 }
 
 /// Keeps every interface a server hands out registered with RPC for the process's life
@@ -211,6 +287,7 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
         default_language,
         no_config_reason,
         ops,
+        legacy_open_access: _,
     } = setup;
     // Text written with a default LCID converts in the system's number format (a Polish
     // system reads "12,5" as 12.5), as VariantChangeTypeEx does on Windows.
@@ -304,7 +381,7 @@ pub fn serve_as(
     stop: &StopSignal,
 ) -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
-    init_security();
+    init_server_security(setup.legacy_open_access);
     keep_interfaces_registered();
     let ctx = start(setup, make_backend).map_err(|e| {
         tracing::error!("cannot start: {e}");

@@ -95,6 +95,8 @@ pub fn class_factory(ctx: &Arc<Context>) -> windows::Win32::System::Com::IClassF
 /// one client.
 pub fn create_instance(ctx: &Arc<Context>) -> windows::core::Result<IUnknown> {
     let handle = ctx.runtime.open_session();
+    ctx.runtime
+        .set_caller(handle, crate::com::caller::current());
     let shutdown = Arc::new(SinkSlot::<IOPCShutdown>::default());
     ctx.runtime
         .set_session_sink(handle, Arc::new(ShutdownSink(Arc::clone(&shutdown))));

@@ -142,6 +142,7 @@ pub fn new_context_with(tune: impl FnOnce(&mut ctopc_core::model::EngineConfig))
     let mut engine_config = server.engine_config();
     tune(&mut engine_config);
     let setup = context::Setup {
+        legacy_open_access: false,
         namespace: Arc::clone(ns) as Arc<dyn ctopc_core::namespace::Namespace>,
         address_space: Arc::clone(address_space),
         engine_config,

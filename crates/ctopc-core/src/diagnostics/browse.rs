@@ -341,7 +341,7 @@ mod tests {
         assert_eq!(names(&l(BrowseType::Branch)), ["_Diagnostics", "Plant"]);
         assert_eq!(names(&l(BrowseType::Leaf)), ["Top"]);
         let flat = l(BrowseType::Flat);
-        assert_eq!(flat.len(), 3 + 9 + 6);
+        assert_eq!(flat.len(), 3 + 9 + 7);
         assert_eq!(flat.get(0), Some("Plant.A1"));
         assert!(names(&flat).contains(&"_Diagnostics.Server.Uptime"));
         assert!(names(&flat).contains(&"_Diagnostics.Clients.HMI.Failures"));
@@ -354,7 +354,13 @@ mod tests {
         let strings = c
             .browse_opc_item_id_list(BrowseType::Flat, "", VarType::BSTR.0, 0, &ns, &d)
             .unwrap();
-        assert_eq!(names(&strings), ["_Diagnostics.Clients.HMI.Name"]);
+        assert_eq!(
+            names(&strings),
+            [
+                "_Diagnostics.Clients.HMI.Name",
+                "_Diagnostics.Clients.HMI.Identity"
+            ]
+        );
         // The name filter too.
         let f = c
             .browse_opc_item_id_list(BrowseType::Branch, "_diag*", 0, 0, &ns, &d)
@@ -392,7 +398,8 @@ mod tests {
                 "Items",
                 "LastCallbackLatency",
                 "CallbacksPending",
-                "Failures"
+                "Failures",
+                "Identity"
             ]
         );
         assert_eq!(
@@ -551,7 +558,7 @@ mod tests {
             ]
         );
         let client = browse(&r, &d, &BrowseRequest::new("_Diagnostics.Clients.HMI"), run).unwrap();
-        assert_eq!(client.elements.len(), 6);
+        assert_eq!(client.elements.len(), 7);
         assert!(client.elements.iter().all(|e| e.is_item && !e.has_children));
         assert_eq!(
             browse(

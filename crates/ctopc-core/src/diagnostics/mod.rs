@@ -158,7 +158,7 @@ pub const SERVER_FIELDS: [Field; 9] = [
 ];
 
 /// The items of `_Diagnostics.Clients.<client>`.
-pub const CLIENT_FIELDS: [Field; 6] = [
+pub const CLIENT_FIELDS: [Field; 7] = [
     field(
         "Name",
         VarType::BSTR,
@@ -199,6 +199,13 @@ pub const CLIENT_FIELDS: [Field; 6] = [
         VarType::I4,
         "Nieudane wywołania zwrotne klienta od podłączenia",
         "The client's failed callbacks since it connected",
+        None,
+    ),
+    field(
+        "Identity",
+        VarType::BSTR,
+        "Kim jest klient według kontekstu bezpieczeństwa wywołania (user:DOMENA\\nazwa; unknown (powód), gdy platforma nie wie)",
+        "Who the client is by the call's security context (user:DOMAIN\\name; unknown (reason) when the platform cannot tell)",
         None,
     ),
 ];
@@ -299,6 +306,8 @@ pub struct ClientCounters {
     pub last_latency_ms: Option<f64>,
     pub pending: u64,
     pub failures: u64,
+    /// Who the client is ([`crate::write_rights::Caller`]'s text; `None`: not told).
+    pub identity: Option<String>,
 }
 
 /// What the runtime hands [`Sampler::sample`].
@@ -592,7 +601,8 @@ impl Snapshot {
                     2 => count(c.items),
                     3 => Value::R8(c.last_latency_ms.unwrap_or(-1.0)),
                     4 => count(c.pending),
-                    _ => count(c.failures),
+                    5 => count(c.failures),
+                    _ => Value::Bstr(c.identity.clone().unwrap_or_default()),
                 }
             }
             Section::Channel => {

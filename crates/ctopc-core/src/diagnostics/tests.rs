@@ -116,7 +116,7 @@ fn the_sampler_computes_rates_and_rebuilds_the_tree_only_when_branches_change() 
         .space
         .find_item_id("_Diagnostics.Channels.*.Subscriptions")
         .is_some());
-    assert_eq!(c.space.len(), 1 + 4 + 9 + 2 * 7 + 6);
+    assert_eq!(c.space.len(), 1 + 4 + 9 + 2 * 8 + 6);
 }
 
 #[test]
@@ -142,6 +142,7 @@ fn snapshot_values_follow_the_counters() {
                     last_latency_ms: Some(1.5),
                     pending: 2,
                     failures: 1,
+                    identity: Some("user:PLANT\\op".into()),
                     ..client(7, Some("HMI"))
                 },
                 client(8, None),
@@ -186,6 +187,14 @@ fn snapshot_values_follow_the_counters() {
         Some(Value::I4(2))
     );
     assert_eq!(v("_Diagnostics.Clients.HMI.Failures"), Some(Value::I4(1)));
+    assert_eq!(
+        v("_Diagnostics.Clients.HMI.Identity"),
+        Some(Value::Bstr("user:PLANT\\op".into()))
+    );
+    assert_eq!(
+        v("_Diagnostics.Clients.Client8.Identity"),
+        Some(Value::Bstr(String::new()))
+    );
     assert_eq!(
         v("_Diagnostics.Clients.Client8.Name"),
         Some(Value::Bstr(String::new()))

@@ -14,6 +14,7 @@ use super::transactions::Txns;
 use super::util::IntMap;
 use crate::convert::Locale;
 use crate::namespace::Namespace;
+use crate::write_rights::{Caller, Decision, WriteRights};
 use crate::{OpcError, Timestamp};
 
 /// Default minimum update rate (AsixConnect 4 §6.6: 1 s).
@@ -116,6 +117,9 @@ pub(crate) struct Session {
     /// The LCID of IOPCCommon::SetLocaleID: the conversion locale of the session's
     /// group-less writes (IOPCItemIO::WriteVQT). LOCALE_SYSTEM_DEFAULT until set.
     pub lcid: u32,
+    /// Who is calling, as the front end last said ([`Engine::set_session_caller`]); what
+    /// the write-rights policy decides on.
+    pub caller: Caller,
 }
 
 /// The OPC DA server model. See [`crate::model`].
@@ -146,6 +150,8 @@ pub struct Engine {
     /// Cache entry -> (group handle, item handle) of the items with buffering on that
     /// refer to it (may hold stale pairs; checked when used, `model/buffer.rs`).
     pub(crate) buffer_refs: IntMap<u32, Vec<(u32, u32)>>,
+    /// Who may write ([`crate::write_rights`]); open until set.
+    pub(crate) write_rights: Arc<WriteRights>,
 }
 
 impl Engine {
@@ -171,7 +177,50 @@ impl Engine {
             requests: VecDeque::new(),
             first_sample_waiters: Vec::new(),
             buffer_refs: IntMap::default(),
+            write_rights: Arc::new(WriteRights::open()),
         }
+    }
+
+    /// Sets the write-rights policy every write is decided by (open until set).
+    pub fn set_write_rights(&mut self, rights: Arc<WriteRights>) {
+        self.write_rights = rights;
+    }
+
+    /// The write-rights policy.
+    pub fn write_rights(&self) -> &WriteRights {
+        &self.write_rights
+    }
+
+    /// Who is calling on `session`: the front end says it when the session opens and again
+    /// before each write (the caller of one server object may change between calls).
+    /// Unknown sessions are ignored.
+    pub fn set_session_caller(&mut self, session: SessionHandle, caller: Caller) {
+        if let Some(s) = self.sessions.get_mut(&session.0) {
+            s.caller = caller;
+        }
+    }
+
+    /// The caller of `session` ([`Self::set_session_caller`]), if the session exists.
+    pub fn session_caller(&self, session: SessionHandle) -> Option<&Caller> {
+        self.sessions.get(&session.0).map(|s| &s.caller)
+    }
+
+    /// The policy's decision for a write of `session` to an item of `channel`.
+    pub fn write_decision(&self, session: SessionHandle, channel: &str) -> Decision {
+        match self.session_caller(session) {
+            Some(c) => self.write_rights.decide(channel, c),
+            None => self
+                .write_rights
+                .decide(channel, &Caller::unknown("no such session")),
+        }
+    }
+
+    /// May `session` write the cache entry `source`? (Open policies skip the lookup.)
+    pub(crate) fn may_write(&self, session: SessionHandle, source: u32) -> bool {
+        self.write_rights.is_open()
+            || self
+                .write_decision(session, self.sources.channel(source))
+                .allowed
     }
 
     pub fn config(&self) -> &EngineConfig {
@@ -228,6 +277,7 @@ impl Engine {
                 last_update: Timestamp(0),
                 name_counter: 0,
                 lcid: crate::lang::LOCALE_SYSTEM_DEFAULT,
+                caller: Caller::default(),
             },
         );
         SessionHandle(h)

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::cache::CachedValue;
 use super::deadband::valid_percent;
-use super::engine::{Engine, GroupHandle};
+use super::engine::{Engine, GroupHandle, SessionHandle};
 use super::util::IntMap;
 use super::Revised;
 use crate::compact::{PackedValue, SideMap};
@@ -607,6 +607,41 @@ impl Engine {
             })
             .collect();
         Ok((g.name.clone(), ids))
+    }
+
+    /// For the write audit: which of these handles of the group the write-rights policy
+    /// refuses to the group's client (false for handles that are not the group's, and for
+    /// every handle under an open policy).
+    pub fn denied_by_policy(&self, group: GroupHandle, handles: &[u32]) -> Vec<bool> {
+        let slot = match self.live_slot(group) {
+            Ok(slot) if !self.write_rights.is_open() => slot,
+            _ => return vec![false; handles.len()],
+        };
+        let g = self.group(slot);
+        handles
+            .iter()
+            .map(|&h| {
+                g.find(h)
+                    .is_some_and(|i| !self.may_write(g.session, g.items[i].source))
+            })
+            .collect()
+    }
+
+    /// For the write audit of IOPCItemIO::WriteVQT: which of these item IDs the policy
+    /// refuses to `session` (resolved on the basic channel, as the write resolves them;
+    /// false for IDs that do not resolve).
+    pub fn item_io_denied_by_policy(&self, session: SessionHandle, item_ids: &[&str]) -> Vec<bool> {
+        if self.write_rights.is_open() {
+            return vec![false; item_ids.len()];
+        }
+        item_ids
+            .iter()
+            .map(|id| {
+                self.ns
+                    .resolve(id, "")
+                    .is_ok_and(|def| !self.write_decision(session, &def.channel).allowed)
+            })
+            .collect()
     }
 
     /// Why the namespace refuses writes of these items by design

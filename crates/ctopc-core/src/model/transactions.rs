@@ -271,13 +271,18 @@ struct PreparedWrite {
 /// writing of quality and/or timestamp"; VT_EMPTY alone stays OPC_E_BADTYPE. The
 /// extended write's quality must fit the 16 bits of an OPC quality (OPC_E_RANGE
 /// otherwise: it is not truncated).
+///
+/// `allowed` is the write-rights policy's answer for the caller
+/// ([`Engine::may_write`]): a refused write is OPC_E_BADRIGHTS, after the item's own
+/// access rights and before any conversion.
 fn prepare_write(
     ns: &dyn Namespace,
     e: &SourceEntry,
     w: &ItemVqt,
     locale: Locale,
+    allowed: bool,
 ) -> Result<PreparedWrite, OpcError> {
-    if !e.writable() {
+    if !e.writable() || !allowed {
         return Err(OpcError::BadRights);
     }
     let (value, mut quality, mut timestamp) = (&w.value, w.quality, w.timestamp);
@@ -747,7 +752,8 @@ impl Engine {
                     s.client = it.client;
                     s.source = it.source;
                     s.source_gen = e.generation;
-                    match prepare_write(&*self.ns, e, w, txn.locale) {
+                    let allowed = self.may_write(txn.session, it.source);
+                    match prepare_write(&*self.ns, e, w, txn.locale, allowed) {
                         Ok(p) => writes.push((n as u32, p)),
                         Err(err) => s.out = SlotOut::Err(err),
                     }
@@ -939,6 +945,7 @@ impl Engine {
                     &self.sources.entries[slot.source as usize],
                     w,
                     txn.locale,
+                    self.may_write(session, slot.source),
                 ) {
                     Ok(p) => writes.push((n as u32, p)),
                     Err(e) => slot.out = SlotOut::Err(e),
@@ -1086,7 +1093,8 @@ impl Engine {
             };
             let it = &g.items[i];
             let e = &self.sources.entries[it.source as usize];
-            match prepare_write(&*self.ns, e, w, txn.locale) {
+            let allowed = self.may_write(txn.session, it.source);
+            match prepare_write(&*self.ns, e, w, txn.locale, allowed) {
                 Err(err) => results.push(Err(err)),
                 Ok(p) => {
                     results.push(Ok(()));

@@ -95,6 +95,7 @@ impl Group_Impl {
         self.da10_connection(connection, false)?;
         let mut pre = PreErrors::default();
         let items = value_items(handles, values, &mut pre);
+        self.tell_caller();
         let started = self
             .da10_start(connection, |e, now| {
                 e.async_write_vqt(now, self.handle, 0, &items)

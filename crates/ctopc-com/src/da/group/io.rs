@@ -125,6 +125,15 @@ fn write_timed_out(n: usize) -> WriteResults {
 
 // ---- shared bodies ---------------------------------------------------------------------
 
+/// What the write audit takes of the engine for one write call.
+struct AuditNames {
+    group: String,
+    /// Per item: its ID (`None`: not an item of the group).
+    ids: Vec<Option<String>>,
+    /// Per item: the write-rights policy refused it.
+    denied: Vec<bool>,
+}
+
 /// Per-item conversion failures of the values to write, recorded before the engine call
 /// (the engine gets VT_EMPTY for them, which it rejects after checking the handle and the
 /// access rights, with OPC_E_BADTYPE, or OPC_E_NOTSUPPORTED when a quality or timestamp
@@ -226,6 +235,7 @@ impl Group_Impl {
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
         let n = items.len();
+        self.tell_caller();
         let (outcome, timeout, names) = self.ctx.runtime.with_engine(|e, now| {
             (
                 e.write_vqt(now, self.handle, &items),
@@ -259,29 +269,39 @@ impl Group_Impl {
             .warn_refused_writes(self.handle, &handles, results);
     }
 
-    /// What the write audit needs of the engine (`None` when auditing is off).
-    fn audit_names(
-        &self,
-        e: &Engine,
-        items: &[(u32, ItemVqt)],
-    ) -> Option<(String, Vec<Option<String>>)> {
+    /// Tells the runtime who is calling before a write: the write-rights policy decides by
+    /// it, the audit shows it (`crate::com::caller`; unknown, with the reason, where the
+    /// platform cannot tell).
+    pub(super) fn tell_caller(&self) {
+        self.ctx
+            .runtime
+            .set_caller(self.session, crate::com::caller::current());
+    }
+
+    /// What the write audit needs of the engine (`None` when auditing is off): the group's
+    /// name, the item IDs, and which items the write-rights policy refuses.
+    fn audit_names(&self, e: &Engine, items: &[(u32, ItemVqt)]) -> Option<AuditNames> {
         if !self.ctx.runtime.clients.auditing() {
             return None;
         }
         let handles: Vec<u32> = items.iter().map(|(h, _)| *h).collect();
-        e.audit_names(self.handle, &handles).ok()
+        let (group, ids) = e.audit_names(self.handle, &handles).ok()?;
+        let denied = e.denied_by_policy(self.handle, &handles);
+        Some(AuditNames { group, ids, denied })
     }
 
     /// The write audit's lines for a write of this group (`ctopc_runtime::clients`).
     fn audit(
         &self,
         method: &str,
-        names: Option<(String, Vec<Option<String>>)>,
+        names: Option<AuditNames>,
         items: &[(u32, ItemVqt)],
         cancel_id: Option<u32>,
         results: &[Result<(), OpcError>],
     ) {
-        let Some((group, ids)) = names else { return };
+        let Some(AuditNames { group, ids, denied }) = names else {
+            return;
+        };
         let keys: Vec<(Option<&str>, Option<u32>)> = items
             .iter()
             .zip(&ids)
@@ -295,6 +315,7 @@ impl Group_Impl {
             items: &keys,
             values: &values,
             cancel_id,
+            denied: &denied,
         };
         self.ctx
             .runtime
@@ -341,6 +362,7 @@ impl Group_Impl {
         p_cancel: *mut u32,
         pp_errors: OutArray<HRESULT>,
     ) -> ComResult<HRESULT> {
+        self.tell_caller();
         let (started, names) = self.ctx.runtime.with_engine(|e, now| {
             let started = self
                 .data_callback_connected(e)

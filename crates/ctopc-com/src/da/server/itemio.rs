@@ -66,10 +66,20 @@ impl OpcServer {
     /// IOPCItemIO::WriteVQT in the core, `items` non-empty.
     fn item_io_write(&self, items: &[(&str, ItemVqt)]) -> WriteResults {
         let n = items.len();
-        let started = self
-            .ctx
+        self.ctx
             .runtime
-            .with_engine(|e, now| e.item_io_write_vqt(now, self.handle, items));
+            .set_caller(self.handle, crate::com::caller::current());
+        let auditing = self.ctx.runtime.clients.auditing();
+        let (started, denied) = self.ctx.runtime.with_engine(|e, now| {
+            let started = e.item_io_write_vqt(now, self.handle, items);
+            let denied = if auditing {
+                let ids: Vec<&str> = items.iter().map(|(id, _)| *id).collect();
+                e.item_io_denied_by_policy(self.handle, &ids)
+            } else {
+                Vec::new()
+            };
+            (started, denied)
+        });
         let results = match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait_sync(id) {
@@ -80,12 +90,17 @@ impl OpcServer {
             Err(e) => vec![Err(e); n],
         };
         self.ctx.runtime.metrics.written(items.len() as u64);
-        self.audit_item_io(items, &results);
+        self.audit_item_io(items, &results, &denied);
         results
     }
 
     /// The write audit's lines of an IOPCItemIO::WriteVQT (`ctopc_runtime::clients`).
-    fn audit_item_io(&self, items: &[(&str, ItemVqt)], results: &[Result<(), OpcError>]) {
+    fn audit_item_io(
+        &self,
+        items: &[(&str, ItemVqt)],
+        results: &[Result<(), OpcError>],
+        denied: &[bool],
+    ) {
         let ops = &self.ctx.runtime.clients;
         if !ops.auditing() {
             return;
@@ -100,6 +115,7 @@ impl OpcServer {
             items: &keys,
             values: &values,
             cancel_id: None,
+            denied,
         };
         ops.audit_write(crate::com::clock::now(), &call, results);
     }

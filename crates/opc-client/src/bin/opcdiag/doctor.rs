@@ -693,16 +693,33 @@ pub fn link_check(
 // ---------------------------------------------------------------------------------------
 // DCOM, firewall
 
-/// The authentication level of the server's `CoInitializeSecurity`
-/// (`ctopc_com::host::init_security`: RPC_C_AUTHN_LEVEL_NONE).
-pub const SERVER_AUTHN_LEVEL: u32 = 1;
+/// The authentication level of the server's open `CoInitializeSecurity`
+/// (`ctopc_com::host::init_security`, `LegacyOpenAccess = tak`: RPC_C_AUTHN_LEVEL_NONE).
+pub const LEGACY_AUTHN_LEVEL: u32 = 1;
+
+/// The name of an RPC authentication level.
+fn authn_level_name(level: u32) -> &'static str {
+    match level {
+        0 => "Default",
+        1 => "None",
+        2 => "Connect",
+        3 => "Call",
+        4 => "Packet",
+        5 => "Packet Integrity",
+        6 => "Packet Privacy",
+        _ => "unknown",
+    }
+}
 
 /// `HKLM\Software\Microsoft\Ole` `EnableDCOM`, `LegacyAuthenticationLevel` and
-/// `AppCompat\RequireIntegrityActivationAuthenticationLevel` (KB5004442).
+/// `AppCompat\RequireIntegrityActivationAuthenticationLevel` (KB5004442);
+/// `server_level`: the authentication level the server's COM security uses (its AppID's,
+/// or None under `LegacyOpenAccess`).
 pub fn dcom_checks(
     enable_dcom: Option<&str>,
     legacy_authn: Option<&str>,
     require_integrity: Option<&str>,
+    server_level: u32,
 ) -> Vec<Check> {
     let mut out = Vec::new();
     out.push(match enable_dcom.map(str::trim) {
@@ -730,16 +747,122 @@ pub fn dcom_checks(
         _ => Check::warn(
             "DCOM hardening (KB5004442)",
             format!(
-                "activation needs packet integrity ({}), the server's CoInitializeSecurity uses level None ({SERVER_AUTHN_LEVEL}): local clients work, remote clients that activate below integrity are refused",
+                "activation needs packet integrity ({}), the server's COM security uses level {} ({server_level}): local clients work, remote clients that activate below integrity are refused",
                 match hardening {
                     Some(v) => format!("RequireIntegrityActivationAuthenticationLevel = {v}"),
                     None => "the default since the 2023 updates".to_owned(),
-                }
+                },
+                authn_level_name(server_level)
             ),
             "make remote OPC clients activate with RPC_C_AUTHN_LEVEL_PKT_INTEGRITY (update them), or use OPC UA / a tunneller for old remote clients",
         ),
     });
     out
+}
+
+/// What the AppID of ServerCTOPC holds (its 64-bit view: the server is 64-bit), as read.
+#[derive(Clone, Debug, Default)]
+pub struct AppIdSecurity {
+    pub access: Option<Vec<u8>>,
+    pub launch: Option<Vec<u8>>,
+    pub authentication_level: Option<u32>,
+    /// `[Server] LegacyOpenAccess` of the configuration.
+    pub legacy_open_access: bool,
+    /// The SID of the local group `ServerCTOPC Clients`, if it exists.
+    pub clients: Option<registration::security::Sid>,
+}
+
+/// The AppID's security: each value as it is (in SDDL), and what is weaker than the
+/// defaults `/RegServer` writes (`ctopc_registration::security`), or missing.
+pub fn appid_security_checks(a: &AppIdSecurity) -> Vec<Check> {
+    use registration::security::{self as sec, Descriptor};
+    let fix = "run ServerCTOPC.exe /RegServer (it writes the defaults where absent), or set it with dcomcnfg: Component Services > DCOM Config > ServerCTOPC.App > Properties > Security";
+    let descriptor = |name: &str, value: &Option<Vec<u8>>| -> Check {
+        let check = format!("AppID {name}");
+        let Some(bytes) = value else {
+            return Check::warn(
+                check,
+                format!("not set: the machine-wide default {name} applies"),
+                fix,
+            );
+        };
+        let Some(d) = Descriptor::from_bytes(bytes) else {
+            return Check::fail(
+                check,
+                "not a self-relative security descriptor: COM refuses every client",
+                fix,
+            );
+        };
+        let weaker = sec::weaker_than_default(&d, a.clients.as_ref());
+        if weaker.is_empty() {
+            Check::ok(check, d.sddl())
+        } else {
+            Check::warn(
+                check,
+                format!("weaker than the defaults: {}; {}", weaker.join("; "), d.sddl()),
+                "remove those entries (dcomcnfg), or delete the value and run ServerCTOPC.exe /RegServer for the defaults",
+            )
+        }
+    };
+    let mut out = vec![
+        descriptor(sec::ACCESS_PERMISSION, &a.access),
+        descriptor(sec::LAUNCH_PERMISSION, &a.launch),
+    ];
+    let level = a.authentication_level;
+    out.push(match level {
+        Some(l) if !sec::authentication_level_weaker(level) => Check::ok(
+            "AppID AuthenticationLevel",
+            format!("{l} ({})", authn_level_name(l)),
+        ),
+        Some(l) => Check::warn(
+            "AppID AuthenticationLevel",
+            format!(
+                "{l} ({}): weaker than packet integrity (5)",
+                authn_level_name(l)
+            ),
+            "set AuthenticationLevel = 5 under the AppID (dcomcnfg: Authentication Level = Packet Integrity)",
+        ),
+        None => Check::warn(
+            "AppID AuthenticationLevel",
+            "not set: the machine-wide default applies (usually Connect, weaker than packet integrity)",
+            fix,
+        ),
+    });
+    out.push(if a.legacy_open_access {
+        Check::warn(
+            "COM security",
+            "LegacyOpenAccess = tak: no security descriptor, authentication level None; every process that can reach DCOM may connect, the AppID's values are not used",
+            "set [Server] LegacyOpenAccess = nie in ASIXConnect.ini once the old remote clients are gone",
+        )
+    } else {
+        Check::ok("COM security", "from the AppID (EOAC_APPID)")
+    });
+    out
+}
+
+/// The authentication level the server's COM security uses, for [`dcom_checks`].
+pub fn server_authn_level(a: &AppIdSecurity) -> u32 {
+    if a.legacy_open_access {
+        LEGACY_AUTHN_LEVEL
+    } else {
+        a.authentication_level.unwrap_or(0)
+    }
+}
+
+/// `[WriteRights]`: without it every connected client may write.
+pub fn write_rights_check(rights: &ctopc_core::write_rights::WriteRights) -> Check {
+    if rights.is_open() {
+        Check::warn(
+            "write rights",
+            "no [WriteRights] section: every connected client may write every writable variable",
+            "name who may write in [WriteRights] of ASIXConnect.ini (docs/configuration.md, Write rights)",
+        )
+    } else {
+        Check::ok(
+            "write rights",
+            format!("[WriteRights]: {} entries", rights.rules().len()),
+        )
+    }
 }
 
 /// The firewall rules of `docs/deployment.md` section 8, from `netsh advfirewall firewall
@@ -1193,16 +1316,93 @@ mod tests {
 
     #[test]
     fn dcom_settings_warn_with_the_fix() {
-        let c = dcom_checks(Some("N"), None, None);
+        let c = dcom_checks(Some("N"), None, None, 5);
         assert_eq!(c[0].status, Status::Warn);
         assert!(c[0].fix.contains("EnableDCOM = Y"));
-        let c = dcom_checks(Some("Y"), Some("2"), Some("0"));
+        let c = dcom_checks(Some("Y"), Some("2"), Some("0"), 5);
         assert!(c.iter().all(|c| c.status == Status::Ok), "{c:?}");
-        let c = dcom_checks(Some("Y"), Some("6"), Some("1"));
+        let c = dcom_checks(Some("Y"), Some("6"), Some("1"), LEGACY_AUTHN_LEVEL);
         assert_eq!(c[1].status, Status::Warn);
         assert_eq!(c[2].status, Status::Warn);
         assert!(c[2].detail.contains("None (1)"), "{:?}", c[2]);
         assert!(c.iter().all(|c| c.status != Status::Fail));
+        let c = dcom_checks(Some("Y"), None, None, 5);
+        assert!(c[2].detail.contains("Packet Integrity (5)"), "{:?}", c[2]);
+    }
+
+    #[test]
+    fn the_appid_security_is_shown_and_what_is_weaker_named() {
+        use registration::security::{self as sec, Ace, Descriptor, Sid};
+        let group = Sid::parse("S-1-5-21-7-1001").unwrap();
+        let defaults = AppIdSecurity {
+            access: Some(sec::default_access(false, Some(&group)).to_bytes()),
+            launch: Some(sec::default_launch(false, Some(&group)).to_bytes()),
+            authentication_level: Some(5),
+            legacy_open_access: false,
+            clients: Some(group.clone()),
+        };
+        let c = appid_security_checks(&defaults);
+        assert!(c.iter().all(|c| c.status == Status::Ok), "{c:?}");
+        assert!(
+            c[0].detail.contains("(A;;0x3;;;S-1-5-32-544)"),
+            "{:?}",
+            c[0]
+        );
+        assert!(c[2].detail.contains("Packet Integrity"), "{:?}", c[2]);
+        assert_eq!(server_authn_level(&defaults), 5);
+
+        let everyone = Descriptor {
+            owner: None,
+            group: None,
+            dacl: Some(vec![Ace::allow(
+                Sid::parse(sec::EVERYONE).unwrap(),
+                sec::ACCESS_REMOTE,
+            )]),
+        };
+        let weak = AppIdSecurity {
+            access: Some(everyone.to_bytes()),
+            launch: None,
+            authentication_level: Some(2),
+            legacy_open_access: true,
+            clients: None,
+        };
+        let c = appid_security_checks(&weak);
+        assert_eq!(c[0].status, Status::Warn);
+        assert!(
+            c[0].detail.contains("Everyone (S-1-1-0) is allowed 0x7"),
+            "{:?}",
+            c[0]
+        );
+        assert_eq!(c[1].status, Status::Warn);
+        assert!(c[1].detail.contains("not set"), "{:?}", c[1]);
+        assert_eq!(c[2].status, Status::Warn);
+        assert!(c[2].detail.contains("2 (Connect)"), "{:?}", c[2]);
+        assert_eq!(c[3].status, Status::Warn);
+        assert!(c[3].detail.contains("LegacyOpenAccess = tak"));
+        assert_eq!(server_authn_level(&weak), LEGACY_AUTHN_LEVEL);
+
+        let broken = AppIdSecurity {
+            access: Some(vec![1, 2, 3]),
+            ..AppIdSecurity::default()
+        };
+        assert_eq!(appid_security_checks(&broken)[0].status, Status::Fail);
+    }
+
+    #[test]
+    fn no_write_rights_warns_that_every_client_may_write() {
+        use ctopc_core::write_rights::{Channels, Principal, Rule, WriteRights};
+        let c = write_rights_check(&WriteRights::open());
+        assert_eq!(c.status, Status::Warn);
+        assert!(
+            c.detail.contains("every connected client may write"),
+            "{c:?}"
+        );
+        let c = write_rights_check(&WriteRights::new(vec![Rule::new(
+            Channels::All,
+            Principal::Anyone,
+        )]));
+        assert_eq!(c.status, Status::Ok);
+        assert!(c.detail.contains("1 entries"), "{c:?}");
     }
 
     #[test]

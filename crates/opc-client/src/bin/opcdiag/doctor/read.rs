@@ -93,6 +93,23 @@ fn checks(global: &Global, options: &DoctorOptions) -> Vec<Check> {
         let log = log_dir(dir, configured.as_deref());
         out.push(log_check(&log, &probe_log_dir(&log), &account));
     }
+    // Write rights and the AppID's security.
+    let legacy_open_access = loaded
+        .as_ref()
+        .is_ok_and(|l| l.namespace.config().server.legacy_open_access);
+    if let Ok(l) = &loaded {
+        out.push(write_rights_check(&l.namespace.config().write_rights));
+    }
+    let appid = format!("AppID\\{}", guid_string(registration::CLSID_SERVERCTOPC));
+    let security = AppIdSecurity {
+        access: winreg::read_binary(View::Reg64, &appid, "AccessPermission"),
+        launch: winreg::read_binary(View::Reg64, &appid, "LaunchPermission"),
+        authentication_level: winreg::read_dword(View::Reg64, &appid, "AuthenticationLevel"),
+        legacy_open_access,
+        clients: ctopc_com::caller::account_sid(registration::security::CLIENTS_GROUP)
+            .and_then(|b| registration::security::Sid::from_bytes(&b)),
+    };
+    out.extend(appid_security_checks(&security));
     let mut item = options.item.clone();
     if let Ok(l) = loaded {
         out.extend(database_checks(&l.namespace));
@@ -111,6 +128,7 @@ fn checks(global: &Global, options: &DoctorOptions) -> Vec<Check> {
             "RequireIntegrityActivationAuthenticationLevel",
         )
         .as_deref(),
+        server_authn_level(&security),
     ));
     out.push(firewall_check(firewall_rules().as_deref()));
     // Finally a connection.
