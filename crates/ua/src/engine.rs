@@ -12,6 +12,7 @@
 use ctopc_core::model::{
     ItemState, ItemVqt, SessionHandle, SyncId, SyncOutcome, SyncResult, WriteResults,
 };
+use ctopc_core::write_rights::Caller;
 use ctopc_core::OpcError;
 use ctopc_runtime::Runtime;
 use std::sync::Arc;
@@ -71,15 +72,29 @@ impl EngineClient {
         }
     }
 
-    /// Writes items by ID (the write audit logs each).
-    pub fn write(&self, items: &[(&str, ItemVqt)], user: &str) -> WriteResults {
+    /// Writes items by ID as `caller` (an OPC UA user and its roles): the write-rights
+    /// policy decides per item (a refusal is `OPC_E_BADRIGHTS` and `true` in the second
+    /// vector, empty when the policy refused nothing), and the write audit logs each.
+    pub fn write(&self, items: &[(&str, ItemVqt)], caller: Caller) -> (WriteResults, Vec<bool>) {
         let n = items.len();
         if n == 0 {
-            return Vec::new();
+            return (Vec::new(), Vec::new());
         }
-        let started = self
-            .runtime
-            .with_engine(|e, now| e.item_io_write_vqt(now, self.session, items));
+        let user = match &caller {
+            Caller::Ua { user, .. } => user.clone(),
+            other => other.to_string(),
+        };
+        self.runtime
+            .clients
+            .set_identity(self.session, &caller.to_string());
+        // One engine session serves every UA session: the caller is set and used under the
+        // same engine lock, so concurrent writers cannot see each other's identity.
+        let (started, denied) = self.runtime.with_engine(|e, now| {
+            e.set_session_caller(self.session, caller);
+            let started = e.item_io_write_vqt(now, self.session, items);
+            let ids: Vec<&str> = items.iter().map(|(id, _)| *id).collect();
+            (started, e.item_io_denied_by_policy(self.session, &ids))
+        });
         let results = match started {
             Ok(SyncOutcome::Ready(r)) => r,
             Ok(SyncOutcome::Pending(id)) => match self.wait(id) {
@@ -101,11 +116,12 @@ impl EngineClient {
             items: &keys,
             values: &values,
             cancel_id: None,
+            denied: &denied,
         };
         self.runtime
             .clients
             .audit_write(ctopc_runtime::clock::now(), &call, &results);
-        results
+        (results, denied)
     }
 }
 

@@ -15,6 +15,7 @@ use ctopc_core::browse::AddressSpace;
 use ctopc_core::lang::Lang;
 use ctopc_core::model::{ItemVqt, MAX_AGE_CACHE};
 use ctopc_core::namespace::{Namespace, OPC_WRITEABLE};
+use ctopc_core::write_rights::Caller;
 use ctopc_core::OpcError;
 use opcua::nodes::{DefaultTypeTree, ReferenceDirection};
 use opcua::server::authenticator::UserToken;
@@ -37,6 +38,16 @@ use std::sync::{Arc, Mutex};
 pub trait Roles: Send + Sync {
     /// True when `token`'s user may write variables.
     fn may_write(&self, token: &UserToken) -> bool;
+
+    /// The roles of `token`'s user, for the write-rights policy (`role:NAME`).
+    fn roles(&self, token: &UserToken) -> Vec<String> {
+        vec![if self.may_write(token) {
+            "writer"
+        } else {
+            "reader"
+        }
+        .to_owned()]
+    }
 }
 
 /// Everyone may write (in-process tests).
@@ -303,18 +314,20 @@ pub fn write_values(
     engine: &EngineClient,
     ns: &dyn Namespace,
     items: &[(String, ItemVqt)],
-    user: &str,
+    caller: Caller,
 ) -> Vec<StatusCode> {
     let req: Vec<(&str, ItemVqt)> = items
         .iter()
         .map(|(id, v)| (id.as_str(), v.clone()))
         .collect();
-    engine
-        .write(&req, user)
+    let (results, denied) = engine.write(&req, caller);
+    results
         .into_iter()
         .zip(items)
-        .map(|(r, (id, _))| match r {
+        .enumerate()
+        .map(|(i, (r, (id, _)))| match r {
             Ok(()) => StatusCode::Good,
+            Err(_) if denied.get(i) == Some(&true) => StatusCode::BadUserAccessDenied,
             Err(e) => {
                 if e == OpcError::BadRights {
                     if let Some(why) = ns.write_refusal(id, "") {
@@ -455,11 +468,14 @@ impl NodeManager for AsixNodeManager {
             return Ok(());
         }
         let items: Vec<(String, ItemVqt)> = writes.iter().map(|(_, w)| w.clone()).collect();
-        let user = context.token.0.clone();
+        let caller = Caller::Ua {
+            user: context.token.0.clone(),
+            roles: self.roles.roles(&context.token),
+        };
         let engine = Arc::clone(&self.engine);
         let ns = Arc::clone(&self.space.namespace);
         let statuses =
-            tokio::task::spawn_blocking(move || write_values(&engine, &*ns, &items, &user))
+            tokio::task::spawn_blocking(move || write_values(&engine, &*ns, &items, caller))
                 .await
                 .map_err(|_| StatusCode::BadInternalError)?;
         for ((i, _), s) in writes.iter().zip(statuses) {

@@ -8,7 +8,7 @@ use asix_model::{parse_config, AsixNamespace};
 use asix_net::inproc::InProcessSim;
 use ctopc_core::browse::MatchCase;
 use ctopc_core::lang::Lang;
-use ctopc_core::ops::OpsConfig;
+use ctopc_core::write_rights::Caller;
 use ctopc_runtime::frontend::no_thread_state;
 use ctopc_ua::engine::EngineClient;
 use ctopc_ua::monitor::Notify;
@@ -60,14 +60,22 @@ struct Fixture {
 }
 
 fn fixture() -> Fixture {
+    fixture_with("")
+}
+
+/// The fixture with more of `ASIXConnect.ini` (sections after `[Channel:*]`).
+fn fixture_with(more_ini: &str) -> Fixture {
     let db = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../../demo/wytwornia_kwasu/wytwornia_kwasu.zez"
     );
-    let ini = format!("[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {db}\n");
+    let ini = format!(
+        "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {db}\n{more_ini}"
+    );
     let (cfg, warnings) = parse_config(ini.as_bytes(), "ua.ini").unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
     let engine_config = cfg.server.engine_config();
+    let ops = cfg.ops_config();
     let ns = Arc::new(AsixNamespace::load(cfg).0);
     let tree = Arc::new(asix_model::address_space::build_address_space(&ns).unwrap());
     let for_source = Arc::clone(&ns);
@@ -75,7 +83,7 @@ fn fixture() -> Fixture {
         ns,
         MatchCase::Insensitive,
         engine_config,
-        &OpsConfig::default(),
+        &ops,
         no_thread_state,
         Box::new(move |_wake| {
             let sim = InProcessSim::new(for_source, 7, ctopc_runtime::clock::now());
@@ -313,14 +321,56 @@ fn writes_are_checked_then_converted_and_written_by_the_engine() {
     // A text that is no number: the engine's conversion refuses it.
     let text = DataValue::value_only(Variant::from("dużo"));
     let w = check("KW_A110", &text, true).unwrap();
-    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], "writer");
+    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], writer("writer"));
     assert_eq!(s, vec![StatusCode::BadTypeMismatch]);
     // A number is written and read back from the device.
     let w = check("KW_A110", &dv, true).unwrap();
-    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], "writer");
+    let s = write_values(&nm.engine, &*nm.space.namespace, &[w], writer("writer"));
     assert_eq!(s, vec![StatusCode::Good]);
     let back = nm.read_values(&["KW_A110".into()], 0);
     assert_eq!(back[0].value, Some(Variant::Float(12.5)));
+}
+
+fn writer(user: &str) -> Caller {
+    Caller::Ua {
+        user: user.into(),
+        roles: vec!["writer".into()],
+    }
+}
+
+#[test]
+fn the_write_rights_policy_decides_ua_writes_by_user_and_role() {
+    let f = fixture_with("[WriteRights]\n* = ua:alice, role:operator\n");
+    let nm = &f.nm;
+    let dv = DataValue::value_only(Variant::Float(7.5));
+    let w = nm
+        .check_write(
+            &item("KW_A110"),
+            AttributeId::Value,
+            &NumericRange::None,
+            &dv,
+            true,
+        )
+        .unwrap();
+    let write = |caller: Caller| {
+        write_values(
+            &nm.engine,
+            &*nm.space.namespace,
+            std::slice::from_ref(&w),
+            caller,
+        )
+    };
+    // A writer role the policy does not name is refused, as a user matter.
+    assert_eq!(write(writer("bob")), vec![StatusCode::BadUserAccessDenied]);
+    // The policy's user, and a user with the policy's role, may write.
+    assert_eq!(write(writer("alice")), vec![StatusCode::Good]);
+    let operator = Caller::Ua {
+        user: "carol".into(),
+        roles: vec!["operator".into()],
+    };
+    assert_eq!(write(operator), vec![StatusCode::Good]);
+    let back = nm.read_values(&["KW_A110".into()], 0);
+    assert_eq!(back[0].value, Some(Variant::Float(7.5)));
 }
 
 #[test]
