@@ -1,7 +1,8 @@
 //! `cargo xtask ua-interop`: the OPC UA front end against an independent client, Python
 //! `asyncua` (pinned [`ASYNCUA`], in the venv `target/ua-venv` that [`venv`] makes; setup
-//! makes it too). Builds `ServerCTOPC` natively (release, as `cargo xtask test` builds
-//! the workspace) and runs `tests/ua/interop.py`: the in-process simulation of the demo
+//! makes it too). Builds `ServerCTOPC` natively in the dev profile (whose dependencies
+//! `cargo test --workspace` has just built; the crypto crates are optimised even there,
+//! `[profile.dev.package.*]` in Cargo.toml) and runs `tests/ua/interop.py`: the in-process simulation of the demo
 //! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
 //! users and roles; anonymous, None and an untrusted client certificate refused (what it
 //! checks: the script's docstring). Part of `cargo xtask test`'s native phase.
@@ -50,10 +51,10 @@ pub fn venv() -> Result<PathBuf, String> {
 
 pub fn run(_args: &[String]) -> Result<(), String> {
     let python = venv()?;
-    println!("ua-interop: building ServerCTOPC (native, release)");
-    util::run(util::cargo().args(["build", "--release", "-p", "serverctopc"]))?;
+    println!("ua-interop: building ServerCTOPC (native, dev profile)");
+    util::run(util::cargo().args(["build", "-p", "serverctopc"]))?;
     let root = util::root();
-    let server = root.join("target").join("release").join("ServerCTOPC");
+    let server = root.join("target").join("debug").join("ServerCTOPC");
     let work = root.join("target").join("ua-interop");
     let db = root
         .join("demo")
