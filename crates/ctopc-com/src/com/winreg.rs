@@ -46,25 +46,8 @@ fn check(err: WIN32_ERROR, what: &str) -> windows::core::Result<()> {
 
 /// Creates (or opens) `HKCR\<key.path>` in `key.view` and sets its values.
 fn set_key(key: &Key) -> windows::core::Result<()> {
-    let mut hkey = HKEY::default();
-    let wpath = HSTRING::from(key.path.as_str());
-    check(
-        // SAFETY: all pointers are valid for the call; `hkey` receives an open handle on success.
-        unsafe {
-            RegCreateKeyExW(
-                HKEY_CLASSES_ROOT,
-                &wpath,
-                None,
-                PCWSTR::null(),
-                REG_OPTION_NON_VOLATILE,
-                KEY_WRITE | view_flag(key.view),
-                None,
-                &mut hkey,
-                None,
-            )
-        },
-        &key.path,
-    )?;
+    let opened = create_key(key.view, &key.path, KEY_WRITE)?;
+    let hkey = opened.0;
     let mut result = Ok(());
     for (name, value) in &key.values {
         let wide: Vec<u16> = value.encode_utf16().chain(std::iter::once(0)).collect();
@@ -87,11 +70,32 @@ fn set_key(key: &Key) -> windows::core::Result<()> {
             break;
         }
     }
-    // SAFETY: `hkey` was opened above and is closed once.
-    unsafe {
-        let _ = RegCloseKey(hkey);
-    }
     result
+}
+
+/// Creates (or opens) `HKCR\<path>` in `view` with `access`; closed when the [`RegKey`]
+/// drops.
+fn create_key(view: View, path: &str, access: REG_SAM_FLAGS) -> windows::core::Result<RegKey> {
+    let mut hkey = HKEY::default();
+    let wpath = HSTRING::from(path);
+    check(
+        // SAFETY: all pointers are valid for the call; `hkey` receives an open handle on success.
+        unsafe {
+            RegCreateKeyExW(
+                HKEY_CLASSES_ROOT,
+                &wpath,
+                None,
+                PCWSTR::null(),
+                REG_OPTION_NON_VOLATILE,
+                access | view_flag(view),
+                None,
+                &mut hkey,
+                None,
+            )
+        },
+        path,
+    )?;
+    Ok(RegKey(hkey))
 }
 
 /// Deletes `HKCR\<path>` of `view` and everything below it; absent keys are fine.
@@ -155,26 +159,7 @@ pub fn write_keys(keys: &[Key]) -> windows::core::Result<()> {
 pub fn write_absent(values: &[DefaultValue]) -> windows::core::Result<usize> {
     let mut written = 0;
     for v in values {
-        let wpath = HSTRING::from(v.path.as_str());
-        let mut hkey = HKEY::default();
-        check(
-            // SAFETY: all pointers are valid for the call; `hkey` receives an open handle.
-            unsafe {
-                RegCreateKeyExW(
-                    HKEY_CLASSES_ROOT,
-                    &wpath,
-                    None,
-                    PCWSTR::null(),
-                    REG_OPTION_NON_VOLATILE,
-                    KEY_READ | KEY_WRITE | view_flag(v.view),
-                    None,
-                    &mut hkey,
-                    None,
-                )
-            },
-            &v.path,
-        )?;
-        let key = RegKey(hkey);
+        let key = create_key(v.view, &v.path, KEY_READ | KEY_WRITE)?;
         let wname = HSTRING::from(v.name);
         // SAFETY: `key` is open; a size-only query of a value (no data buffer).
         let present =
