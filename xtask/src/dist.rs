@@ -2,9 +2,9 @@
 //! proxy/stub DLL, the diagnostic client (the last two also 32-bit, in `x86/`), the example configuration, the demo database
 //! and the documentation (the deployment guide first).
 //!
-//! The executables ship **stripped**: the release profile keeps debug information
-//! (`debug = 1`, so that the tests and panics have line tables), which is most of
-//! ServerCTOPC.exe's size (about 40 MB of which 35 MB DWARF). Each `.exe`/`.dll` with
+//! The executables ship **stripped**: the release profile keeps line tables for the
+//! project's own crates (`debug = 1`, so that the tests and panics name our lines), which
+//! are much of ServerCTOPC.exe's size. Each `.exe`/`.dll` with
 //! `.debug_*` sections is split with the mingw binutils of its bitness, as for ELF:
 //! `objcopy --only-keep-debug` into `<name>.debug`, then `objcopy --strip-debug
 //! --add-gnu-debuglink=<name>.debug` (the COFF symbol table stays, so a panic's backtrace

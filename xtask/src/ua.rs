@@ -1,8 +1,8 @@
 //! `cargo xtask ua-interop`: the OPC UA front end against an independent client, Python
 //! `asyncua` (pinned [`ASYNCUA`], in the venv `target/ua-venv` that [`venv`] makes; setup
-//! makes it too). Builds `ServerCTOPC` natively in the dev profile (whose dependencies
-//! `cargo test --workspace` has just built; the crypto crates are optimised even there,
-//! `[profile.dev.package.*]` in Cargo.toml) and runs `tests/ua/interop.py`: the in-process simulation of the demo
+//! makes it too). Runs the native release `ServerCTOPC` (`--built`: the one `cargo test
+//! --workspace --release` has just built for the server's command-line tests, as `cargo
+//! xtask test` does; else built here) and runs `tests/ua/interop.py`: the in-process simulation of the demo
 //! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
 //! users and roles; anonymous, None and an untrusted client certificate refused (what it
 //! checks: the script's docstring). Part of `cargo xtask test`'s native phase.
@@ -49,12 +49,19 @@ pub fn venv() -> Result<PathBuf, String> {
     Ok(python)
 }
 
-pub fn run(_args: &[String]) -> Result<(), String> {
+pub fn run(args: &[String]) -> Result<(), String> {
     let python = venv()?;
-    println!("ua-interop: building ServerCTOPC (native, dev profile)");
-    util::run(util::cargo().args(["build", "-p", "serverctopc"]))?;
     let root = util::root();
-    let server = root.join("target").join("debug").join("ServerCTOPC");
+    let server = root.join("target").join("release").join("ServerCTOPC");
+    if args.iter().any(|a| a == "--built") && server.exists() {
+        println!(
+            "ua-interop: {} (built by the native tests)",
+            server.display()
+        );
+    } else {
+        println!("ua-interop: building ServerCTOPC (native, release)");
+        util::run(util::cargo().args(["build", "--release", "-p", "serverctopc"]))?;
+    }
     let work = root.join("target").join("ua-interop");
     let db = root
         .join("demo")

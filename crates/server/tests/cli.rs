@@ -1,0 +1,187 @@
+//! The native command line of `ServerCTOPC` as an operator meets it: `user add` and
+//! `pki trust` against a configuration in a scratch folder, and the refusals of bad input
+//! (exit code and message). Linux only: on Windows those commands belong to the COM build.
+#![cfg(not(windows))]
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+const EXE: &str = env!("CARGO_BIN_EXE_ServerCTOPC");
+
+/// A fresh folder with an `ASIXConnect.ini` serving the demo plant from the simulation.
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("server-cli")
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let db = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../demo/wytwornia_kwasu/wytwornia_kwasu.zez")
+        .canonicalize()
+        .expect("the demo plant's database");
+    std::fs::write(
+        dir.join("ASIXConnect.ini"),
+        format!(
+            "[Server]\nSimulateCurrentData = tak\n[Channel:*]\nItemsDatabase = {}\n",
+            db.display()
+        ),
+    )
+    .expect("ini");
+    dir
+}
+
+/// Runs the server with `args`, the configuration in `dir`, and `stdin` as its input.
+fn run(dir: &Path, args: &[&str], stdin: &str) -> Output {
+    let mut child = Command::new(EXE)
+        .args(args)
+        .env("SERVERCTOPC_INI", dir.join("ASIXConnect.ini"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start ServerCTOPC");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(stdin.as_bytes())
+        .expect("write stdin");
+    child.wait_with_output().expect("ServerCTOPC ends")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn user_add_keeps_a_salted_hash_and_never_the_password() {
+    let dir = scratch("user-add");
+    let password = "Kwas-siarkowy-98%";
+    let o = run(
+        &dir,
+        &[
+            "user",
+            "add",
+            "operator1",
+            "--role",
+            "writer",
+            "--password-stdin",
+        ],
+        &format!("{password}\n"),
+    );
+    assert!(o.status.success(), "user add failed: {}", stderr(&o));
+    let users = std::fs::read_to_string(dir.join("ua-users.txt")).expect("the users file");
+    let line = users
+        .lines()
+        .find(|l| l.starts_with("operator1:"))
+        .expect("a line for operator1");
+    let fields: Vec<&str> = line.split(':').collect();
+    assert_eq!(fields[..3], ["operator1", "writer", "pbkdf2-sha256"]);
+    assert_eq!(fields.len(), 6, "{line}");
+    assert!(!users.contains(password), "the password is stored in clear");
+    assert!(!String::from_utf8_lossy(&o.stdout).contains(password));
+
+    // The same name again replaces the user (a new salt), it does not add a second line.
+    let o = run(
+        &dir,
+        &[
+            "user",
+            "add",
+            "operator1",
+            "--role",
+            "reader",
+            "--password-stdin",
+        ],
+        "another one\n",
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let users = std::fs::read_to_string(dir.join("ua-users.txt")).expect("the users file");
+    let lines: Vec<&str> = users
+        .lines()
+        .filter(|l| l.starts_with("operator1:"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{users}");
+    assert!(lines[0].starts_with("operator1:reader:"), "{users}");
+    assert_ne!(lines[0], line, "the hash did not change");
+}
+
+#[test]
+fn user_add_refuses_bad_input_and_writes_nothing() {
+    let dir = scratch("user-add-bad");
+    let cases: [(&[&str], &str, &str); 3] = [
+        (
+            &["user", "add", "x", "--role", "admin", "--password-stdin"],
+            "pw\n",
+            "--role takes reader or writer",
+        ),
+        (
+            &["user", "add", "a:b", "--role", "reader", "--password-stdin"],
+            "pw\n",
+            "a user name is",
+        ),
+        (
+            &["user", "add", "x", "--role", "reader", "--password-stdin"],
+            "\n",
+            "the password is empty",
+        ),
+    ];
+    for (args, input, message) in cases {
+        let o = run(&dir, args, input);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(stderr(&o).contains(message), "{args:?}: {}", stderr(&o));
+    }
+    assert!(
+        !dir.join("ua-users.txt").exists(),
+        "a refused user was saved"
+    );
+}
+
+#[test]
+fn bad_switches_exit_2_with_the_usage() {
+    let dir = scratch("switches");
+    for args in [
+        &["/Frobnicate"][..],
+        &["serve", "now"],
+        &["pki", "trust"],
+        &[],
+    ] {
+        let o = run(&dir, args, "");
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains("usage: ServerCTOPC.exe"), "{args:?}");
+    }
+}
+
+#[test]
+fn pki_trust_of_a_missing_certificate_fails_clearly() {
+    let dir = scratch("pki-trust");
+    let missing = dir.join("no-such-client.der");
+    let o = run(
+        &dir,
+        &["pki", "trust", missing.to_str().expect("utf-8")],
+        "",
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("no-such-client.der"),
+        "the message does not name the file: {}",
+        stderr(&o)
+    );
+    let not_a_cert = dir.join("notes.der");
+    std::fs::write(&not_a_cert, b"not a certificate").expect("write");
+    let o = run(
+        &dir,
+        &["pki", "trust", not_a_cert.to_str().expect("utf-8")],
+        "",
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("is not an X.509 certificate"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        !dir.join("pki").join("trusted").exists(),
+        "something was trusted"
+    );
+}
