@@ -5,7 +5,10 @@
 //! `[profile.dev.package.*]` in Cargo.toml) and runs `tests/ua/interop.py`: the in-process simulation of the demo
 //! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
 //! users and roles; anonymous, None and an untrusted client certificate refused (what it
-//! checks: the script's docstring). Part of `cargo xtask test`'s native phase.
+//! checks: the script's docstring). Then our own client, `opcdiag --url`, through the
+//! same server (`ua_client.rs`: browse in pages, read, write as writer and reader,
+//! subscribe, a wrong password, anonymous and None refused, the server's certificate
+//! refused until pinned). Part of `cargo xtask test`'s native phase.
 
 use crate::util;
 use std::path::PathBuf;
@@ -49,7 +52,11 @@ pub fn venv() -> Result<PathBuf, String> {
     Ok(python)
 }
 
-pub fn run(_args: &[String]) -> Result<(), String> {
+/// `ua-interop [--opcdiag-only]`: both scenarios, or only opcdiag's (no Python needed).
+pub fn run(args: &[String]) -> Result<(), String> {
+    if args.iter().any(|a| a == "--opcdiag-only") {
+        return crate::ua_client::scenario();
+    }
     let python = venv()?;
     println!("ua-interop: building ServerCTOPC (native, dev profile)");
     util::run(util::cargo().args(["build", "-p", "serverctopc"]))?;
@@ -73,12 +80,15 @@ pub fn run(_args: &[String]) -> Result<(), String> {
             .env_remove("SERVERCTOPC_INI"),
         LIMIT,
     )?;
-    if status.success() {
+    let interop = if status.success() {
         Ok(())
     } else {
         Err(format!(
             "the OPC UA interop test failed ({status}); the server's log: {}",
             work.join("serve.log").display()
         ))
-    }
+    };
+    println!("ua-interop: opcdiag --url against ServerCTOPC serve (xtask/src/ua_client.rs)");
+    let ours = crate::ua_client::scenario();
+    interop.and(ours)
 }
