@@ -23,6 +23,7 @@ pub const EXIT_FAILED: u8 = 1;
 pub const EXIT_USAGE: u8 = 2;
 /// OPC UA (`--url`): no session: the server unreachable, its certificate not trusted, ours
 /// refused, or the user refused.
+#[cfg_attr(not(ua), allow(dead_code))]
 pub const EXIT_NO_SESSION: u8 = 3;
 
 /// The heading of the options every command takes.
