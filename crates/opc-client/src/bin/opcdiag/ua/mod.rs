@@ -423,25 +423,24 @@ impl Connection {
     }
 
     async fn command(&mut self, command: Command) -> Result<u8, Failure> {
-        let self_ = self;
         match command {
             Command::Browse {
                 flat,
                 branch,
                 depth,
                 page,
-            } => self_.browse(flat, branch.as_deref(), depth, page).await,
-            Command::Read { items, device, .. } => self_.read(&items, device).await,
+            } => self.browse(flat, branch.as_deref(), depth, page).await,
+            Command::Read { items, device, .. } => self.read(&items, device).await,
             Command::Write {
                 item, value, vt, ..
-            } => self_.write(&item, &value, vt).await,
+            } => self.write(&item, &value, vt).await,
             Command::Subscribe {
                 items,
                 rate_ms,
                 for_secs,
                 count,
                 ..
-            } => self_.subscribe(&items, rate_ms, for_secs, count).await,
+            } => self.subscribe(&items, rate_ms, for_secs, count).await,
             _ => Err(Failure {
                 code: EXIT_USAGE,
                 message: "with --url: browse, read, write and subscribe (the other commands are OPC DA's)".into(),
