@@ -17,6 +17,12 @@
 //!    stop (it removes its group), asix-sim quits (killed if it does not), and
 //!    `wineserver -k` ends every Wine process of the demo prefix (the server too).
 //!
+//! `--ua`: the demo natively, without Wine: `ServerCTOPC serve` (the Linux build) with
+//! the demo plant simulated in process, OPC UA on opc.tcp://127.0.0.1:48174 (Basic256Sha256
+//! SignAndEncrypt), a user `demo` (role writer, password `demo`) made with `user add
+//! --password-stdin`, opcdiag's client certificate trusted with `pki trust`, watched live
+//! with `opcdiag --url ... subscribe` (`ua_client.rs` serves it, in target/demo-ua/).
+//!
 //! Why a prefix of its own: the demo registers the *staged* server (with its network
 //! ASIXConnect.ini) as ServerCTOPC.App and ends with `wineserver -k`; in the test prefix
 //! that would swap the server under a running `cargo xtask test` and kill it. (`cargo
@@ -41,7 +47,7 @@ const DATA_PORT: u16 = 48171;
 const REST_PORT: u16 = 48172;
 
 const USAGE: &str = "\
-usage: cargo xtask demo [--for SECONDS] [--rest]
+usage: cargo xtask demo [--for SECONDS] [--rest | --ua]
 
 Builds everything, stages target/demo/ServerCTOPC/ (server, opc_ps.dll, opcdiag, the demo
 database, an ASIXConnect.ini reading the plant over the asix network), registers it in the
@@ -49,14 +55,21 @@ Wine prefix target/wine/demo-prefix, starts the asix simulator (asix-sim) on loo
 runs `opcdiag demo`: the server status, the plant tree and live values. Ctrl+C stops
 everything; --for SECONDS stops after SECONDS (for a non-interactive run). --rest reads
 the plant through asix-sim's Asix.Evo REST server instead of the asix network (the items
-are then read-only).
+are then read-only). --ua runs natively, without Wine: ServerCTOPC serve with the simulated
+plant over OPC UA (opc.tcp://127.0.0.1:48174, user demo, password demo, in target/demo-ua/),
+watched with `opcdiag --url ... subscribe`.
 ";
+
+/// The OPC UA demo's endpoint port (loopback), and its user (role writer).
+const UA_PORT: u16 = 48174;
+const UA_USER: (&str, &str) = ("demo", "demo");
 
 /// What the command line asks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 struct Options {
     for_secs: Option<u64>,
     rest: bool,
+    ua: bool,
 }
 
 pub fn prefix() -> PathBuf {
@@ -67,6 +80,7 @@ pub fn prefix() -> PathBuf {
 fn parse(args: &[String]) -> Result<Options, String> {
     let mut for_secs = None;
     let mut rest = false;
+    let mut ua = false;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -80,6 +94,7 @@ fn parse(args: &[String]) -> Result<Options, String> {
                 );
             }
             "--rest" => rest = true,
+            "--ua" => ua = true,
             "-h" | "--help" => {
                 print!("{USAGE}");
                 std::process::exit(0);
@@ -87,7 +102,10 @@ fn parse(args: &[String]) -> Result<Options, String> {
             other => return Err(format!("demo: unknown argument {other:?}\n{USAGE}")),
         }
     }
-    Ok(Options { for_secs, rest })
+    if rest && ua {
+        return Err(format!("demo: --rest and --ua exclude each other\n{USAGE}"));
+    }
+    Ok(Options { for_secs, rest, ua })
 }
 
 /// The ASIXConnect.ini of the demo install folder (`rest`: the basic channel reads from
@@ -364,13 +382,17 @@ fn run_opcdiag(
 }
 
 pub fn run(args: &[String]) -> Result<(), String> {
-    let Options { for_secs, rest } = parse(args)?;
+    let Options { for_secs, rest, ua } = parse(args)?;
     // Ctrl+C must not end xtask before it has cleaned up: it only raises this flag (the
-    // terminal's SIGINT reaches opcdiag too, which stops by itself).
+    // terminal's SIGINT reaches opcdiag too, which stops by itself; with --ua the server
+    // as well).
     let stop = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
         .map_err(|e| format!("cannot catch Ctrl+C: {e}"))?;
+    if ua {
+        return run_ua(for_secs, &stop);
+    }
 
     setup::run(&[])?;
     let artifacts = build::run(&[])?;
@@ -420,6 +442,123 @@ pub fn run(args: &[String]) -> Result<(), String> {
         pfx.display()
     );
     result
+}
+
+/// `demo --ua`: the plant served natively over OPC UA, watched with `opcdiag --url`.
+fn run_ua(for_secs: Option<u64>, stop: &AtomicBool) -> Result<(), String> {
+    use crate::ua_client;
+    let bins = ua_client::build()?;
+    let work = util::root().join("target").join("demo-ua");
+    let served = ua_client::Served::start(&bins, &work, UA_PORT)?;
+    let (user, password) = UA_USER;
+    let ini = work.join("ASIXConnect.ini");
+    let added = ua_client::run(
+        Command::new(&bins.server)
+            .args(["user", "add", user, "--role", "writer", "--password-stdin"])
+            .env("SERVERCTOPC_INI", &ini),
+        &format!("{password}\n"),
+        Duration::from_secs(60),
+    )?;
+    if !added.status.success() {
+        return Err(format!(
+            "ServerCTOPC user add {user} failed: {}",
+            added.stderr
+        ));
+    }
+    println!(
+        "demo: ServerCTOPC serves the plant at {} (log {}); user {user}, password {password}",
+        served.url,
+        served.log.display()
+    );
+    if stop.load(Ordering::SeqCst) {
+        return Err("interrupted".into());
+    }
+    let mut cmd = Command::new(&bins.opcdiag);
+    cmd.args(["--url", &served.url])
+        .arg("--pki")
+        .arg(&served.client_pki)
+        // The server was made a moment ago by this command, on loopback: its certificate
+        // is accepted on first use (and shown).
+        .args([
+            "--trust-server",
+            "accept",
+            "--user",
+            user,
+            "--password-stdin",
+        ])
+        .arg("subscribe")
+        .args(DEMO_ITEMS)
+        .args(["--rate", "1000"]);
+    if let Some(s) = for_secs {
+        cmd.args(["--for", &s.to_string()]);
+    }
+    println!(
+        "demo: `opcdiag --url {} subscribe` natively{}\n",
+        served.url,
+        if for_secs.is_none() {
+            " (Ctrl+C to stop)"
+        } else {
+            ""
+        }
+    );
+    let mut child = cmd
+        .stdin(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start {}: {e}", bins.opcdiag.display()))?;
+    if let Some(mut stdin) = child.stdin.take() {
+        let _ = writeln!(stdin, "{password}");
+    }
+    let result = watch(&mut child, for_secs, stop, "opcdiag --url ... subscribe");
+    let status = served.stop();
+    println!("demo: stopped (ServerCTOPC serve ended: {status:?})");
+    result
+}
+
+/// The demo's items (tank levels, temperatures, flows, a pump), as `opcdiag demo` follows.
+const DEMO_ITEMS: &[&str] = &[
+    "KW_A000", "KW_A001", "KW_A020", "KW_D002", "KW_A014", "KW_A100", "KW_A115", "KW_A400",
+];
+
+/// Waits for `child` to end: on Ctrl+C (or `for_secs` + 90 s) it is interrupted, killed
+/// when it does not end within 10 s of that.
+fn watch(
+    child: &mut Child,
+    for_secs: Option<u64>,
+    stop: &AtomicBool,
+    what: &str,
+) -> Result<(), String> {
+    let started = Instant::now();
+    let limit = for_secs.map(|s| Duration::from_secs(s + 90));
+    let mut interrupted_at: Option<Instant> = None;
+    loop {
+        match child.try_wait() {
+            Ok(Some(status))
+                if status.success() || interrupted_at.is_some() || stop.load(Ordering::SeqCst) =>
+            {
+                return Ok(())
+            }
+            Ok(Some(status)) => return Err(format!("{what} failed: {status}")),
+            Ok(None) => {}
+            Err(e) => return Err(format!("waiting for {what}: {e}")),
+        }
+        let overtime = limit.is_some_and(|l| started.elapsed() > l);
+        match interrupted_at {
+            None if stop.load(Ordering::SeqCst) || overtime => {
+                println!("\ndemo: stopping");
+                interrupt(child);
+                interrupted_at = Some(Instant::now());
+            }
+            Some(t) if t.elapsed() > Duration::from_secs(10) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(format!(
+                    "{what} did not stop within 10 s of Ctrl+C and was killed"
+                ));
+            }
+            _ => {}
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 #[cfg(test)]
@@ -488,9 +627,19 @@ mod tests {
             parse(&["--for".into(), "15".into(), "--rest".into()]),
             Ok(Options {
                 for_secs: Some(15),
-                rest: true
+                rest: true,
+                ua: false
             })
         );
+        assert_eq!(
+            parse(&["--ua".into()]),
+            Ok(Options {
+                for_secs: None,
+                rest: false,
+                ua: true
+            })
+        );
+        assert!(parse(&["--ua".into(), "--rest".into()]).is_err());
         assert!(parse(&["--for".into(), "0".into()]).is_err());
         assert!(parse(&["--for".into()]).is_err());
         assert!(parse(&["--bogus".into()]).is_err());

@@ -16,6 +16,7 @@ mod setup;
 mod soak;
 mod test;
 mod ua;
+mod ua_client;
 mod util;
 mod wine;
 
@@ -41,11 +42,13 @@ commands:
   demo    the server with the demo plant Wytwornia_Kwasu, read over the asix network from
           the asix simulator, watched with `opcdiag demo` (status, plant tree, live
           values) in a Wine prefix of its own; Ctrl+C stops everything; `--for SECONDS`
-          stops after SECONDS
+          stops after SECONDS; `--ua`: natively, no Wine: ServerCTOPC serve with the
+          simulated plant over OPC UA, watched with `opcdiag --url ... subscribe`
   ua-interop  the OPC UA front end natively against Python asyncua (venv
           target/ua-venv): ServerCTOPC serve with the simulated demo plant over
           Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe, users and roles,
-          anonymous, None and an untrusted certificate refused (also part of `test`)
+          anonymous, None and an untrusted certificate refused; then the same through
+          `opcdiag --url` (also part of `test`; `--opcdiag-only`: only that part)
   proxy   build only the proxy/stub DLLs from idl/ (64-bit and 32-bit)
   dist    target/dist/ServerCTOPC-<version>.zip and ServerCTOPC-<version>-x64.msi
           (installer/, xtask/src/msi.rs; needs wixl): server, proxy/stub, opcdiag (the last

@@ -5,7 +5,10 @@
 //! xtask test` does; else built here) and runs `tests/ua/interop.py`: the in-process simulation of the demo
 //! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
 //! users and roles; anonymous, None and an untrusted client certificate refused (what it
-//! checks: the script's docstring). Part of `cargo xtask test`'s native phase.
+//! checks: the script's docstring). Then our own client, `opcdiag --url`, through the
+//! same server (`ua_client.rs`: browse in pages, read, write as writer and reader,
+//! subscribe, a wrong password, anonymous and None refused, the server's certificate
+//! refused until pinned). Part of `cargo xtask test`'s native phase.
 
 use crate::util;
 use std::path::PathBuf;
@@ -49,11 +52,17 @@ pub fn venv() -> Result<PathBuf, String> {
     Ok(python)
 }
 
+/// `ua-interop [--built] [--opcdiag-only]`: both scenarios, or only opcdiag's (no Python
+/// needed); `--built`: the release binaries the native tests built.
 pub fn run(args: &[String]) -> Result<(), String> {
+    let built = args.iter().any(|a| a == "--built");
+    if args.iter().any(|a| a == "--opcdiag-only") {
+        return crate::ua_client::scenario(built);
+    }
     let python = venv()?;
     let root = util::root();
     let server = root.join("target").join("release").join("ServerCTOPC");
-    if args.iter().any(|a| a == "--built") && server.exists() {
+    if built && server.exists() {
         println!(
             "ua-interop: {} (built by the native tests)",
             server.display()
@@ -80,12 +89,15 @@ pub fn run(args: &[String]) -> Result<(), String> {
             .env_remove("SERVERCTOPC_INI"),
         LIMIT,
     )?;
-    if status.success() {
+    let interop = if status.success() {
         Ok(())
     } else {
         Err(format!(
             "the OPC UA interop test failed ({status}); the server's log: {}",
             work.join("serve.log").display()
         ))
-    }
+    };
+    println!("ua-interop: opcdiag --url against ServerCTOPC serve (xtask/src/ua_client.rs)");
+    let ours = crate::ua_client::scenario(built);
+    interop.and(ours)
 }

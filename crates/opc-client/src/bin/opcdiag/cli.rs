@@ -21,14 +21,24 @@ pub const EXIT_OK: u8 = 0;
 pub const EXIT_FAILED: u8 = 1;
 /// Bad command line.
 pub const EXIT_USAGE: u8 = 2;
+/// OPC UA (`--url`): no session: the server unreachable, its certificate not trusted, ours
+/// refused, or the user refused.
+#[cfg_attr(not(ua), allow(dead_code))]
+pub const EXIT_NO_SESSION: u8 = 3;
 
 /// The heading of the options every command takes.
 const GLOBAL: &str = "Global options";
+/// The heading of the OPC UA options.
+const UA: &str = "OPC UA (--url)";
 
 /// The end of the general help.
 const AFTER_HELP: &str = "\
 exit codes: 0 success, 1 the server or an item reported an error, 2 bad command line.
-Errors show the HRESULT in hex, its symbol, and the server's text for it.";
+3 (OPC UA) no session: server unreachable, its certificate untrusted, ours or the user refused.
+Errors show the HRESULT in hex, its symbol, and the server's text for it (OPC UA: the
+StatusCode's name and hex).
+With --url, browse, read, write and subscribe speak OPC UA: an ITEMID is a DA item ID
+(the NodeId ns=<the server's namespace>;s=ITEMID) or a full NodeId (ns=2;s=KW_A000, i=85).";
 
 /// opcdiag - diagnostic client for any OPC DA 2.05a/3.0 server (local, through COM)
 #[derive(Parser, Debug)]
@@ -72,6 +82,78 @@ pub struct Global {
     #[arg(long = "lang", global = true, value_name = "en|pl|LCID", value_parser = lang_arg,
           help_heading = GLOBAL, verbatim_doc_comment)]
     pub lcid: Option<u32>,
+    #[command(flatten)]
+    pub ua: UaOptions,
+}
+
+/// The OPC UA options: with `--url`, browse, read, write and subscribe speak OPC UA.
+#[derive(Args, Debug, Clone, PartialEq)]
+pub struct UaOptions {
+    /// speak OPC UA to this server instead of OPC DA
+    #[arg(long, global = true, value_name = "opc.tcp://HOST:PORT", value_parser = url_arg,
+          help_heading = UA)]
+    pub url: Option<String>,
+    /// message security: none, sign, encrypt (SignAndEncrypt)
+    #[arg(long, global = true, value_name = "none|sign|encrypt", value_parser = security_arg,
+          default_value = "encrypt", help_heading = UA)]
+    pub security: Security,
+    /// the security policy: Basic256Sha256, Aes128_Sha256_RsaOaep,
+    /// Aes256_Sha256_RsaPss
+    #[arg(long, global = true, value_name = "POLICY", value_parser = policy_arg,
+          default_value = "Basic256Sha256", help_heading = UA, verbatim_doc_comment)]
+    pub policy: String,
+    /// log in as NAME (the password is asked for, or read with
+    /// --password-stdin); default: anonymous
+    #[arg(long, global = true, value_name = "NAME", help_heading = UA, verbatim_doc_comment)]
+    pub user: Option<String>,
+    /// read the password from the first line of standard input
+    #[arg(long, global = true, help_heading = UA)]
+    pub password_stdin: bool,
+    /// opcdiag's PKI folder: own/ (its certificate, made at first use),
+    /// trusted/ and rejected/ (server certificates); default: the user's
+    /// configuration folder (see `opcdiag cert`)
+    #[arg(long, global = true, value_name = "DIR", help_heading = UA, verbatim_doc_comment)]
+    pub pki: Option<String>,
+    /// trust the server's certificate: its SHA-1 thumbprint (pinned: only
+    /// that certificate), or `accept` (whatever it presents, on first use);
+    /// either way it is saved in trusted/ for the next runs. Default: an
+    /// unknown server certificate is refused and saved in rejected/
+    #[arg(long, global = true, value_name = "THUMBPRINT|accept", value_parser = trust_arg,
+          help_heading = UA, verbatim_doc_comment)]
+    pub trust_server: Option<TrustServer>,
+}
+
+impl Default for UaOptions {
+    /// What the command line gives without any OPC UA option.
+    fn default() -> Self {
+        UaOptions {
+            url: None,
+            security: Security::Encrypt,
+            policy: POLICIES[0].into(),
+            user: None,
+            password_stdin: false,
+            pki: None,
+            trust_server: None,
+        }
+    }
+}
+
+/// `--security`: the message security mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Security {
+    None,
+    Sign,
+    #[default]
+    Encrypt,
+}
+
+/// `--trust-server`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum TrustServer {
+    /// The certificate with this SHA-1 thumbprint (40 hex digits, lower case).
+    Pin(String),
+    /// Whatever certificate the server presents (trust on first use).
+    Accept,
 }
 
 /// The subcommands: the commands that run, and `help`.
@@ -115,6 +197,11 @@ pub enum Command {
         /// show N levels (default: all)
         #[arg(long, value_name = "N", value_parser = depth_arg, allow_negative_numbers = true)]
         depth: Option<usize>,
+        /// OPC UA: at most N references per Browse answer; the rest
+        /// follow with BrowseNext (continuation points)
+        #[arg(long, value_name = "N", default_value_t = 1000, value_parser = page_arg,
+              allow_negative_numbers = true, verbatim_doc_comment)]
+        page: u32,
     },
     /// the item's properties: ID, description, value
     ///
@@ -192,8 +279,8 @@ pub enum Command {
               allow_negative_numbers = true)]
         rate_ms: u32,
         /// stop after SECONDS (may have decimals)
-        #[arg(long = "for", value_name = "SECONDS", value_parser = for_arg,
-              allow_negative_numbers = true)]
+        #[arg(long = "for", visible_alias = "seconds", value_name = "SECONDS",
+              value_parser = for_arg, allow_negative_numbers = true)]
         for_secs: Option<f64>,
         /// stop after N item changes (the first values count)
         #[arg(long, value_name = "N", value_parser = count_arg, allow_negative_numbers = true)]
@@ -244,6 +331,15 @@ pub enum Command {
     /// reads one item and receives one callback. Exit code 0 when nothing failed, else 1.
     #[command(verbatim_doc_comment)]
     Doctor(DoctorOptions),
+    /// OPC UA: opcdiag's client certificate (made at first use)
+    ///
+    /// Prints the file and SHA-1 thumbprint of the application instance certificate opcdiag
+    /// presents to OPC UA servers, made on first use in the PKI folder (--pki, default: the
+    /// user's configuration folder: $XDG_CONFIG_HOME or ~/.config, %APPDATA% on Windows, then
+    /// opcdiag/pki). A server refuses it until trusted: on ServerCTOPC,
+    /// `ServerCTOPC pki trust FILE` (or move it from the server's pki/rejected to pki/trusted).
+    #[command(verbatim_doc_comment)]
+    Cert,
     /// the Paradox attribute table as the CSV the server reads
     ///
     /// Reads the original's Paradox attribute table (a .DB with its .MB memos, or the table of a
@@ -307,6 +403,8 @@ pub fn help(command: Option<&str>) -> String {
 
 /// What the command line asks for.
 #[derive(Debug, Clone, PartialEq)]
+// Made once per run: its size does not matter.
+#[allow(clippy::large_enum_variant)]
 pub enum Parsed {
     Run(Global, Command),
     /// Print this help text and exit 0.
@@ -330,6 +428,7 @@ const COMMANDS: &[&str] = &[
     "demo",
     "doctor",
     "export-db",
+    "cert",
 ];
 
 /// What a command's arguments must be, for the message when they are not.
@@ -343,6 +442,7 @@ fn needs(command: &str) -> &'static str {
         "demo" => "no arguments besides --for",
         "doctor" => "no arguments besides its options",
         "export-db" => "one variable set or Paradox table",
+        "cert" => "no arguments",
         _ => "other arguments",
     }
 }
@@ -410,6 +510,69 @@ fn host_arg(_: &str) -> Result<String, String> {
 
 fn node_arg(_: &str) -> Result<String, String> {
     Err(remote("--node"))
+}
+
+fn url_arg(v: &str) -> Result<String, String> {
+    let rest = v
+        .strip_prefix("opc.tcp://")
+        .ok_or_else(|| format!("--url: expected opc.tcp://HOST:PORT, got {v:?}"))?;
+    let authority = rest.split('/').next().unwrap_or_default();
+    match authority.rsplit_once(':') {
+        Some((host, port)) if !host.is_empty() && port.parse::<u16>().is_ok() => Ok(v.into()),
+        _ => Err(format!("--url: expected opc.tcp://HOST:PORT, got {v:?}")),
+    }
+}
+
+fn security_arg(v: &str) -> Result<Security, String> {
+    match v.to_ascii_lowercase().as_str() {
+        "none" => Ok(Security::None),
+        "sign" => Ok(Security::Sign),
+        "encrypt" | "signandencrypt" => Ok(Security::Encrypt),
+        _ => Err(format!(
+            "--security: expected none, sign or encrypt, got {v:?}"
+        )),
+    }
+}
+
+/// The security policies opcdiag offers (the names of OPC UA's policy URIs).
+pub const POLICIES: &[&str] = &[
+    "Basic256Sha256",
+    "Aes128_Sha256_RsaOaep",
+    "Aes256_Sha256_RsaPss",
+];
+
+fn policy_arg(v: &str) -> Result<String, String> {
+    POLICIES
+        .iter()
+        .find(|p| p.eq_ignore_ascii_case(v))
+        .map(|p| p.to_string())
+        .ok_or_else(|| {
+            format!(
+                "--policy: expected one of {}, got {v:?}",
+                POLICIES.join(", ")
+            )
+        })
+}
+
+fn trust_arg(v: &str) -> Result<TrustServer, String> {
+    if v.eq_ignore_ascii_case("accept") {
+        return Ok(TrustServer::Accept);
+    }
+    let hex: String = v.chars().filter(|c| *c != ':' && *c != ' ').collect();
+    if hex.len() == 40 && hex.chars().all(|c| c.is_ascii_hexdigit()) {
+        Ok(TrustServer::Pin(hex.to_ascii_lowercase()))
+    } else {
+        Err(format!(
+            "--trust-server: expected the certificate's SHA-1 thumbprint (40 hex digits) or accept, got {v:?}"
+        ))
+    }
+}
+
+fn page_arg(v: &str) -> Result<u32, String> {
+    v.parse::<u32>()
+        .ok()
+        .filter(|d| *d > 0)
+        .ok_or_else(|| format!("--page: expected a number > 0, got {v:?}"))
 }
 
 fn depth_arg(v: &str) -> Result<usize, String> {
@@ -600,7 +763,8 @@ mod tests {
             g,
             Global {
                 server: "ServerCTOPC.App".into(),
-                lcid: None
+                lcid: None,
+                ua: UaOptions::default()
             }
         );
         assert_eq!(c, Command::Status);
@@ -623,7 +787,8 @@ mod tests {
             Command::Browse {
                 flat: false,
                 branch: None,
-                depth: None
+                depth: None,
+                page: 1000
             }
         );
         assert_eq!(
@@ -631,7 +796,8 @@ mod tests {
             Command::Browse {
                 flat: true,
                 branch: Some("Magazyn".into()),
-                depth: Some(2)
+                depth: Some(2),
+                page: 1000
             }
         );
     }
@@ -790,7 +956,8 @@ mod tests {
             Ok(Parsed::Run(
                 Global {
                     server: DEFAULT_SERVER.into(),
-                    lcid: None
+                    lcid: None,
+                    ua: UaOptions::default()
                 },
                 Command::ExportDb {
                     source: "D:\\baza\\zestaw.zez".into(),
@@ -828,7 +995,11 @@ mod tests {
             "--lang <en|pl|LCID>",
             "-h, --help",
             "exit codes: 0 success, 1 the server or an item reported an error, 2 bad command line.",
-            "Errors show the HRESULT in hex, its symbol, and the server's text for it.",
+            "Errors show the HRESULT in hex, its symbol, and the server's text for it",
+            "--url <opc.tcp://HOST:PORT>",
+            "3 (OPC UA) no session",
+            "[default: encrypt]",
+            "[default: Basic256Sha256]",
         ] {
             assert!(general.contains(fact), "{fact}: {general}");
         }
@@ -915,13 +1086,84 @@ mod tests {
     }
 
     #[test]
+    fn opc_ua_options_anywhere_with_safe_defaults() {
+        let (g, c) = run("--url opc.tcp://plc1:4840 read KW_A000 --user jan --password-stdin");
+        assert_eq!(
+            g.ua,
+            UaOptions {
+                url: Some("opc.tcp://plc1:4840".into()),
+                user: Some("jan".into()),
+                password_stdin: true,
+                ..UaOptions::default()
+            }
+        );
+        assert_eq!(
+            g.ua.security,
+            Security::Encrypt,
+            "SignAndEncrypt by default"
+        );
+        assert_eq!(g.ua.policy, "Basic256Sha256");
+        assert_eq!(
+            g.ua.trust_server, None,
+            "no server certificate trusted by default"
+        );
+        assert!(matches!(c, Command::Read { .. }));
+        let (g, _) = run(
+            "browse --url opc.tcp://[::1]:4840/ --security sign --policy aes256_sha256_rsapss \
+             --pki /tmp/p --trust-server 0E:2C:62:D1:EF:56:DF:9E:8E:84:AB:3E:0F:F5:08:5A:69:DF:94:26",
+        );
+        assert_eq!(g.ua.security, Security::Sign);
+        assert_eq!(g.ua.policy, "Aes256_Sha256_RsaPss");
+        assert_eq!(g.ua.pki.as_deref(), Some("/tmp/p"));
+        assert_eq!(
+            g.ua.trust_server,
+            Some(TrustServer::Pin(
+                "0e2c62d1ef56df9e8e84ab3e0ff5085a69df9426".into()
+            ))
+        );
+        assert_eq!(
+            run("read A --url opc.tcp://h:1 --trust-server accept")
+                .0
+                .ua
+                .trust_server,
+            Some(TrustServer::Accept)
+        );
+        assert_eq!(
+            run("read A --url opc.tcp://h:1 --security none")
+                .0
+                .ua
+                .security,
+            Security::None
+        );
+        assert!(usage_error("read A --url http://h:1").contains("opc.tcp://HOST:PORT"));
+        assert!(usage_error("read A --url opc.tcp://h").contains("opc.tcp://HOST:PORT"));
+        assert!(usage_error("read A --security high").contains("none, sign or encrypt"));
+        assert!(usage_error("read A --policy Basic128Rsa15").contains("Basic256Sha256"));
+        assert!(usage_error("read A --trust-server yes").contains("SHA-1 thumbprint"));
+        assert!(usage_error("browse --page 0").contains("--page"));
+        assert_eq!(
+            run("subscribe A --seconds 2 --count 3").1,
+            Command::Subscribe {
+                items: vec!["A".into()],
+                rate_ms: 1000,
+                for_secs: Some(2.0),
+                count: Some(3),
+                path: String::new()
+            },
+            "--seconds is --for"
+        );
+        assert_eq!(run("cert --pki /tmp/p").1, Command::Cert);
+    }
+
+    #[test]
     fn servers_takes_no_arguments() {
         assert_eq!(
             parse(&args("servers")),
             Ok(Parsed::Run(
                 Global {
                     server: DEFAULT_SERVER.into(),
-                    lcid: None
+                    lcid: None,
+                    ua: UaOptions::default()
                 },
                 Command::Servers
             ))

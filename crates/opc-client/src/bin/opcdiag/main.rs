@@ -3,9 +3,13 @@
 //! subscribe, and the demo plant tour; and `export-db`, the original's Paradox attribute
 //! table as the CSV the server reads. `opcdiag --help` lists the commands.
 //!
-//! The command line and every formatting rule are plain Rust (`cli`, `text`: tested
-//! natively; `export` reads files only and runs everywhere); the COM calls (`win`, `demo`)
-//! exist on Windows only and go through the safe
+//! With `--url opc.tcp://HOST:PORT`, browse, read, write and subscribe speak OPC UA
+//! instead (`ua`, async-opcua's client; on every host but 32-bit Windows, `cfg(ua)` from
+//! build.rs).
+//!
+//! The command line and every formatting rule are plain Rust (`cli`, `text`, `ua::show`:
+//! tested natively; `export` reads files only and runs everywhere); the COM calls (`win`,
+//! `demo`) exist on Windows only and go through the safe
 //! client wrapper `opc_client`.
 
 /// `println!` that does not panic when stdout is gone (piped into `head`, say): the
@@ -21,9 +25,11 @@ mod cli;
 mod demo;
 mod doctor;
 mod export;
-#[cfg(windows)]
+#[cfg(any(windows, ua))]
 mod out;
 mod text;
+#[cfg(ua)]
+mod ua;
 #[cfg(windows)]
 mod win;
 
@@ -40,12 +46,32 @@ fn main() -> ExitCode {
         Ok(cli::Parsed::Run(_, cli::Command::ExportDb { source, out })) => {
             ExitCode::from(export::run(&source, out.as_deref()))
         }
+        // OPC UA: `--url`, and `cert` (opcdiag's client certificate).
+        Ok(cli::Parsed::Run(global, command))
+            if global.ua.url.is_some() || command == cli::Command::Cert =>
+        {
+            ExitCode::from(run_ua(&global, command))
+        }
         Ok(cli::Parsed::Run(global, command)) => run(global, command),
         Err(e) => {
             eprintln!("opcdiag: {}\n\n{}", e.message, e.help);
             ExitCode::from(cli::EXIT_USAGE)
         }
     }
+}
+
+#[cfg(ua)]
+fn run_ua(global: &cli::Global, command: cli::Command) -> u8 {
+    ua::run(global, command)
+}
+
+#[cfg(not(ua))]
+fn run_ua(_global: &cli::Global, _command: cli::Command) -> u8 {
+    eprintln!(
+        "opcdiag: this opcdiag is built without OPC UA (the 32-bit one is OPC DA only): use \
+         the 64-bit opcdiag for --url and cert"
+    );
+    cli::EXIT_USAGE
 }
 
 #[cfg(windows)]

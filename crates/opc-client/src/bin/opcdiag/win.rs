@@ -89,6 +89,8 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
             flat,
             branch,
             depth,
+            // OPC UA's BrowseNext paging; DA's browse enumerates.
+            page: _,
         } => s.browse(flat, branch.as_deref(), depth),
         Command::Props { item } => s.props(&item),
         Command::Read {
@@ -113,6 +115,7 @@ pub fn run(global: &Global, command: Command) -> Result<u8, String> {
         Command::Servers => servers(),
         Command::Doctor(_) => Err("doctor runs without a session".into()),
         Command::ExportDb { .. } => Err("export-db runs from main".into()),
+        Command::Cert => Err("cert runs from main".into()),
     }
 }
 
