@@ -1,5 +1,6 @@
 //! The asix protocol's server role over the [`Engine`]: discovery answers, the link
-//! listener with its TLS handshake (asix-net's [`server_handshake`]), and one task per
+//! listener with its TLS handshake (asix-net's [`server`] plumbing, shared with
+//! asix-sim), and one task per
 //! link serving Hello, Subscribe/Unsubscribe (sampled from the channels' images), Read,
 //! Write and WriteVqt (`docs/asix-net-protocol.md`).
 //!
@@ -19,15 +20,12 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use asix_net::proto::codec::{frames, next_frame, ReadError};
-use asix_net::proto::discovery::{
-    decode_datagram, encode_datagram, Announce, Datagram, FindServer, Resource,
-};
+use asix_net::proto::discovery::{Announce, FindServer, Resource};
 use asix_net::proto::frame::{
     encode_frame, Frame, HelloAck, Message, ReadSource, ServerFlags, UpdateEncoder,
 };
-use asix_net::proto::{DecodeError, MAX_DATAGRAM};
-use asix_net::secure::{refuse_busy, server_handshake, LinkRead, ServerSecurity};
+use asix_net::secure::ServerSecurity;
+use asix_net::server::{self, reply};
 use asix_net::tls::Fingerprint;
 use ctopc_core::write_rights::{Caller, WriteRights};
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
@@ -163,44 +161,16 @@ impl Drop for GateServer {
 }
 
 async fn udp_loop(shared: Arc<Shared>, sock: UdpSocket) {
-    let mut shut = shared.shutdown.subscribe();
-    let mut buf = vec![0u8; MAX_DATAGRAM + 1];
-    loop {
-        let (n, from) = tokio::select! {
-            _ = shut.changed() => break,
-            r = sock.recv_from(&mut buf) => match r {
-                Ok(x) => x,
-                Err(e) => {
-                    debug!(error = %e, "discovery socket error");
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                    continue;
-                }
-            },
-        };
-        let Ok(Datagram::FindServer(f)) = decode_datagram(&buf[..n]) else {
-            continue;
-        };
-        if !(f.resource.name.is_empty() || shared.resources.contains(&f.resource)) {
-            continue;
-        }
-        if let Ok(bytes) = encode_datagram(&Datagram::Announce(announce(&shared, &f))) {
-            let _ = sock.send_to(&bytes, from).await;
-        }
-    }
+    let shutdown = shared.shutdown.subscribe();
+    server::discovery_loop(sock, shutdown, |f| {
+        (f.resource.name.is_empty() || shared.resources.contains(&f.resource))
+            .then(|| announce(&shared, f))
+    })
+    .await;
 }
 
 fn announce(shared: &Shared, f: &FindServer) -> Announce {
-    let mut resources = Vec::with_capacity(shared.resources.len());
-    if !f.resource.name.is_empty() {
-        resources.push(f.resource.clone());
-    }
-    resources.extend(
-        shared
-            .resources
-            .iter()
-            .filter(|r| **r != f.resource)
-            .cloned(),
-    );
+    let resources = server::announced_resources(&shared.resources, &f.resource);
     Announce {
         request: f.request,
         server_name: shared.cfg.server_name.clone(),
@@ -214,27 +184,12 @@ fn announce(shared: &Shared, f: &FindServer) -> Announce {
 }
 
 async fn accept_loop(shared: Arc<Shared>, listener: TcpListener) {
-    let mut shut = shared.shutdown.subscribe();
-    loop {
-        tokio::select! {
-            _ = shut.changed() => break,
-            r = listener.accept() => match r {
-                Ok((stream, peer)) => match shared.handshakes.clone().try_acquire_owned() {
-                    Ok(permit) => {
-                        tokio::spawn(serve_link(shared.clone(), stream, peer, permit));
-                    }
-                    Err(_) => {
-                        debug!(%peer, "too many handshakes under way: connection refused as busy");
-                        refuse_busy(&stream);
-                    }
-                },
-                Err(e) => {
-                    debug!(error = %e, "accept failed");
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                }
-            },
-        }
-    }
+    let shutdown = shared.shutdown.subscribe();
+    let handshakes = shared.handshakes.clone();
+    server::accept_loop(listener, shutdown, handshakes, |stream, peer, permit| {
+        tokio::spawn(serve_link(shared.clone(), stream, peer, permit));
+    })
+    .await;
 }
 
 struct Sub {
@@ -295,35 +250,6 @@ impl Link {
     }
 }
 
-async fn read_frames(rd: LinkRead, tx: mpsc::Sender<Result<Frame, DecodeError>>) {
-    let mut rd = frames(rd);
-    loop {
-        let r = match next_frame(&mut rd).await {
-            Some(Ok(frame)) => Ok(frame),
-            Some(Err(ReadError::Decode(e))) => Err(e),
-            None | Some(Err(ReadError::Io(_))) => return,
-        };
-        let stop = r.is_err();
-        if tx.send(r).await.is_err() || stop {
-            return;
-        }
-    }
-}
-
-fn reply(out: &mut Vec<u8>, request: u32, msg: &Message) {
-    if let Err(e) = encode_frame(out, request, msg) {
-        warn!(error = %e, "reply not encodable");
-        let _ = encode_frame(
-            out,
-            request,
-            &Message::Error {
-                code: OpcError::Fail.hresult(),
-                message: e.to_string(),
-            },
-        );
-    }
-}
-
 async fn serve_link(
     shared: Arc<Shared>,
     stream: TcpStream,
@@ -331,29 +257,14 @@ async fn serve_link(
     permit: OwnedSemaphorePermit,
 ) {
     let mut shut_rx = shared.shutdown.subscribe();
-    let security = &shared.cfg.security;
-    let handshake = tokio::time::timeout(
-        security.handshake_timeout,
-        server_handshake(stream, peer, security),
-    );
-    let secured = tokio::select! {
-        r = handshake => match r {
-            Ok(Ok(s)) => s,
-            Ok(Err(reason)) => {
-                warn!(%peer, %reason, "asix link refused");
-                return;
-            }
-            Err(_) => {
-                warn!(%peer, "asix link refused: handshake not finished in time");
-                return;
-            }
-        },
-        _ = shut_rx.changed() => return,
+    let Some(secured) = server::secure_link(stream, peer, &shared.cfg.security, &mut shut_rx).await
+    else {
+        return;
     };
     drop(permit);
     info!(%peer, identity = secured.peer.as_deref().unwrap_or("none (plaintext)"), "client linked");
     let (ftx, mut frx) = mpsc::channel(64);
-    let reader = tokio::spawn(read_frames(secured.rd, ftx));
+    let reader = tokio::spawn(server::read_frames(secured.rd, ftx));
     let (dtx, mut drx) = mpsc::channel::<Vec<u8>>(MAX_PENDING);
     let pending = Arc::new(Semaphore::new(MAX_PENDING));
     let mut w = BufWriter::with_capacity(64 * 1024, secured.wr);
@@ -387,11 +298,7 @@ async fn serve_link(
                 }
                 Some(Err(e)) => {
                     warn!(%peer, error = %e, "bad frame from client; closing");
-                    let code = match e {
-                        DecodeError::Version(_) => OpcError::NetLinkToServerNegativeAnswer,
-                        _ => OpcError::NetSendData,
-                    };
-                    let _ = encode_frame(&mut out, 0, &Message::Error { code: code.hresult(), message: e.to_string() });
+                    server::bad_frame(&mut out, &e);
                     true
                 }
                 None => true,
