@@ -60,6 +60,11 @@ impl Drop for Gate {
 /// A gate serving KANAL1 (LoadChannel, items A B C, writable by the writer's certificate)
 /// and KANAL2 (Init, items X Y, device reads from the driver, writable by nobody).
 async fn gate() -> Gate {
+    gate_with(|_| {}).await
+}
+
+/// [`gate`] with its configuration changed by `f`.
+async fn gate_with(f: impl FnOnce(&mut GateConfig)) -> Gate {
     let plants: HashMap<&'static str, FakePlant> = [
         (K1, FakePlant::new(&["A", "B", "C"])),
         (K2, FakePlant::new(&["X", "Y"])),
@@ -97,6 +102,7 @@ async fn gate() -> Gate {
         Channels::One(K1.into()),
         Principal::Certificate(pki().writer.identity.fingerprint()),
     )]);
+    f(&mut cfg);
     let engine = Engine::start(&cfg, factory);
     let security = asix_gate::security(&cfg, Some(&pki().server.identity)).expect("security");
     let server = asix_gate::serve(asix_gate::serve_config(&cfg, security), engine.clone())
@@ -122,6 +128,18 @@ struct Client {
 }
 
 fn client(g: &Gate, who: &tls::Generated, name: &str) -> Client {
+    client_secured(
+        g,
+        name,
+        ClientSecurity::tls(
+            &who.identity,
+            tls::Trust::Fingerprints(vec![pki().server.identity.fingerprint()]),
+        )
+        .expect("client TLS"),
+    )
+}
+
+fn client_secured(g: &Gate, name: &str, security: ClientSecurity) -> Client {
     let mut c = ClientConfig::new(name, "CLI");
     c.discovery_targets = vec![g.server.discovery_addr()];
     c.discovery_bind = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
@@ -132,11 +150,7 @@ fn client(g: &Gate, who: &tls::Generated, name: &str) -> Client {
     c.reconnect_interval = Duration::from_millis(200);
     c.retry_failed_items = Duration::from_millis(300);
     c.changes_only = true;
-    c.security = ClientSecurity::tls(
-        &who.identity,
-        tls::Trust::Fingerprints(vec![pki().server.identity.fingerprint()]),
-    )
-    .expect("client TLS");
+    c.security = security;
     let (sink, rx) = channel_sink();
     let client =
         AsixClient::start(c, sink, &tokio::runtime::Handle::current()).expect("client starts");
@@ -514,4 +528,58 @@ async fn a_client_without_a_pinned_gate_certificate_gets_no_data() {
         matches!(e, ClientEvent::ChannelUp { .. }).then_some(())
     })
     .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_plaintext_link_reaches_only_the_channels_that_allow_it() {
+    let g = gate_with(|cfg| {
+        cfg.channels[1].allow_plaintext = true;
+        for ch in [K1, K2] {
+            cfg.write_rights = WriteRights::new(
+                cfg.write_rights
+                    .rules()
+                    .iter()
+                    .cloned()
+                    .chain([Rule::new(
+                        Channels::One(ch.into()),
+                        Principal::AsixClient("PLAIN.".into()),
+                    )])
+                    .collect(),
+            );
+        }
+    })
+    .await;
+    until("both channels open", || {
+        g.plant(K1).is_active() && g.plant(K2).is_active()
+    })
+    .await;
+    let mut p = client_secured(&g, "PLAIN.", ClientSecurity::Plaintext);
+    let r = p
+        .read(vec![k(K1, "B"), k(K2, "Y")], ReadSource::Device)
+        .await;
+    assert_eq!(r[0], Err(OpcError::NetLinkToServerNegativeAnswer));
+    assert_eq!(r[1].as_ref().map(|v| v.quality), Ok(Quality::GOOD));
+    // On a plaintext link the declared name is all there is: it grants KANAL2.
+    let r = p
+        .write(vec![
+            (k(K2, "X"), Value::R8(4.0)),
+            (k(K1, "A"), Value::R8(4.0)),
+        ])
+        .await;
+    assert_eq!(
+        r,
+        vec![Ok(()), Err(OpcError::NetLinkToServerNegativeAnswer)]
+    );
+    assert_eq!(
+        g.plant(K2).value("X").map(|v| v.value),
+        Some(Value::R8(4.0))
+    );
+    // On a TLS link the same declared name grants nothing: the certificate decides.
+    let mut t = client(&g, &pki().reader, "PLAIN.");
+    let r = t.write(vec![(k(K2, "X"), Value::R8(5.0))]).await;
+    assert_eq!(r, vec![Err(OpcError::WriteErrorIllegalCommand)]);
+    assert_eq!(
+        g.plant(K2).value("X").map(|v| v.value),
+        Some(Value::R8(4.0))
+    );
 }
