@@ -12,6 +12,7 @@
 //! CallTimeoutMs = 5000               ; the longest an Automation call may take
 //! TimeZone = Europe/Warsaw           ; the station's zone (or UTC, or a Windows rule)
 //! Language = PL                      ; messages: PL or EN
+//! LogDir = Log                       ; daily log files asix-gate.<date>.log
 //! ZEZWOLENIE_ZAPISU = KANAL1, cert:3f1a…   ; who may write (repeatable; none: nobody)
 //!
 //! [KANAL1]                           ; a served channel, by its asix name
@@ -73,6 +74,8 @@ pub struct GateConfig {
     pub state_poll: Duration,
     pub time_zone: ZoneRule,
     pub language: Lang,
+    /// Where the daily log files go (`asix-gate.<date>.log`); relative to the ini's folder.
+    pub log_dir: PathBuf,
     pub write_rights: WriteRights,
     pub channels: Vec<ChannelConfig>,
 }
@@ -92,6 +95,7 @@ impl GateConfig {
             state_poll: Duration::from_secs(1),
             time_zone: ZoneRule::europe_warsaw(),
             language: Lang::English,
+            log_dir: PathBuf::from("Log"),
             write_rights: WriteRights::new(Vec::new()),
             channels: Vec::new(),
         }
@@ -195,6 +199,9 @@ pub fn load(path: &Path) -> Result<GateConfig, ConfigError> {
     let mut cfg = parse(&bytes, &file)?;
     // Relative file names are relative to the ini's folder.
     let dir = path.parent().unwrap_or(Path::new("."));
+    if cfg.log_dir.is_relative() {
+        cfg.log_dir = dir.join(&cfg.log_dir);
+    }
     for p in [
         &mut cfg.certificate,
         &mut cfg.private_key,
@@ -267,6 +274,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<GateConfig, ConfigError> {
                 .allow_clients
                 .extend(tls::parse_fingerprints(v).map_err(|_| bad())?),
             "clientca" => cfg.client_ca = Some(PathBuf::from(v)),
+            "logdir" if !v.is_empty() => cfg.log_dir = PathBuf::from(v),
             "calltimeoutms" => cfg.call_timeout = ms()?,
             "statepollms" => cfg.state_poll = ms()?,
             "timezone" => cfg.time_zone = ZoneRule::parse(v).ok_or_else(bad)?,

@@ -162,6 +162,7 @@ impl Engine {
                 state_poll: cfg.state_poll,
                 shutdown: engine.shutdown.clone(),
                 start,
+                open_error: Default::default(),
             };
             let name = format!("gate-{}", ch.config.name);
             if let Err(e) = std::thread::Builder::new()
@@ -385,6 +386,8 @@ struct Worker {
     state_poll: Duration,
     shutdown: Arc<AtomicBool>,
     start: Instant,
+    /// The last reason the object could not be opened (logged once, not every retry).
+    open_error: std::cell::RefCell<Option<String>>,
 }
 
 impl Worker {
@@ -424,12 +427,21 @@ impl Worker {
         }
     }
 
+    /// Logs why opening failed, once per distinct reason.
+    fn open_failed(&self, what: &str, e: &CallError) {
+        let text = format!("{what}: {e}");
+        if self.open_error.borrow().as_deref() != Some(text.as_str()) {
+            warn!(channel = %self.channel.config.name, error = %e, "{what}; tried again every {} ms", self.state_poll.as_millis());
+            *self.open_error.borrow_mut() = Some(text);
+        }
+    }
+
     fn open(&self) -> Option<Box<dyn XConnectChannel>> {
         let name = &self.channel.config.name;
         let mut obj = match self.call("create", || (self.factory)(name)) {
             Ok(o) => o,
             Err(e) => {
-                warn!(channel = %name, error = %e, "cannot create XConnect.ServerCT");
+                self.open_failed("cannot create XConnect.ServerCT", &e);
                 return None;
             }
         };
@@ -438,9 +450,10 @@ impl Worker {
             Open::Init(s) => self.call("Init", || obj.init(s)),
         };
         if let Err(e) = r.and_then(|()| self.call("Active", || obj.set_active(true))) {
-            warn!(channel = %name, error = %e, "cannot open the channel");
+            self.open_failed("cannot open the channel", &e);
             return None;
         }
+        *self.open_error.borrow_mut() = None;
         info!(channel = %name, "channel open");
         Some(obj)
     }

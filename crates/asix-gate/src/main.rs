@@ -59,6 +59,46 @@ usage: asix-gate [--config FILE] [--check]
         })
     }
 
+    /// The console and the daily files `asix-gate.<YYYY-MM-DD>.log` in `dir` (30 kept),
+    /// written on a background thread; `ASIX_GATE_LOG` sets the filter (default info).
+    fn logging(dir: &std::path::Path) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+        use tracing_subscriber::layer::SubscriberExt;
+        use tracing_subscriber::util::SubscriberInitExt;
+        use tracing_subscriber::Layer;
+        let filter = || {
+            tracing_subscriber::EnvFilter::try_from_env("ASIX_GATE_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"))
+        };
+        let _ = std::fs::create_dir_all(dir);
+        let files = tracing_appender::rolling::Builder::new()
+            .rotation(tracing_appender::rolling::Rotation::DAILY)
+            .filename_prefix("asix-gate")
+            .filename_suffix("log")
+            .max_log_files(30)
+            .build(dir);
+        let console = tracing_subscriber::fmt::layer().with_filter(filter());
+        match files {
+            Ok(f) => {
+                let (writer, guard) = tracing_appender::non_blocking(f);
+                let file = tracing_subscriber::fmt::layer()
+                    .with_writer(writer)
+                    .with_ansi(false)
+                    .with_thread_names(true)
+                    .with_filter(filter());
+                tracing_subscriber::registry()
+                    .with(console)
+                    .with(file)
+                    .init();
+                Some(guard)
+            }
+            Err(e) => {
+                tracing_subscriber::registry().with(console).init();
+                tracing::warn!(dir = %dir.display(), error = %e, "no log files: the console only");
+                None
+            }
+        }
+    }
+
     pub fn run(args: Vec<String>) -> ExitCode {
         let mut path = None;
         let mut check = false;
@@ -103,9 +143,7 @@ usage: asix-gate [--config FILE] [--check]
                 return ExitCode::from(2);
             }
         };
-        let filter = tracing_subscriber::EnvFilter::try_from_env("ASIX_GATE_LOG")
-            .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-        tracing_subscriber::fmt().with_env_filter(filter).init();
+        let _log_guard = if check { None } else { logging(&cfg.log_dir) };
         let security = match asix_gate::security(&cfg, None) {
             Ok(s) => s,
             Err(e) => {

@@ -208,8 +208,10 @@ struct Group {
 }
 
 struct Link {
-    /// Declared asix name, and whether the client declared this computer.
+    /// The asix name the client declared.
     client: Option<String>,
+    /// The client declared this computer's name.
+    local: bool,
     identity: Option<String>,
     certificate: Option<Fingerprint>,
     subs: HashMap<u32, Sub>,
@@ -271,6 +273,7 @@ async fn serve_link(
     let mut status_rx = shared.engine.status.subscribe();
     let mut link = Link {
         client: None,
+        local: false,
         identity: secured.peer,
         certificate: secured.peer_fingerprint,
         subs: HashMap::new(),
@@ -327,7 +330,7 @@ async fn serve_link(
             }
             _ = status_rx.changed() => {
                 if link.client.is_some() {
-                    let _ = encode_frame(&mut out, 0, &Message::ServerStatus { flags: shared.flags(""), clients: shared.clients() });
+                    let _ = encode_frame(&mut out, 0, &Message::ServerStatus { flags: shared.flags("").with(ServerFlags::LOCAL, link.local), clients: shared.clients() });
                     let handles: Vec<u32> = link.subs.keys().copied().collect();
                     sample(&mut link.subs, &handles, true, &mut out);
                 }
@@ -417,6 +420,7 @@ fn handle_frame(
                 idle_timeout_ms: link.idle.as_millis() as u32,
             }),
         );
+        link.local = shared.flags(&h.client_host).local();
         link.client = Some(h.client_name);
         return false;
     }
