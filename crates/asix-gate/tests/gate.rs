@@ -583,3 +583,43 @@ async fn a_plaintext_link_reaches_only_the_channels_that_allow_it() {
         Some(Value::R8(4.0))
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_to_a_hung_channel_are_bounded() {
+    let g = gate().await;
+    until("KANAL2 open", || g.plant(K2).is_active()).await;
+    g.plant(K2).hang("Read", true);
+    let ch = g.engine.channel(K2).expect("KANAL2").clone();
+    // Far more requests than the queue holds, all at once.
+    let n = asix_gate::engine::QUEUE * 2;
+    let reads: Vec<_> = (0..n)
+        .map(|_| {
+            let (e, ch) = (g.engine.clone(), ch.clone());
+            tokio::spawn(async move { e.read(&ch, DataSource::Device, vec!["Y".into()]).await })
+        })
+        .collect();
+    for r in reads {
+        let r = r.await.expect("read task");
+        assert_eq!(
+            r[0].as_ref().map(|v| v.quality),
+            Ok(Quality::BAD_COMM_FAILURE)
+        );
+    }
+    g.plant(K2).hang("Read", false);
+    // Once released, the worker ran what was queued and no more: the rest was refused.
+    let r = g
+        .engine
+        .read(&ch, DataSource::Device, vec!["Y".into()])
+        .await;
+    assert_eq!(r[0].as_ref().map(|v| v.quality), Ok(Quality::GOOD));
+    let reads = g
+        .plant(K2)
+        .calls()
+        .iter()
+        .filter(|c| c.starts_with("Read 2 Y"))
+        .count();
+    assert!(
+        reads > 1 && reads <= asix_gate::engine::QUEUE + 2,
+        "{reads} reads of {n} reached the Automation server"
+    );
+}
