@@ -459,7 +459,7 @@ async fn server_state_failed_is_announced_as_source_failed() {
         })
         .await;
     }
-    // A channel that cannot open is failed too.
+    // A ServerState call that fails counts as a failed source too.
     g.plant(K1)
         .fail("ServerState", Some(CallError::new(OpcError::Fail, "gone")));
     until("ServerState call failing", || flags(&g).source_failed()).await;
