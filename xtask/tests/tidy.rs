@@ -110,6 +110,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/registration",
         "crates/runtime",
         "crates/asix-net",
+        "crates/asix-gate",
         "crates/server",
         "crates/test-support",
         "crates/ua",

@@ -14,6 +14,8 @@
 //! - [`sim`]: `asix-sim`, a simulated asix data server serving a deterministic plant, and
 //!   the in-process simulation over the same plant ([`sim::inproc`], re-exported as
 //!   [`inproc`]).
+//! - [`server`]: the server role's shared plumbing (discovery answers, accepting and
+//!   securing links, reading frames), used by asix-sim and asix-gate.
 //! - [`discovery`]: choosing a server from the announcements (ranking, variants).
 //! - [`naming`], [`config`]: the client's asix name, channel options and external server
 //!   lists (INI files are read by the core's reader, [`asix_model::ini`]).
@@ -29,6 +31,7 @@ pub mod pipeline;
 pub mod proto;
 pub mod rest;
 pub mod secure;
+pub mod server;
 pub mod sim;
 pub mod tls;
 

@@ -26,15 +26,11 @@ use tracing::{debug, info, warn};
 use self::plant::{numeric, Behaviour, ChannelDef, Plant};
 use self::rights::{Denied, WriteRights};
 use crate::client::wall_now;
-use crate::proto::codec::{frames, next_frame, ReadError};
-use crate::proto::discovery::{
-    decode_datagram, encode_datagram, Announce, Datagram, FindServer, Resource, ResourceKind,
-};
+use crate::proto::discovery::{Announce, FindServer, Resource, ResourceKind};
 use crate::proto::frame::{
     encode_frame, Frame, HelloAck, Message, ReadSource, ServerFlags, UpdateEncoder, VarRef,
 };
-use crate::proto::{DecodeError, MAX_DATAGRAM};
-use crate::secure::{refuse_busy, server_handshake, LinkRead, ServerSecurity, ServerTls};
+use crate::secure::{ServerSecurity, ServerTls};
 use crate::tls::{self, Fingerprint, Trust};
 use crate::Vqt;
 
@@ -389,53 +385,15 @@ impl Drop for SimHandle {
 }
 
 async fn udp_loop(shared: Arc<Shared>, sock: UdpSocket) {
-    let mut shut = shared.shutdown.subscribe();
-    let mut buf = vec![0u8; MAX_DATAGRAM + 1];
-    loop {
-        let (n, from) = tokio::select! {
-            _ = shut.changed() => break,
-            r = sock.recv_from(&mut buf) => match r {
-                Ok(x) => x,
-                Err(e) => {
-                    // e.g. ICMP port unreachable reported on Windows; do not spin.
-                    debug!(error = %e, "discovery socket error");
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                    continue;
-                }
-            },
-        };
-        if !shared.answering() {
-            continue;
-        }
-        let Ok(Datagram::FindServer(f)) = decode_datagram(&buf[..n]) else {
-            continue;
-        };
-        if !shared.offers(&f.resource) {
-            continue;
-        }
-        let bytes = match encode_datagram(&Datagram::Announce(announce(&shared, &f))) {
-            Ok(b) => b,
-            Err(e) => {
-                warn!(error = %e, "announcement not encodable");
-                continue;
-            }
-        };
-        let _ = sock.send_to(&bytes, from).await;
-    }
+    let shutdown = shared.shutdown.subscribe();
+    crate::server::discovery_loop(sock, shutdown, |f| {
+        (shared.answering() && shared.offers(&f.resource)).then(|| announce(&shared, f))
+    })
+    .await;
 }
 
 fn announce(shared: &Shared, f: &FindServer) -> Announce {
-    let mut resources = Vec::with_capacity(shared.resources.len());
-    if !f.resource.name.is_empty() {
-        resources.push(f.resource.clone());
-    }
-    resources.extend(
-        shared
-            .resources
-            .iter()
-            .filter(|r| **r != f.resource)
-            .cloned(),
-    );
+    let resources = crate::server::announced_resources(&shared.resources, &f.resource);
     Announce {
         request: f.request,
         server_name: shared.name.clone(),
@@ -449,28 +407,12 @@ fn announce(shared: &Shared, f: &FindServer) -> Announce {
 }
 
 async fn accept_loop(shared: Arc<Shared>, listener: TcpListener) {
-    let mut shut = shared.shutdown.subscribe();
-    loop {
-        tokio::select! {
-            _ = shut.changed() => break,
-            r = listener.accept() => match r {
-                Ok((stream, peer)) => match shared.handshakes.clone().try_acquire_owned() {
-                    Ok(permit) => {
-                        debug!(%peer, "connection accepted");
-                        tokio::spawn(serve_link(shared.clone(), stream, peer, permit));
-                    }
-                    Err(_) => {
-                        debug!(%peer, "too many handshakes under way: connection refused as busy");
-                        refuse_busy(&stream);
-                    }
-                },
-                Err(e) => {
-                    debug!(error = %e, "accept failed");
-                    tokio::time::sleep(Duration::from_millis(10)).await;
-                }
-            },
-        }
-    }
+    let shutdown = shared.shutdown.subscribe();
+    let handshakes = shared.handshakes.clone();
+    crate::server::accept_loop(listener, shutdown, handshakes, |stream, peer, permit| {
+        tokio::spawn(serve_link(shared.clone(), stream, peer, permit));
+    })
+    .await;
 }
 
 struct Sub {
@@ -503,21 +445,6 @@ enum Step {
     Close,
 }
 
-async fn read_frames(rd: LinkRead, tx: mpsc::Sender<Result<Frame, DecodeError>>) {
-    let mut rd = frames(rd);
-    loop {
-        let r = match next_frame(&mut rd).await {
-            Some(Ok(frame)) => Ok(frame),
-            Some(Err(ReadError::Decode(e))) => Err(e),
-            None | Some(Err(ReadError::Io(_))) => return,
-        };
-        let stop = r.is_err();
-        if tx.send(r).await.is_err() || stop {
-            return;
-        }
-    }
-}
-
 async fn serve_link(
     shared: Arc<Shared>,
     stream: TcpStream,
@@ -525,28 +452,15 @@ async fn serve_link(
     permit: OwnedSemaphorePermit,
 ) {
     let mut shut_rx = shared.shutdown.subscribe();
-    let handshake = tokio::time::timeout(
-        shared.security.handshake_timeout,
-        server_handshake(stream, peer, &shared.security),
-    );
-    let secured = tokio::select! {
-        r = handshake => match r {
-            Ok(Ok(s)) => s,
-            Ok(Err(reason)) => {
-                warn!(%peer, %reason, "asix link refused");
-                return;
-            }
-            Err(_) => {
-                warn!(%peer, timeout_ms = shared.security.handshake_timeout.as_millis() as u64, "asix link refused: handshake not finished in time");
-                return;
-            }
-        },
-        _ = shut_rx.changed() => return,
+    let Some(secured) =
+        crate::server::secure_link(stream, peer, &shared.security, &mut shut_rx).await
+    else {
+        return;
     };
     drop(permit);
     debug!(%peer, identity = secured.peer.as_deref().unwrap_or("none (plaintext)"), "link secured");
     let (ftx, mut frx) = mpsc::channel(64);
-    let reader = tokio::spawn(read_frames(secured.rd, ftx));
+    let reader = tokio::spawn(crate::server::read_frames(secured.rd, ftx));
     let (dtx, mut drx) = mpsc::unbounded_channel::<Vec<u8>>();
     let mut w = BufWriter::with_capacity(64 * 1024, secured.wr);
     let mut drop_rx = shared.drop_epoch.subscribe();
@@ -580,11 +494,7 @@ async fn serve_link(
                 Some(Ok(_)) => Step::Continue,
                 Some(Err(e)) => {
                     warn!(error = %e, "bad frame from client; closing");
-                    let code = match e {
-                        DecodeError::Version(_) => OpcError::NetLinkToServerNegativeAnswer,
-                        _ => OpcError::NetSendData,
-                    };
-                    let _ = encode_frame(&mut out, 0, &Message::Error { code: code.hresult(), message: e.to_string() });
+                    crate::server::bad_frame(&mut out, &e);
                     Step::Close
                 }
                 None => Step::Close,
@@ -681,19 +591,7 @@ fn sample(shared: &Shared, subs: &mut HashMap<u32, Sub>, handles: &[u32], out: &
     }
 }
 
-fn reply(out: &mut Vec<u8>, request: u32, msg: &Message) {
-    if let Err(e) = encode_frame(out, request, msg) {
-        warn!(error = %e, "reply not encodable");
-        let _ = encode_frame(
-            out,
-            request,
-            &Message::Error {
-                code: OpcError::Fail.hresult(),
-                message: e.to_string(),
-            },
-        );
-    }
-}
+use crate::server::reply;
 
 fn handle_frame(
     shared: &Arc<Shared>,

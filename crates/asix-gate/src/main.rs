@@ -1,0 +1,221 @@
+//! `asix-gate`: serves the asix channels of `asix-gate.ini` to ServerCTOPC over the asix
+//! network protocol (`docs/asix-gate.md`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    asix_gate_main::run(std::env::args().skip(1).collect())
+}
+
+mod asix_gate_main {
+    use super::*;
+    use asix_gate::channel::{CallError, ChannelFactory};
+    use asix_gate::config;
+    use asix_net::tls;
+    use ctopc_core::lang::Lang;
+    use ctopc_core::OpcError;
+
+    const USAGE: &str = "\
+usage: asix-gate [--config FILE] [--check]
+       asix-gate --gen-cert DIR [--name NAME]
+  --config FILE   the configuration (default: asix-gate.ini beside the program)
+  --check         read the configuration, report, exit
+  --gen-cert DIR  write DIR/asix-gate-cert.pem and DIR/asix-gate-key.pem, print the
+                  fingerprint (paste it as AsixNetServerFingerprint into ServerCTOPC's channel)
+";
+
+    fn default_config() -> PathBuf {
+        std::env::current_exe()
+            .ok()
+            .and_then(|p| p.parent().map(|d| d.join("asix-gate.ini")))
+            .unwrap_or_else(|| PathBuf::from("asix-gate.ini"))
+    }
+
+    fn gen_cert(dir: &str, name: &str) -> Result<String, String> {
+        let g = tls::generate(name, None).map_err(|e| e.to_string())?;
+        let dir = std::path::Path::new(dir);
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let cert = dir.join("asix-gate-cert.pem");
+        let key = dir.join("asix-gate-key.pem");
+        std::fs::write(&cert, &g.cert_pem).map_err(|e| format!("{}: {e}", cert.display()))?;
+        std::fs::write(&key, &g.key_pem).map_err(|e| format!("{}: {e}", key.display()))?;
+        Ok(format!(
+            "certificate {}\nprivate key {} (keep it secret)\nfingerprint {}",
+            cert.display(),
+            key.display(),
+            tls::fingerprint_hex(&g.identity.fingerprint())
+        ))
+    }
+
+    /// The Automation adapter is not part of this build: every channel reports it (and
+    /// the gate announces SOURCE_FAILED) instead of serving.
+    fn factory() -> ChannelFactory {
+        std::sync::Arc::new(|name: &str| {
+            Err(CallError::new(
+                OpcError::NotImpl,
+                format!("channel {name}: this build has no XConnect.ServerCT adapter"),
+            ))
+        })
+    }
+
+    /// The console and the daily files `asix-gate.<YYYY-MM-DD>.log` in `dir` (30 kept),
+    /// written on a background thread; `ASIX_GATE_LOG` sets the filter (default info).
+    fn logging(dir: &std::path::Path) -> Option<tracing_appender::non_blocking::WorkerGuard> {
+        use tracing_subscriber::layer::SubscriberExt;
+        use tracing_subscriber::util::SubscriberInitExt;
+        use tracing_subscriber::Layer;
+        let filter = || {
+            tracing_subscriber::EnvFilter::try_from_env("ASIX_GATE_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"))
+        };
+        let _ = std::fs::create_dir_all(dir);
+        let files = tracing_appender::rolling::Builder::new()
+            .rotation(tracing_appender::rolling::Rotation::DAILY)
+            .filename_prefix("asix-gate")
+            .filename_suffix("log")
+            .max_log_files(30)
+            .build(dir);
+        let console = tracing_subscriber::fmt::layer().with_filter(filter());
+        match files {
+            Ok(f) => {
+                let (writer, guard) = tracing_appender::non_blocking(f);
+                let file = tracing_subscriber::fmt::layer()
+                    .with_writer(writer)
+                    .with_ansi(false)
+                    .with_thread_names(true)
+                    .with_filter(filter());
+                tracing_subscriber::registry()
+                    .with(console)
+                    .with(file)
+                    .init();
+                Some(guard)
+            }
+            Err(e) => {
+                tracing_subscriber::registry().with(console).init();
+                tracing::warn!(dir = %dir.display(), error = %e, "no log files: the console only");
+                None
+            }
+        }
+    }
+
+    pub fn run(args: Vec<String>) -> ExitCode {
+        let mut path = None;
+        let mut check = false;
+        let mut gen = None;
+        let mut name = "ASIX-GATE".to_owned();
+        let mut it = args.into_iter();
+        while let Some(a) = it.next() {
+            match a.as_str() {
+                "--config" => path = it.next().map(PathBuf::from),
+                "--check" => check = true,
+                "--gen-cert" => gen = it.next(),
+                "--name" => name = it.next().unwrap_or(name),
+                "-h" | "--help" | "/?" => {
+                    print!("{USAGE}");
+                    return ExitCode::SUCCESS;
+                }
+                other => {
+                    eprintln!("asix-gate: unknown option {other}\n\n{USAGE}");
+                    return ExitCode::from(2);
+                }
+            }
+        }
+        if let Some(dir) = gen {
+            return match gen_cert(&dir, &name) {
+                Ok(t) => {
+                    println!("{t}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("asix-gate: --gen-cert: {e}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
+        let path = path.unwrap_or_else(default_config);
+        let cfg = match config::load(&path) {
+            Ok(c) => c,
+            Err(e) => {
+                // The language is in the file that could not be read: both.
+                eprintln!("asix-gate: {}", e.text(Lang::Polish));
+                eprintln!("asix-gate: {}", e.text(Lang::English));
+                return ExitCode::from(2);
+            }
+        };
+        let _log_guard = if check { None } else { logging(&cfg.log_dir) };
+        let security = match asix_gate::security(&cfg, None) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("asix-gate: {}: {e}", path.display());
+                return ExitCode::from(2);
+            }
+        };
+        if check {
+            let ok = match cfg.language {
+                Lang::Polish => "konfiguracja poprawna",
+                Lang::English => "configuration valid",
+            };
+            println!(
+                "asix-gate: {}: {ok}; {} channel(s); fingerprint {}",
+                path.display(),
+                cfg.channels.len(),
+                security
+                    .fingerprint()
+                    .map(|f| tls::fingerprint_hex(&f))
+                    .unwrap_or_default()
+            );
+            return ExitCode::SUCCESS;
+        }
+        let rt = match tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()
+        {
+            Ok(rt) => rt,
+            Err(e) => {
+                eprintln!("asix-gate: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        rt.block_on(async move {
+            let engine = asix_gate::Engine::start(&cfg, factory());
+            let server =
+                match asix_gate::serve(asix_gate::serve_config(&cfg, security), engine.clone())
+                    .await
+                {
+                    Ok(s) => s,
+                    Err(e) => {
+                        eprintln!("asix-gate: {e}");
+                        return ExitCode::FAILURE;
+                    }
+                };
+            println!(
+                "asix-gate {} udp={} tcp={} fingerprint={}",
+                cfg.server_name,
+                server.discovery_addr(),
+                server.tcp_addr(),
+                server
+                    .fingerprint()
+                    .map(|f| tls::fingerprint_hex(&f))
+                    .unwrap_or_default()
+            );
+            // `quit` on stdin stops the gate (Ctrl+C ends the process).
+            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+            std::thread::spawn(move || {
+                use std::io::BufRead;
+                // Without a console (stdin at its end) the gate runs until killed.
+                for line in std::io::stdin().lock().lines() {
+                    if line.is_ok_and(|l| l.trim() == "quit") {
+                        let _ = tx.send(());
+                        return;
+                    }
+                }
+                std::mem::forget(tx);
+            });
+            let _ = rx.await;
+            engine.stop();
+            server.shutdown().await;
+            ExitCode::SUCCESS
+        })
+    }
+}
