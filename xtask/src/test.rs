@@ -319,13 +319,16 @@ fn static_checks(native_only: bool) -> Result<(), String> {
         )
     })?;
     // What is built for 32-bit Windows: opcdiag and the e2e tests (the 32-bit client), with
-    // the client library and the core beneath them.
+    // the client library and the core beneath them, and asix-gate (a 32-bit program beside
+    // AsixConnect's in-process Automation server).
     let x86 = Arch::X86.target();
-    println!("test: clippy for {x86} (the 32-bit client side)");
+    println!("test: clippy for {x86} (the 32-bit client side, asix-gate)");
     util::run(util::cargo().args([
         "clippy",
         "-p",
         "e2e-tests",
+        "-p",
+        "asix-gate",
         "-p",
         "opc-client",
         "-p",
