@@ -17,7 +17,10 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   the first one through);
 - the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
   SecurityPolicy None are refused;
-- the server stops on SIGTERM with exit code 0.
+- the server stops on SIGTERM with exit code 0;
+- secrets at rest: the users file and the private key made at first start are 0600 (the
+  key's folder 0700), and the server's log of the whole run, at TRACE for every crate,
+  holds no password, no password hash and no line of the private key.
 
 Every wait has a deadline. The last line is `N passed, M failed`.
 """
@@ -297,12 +300,17 @@ def main():
         encoding="utf-8",
     )
     env = dict(os.environ, SERVERCTOPC_INI=str(ini))
+    user_add_output = ""
     for user, role in (("writer1", "writer"), ("reader1", "reader")):
         r = subprocess.run([a.server, "user", "add", user, "--role", role, "--password-stdin"],
                            input=PASSWORDS[user] + "\n", capture_output=True, text=True, env=env)
         check(f"user add {user}", r.returncode == 0, r.stderr)
+        user_add_output += r.stdout + r.stderr
     log = open(work / "serve.log", "w")
-    proc = subprocess.Popen([a.server, "serve"], env=env, stdout=log, stderr=subprocess.STDOUT)
+    # The most verbose log there is (every crate at TRACE), so that the check of secrets in
+    # it below covers every level.
+    proc = subprocess.Popen([a.server, "serve"], env=dict(env, RUST_LOG="trace"), stdout=log,
+                            stderr=subprocess.STDOUT)
     os.environ["SERVERCTOPC_INI"] = str(ini)
     try:
         up = wait_port(port, proc, time.monotonic() + 120)
@@ -321,11 +329,35 @@ def main():
             code = proc.wait()
         check("serve stops on SIGTERM with exit code 0", code == 0, f"exit code {code}")
         log.close()
+    secrets_at_rest(work, user_add_output)
     if failed:
         print(f"--- {work / 'serve.log'} (last lines)")
         print("".join(open(work / "serve.log", encoding="utf-8", errors="replace").readlines()[-40:]))
     print(f"{passed} passed, {failed} failed")
     sys.exit(1 if failed else 0)
+
+
+def secrets_at_rest(work, user_add_output):
+    """The users file and the private key made at first start are owner-only (0600, the
+    key's folder 0700), and no secret is in the TRACE log of the run nor in `user add`'s
+    output: not a password, not a password hash of the users file, not a line of the
+    private key's PEM body."""
+    key = work / "pki" / "private" / "private.pem"
+    users = work / "ua-users.txt"
+    for path, want in ((users, 0o600), (key, 0o600), (key.parent, 0o700)):
+        mode = path.stat().st_mode & 0o777 if path.exists() else None
+        check(f"{path.relative_to(work)} is owner-only ({want:o})", mode == want,
+              f"mode {mode:o}" if mode is not None else "missing")
+    text = open(work / "serve.log", encoding="utf-8", errors="replace").read() + user_add_output
+    secrets = [(f"the password of {u}", p) for u, p in PASSWORDS.items()]
+    for line in users.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#") and line.count(":") >= 5:
+            secrets.append((f"the hash of {line.split(':')[0]}", line.rsplit(":", 1)[1]))
+    body = [l for l in key.read_text().splitlines() if l and not l.startswith("-----")]
+    secrets += [("a line of the private key", l) for l in body if len(l) >= 16]
+    leaked = [what for what, s in secrets if s in text]
+    check(f"no secret in the TRACE log ({len(text.splitlines())} lines, {len(secrets)} secrets "
+          "looked for)", bool(body) and not leaked, ", ".join(sorted(set(leaked))))
 
 
 if __name__ == "__main__":

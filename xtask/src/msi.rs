@@ -270,6 +270,117 @@ pub fn dist(files: &[(String, PathBuf)], version: &str) -> Result<PathBuf, Strin
     Ok(out)
 }
 
+// ---------------------------------------------------------------------------------------
+// The AppID's security values in a Wine prefix's `system.reg` (lowercased text), for
+// `msi-test`: pure, tested below.
+
+/// The `[head]` section of a Wine registry file (its value lines, up to the blank line).
+pub fn reg_section<'a>(reg: &'a str, head: &str) -> Option<&'a str> {
+    let start = reg
+        .lines()
+        .position(|l| l.starts_with(head))
+        .map(|i| reg.lines().take(i).map(|l| l.len() + 1).sum::<usize>())?;
+    let body = &reg[start..];
+    let end = body.find("\n\n").unwrap_or(body.len());
+    Some(&body[..end])
+}
+
+/// The `"name"=hex:..` value of a section (Wine continues long ones with `\` and an
+/// indented line).
+pub fn reg_hex(section: &str, name: &str) -> Option<Vec<u8>> {
+    let key = format!("\"{name}\"=hex:");
+    let at = section.find(&key)? + key.len();
+    let mut out = Vec::new();
+    for line in section[at..].lines() {
+        let l = line.trim();
+        let (bytes, more) = match l.strip_suffix('\\') {
+            Some(b) => (b, true),
+            None => (l, false),
+        };
+        for b in bytes.split(',').filter(|b| !b.is_empty()) {
+            out.push(u8::from_str_radix(b, 16).ok()?);
+        }
+        if !more {
+            break;
+        }
+    }
+    Some(out)
+}
+
+/// The `"name"=dword:..` value of a section.
+pub fn reg_dword(section: &str, name: &str) -> Option<u32> {
+    let key = format!("\"{name}\"=dword:");
+    let at = section.find(&key)? + key.len();
+    u32::from_str_radix(section[at..].get(..8)?, 16).ok()
+}
+
+/// The AppID key's head of `view` in a lowercased `system.reg`.
+pub fn appid_head(view: View) -> String {
+    let guid = registration::guid_string(registration::CLSID_SERVERCTOPC).to_ascii_lowercase();
+    match view {
+        View::Reg64 => format!("[software\\\\classes\\\\appid\\\\{guid}]"),
+        View::Reg32 => {
+            format!("[software\\\\classes\\\\wow6432node\\\\appid\\\\{guid}]")
+        }
+    }
+}
+
+/// Checks the AppID's `AccessPermission`, `LaunchPermission` (the defaults for `service`,
+/// granting the clients' group when `clients` is its SID) and `AuthenticationLevel`
+/// (`level`) in both views; one line per view, or what differs.
+pub fn appid_security(
+    reg: &str,
+    service: bool,
+    clients: Option<&registration::security::Sid>,
+    level: u32,
+) -> Result<Vec<String>, String> {
+    use registration::security::{self as sec, Descriptor};
+    let mut out = Vec::new();
+    for view in registration::VIEWS {
+        let head = appid_head(view);
+        let section = match reg_section(reg, &head) {
+            Some(s) => s,
+            // `HKLM\Software\Classes\AppID` is a key WOW64 shares (not redirected) since
+            // Windows 7, and so in Wine: both views are the one key checked already.
+            None if view == View::Reg32 && !out.is_empty() => {
+                out.push(format!(
+                    "{view:?}: the same key (HKCR\\AppID is shared by both registry views)"
+                ));
+                continue;
+            }
+            None => return Err(format!("no key {head}")),
+        };
+        for (name, want) in [
+            ("accesspermission", sec::default_access(service, clients)),
+            ("launchpermission", sec::default_launch(service, clients)),
+        ] {
+            let got = reg_hex(section, name).ok_or_else(|| format!("{head}: no {name}"))?;
+            if got != want.to_bytes() {
+                let text =
+                    Descriptor::from_bytes(&got).map_or("not a descriptor".into(), |d| d.sddl());
+                return Err(format!(
+                    "{head}: {name} is {text}, not the default {}",
+                    want.sddl()
+                ));
+            }
+        }
+        match reg_dword(section, "authenticationlevel") {
+            Some(l) if l == level => {}
+            other => {
+                return Err(format!(
+                    "{head}: authenticationlevel is {other:?}, not {level}"
+                ))
+            }
+        }
+        out.push(format!(
+            "{view:?}: AccessPermission {}, LaunchPermission {}, AuthenticationLevel {level}",
+            sec::default_access(service, clients).sddl(),
+            sec::default_launch(service, clients).sddl()
+        ));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 /// The rows of an MSI table as `msiinfo export` prints them (tab-separated, after three
 /// header lines).
@@ -387,11 +498,69 @@ mod tests {
         );
         let actions = table(&msi, "CustomAction").unwrap();
         let service = actions.iter().find(|r| r[0] == "InstallService").unwrap();
-        assert_eq!(service[3], "/Service");
+        assert_eq!(service[3], "/Service /CreateGroup");
+        let security = actions.iter().find(|r| r[0] == "InstallSecurity").unwrap();
+        assert_eq!(security[3], "/RegServer /CreateGroup");
+        let upgrade = actions
+            .iter()
+            .find(|r| r[0] == "UpgradeUninstallServer")
+            .unwrap();
+        assert_eq!(upgrade[3], "/UnregServer /KeepSecurity");
         for a in actions.iter().filter(|r| r[0].starts_with("Rollback")) {
             let t = a[1].parse::<u32>().unwrap();
             assert_eq!(t & (IN_SCRIPT | ROLLBACK), IN_SCRIPT | ROLLBACK, "{a:?}");
         }
+    }
+
+    /// A `system.reg` as Wine writes it: the AppID key in both views, a long binary value
+    /// continued over lines.
+    #[test]
+    fn the_appid_security_values_are_read_from_a_wine_registry() {
+        use registration::security::{default_access, default_launch};
+        let hex = |b: &[u8]| -> String {
+            let all: Vec<String> = b.iter().map(|x| format!("{x:02x}")).collect();
+            all.chunks(20)
+                .map(|c| c.join(","))
+                .collect::<Vec<_>>()
+                .join(",\\\n  ")
+        };
+        let key = |view: View, level: u32| {
+            format!(
+                "{} 1733450000\n#time=1db47\n@=\"ServerCTOPC\"\n\"accesspermission\"=hex:{}\n\"authenticationlevel\"=dword:{level:08x}\n\"launchpermission\"=hex:{}\n\n",
+                appid_head(view),
+                hex(&default_access(false, None).to_bytes()),
+                hex(&default_launch(false, None).to_bytes())
+            )
+        };
+        let reg = format!(
+            "WINE REGISTRY Version 2\n\n[software\\\\classes\\\\clsid] 1\n\n{}{}",
+            key(View::Reg64, 5),
+            key(View::Reg32, 5)
+        );
+        let lines = appid_security(&reg, false, None, 5).unwrap();
+        assert_eq!(lines.len(), 2);
+        assert!(
+            lines[0].starts_with("Reg64: AccessPermission O:S-1-5-32-544"),
+            "{lines:?}"
+        );
+        // Another level, the service's descriptor, a missing view: each named.
+        let e = appid_security(&reg, false, None, 6).unwrap_err();
+        assert!(e.contains("authenticationlevel is Some(5), not 6"), "{e}");
+        let e = appid_security(&reg, true, None, 5).unwrap_err();
+        assert!(e.contains("accesspermission is O:S-1-5-32-544"), "{e}");
+        // The AppID key is shared by both views (what Wine's registry holds): one key.
+        let shared = key(View::Reg64, 5);
+        let lines = appid_security(&shared, false, None, 5).unwrap();
+        assert!(lines[1].starts_with("Reg32: the same key"), "{lines:?}");
+        let only32 = key(View::Reg32, 5);
+        let e = appid_security(&only32, false, None, 5).unwrap_err();
+        assert!(e.starts_with("no key [software\\\\classes\\\\appid"), "{e}");
+        assert_eq!(reg_dword("\"x\"=dword:0000000a", "x"), Some(10));
+        assert_eq!(
+            reg_hex("\"x\"=hex:01,ff,\\\n  02\n\"y\"=hex:03", "x"),
+            Some(vec![1, 255, 2])
+        );
+        assert_eq!(reg_hex("\"x\"=hex:zz", "x"), None);
     }
 
     #[test]
@@ -635,6 +804,67 @@ mod wine_test {
 
         fn install_dir(&self) -> PathBuf {
             self.pfx.join(INSTALL)
+        }
+
+        /// The AppID's security values in both views: the defaults of a plain install
+        /// (without the clients' group, which Wine cannot create: [`Self::clients_group`]),
+        /// authentication level `level`.
+        fn security(&self, what: &str, level: u32) -> Result<(), String> {
+            let lines = appid_security(&self.system_reg(), false, None, level)
+                .map_err(|e| format!("msi-test: {what}: AppID security: {e}"))?;
+            for l in lines {
+                println!("msi-test: {what}: AppID {l}");
+            }
+            Ok(())
+        }
+
+        /// The clients' group under Wine: `NetLocalGroupAdd` is a stub (success, no group),
+        /// so the MSI's `/RegServer /CreateGroup` says so and the descriptors leave the
+        /// group out ([`Self::security`]). Asserted as that limitation: the same command,
+        /// run again here, prints the WARN naming it.
+        fn clients_group(&self) -> Result<(), String> {
+            let exe = "C:\\Program Files\\ServerCTOPC\\ServerCTOPC.exe";
+            let (code, out) = self.run(Arch::X64, exe, &["/RegServer", "/CreateGroup"], 120);
+            self.settle();
+            let warn = out
+                .lines()
+                .find(|l| l.contains("Wine's NetLocalGroupAdd is a stub"))
+                .map(str::to_owned);
+            match (code, warn) {
+                (0, Some(w)) => {
+                    println!("msi-test: the clients' group (Wine limitation, as documented): {w}");
+                    Ok(())
+                }
+                _ => Err(format!(
+                    "msi-test: `ServerCTOPC.exe /RegServer /CreateGroup`: exit {code}, no WARN about Wine's NetLocalGroupAdd:\n{out}"
+                )),
+            }
+        }
+
+        /// `AuthenticationLevel` = `level` in both views, as an administrator would set it.
+        fn set_authentication_level(&self, level: u32) -> Result<(), String> {
+            let key = format!("HKLM\\Software\\Classes\\AppID\\{{{CLSID}}}");
+            let d = level.to_string();
+            for view in ["/reg:64", "/reg:32"] {
+                let args = [
+                    "add",
+                    key.as_str(),
+                    "/v",
+                    "AuthenticationLevel",
+                    "/t",
+                    "REG_DWORD",
+                    "/d",
+                    d.as_str(),
+                    "/f",
+                    view,
+                ];
+                let (code, out) = self.run(Arch::X64, "reg", &args, 60);
+                if code != 0 {
+                    return Err(format!("msi-test: reg add {view}: exit {code}: {out}"));
+                }
+            }
+            self.settle();
+            Ok(())
         }
 
         /// The registry of the prefix (both views: Wow6432Node is in system.reg too).
@@ -1106,6 +1336,8 @@ mod wine_test {
         }
         clock.lap("installed");
         ctx.installed("after install")?;
+        ctx.security("after install", 5)?;
+        ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
 
@@ -1139,6 +1371,9 @@ mod wine_test {
                 Err(format!("msi-test: {when} removed or changed {USER_LOG}"))
             }
         };
+        // An administrator's change (dcomcnfg's "Authentication Level" raised to packet
+        // privacy, 6) in both views: the upgrade must keep it.
+        ctx.set_authentication_level(6)?;
         let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
         if code != 0 {
             return Err(format!(
@@ -1158,6 +1393,10 @@ mod wine_test {
         ));
         ctx.installed("after upgrade")?;
         service_installed(&ctx.system_reg())?;
+        // The older version's removal (`/UnregServer /KeepSecurity`) put the values back,
+        // so `/Service` wrote none: the administrator's level, the first install's
+        // descriptors.
+        ctx.security("after upgrade (the administrator's values kept)", 6)?;
         println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
         ctx.serves("after upgrade", "-ServiceRun")?;
         clock.lap("both clients served after the upgrade (through the service)");

@@ -131,12 +131,14 @@ impl Identity {
         })
     }
 
-    /// From a certificate file and a key file (PEM).
+    /// From a certificate file and a key file (PEM); a WARN when the key file is open to
+    /// its group or others (`ctopc_runtime::secret_file`).
     pub fn load(cert_file: &Path, key_file: &Path) -> Result<Identity, TlsError> {
         let cert = std::fs::read(cert_file)
             .map_err(|e| TlsError(format!("{}: {e}", cert_file.display())))?;
         let key = std::fs::read(key_file)
             .map_err(|e| TlsError(format!("{}: {e}", key_file.display())))?;
+        ctopc_runtime::secret_file::warn_if_exposed(key_file, "the asix link's private key");
         Identity::from_pem(&cert, &key).map_err(|TlsError(m)| {
             TlsError(format!(
                 "{} / {}: {m}",

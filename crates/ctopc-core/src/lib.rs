@@ -19,6 +19,7 @@ pub mod namespace;
 pub mod ops;
 pub mod properties;
 pub mod quality;
+pub mod secrets;
 pub mod source;
 pub mod stream;
 pub mod time;

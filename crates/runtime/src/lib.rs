@@ -24,6 +24,7 @@ pub mod frontend;
 pub mod metrics_http;
 pub mod prometheus;
 mod runtime;
+pub mod secret_file;
 pub mod start;
 
 pub use frontend::{Delivery, GroupSink, SessionSink, ThreadHook};

@@ -5,14 +5,16 @@
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Command {
-    /// Write the registry keys (CLSID, ProgID, AppID, categories, legacy OPC key).
-    RegServer,
-    /// Remove them.
-    UnregServer,
+    /// Write the registry keys (CLSID, ProgID, AppID, categories, legacy OPC key);
+    /// `create_group` (`/CreateGroup`): create the local group `ServerCTOPC Clients` first.
+    RegServer { create_group: bool },
+    /// Remove them; `keep_security` (`/KeepSecurity`): keep the AppID's security values.
+    UnregServer { keep_security: bool },
     /// Started by COM to serve clients.
     Embedding,
-    /// Register as an NT service (on demand, LocalService), with AppID LocalService.
-    Service,
+    /// Register as an NT service (on demand, LocalService), with AppID LocalService;
+    /// `create_group` as for `RegServer`.
+    Service { create_group: bool },
     /// Started by the service control manager.
     ServiceRun,
     /// Serve OPC UA in the foreground until Ctrl+C (`serve`, `/Serve`).
@@ -34,10 +36,16 @@ pub const USAGE: &str = "\
 ServerCTOPC - OPC DA 2.05a/3.0 server for asix (ProgID ServerCTOPC.App)
 
 usage: ServerCTOPC.exe <switch>
-  /RegServer     register the server (CLSID, ProgID, AppID, OPC DA 2.0/3.0 categories)
+  /RegServer     register the server (CLSID, ProgID, AppID, OPC DA 2.0/3.0 categories;
+                 the AppID's AccessPermission, LaunchPermission and AuthenticationLevel
+                 where absent)
   /UnregServer   remove the registration
   /Service       register as the NT service ServerCTOPC (on demand, as LocalService;
                  COM starts it when a client connects); /UnregServer removes it
+  /RegServer /CreateGroup, /Service /CreateGroup
+                 also create the local group \"ServerCTOPC Clients\" (the MSI does)
+  /UnregServer /KeepSecurity
+                 keep the AppID's security values (the MSI's major upgrade does)
   -Embedding     (used by COM) serve OPC clients; the server exits when the last
                  client has gone
   -ServiceRun    (used by the service control manager) run as the NT service
@@ -84,18 +92,43 @@ where
     let Some(name) = first.strip_prefix('/').or_else(|| first.strip_prefix('-')) else {
         return Err(format!("unknown argument `{first}`"));
     };
+    let option = |wanted: &str| -> Result<bool, String> {
+        match args.get(1) {
+            None => Ok(false),
+            Some(a)
+                if a.strip_prefix('/')
+                    .or_else(|| a.strip_prefix('-'))
+                    .is_some_and(|o| o.eq_ignore_ascii_case(wanted))
+                    && args.len() == 2 =>
+            {
+                Ok(true)
+            }
+            Some(extra) => Err(format!("unexpected argument `{extra}` after `{first}`")),
+        }
+    };
     let cmd = match name.to_ascii_lowercase().as_str() {
-        "regserver" => Command::RegServer,
-        "unregserver" => Command::UnregServer,
+        "regserver" => Command::RegServer {
+            create_group: option("CreateGroup")?,
+        },
+        "unregserver" => Command::UnregServer {
+            keep_security: option("KeepSecurity")?,
+        },
+        "service" => Command::Service {
+            create_group: option("CreateGroup")?,
+        },
         "embedding" | "automation" => Command::Embedding,
-        "service" => Command::Service,
         "servicerun" => Command::ServiceRun,
         "serve" => Command::Serve,
         "?" | "h" | "help" => Command::Help,
         _ => return Err(format!("unknown switch `{first}`")),
     };
-    // COM passes nothing else with -Embedding; registration takes no extra arguments.
-    if let Some(extra) = args.get(1) {
+    // COM passes nothing else with -Embedding; registration takes only its option.
+    if let Some(extra) = args.get(1).filter(|_| {
+        !matches!(
+            cmd,
+            Command::RegServer { .. } | Command::UnregServer { .. } | Command::Service { .. }
+        )
+    }) {
         return Err(format!("unexpected argument `{extra}` after `{first}`"));
     }
     Ok(cmd)
@@ -138,16 +171,51 @@ mod tests {
     #[test]
     fn switches_accept_slash_or_dash_in_any_case() {
         for (arg, cmd) in [
-            ("/RegServer", Command::RegServer),
-            ("-regserver", Command::RegServer),
-            ("/REGSERVER", Command::RegServer),
-            ("-UnregServer", Command::UnregServer),
-            ("/unregserver", Command::UnregServer),
+            (
+                "/RegServer",
+                Command::RegServer {
+                    create_group: false,
+                },
+            ),
+            (
+                "-regserver",
+                Command::RegServer {
+                    create_group: false,
+                },
+            ),
+            (
+                "/REGSERVER",
+                Command::RegServer {
+                    create_group: false,
+                },
+            ),
+            (
+                "-UnregServer",
+                Command::UnregServer {
+                    keep_security: false,
+                },
+            ),
+            (
+                "/unregserver",
+                Command::UnregServer {
+                    keep_security: false,
+                },
+            ),
             ("-Embedding", Command::Embedding),
             ("/embedding", Command::Embedding),
             ("/?", Command::Help),
-            ("/Service", Command::Service),
-            ("-service", Command::Service),
+            (
+                "/Service",
+                Command::Service {
+                    create_group: false,
+                },
+            ),
+            (
+                "-service",
+                Command::Service {
+                    create_group: false,
+                },
+            ),
             ("-ServiceRun", Command::ServiceRun),
         ] {
             assert_eq!(parse([arg]), Ok(cmd), "{arg}");
@@ -196,6 +264,33 @@ mod tests {
             Ok(Command::PkiTrust("client.der".into()))
         );
         assert!(parse(["pki", "trust"]).is_err());
+    }
+
+    #[test]
+    fn registration_takes_its_one_option() {
+        assert_eq!(
+            parse(["/RegServer", "/CreateGroup"]),
+            Ok(Command::RegServer { create_group: true })
+        );
+        assert_eq!(
+            parse(["-service", "-creategroup"]),
+            Ok(Command::Service { create_group: true })
+        );
+        assert_eq!(
+            parse(["/UnregServer", "/KeepSecurity"]),
+            Ok(Command::UnregServer {
+                keep_security: true
+            })
+        );
+        for bad in [
+            &["/RegServer", "/KeepSecurity"][..],
+            &["/UnregServer", "/CreateGroup"],
+            &["/RegServer", "/CreateGroup", "x"],
+            &["/RegServer", "CreateGroup"],
+            &["-Embedding", "/CreateGroup"],
+        ] {
+            assert!(parse(bad).is_err(), "{bad:?}");
+        }
     }
 
     #[test]

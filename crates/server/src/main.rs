@@ -38,12 +38,12 @@ fn run(cmd: cli::Command) -> ExitCode {
     use ctopc_com::host;
     use ctopc_com::lifetime::StopSignal;
     let result = match cmd {
-        cli::Command::RegServer => host::register(),
-        cli::Command::UnregServer => host::unregister(),
+        cli::Command::RegServer { create_group } => host::register(create_group),
+        cli::Command::UnregServer { keep_security } => host::unregister(keep_security),
         cli::Command::Embedding => {
             return embedding(host::ServeMode::UntilUnused, &StopSignal::new())
         }
-        cli::Command::Service => host::register_service(),
+        cli::Command::Service { create_group } => host::register_service(create_group),
         cli::Command::ServiceRun => {
             return match ctopc_com::service::run(Box::new(|stop| {
                 match embedding(host::ServeMode::UntilStopped, &stop) {

@@ -25,6 +25,9 @@ use std::future::Future;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+/// The application instance certificate's private key, below the PKI folder.
+pub const PRIVATE_KEY: &str = "private/private.pem";
+
 /// The `[UA]` settings, as plain values (paths resolved).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
@@ -125,6 +128,15 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
             settings.pki_dir.display()
         )
     })?;
+    // The private key's folder owner-only before async-opcua makes the key in it (it
+    // writes the file with the default mode); the key itself is narrowed once made.
+    let key_path = settings.pki_dir.join(PRIVATE_KEY);
+    let key_existed = key_path.exists();
+    if let Some(private) = key_path.parent().filter(|_| !key_existed) {
+        std::fs::create_dir_all(private)
+            .and_then(|()| ctopc_runtime::secret_file::narrow(private))
+            .map_err(|e| format!("cannot make {}: {e}", private.display()))?;
+    }
     let auth = Arc::new(UsersAuth::new(
         settings.users_file.clone(),
         settings.allow_anonymous,
@@ -143,7 +155,7 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         .product_uri("urn:askom:ServerCTOPC")
         .create_sample_keypair(true)
         .certificate_path("own/cert.der")
-        .private_key_path("private/private.pem")
+        .private_key_path(PRIVATE_KEY)
         .pki_dir(settings.pki_dir.clone())
         .trust_client_certs(false)
         .check_cert_time(true)
@@ -172,6 +184,16 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         b = b.add_endpoint("none", ServerEndpoint::new_none("/", &[] as &[String]));
     }
     let (server, handle) = b.build()?;
+    if !key_existed && key_path.exists() {
+        ctopc_runtime::secret_file::narrow(&key_path)
+            .map_err(|e| format!("cannot make {} private: {e}", key_path.display()))?;
+        tracing::info!(
+            "OPC UA: made the application instance certificate and its private key {} (owner only)",
+            key_path.display()
+        );
+    }
+    ctopc_runtime::secret_file::warn_if_exposed(&key_path, "OPC UA: the private key");
+    ctopc_runtime::secret_file::warn_if_exposed(&settings.users_file, "OPC UA: the users file");
     let node_manager = built
         .lock()
         .unwrap_or_else(|p| p.into_inner())

@@ -170,7 +170,8 @@ pub fn load(path: &Path) -> Result<Vec<User>, String> {
     Ok(parse(&text, &path.display().to_string()))
 }
 
-/// Adds a user to the file (replacing one of the same name), keeping the other lines.
+/// Adds a user to the file (replacing one of the same name), keeping the other lines; the
+/// file is written owner-only (`ctopc_runtime::secret_file`).
 pub fn add(path: &Path, user: &User) -> Result<(), String> {
     let old = match std::fs::read_to_string(path) {
         Ok(t) => t,
@@ -189,7 +190,9 @@ pub fn add(path: &Path, user: &User) -> Result<(), String> {
     }
     text.push_str(&user.line());
     text.push('\n');
-    std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    // Readable by the server's account only (0600 on Unix): the hashes are offline-guessable.
+    ctopc_runtime::secret_file::write(path, text.as_bytes())
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
 #[cfg(test)]
@@ -241,6 +244,24 @@ mod tests {
         let anna = users.iter().find(|u| u.name == "anna").unwrap();
         assert_eq!(anna.role, Role::Writer);
         assert!(anna.verify("c"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// `ServerCTOPC user add`'s file is owner-only, also one that was open before.
+    #[cfg(unix)]
+    #[test]
+    fn the_users_file_is_written_owner_only() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = std::env::temp_dir().join(format!("ctopc-ua-mode-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("users.txt");
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        add(&path, &User::new("anna", Role::Reader, "a")).unwrap();
+        assert_eq!(mode(&path), 0o600);
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+        add(&path, &User::new("bob", Role::Writer, "b")).unwrap();
+        assert_eq!(mode(&path), 0o600);
+        assert_eq!(load(&path).unwrap().len(), 2);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

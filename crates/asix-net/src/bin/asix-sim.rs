@@ -272,7 +272,9 @@ fn gen_cert(dir: &str, name: &str) -> Result<String, String> {
     let cert = dir.join("asix-cert.pem");
     let key = dir.join("asix-key.pem");
     std::fs::write(&cert, &g.cert_pem).map_err(|e| format!("{}: {e}", cert.display()))?;
-    std::fs::write(&key, &g.key_pem).map_err(|e| format!("{}: {e}", key.display()))?;
+    // The key owner-only (0600 on Unix).
+    ctopc_runtime::secret_file::write(&key, g.key_pem.as_bytes())
+        .map_err(|e| format!("{}: {e}", key.display()))?;
     Ok(format!(
         "certificate {}\nprivate key {} (keep it secret)\nfingerprint {}",
         cert.display(),

@@ -277,6 +277,48 @@ pub fn account_sid(name: &str) -> Option<Vec<u8>> {
     Some(sid)
 }
 
+/// What [`create_local_group`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GroupAdded {
+    /// The group is new.
+    Created,
+    /// It existed already (its members are kept).
+    Existed,
+}
+
+/// Creates the local group `name` with `comment` (`NetLocalGroupAdd`, level 1, on this
+/// machine); `Err` carries the `NET_API_STATUS` (5: access denied, run as administrator).
+/// Whether it can then be found is [`account_sid`]'s answer: Wine's netapi32 answers
+/// success and creates nothing (`platform::local_group_missing_reason`).
+pub fn create_local_group(name: &str, comment: &str) -> Result<GroupAdded, u32> {
+    use windows::Win32::NetworkManagement::NetManagement::{
+        NERR_GroupExists, NetLocalGroupAdd, LOCALGROUP_INFO_1,
+    };
+    let mut wname: Vec<u16> = name.encode_utf16().chain([0]).collect();
+    let mut wcomment: Vec<u16> = comment.encode_utf16().chain([0]).collect();
+    let info = LOCALGROUP_INFO_1 {
+        lgrpi1_name: PWSTR(wname.as_mut_ptr()),
+        lgrpi1_comment: PWSTR(wcomment.as_mut_ptr()),
+    };
+    let mut parm_err = 0u32;
+    // SAFETY: level 1 takes a LOCALGROUP_INFO_1, whose two strings are NUL-terminated
+    // buffers alive for the call (only read); `parm_err` is a live out-parameter.
+    let status = unsafe {
+        NetLocalGroupAdd(
+            windows::core::PCWSTR::null(),
+            1,
+            (&raw const info).cast(),
+            Some(&raw mut parm_err),
+        )
+    };
+    const ERROR_ALIAS_EXISTS: u32 = 1379;
+    match status {
+        0 => Ok(GroupAdded::Created),
+        s if s == NERR_GroupExists || s == ERROR_ALIAS_EXISTS => Ok(GroupAdded::Existed),
+        s => Err(s),
+    }
+}
+
 /// The `S-1-<authority>-<sub>...` text of a SID's bytes (MS-DTYP 2.4.2.2).
 pub fn sid_text(sid: &[u8]) -> String {
     if sid.len() < 8 {

@@ -58,9 +58,33 @@ fn with_registration<R>(
     Ok(f(&registration::serverctopc(&exe, service)))
 }
 
+/// Creates the local group `ServerCTOPC Clients` (`security::CLIENTS_GROUP`) when it
+/// does not exist, and says what happened. A group that cannot be created (not an
+/// administrator; Wine, whose `NetLocalGroupAdd` is a stub) is a WARN line, not a
+/// failure: the descriptors then leave it out ([`write_appid_security`]).
+fn ensure_clients_group() {
+    use crate::com::caller::{account_sid, create_local_group, GroupAdded};
+    use registration::security::CLIENTS_GROUP;
+    const COMMENT: &str = "Accounts that may use the ServerCTOPC OPC server, also remotely";
+    match create_local_group(CLIENTS_GROUP, COMMENT) {
+        Ok(GroupAdded::Created) => println!("ServerCTOPC: created the local group \"{CLIENTS_GROUP}\""),
+        Ok(GroupAdded::Existed) => println!("ServerCTOPC: the local group \"{CLIENTS_GROUP}\" exists (its members are kept)"),
+        Err(status) => println!(
+            "ServerCTOPC: WARN: cannot create the local group \"{CLIENTS_GROUP}\" (NetLocalGroupAdd: status {status}{}); create it with `net localgroup \"{CLIENTS_GROUP}\" /add`",
+            if status == 5 { ", access denied: run as administrator" } else { "" }
+        ),
+    }
+    if account_sid(CLIENTS_GROUP).is_none() {
+        println!(
+            "ServerCTOPC: WARN: {}",
+            crate::com::platform::local_group_missing_reason(CLIENTS_GROUP)
+        );
+    }
+}
+
 /// The AppID's security values where absent (`ctopc_registration::security`), both
 /// views: what an administrator set (dcomcnfg) stays. The clients' group
-/// (`ServerCTOPC Clients`) is granted when it exists.
+/// (`ServerCTOPC Clients`) is granted when it exists (a WARN line when it does not).
 fn write_appid_security(service: bool) -> windows::core::Result<()> {
     use registration::security;
     let clients = crate::com::caller::account_sid(security::CLIENTS_GROUP)
@@ -71,7 +95,7 @@ fn write_appid_security(service: bool) -> windows::core::Result<()> {
             security::CLIENTS_GROUP
         ),
         None => println!(
-            "ServerCTOPC: no local group \"{}\": remote clients are not granted access (create it and register again, or use dcomcnfg)",
+            "ServerCTOPC: WARN: no local group \"{}\": the descriptors leave it out and remote clients are not granted access (create it and register again with /CreateGroup, or use dcomcnfg)",
             security::CLIENTS_GROUP
         ),
     }
@@ -85,10 +109,14 @@ fn write_appid_security(service: bool) -> windows::core::Result<()> {
     Ok(())
 }
 
-/// `/RegServer`.
-pub fn register() -> windows::core::Result<()> {
+/// `/RegServer`; `create_group` (`/RegServer /CreateGroup`, what the MSI runs): the
+/// clients' group first, so that the descriptors grant it.
+pub fn register(create_group: bool) -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     with_registration(None, winreg::register)??;
+    if create_group {
+        ensure_clients_group();
+    }
     write_appid_security(false)?;
     println!(
         "ServerCTOPC: registered {PROGID} ({})",
@@ -99,12 +127,16 @@ pub fn register() -> windows::core::Result<()> {
 
 /// `/Service`: the COM registration with AppID `LocalService`, and the NT service
 /// (on demand, as LocalService): COM starts the service when a client activates the server.
-pub fn register_service() -> windows::core::Result<()> {
+/// `create_group` as for [`register`].
+pub fn register_service(create_group: bool) -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     let exe = exe_path()?;
     crate::com::service::install(std::path::Path::new(&exe))
         .map_err(|e| crate::com::error::error(E_FAIL, &e))?;
     with_registration(Some(crate::com::service::SERVICE_NAME), winreg::register)??;
+    if create_group {
+        ensure_clients_group();
+    }
     write_appid_security(true)?;
     println!(
         "ServerCTOPC: registered {PROGID} as the NT service {}",
@@ -113,11 +145,37 @@ pub fn register_service() -> windows::core::Result<()> {
     Ok(())
 }
 
-/// `/UnregServer`.
-pub fn unregister() -> windows::core::Result<()> {
+/// `/UnregServer`; `keep_security` (`/UnregServer /KeepSecurity`, what the MSI runs when a
+/// major upgrade removes the older version): the AppID's `AccessPermission`,
+/// `LaunchPermission` and `AuthenticationLevel` (both views) are put back after the keys
+/// are removed, so that an administrator's settings survive the upgrade (the new version's
+/// registration writes its values only where absent).
+pub fn unregister(keep_security: bool) -> windows::core::Result<()> {
+    use registration::security::{self, Data, DefaultValue};
     let _com = Apartment::mta_without_keepalive()?;
+    let kept: Vec<DefaultValue> = if keep_security {
+        security::appid_defaults(registration::CLSID_SERVERCTOPC, false, None)
+            .into_iter()
+            .filter_map(|mut v| {
+                v.data = match v.data {
+                    Data::Binary(_) => Data::Binary(winreg::read_binary(v.view, &v.path, v.name)?),
+                    Data::Dword(_) => Data::Dword(winreg::read_dword(v.view, &v.path, v.name)?),
+                };
+                Some(v)
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     with_registration(None, winreg::unregister)??;
     crate::com::service::uninstall().map_err(|e| crate::com::error::error(E_FAIL, &e))?;
+    if !kept.is_empty() {
+        winreg::write_absent(&kept)?;
+        println!(
+            "ServerCTOPC: kept the AppID's security values ({} of both views)",
+            kept.len()
+        );
+    }
     println!("ServerCTOPC: unregistered {PROGID}");
     Ok(())
 }

@@ -23,3 +23,15 @@ pub fn caller_context_reason(api: &str, hr: windows_core::HRESULT) -> String {
         format!("{api}: {code:#010x}{name}")
     }
 }
+
+/// Why the local group `name` cannot be found right after `NetLocalGroupAdd` answered
+/// success: under Wine, whose netapi32 `NetLocalGroupAdd` is a stub (it answers
+/// `NERR_Success` and creates nothing; Wine has no local account database), the text says
+/// so; elsewhere it names the lookup that failed.
+pub fn local_group_missing_reason(name: &str) -> String {
+    if wine::under_wine() {
+        format!("Wine's NetLocalGroupAdd is a stub: it reports success and creates no group, so LookupAccountName finds no \"{name}\"")
+    } else {
+        format!("LookupAccountName finds no \"{name}\" after NetLocalGroupAdd reported success")
+    }
+}
