@@ -3,6 +3,8 @@
 //! and bad options (exit 2). The scenario against a running server is `cargo xtask
 //! ua-interop` (xtask/src/ua_client.rs), which runs the binary these tests make cargo build.
 #![cfg(not(windows))]
+// A test's failure is its panic (the crate denies expect for its library and opcdiag).
+#![allow(clippy::expect_used)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
