@@ -14,6 +14,9 @@ pub struct Artifacts {
     /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
     pub dir32: PathBuf,
     pub proxy32: PathBuf,
+    /// target/i686-pc-windows-gnu/release/xconnect_double.dll: the 32-bit test double of
+    /// AsixConnect's Automation server, its type library `xconnect_double.tlb` beside it.
+    pub xconnect_double: PathBuf,
 }
 
 /// Builds the native asix simulator (`asix-sim`, release) for the demo, the soak's `--net`
@@ -66,6 +69,7 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     ]))?;
     proxy::build_proxy(&root, Arch::X64)?;
     proxy::build_proxy(&root, Arch::X86)?;
+    xconnect_double()?;
     Ok(built())
 }
 
@@ -81,5 +85,35 @@ pub fn built() -> Artifacts {
         dir,
         dir32: Arch::X86.release_dir(&root),
         proxy32: proxy::dll_path(&root, Arch::X86),
+        xconnect_double: Arch::X86.release_dir(&root).join("xconnect_double.dll"),
     }
+}
+
+/// Builds the test double of `XConnect.ServerCT` (tests/xconnect-double, a 32-bit
+/// in-process server, as the original) and compiles its type library with
+/// `i686-w64-mingw32-widl -t` into `xconnect_double.tlb` beside the DLL (where the DLL
+/// loads and registers it). widl imports `stdole2.tlb` from Wine's i386 libraries
+/// (package libwine:i386, which wine32 brings).
+pub fn xconnect_double() -> Result<PathBuf, String> {
+    let root = util::root();
+    util::run(util::cargo().args([
+        "build",
+        "--release",
+        "--target",
+        Arch::X86.target(),
+        "-p",
+        "xconnect-double",
+    ]))?;
+    let dir = Arch::X86.release_dir(&root);
+    let tlb = dir.join("xconnect_double.tlb");
+    util::run(
+        std::process::Command::new(Arch::X86.widl())
+            .args([Arch::X86.widl_m(), "-I/usr/include/wine/wine/windows"])
+            .arg("-L/usr/lib/i386-linux-gnu/wine/i386-windows")
+            .arg("-t")
+            .arg("-o")
+            .arg(&tlb)
+            .arg(root.join("tests/xconnect-double/xconnect.idl")),
+    )?;
+    Ok(dir.join("xconnect_double.dll"))
 }

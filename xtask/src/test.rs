@@ -12,9 +12,10 @@
 //!    steps 5 to 7 (which mostly wait on Wine and the server, not the CPU), the
 //!    third-party client's builds (both bitnesses, in `target/thirdparty`, which cargo
 //!    locks apart from `target/`) and step 8;
-//! 5. registration of the proxy/stub DLLs (64-bit and 32-bit) and the server in the
-//!    project's Wine prefix; two native `asix-sim --rest` stations for the Asix.Evo REST
-//!    test (`rest_stations.rs`), up until the end-to-end tests end;
+//! 5. registration of the proxy/stub DLLs (64-bit and 32-bit), the server and the test
+//!    double of `XConnect.ServerCT` (32-bit) in the project's Wine prefix; two native
+//!    `asix-sim --rest` stations for the Asix.Evo REST test (`rest_stations.rs`), up until
+//!    the end-to-end tests end;
 //! 6. the end-to-end tests (crate `tests/`, run under Wine by the cargo runner) and the COM
 //!    crate's unit tests (Windows-only), then the third-party client;
 //! 7. the end-to-end tests again as a **32-bit client** ([`E2E_32`]: built for
@@ -215,7 +216,10 @@ impl Background {
 /// against the 64-bit probe's stub), registration as 32-bit processes see it, and the
 /// 32-bit opcdiag (`opcdiag`, and `doctor`: its self-check, broken copies of the prefix
 /// included). Left out: `service` (it tests the server as an NT service, not the
-/// client's side of the wire). Measured: that one passes at 32-bit too.
+/// client's side of the wire). Measured: that one passes at 32-bit too. `xconnect` (the
+/// late-bound Automation client against the test double of AsixConnect's
+/// `XConnect.ServerCT`, a 32-bit in-process server) runs only here: its file is empty in
+/// a 64-bit build.
 pub const E2E_32: &[&str] = &[
     "da10",
     "diagnostics",
@@ -243,6 +247,7 @@ pub const E2E_32: &[&str] = &[
     "server_props",
     "server_shutdown",
     "write_rights",
+    "xconnect",
 ];
 
 /// The 64-bit end-to-end units: the COM crate's unit and in-process tests and the server
@@ -420,6 +425,22 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
             ));
         }
     }
+    // The test double of AsixConnect's XConnect.ServerCT (tests/tests/xconnect.rs): a
+    // 32-bit in-process server, so the 32-bit regsvr32 (its DllRegisterServer writes the
+    // 32-bit view and registers its type library).
+    let status = util::run_with_timeout(
+        wine::wine_arch(Arch::X86, "regsvr32")
+            .arg("/s")
+            .arg(&a.xconnect_double),
+        limit,
+    )?;
+    if !status.success() {
+        return Err(format!(
+            "regsvr32 ({}) {} failed: {status}",
+            Arch::X86.target(),
+            a.xconnect_double.display()
+        ));
+    }
     // The server browser too (OPC.ServerList.1: tests/tests/server_list.rs).
     for exe in [&a.server, &a.server_list] {
         let status = util::run_with_timeout(wine::wine(exe).arg("/RegServer"), limit)?;
@@ -428,9 +449,10 @@ pub fn register(a: &build::Artifacts) -> Result<(), String> {
         }
     }
     println!(
-        "test: registered {}, {}, {} and {}",
+        "test: registered {}, {}, {}, {} and {}",
         a.proxy.display(),
         a.proxy32.display(),
+        a.xconnect_double.display(),
         a.server.display(),
         a.server_list.display()
     );

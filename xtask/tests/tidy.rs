@@ -5,12 +5,12 @@
 //! `clippy.toml`:
 //! - `unsafe` only in crates/ctopc-com, the client library (crates/opc-client), the server
 //!   browser (crates/serverlist) and the end-to-end tests (tests/, which pass deliberately
-//!   invalid raw pointers and hold the marshal probe in tests/src/probe): rustc's
-//!   `unsafe_code = "forbid"` (`[workspace.lints.rust]`), relaxed only in the `[lints]`
-//!   tables of those crates;
+//!   invalid raw pointers and hold the marshal probe in tests/src/probe) and the COM test
+//!   double tests/xconnect-double: rustc's `unsafe_code = "forbid"`
+//!   (`[workspace.lints.rust]`), relaxed only in the `[lints]` tables of those crates;
 //! - a `// SAFETY:` comment at every unsafe block: clippy's `undocumented_unsafe_blocks`;
-//! - no `.unwrap()` / `.expect(` in ctopc-com, opc-client, serverlist and tests/src/probe
-//!   outside tests (a panic would cross COM): clippy's `unwrap_used` and `expect_used`
+//! - no `.unwrap()` / `.expect(` in ctopc-com, opc-client, serverlist, tests/src/probe and
+//!   tests/xconnect-double outside tests (a panic would cross COM): clippy's `unwrap_used` and `expect_used`
 //!   (those crates' `[lints]`, the probe's `#![deny]`; `allow-unwrap-in-tests` in
 //!   clippy.toml);
 //! - no `windows::core::Error::new` outside `ctopc_com::error` (it aborts under Wine):
@@ -121,6 +121,7 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         "crates/opc-client",
         "crates/serverlist",
         "tests",
+        "tests/xconnect-double",
         "fuzz",
     ];
     let mut all: Vec<&str> = inheriting.iter().chain(&own).copied().collect();
@@ -140,13 +141,14 @@ fn every_member_inherits_the_workspace_lints_or_relaxes_only_unsafe_code() {
         );
     }
     // Their own tables (forbid cannot be relaxed inside a crate): unsafe code allowed, the
-    // workspace's clippy lints kept; the COM crate, the client library and the server
-    // browser also deny unwrap/expect.
+    // workspace's clippy lints kept; the COM crate, the client library, the server
+    // browser and the COM test double also deny unwrap/expect.
     for (m, extra) in [
         ("crates/ctopc-com", &["unwrap_used", "expect_used"][..]),
         ("crates/opc-client", &["unwrap_used", "expect_used"][..]),
         ("crates/serverlist", &["unwrap_used", "expect_used"][..]),
         ("tests", &[][..]),
+        ("tests/xconnect-double", &["unwrap_used", "expect_used"][..]),
         ("fuzz", &[][..]),
     ] {
         let manifest = read(&format!("{m}/Cargo.toml"));

@@ -18,7 +18,7 @@ pub mod com;
 pub mod da;
 
 pub use com::{
-    abi, apartment, caller, clock, comdef, connpoint, enums, error, factory, interfaces, lifetime,
-    service, variant, winreg,
+    abi, apartment, automation, caller, clock, comdef, connpoint, enums, error, factory,
+    interfaces, lifetime, service, variant, winreg,
 };
 pub use da::{callbacks, context, group, host, server};
