@@ -7,9 +7,13 @@
 //! one 32-bit component for the 32-bit view (Windows Installer writes a 32-bit
 //! component's HKLM\Software\Classes keys through Wow6432Node), so the MSI and the exe
 //! cannot drift (a test compares the built MSI's Registry table with the list).
-//! `SERVICE=1` runs `ServerCTOPC.exe /Service` as a deferred custom action (with
-//! `/UnregServer` for rollback and removal): wixl 0.101 has no Component/Condition, so a
-//! conditional ServiceInstall component (and AppID `LocalService` row) cannot be built.
+//! `SERVICE=1` runs `ServerCTOPC.exe /Service /CreateGroup` as a deferred custom action,
+//! without it `/RegServer /CreateGroup` (both with `/UnregServer` for rollback and
+//! removal; a major upgrade's removal of the older version `/UnregServer /KeepSecurity`):
+//! wixl 0.101 has no Component/Condition, so a conditional ServiceInstall component (and
+//! AppID `LocalService` row) cannot be built, and no util:Group; and a Registry table can
+//! neither know the clients' group's SID nor write the AppID's security values only where
+//! absent.
 //!
 //! The proxy/stubs register themselves (deferred regsvr32 custom actions of the right
 //! bitness in the template, with rollback and uninstall counterparts): their keys are
@@ -30,7 +34,9 @@
 //! Measured under Wine 8: `[SystemFolder]` is syswow64
 //! (the 32-bit regsvr32), `[System64Folder]` system32; `icacls.exe` exists; removing a
 //! Registry row's last value removes the emptied key; a failed `/qn` install exits with
-//! the low byte of 1627 (91). Wine runs rollback custom actions only after its own
+//! the low byte of 1627 (91); `HKCR\AppID` is one key for both views (WOW64 shares it);
+//! `NetLocalGroupAdd` is a stub (no group is made); a major upgrade removes the older
+//! version without `UPGRADINGPRODUCTCODE`. Wine runs rollback custom actions only after its own
 //! rollback removed the files, hence the 32-bit proxy/stub's registration comes first
 //! (the template says why).
 
@@ -809,8 +815,8 @@ mod wine_test {
         /// The AppID's security values in both views: the defaults of a plain install
         /// (without the clients' group, which Wine cannot create: [`Self::clients_group`]),
         /// authentication level `level`.
-        fn security(&self, what: &str, level: u32) -> Result<(), String> {
-            let lines = appid_security(&self.system_reg(), false, None, level)
+        fn security(&self, what: &str, service: bool, level: u32) -> Result<(), String> {
+            let lines = appid_security(&self.system_reg(), service, None, level)
                 .map_err(|e| format!("msi-test: {what}: AppID security: {e}"))?;
             for l in lines {
                 println!("msi-test: {what}: AppID {l}");
@@ -839,6 +845,43 @@ mod wine_test {
                     "msi-test: `ServerCTOPC.exe /RegServer /CreateGroup`: exit {code}, no WARN about Wine's NetLocalGroupAdd:\n{out}"
                 )),
             }
+        }
+
+        /// `/UnregServer /KeepSecurity` (the MSI's upgrade removal) after an administrator's
+        /// change: the registration goes, the AppID's three values stay as they were; then
+        /// `/Service /CreateGroup` registers again and writes none of them.
+        fn keep_security(&self) -> Result<(), String> {
+            let exe = "C:\\Program Files\\ServerCTOPC\\ServerCTOPC.exe";
+            self.set_authentication_level(6)?;
+            for args in [
+                &["/UnregServer", "/KeepSecurity"][..],
+                &["/Service", "/CreateGroup"],
+            ] {
+                let (code, out) = self.run(Arch::X64, exe, args, 120);
+                self.settle();
+                if code != 0 {
+                    return Err(format!(
+                        "msi-test: ServerCTOPC.exe {}: exit {code}\n{out}",
+                        args.join(" ")
+                    ));
+                }
+                if args[0] == "/UnregServer" {
+                    let reg = self.system_reg();
+                    // The key itself (Windows Installer's component data names its path
+                    // in values).
+                    let head = format!(
+                        "[software\\\\classes\\\\clsid\\\\{{{}}}]",
+                        CLSID.to_ascii_lowercase()
+                    );
+                    if reg.contains(&head) {
+                        return Err(
+                            "msi-test: /UnregServer /KeepSecurity left the CLSID key".into()
+                        );
+                    }
+                    self.security("after /UnregServer /KeepSecurity (kept)", true, 6)?;
+                }
+            }
+            self.security("after /Service again (nothing overwritten)", true, 6)
         }
 
         /// `AuthenticationLevel` = `level` in both views, as an administrator would set it.
@@ -1336,7 +1379,7 @@ mod wine_test {
         }
         clock.lap("installed");
         ctx.installed("after install")?;
-        ctx.security("after install", 5)?;
+        ctx.security("after install", false, 5)?;
         ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
@@ -1393,10 +1436,13 @@ mod wine_test {
         ));
         ctx.installed("after upgrade")?;
         service_installed(&ctx.system_reg())?;
-        // The older version's removal (`/UnregServer /KeepSecurity`) put the values back,
-        // so `/Service` wrote none: the administrator's level, the first install's
-        // descriptors.
-        ctx.security("after upgrade (the administrator's values kept)", 6)?;
+        // Measured under Wine 8: its RemoveExistingProducts removes the older version
+        // without setting UPGRADINGPRODUCTCODE, so the older version's `/UnregServer` (not
+        // `/UnregServer /KeepSecurity`, which Windows Installer's upgrade runs) removed the
+        // administrator's level, and `/Service` wrote the service's defaults.
+        ctx.security("after upgrade (Wine: UPGRADINGPRODUCTCODE unset)", true, 5)?;
+        // What Windows Installer's upgrade runs keeps an administrator's values.
+        ctx.keep_security()?;
         println!("msi-test: SERVICE=1: the service is installed (on demand, NT AUTHORITY\\LocalService), the AppID names it");
         ctx.serves("after upgrade", "-ServiceRun")?;
         clock.lap("both clients served after the upgrade (through the service)");
