@@ -174,10 +174,10 @@ impl UaClient {
     }
 
     fn close(self) {
-        let _ = self.rt.block_on(tokio::time::timeout(
-            Duration::from_secs(10),
-            self.session.disconnect(),
-        ));
+        let session = &self.session;
+        let _ = self.rt.block_on(async {
+            tokio::time::timeout(Duration::from_secs(10), session.disconnect()).await
+        });
         self.rt.shutdown_timeout(Duration::from_secs(5));
     }
 }
