@@ -78,6 +78,7 @@ pub const SERVER_OPTIONS: &[&str] = &[
 
 /// Options of the `[UA]` section (the OPC UA front end), in file spelling.
 pub const UA_OPTIONS: &[&str] = &[
+    "Enabled",
     "Endpoint",
     "AllowNone",
     "AllowAnonymous",
@@ -91,6 +92,11 @@ pub const UA_OPTIONS: &[&str] = &[
 /// The OPC UA front end (`[UA]`): where it listens, its security and its limits.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct UaOptions {
+    /// The configuration has a `[UA]` section (even an empty one).
+    pub section: bool,
+    /// `Enabled`: whether ServerCTOPC.exe serves OPC UA beside OPC DA; unset, it does
+    /// when the configuration has a `[UA]` section ([`UaOptions::beside_da`]).
+    pub enabled: Option<bool>,
     /// `Endpoint`: the endpoint URL, default `opc.tcp://0.0.0.0:4840` (every interface;
     /// the endpoints it announces name the host).
     pub endpoint: String,
@@ -115,6 +121,8 @@ pub struct UaOptions {
 impl Default for UaOptions {
     fn default() -> Self {
         UaOptions {
+            section: false,
+            enabled: None,
             endpoint: "opc.tcp://0.0.0.0:4840".to_owned(),
             allow_none: false,
             allow_anonymous: false,
@@ -124,6 +132,14 @@ impl Default for UaOptions {
             max_subscriptions_per_session: 100,
             max_monitored_items_per_subscription: 100_000,
         }
+    }
+}
+
+impl UaOptions {
+    /// Whether ServerCTOPC.exe serves OPC UA beside OPC DA: `Enabled` when set, else
+    /// when the configuration has a `[UA]` section.
+    pub fn beside_da(&self) -> bool {
+        self.enabled.unwrap_or(self.section)
     }
 }
 
@@ -707,6 +723,13 @@ fn text(e: &IniEntry) -> Option<String> {
 /// Applies one `[Server]` option; `Ok(false)` for an unknown option.
 fn apply_ua_option(o: &mut UaOptions, file: &str, e: &IniEntry) -> Result<bool, ConfigError> {
     match e.key.to_ascii_lowercase().as_str() {
+        "enabled" => {
+            if !e.value.trim().is_empty() {
+                let mut on = false;
+                set_bool(&mut on, file, e)?;
+                o.enabled = Some(on);
+            }
+        }
         "endpoint" => {
             if let Some(url) = text(e) {
                 let rest = url
@@ -1118,6 +1141,7 @@ pub fn parse_config(bytes: &[u8], file: &str) -> Result<(AsixConfig, Vec<Warning
             }
             config.channels.insert(name.to_owned(), options);
         } else if lower == "ua" {
+            config.ua.section = true;
             for e in &section.entries {
                 if !apply_ua_option(&mut config.ua, file, e)? {
                     warnings.push(Warning::new(
@@ -1219,6 +1243,22 @@ mod tests {
     }
 
     #[test]
+    fn ua_beside_da_when_the_section_is_there_unless_enabled_says_otherwise() {
+        for (text, beside) in [
+            ("", false),
+            ("[UA]\n", true),
+            ("[UA]\nEnabled =\n", true),
+            ("[UA]\nEnabled = nie\n", false),
+            ("[UA]\nEnabled = 1\n", true),
+            ("[ua]\nEndpoint = opc.tcp://plant:4841\n", true),
+        ] {
+            let (c, w) = parse(text).unwrap();
+            assert!(w.is_empty(), "{text}: {w:?}");
+            assert_eq!(c.ua.beside_da(), beside, "{text}");
+        }
+    }
+
+    #[test]
     fn ua_section_options_and_defaults() {
         let (c, w) = parse("").unwrap();
         assert!(w.is_empty());
@@ -1247,6 +1287,7 @@ mod tests {
             "[UA]\nEndpoint = opc.tcp://\n",
             "[UA]\nMaxSessions = 0\n",
             "[UA]\nAllowNone = maybe\n",
+            "[UA]\nEnabled = maybe\n",
         ] {
             let e = parse(bad).unwrap_err();
             assert_eq!(e.line, 2, "{bad}: {e}");

@@ -146,6 +146,8 @@ fn example_ini_documents_every_option_and_parses_cleanly() {
     }
     let c = example();
     assert_eq!(c.channels.len(), 3);
+    // OPC UA beside DA is what the user turns on (its `[UA]` section is commented out).
+    assert!(!c.ua.section && !c.ua.beside_da());
     assert_eq!(c.server.min_update_rate_ms, 1000);
     let demo = c.resolve_channel("Demo_Wytwornia_Kwasu").unwrap();
     assert!(demo.options.check_limits && demo.options.check_control_variables);

@@ -17,7 +17,8 @@ pub enum Command {
     Service { create_group: bool },
     /// Started by the service control manager.
     ServiceRun,
-    /// Serve OPC UA in the foreground until Ctrl+C (`serve`, `/Serve`).
+    /// Serve in the foreground until Ctrl+C (`serve`, `/Serve`): on Windows OPC DA and
+    /// OPC UA, on Linux OPC UA.
     Serve,
     /// Add (or replace) an OPC UA user in the users file.
     UserAdd {
@@ -49,11 +50,14 @@ usage: ServerCTOPC.exe <switch>
   -Embedding     (used by COM) serve OPC clients; the server exits when the last
                  client has gone
   -ServiceRun    (used by the service control manager) run as the NT service
+  /Serve         serve OPC DA and OPC UA in the foreground until Ctrl+C
   /?             this text
 Switches are case-insensitive and may start with / or -.
 
-OPC UA (on Linux; the configuration: SERVERCTOPC_INI, else ASIXConnect.ini next to the
-program, else the embedded demo plant; pki/ and ua-users.txt beside it by default):
+OPC UA (the configuration: SERVERCTOPC_INI, else ASIXConnect.ini next to the program,
+else the embedded demo plant; pki/ and ua-users.txt beside it by default). On Windows
+the server serves OPC UA beside OPC DA, from the same engine, when the configuration has
+a [UA] section (unless Enabled = nie), and with /Serve unless Enabled = nie; on Linux:
   serve                                   serve OPC UA ([UA] section) until Ctrl+C
   user add NAME --role reader|writer [--password-stdin]
                                           add or replace a user of the users file; the

@@ -1,7 +1,8 @@
 //! ServerCTOPC.exe: thin shell. Parse the switch, load the configuration (`config`), set
 //! up logging, choose the data source (`backend`), then hand over to the COM layer
-//! (`ctopc_com::host`) with the namespace and plain values. On Linux it serves OPC UA
-//! (`ua`: `serve`, `user add`, `pki trust`) over the same runtime and data source.
+//! (`ctopc_com::host`) with the namespace and plain values, and the OPC UA front end
+//! (`ua`) to start beside DA over the same runtime when the configuration enables it. On
+//! Linux it serves OPC UA alone (`ua`: `serve`). `user add` and `pki trust` on both.
 
 mod cli;
 // config and logging are plain Rust, tested natively; the Windows server uses both, the
@@ -10,7 +11,6 @@ mod cli;
 mod config;
 #[cfg_attr(not(windows), allow(dead_code))]
 mod logging;
-#[cfg(not(windows))]
 mod ua;
 
 use std::process::ExitCode;
@@ -41,12 +41,23 @@ fn run(cmd: cli::Command) -> ExitCode {
         cli::Command::RegServer { create_group } => host::register(create_group),
         cli::Command::UnregServer { keep_security } => host::unregister(keep_security),
         cli::Command::Embedding => {
-            return embedding(host::ServeMode::UntilUnused, &StopSignal::new())
+            return embedding(
+                host::ServeMode::UntilUnused,
+                Ua::AsConfigured,
+                &StopSignal::new(),
+            )
+        }
+        cli::Command::Serve => {
+            return embedding(
+                host::ServeMode::UntilStopped,
+                Ua::UnlessDisabled,
+                &StopSignal::new(),
+            )
         }
         cli::Command::Service { create_group } => host::register_service(create_group),
         cli::Command::ServiceRun => {
             return match ctopc_com::service::run(Box::new(|stop| {
-                match embedding(host::ServeMode::UntilStopped, &stop) {
+                match embedding(host::ServeMode::UntilStopped, Ua::AsConfigured, &stop) {
                     code if code == ExitCode::SUCCESS => Ok(()),
                     _ => Err("the server stopped with an error (see the log)".into()),
                 }
@@ -59,10 +70,12 @@ fn run(cmd: cli::Command) -> ExitCode {
             }
         }
         cli::Command::Help => Ok(()),
-        cli::Command::Serve | cli::Command::UserAdd { .. } | cli::Command::PkiTrust(_) => {
-            eprintln!("ServerCTOPC: OPC UA is served by the Linux build (`serve`); the Windows build serves OPC DA");
-            return ExitCode::FAILURE;
-        }
+        cli::Command::UserAdd {
+            name,
+            role,
+            password_stdin,
+        } => return ua::user_add(&name, &role, password_stdin),
+        cli::Command::PkiTrust(file) => return ua::pki_trust(&file),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -73,11 +86,27 @@ fn run(cmd: cli::Command) -> ExitCode {
     }
 }
 
-/// `-Embedding` (and the service): configuration, then logging as configured, then serve
-/// until the server is unused (`-Embedding`) or `stop` is triggered (the service's stop,
-/// or Ctrl+C / a system shutdown on the console, in both modes).
+/// Whether the Windows server serves OPC UA beside OPC DA.
 #[cfg(windows)]
-fn embedding(mode: ctopc_com::host::ServeMode, stop: &ctopc_com::lifetime::StopSignal) -> ExitCode {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ua {
+    /// `-Embedding` and the service: when `[UA]` is in the configuration, unless
+    /// `Enabled = nie` (or with `Enabled = tak`).
+    AsConfigured,
+    /// `/Serve`: unless `[UA] Enabled = nie`.
+    UnlessDisabled,
+}
+
+/// `-Embedding`, the service and `/Serve`: configuration, then logging as configured, then
+/// serve (OPC UA beside DA as `ua` says) until the server is unused (`-Embedding`: by DA
+/// clients) or `stop` is triggered (the service's stop, or Ctrl+C / a system shutdown on
+/// the console, in every mode).
+#[cfg(windows)]
+fn embedding(
+    mode: ctopc_com::host::ServeMode,
+    ua: Ua,
+    stop: &ctopc_com::lifetime::StopSignal,
+) -> ExitCode {
     use ctopc_com::host;
     use std::sync::Arc;
     // Start-up phases are logged as `start: ...` lines with their times (read by
@@ -117,6 +146,23 @@ fn embedding(mode: ctopc_com::host::ServeMode, stop: &ctopc_com::lifetime::StopS
         tracing::warn!("{w}");
     }
     let ns = Arc::new(loaded.namespace);
+    let ua_options = &ns.config().ua;
+    let serve_ua = match ua {
+        Ua::AsConfigured => ua_options.beside_da(),
+        Ua::UnlessDisabled => ua_options.enabled != Some(false),
+    };
+    let beside: Option<Box<host::StartBeside>> = if serve_ua {
+        let settings = ua::settings(&ns, &ua::config_dir(&source));
+        if mode == host::ServeMode::UntilUnused {
+            tracing::info!(
+                "OPC UA beside OPC DA: started by COM, this process ends when its last DA client has gone, whatever OPC UA sessions it has (a lasting OPC UA server: the service or /Serve)"
+            );
+        }
+        Some(Box::new(move |beside| ua::start_beside(&settings, beside)))
+    } else {
+        tracing::info!("OPC UA: off (no [UA] section, or Enabled = nie)");
+        None
+    };
     let setup = setup(&ns);
     tracing::info!(
         "start: browse tree built at {} ms",
@@ -125,7 +171,7 @@ fn embedding(mode: ctopc_com::host::ServeMode, stop: &ctopc_com::lifetime::StopS
     let make_backend =
         Box::new(move |wake: Arc<dyn ctopc_core::source::Wake>| backend::make(&ns, wake));
     host::stop_on_console_ctrl(stop);
-    match host::serve_as(setup, make_backend, mode, stop) {
+    match host::serve_as(setup, make_backend, mode, stop, beside) {
         Ok(()) => {
             tracing::info!("ServerCTOPC stopped");
             ExitCode::SUCCESS

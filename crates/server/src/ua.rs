@@ -1,16 +1,14 @@
-//! The OPC UA commands of the server on Linux: `serve` (the runtime over the configured
-//! data source, the OPC UA front end over the runtime, until Ctrl+C or SIGTERM),
-//! `user add` and `pki trust`. The configuration is found as for the COM server
-//! (`config`): `SERVERCTOPC_INI`, else `ASIXConnect.ini` next to the program, else the
-//! embedded demo plant; the PKI folder and the users file are beside it by default.
+//! OPC UA in the server: on Linux `serve` (the runtime over the configured data source,
+//! the OPC UA front end over the runtime, until Ctrl+C or SIGTERM); on Windows the front
+//! end beside OPC DA over the COM server's runtime ([`start_beside`]); on both `user add`
+//! and `pki trust`. The configuration is found as for the COM server (`config`):
+//! `SERVERCTOPC_INI`, else `ASIXConnect.ini` next to the program, else the embedded demo
+//! plant; the PKI folder and the users file are beside it by default.
 
-use crate::{backend, config};
+use crate::config;
 use asix_model::AsixNamespace;
-use ctopc_core::lang::Lang;
-use ctopc_core::namespace::Namespace;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
 
 /// The folder of the program.
 fn exe_dir() -> PathBuf {
@@ -21,7 +19,7 @@ fn exe_dir() -> PathBuf {
 }
 
 /// The folder of the configuration in use (the program's for the embedded demo).
-fn config_dir(source: &config::ConfigSource) -> PathBuf {
+pub fn config_dir(source: &config::ConfigSource) -> PathBuf {
     match source {
         config::ConfigSource::File(p) | config::ConfigSource::FromEnv(p) => p
             .parent()
@@ -32,7 +30,7 @@ fn config_dir(source: &config::ConfigSource) -> PathBuf {
 }
 
 /// `[UA]` as the front end's settings, paths resolved beside the configuration.
-fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
+pub fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
     let cfg = ns.config();
     let ua = &cfg.ua;
     let path = |configured: &Option<String>, default: &str| {
@@ -68,6 +66,7 @@ fn fail(e: &str) -> ExitCode {
 }
 
 /// `serve`: logs to standard error (`RUST_LOG` filters; default `info`).
+#[cfg(not(windows))]
 pub fn serve() -> ExitCode {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,opcua=warn"));
@@ -87,7 +86,12 @@ pub fn serve() -> ExitCode {
     }
 }
 
+#[cfg(not(windows))]
 fn serve_inner() -> Result<(), String> {
+    use crate::backend;
+    use ctopc_core::lang::Lang;
+    use ctopc_core::namespace::Namespace;
+    use std::sync::Arc;
     tracing::info!(
         version = env!("CARGO_PKG_VERSION"),
         "ServerCTOPC starting (OPC UA)"
@@ -137,6 +141,7 @@ fn serve_inner() -> Result<(), String> {
 }
 
 /// Ctrl+C or SIGTERM.
+#[cfg(not(windows))]
 async fn stop_signal() {
     use tokio::signal::unix::{signal, SignalKind};
     match signal(SignalKind::terminate()) {
@@ -150,6 +155,66 @@ async fn stop_signal() {
             let _ = tokio::signal::ctrl_c().await;
         }
     }
+}
+
+/// How long stopping the OPC UA front end beside DA may take (its sessions closed, its
+/// runtime's tasks ended).
+#[cfg(windows)]
+const STOP_LIMIT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// The OPC UA front end beside OPC DA: its own tokio runtime (the process's only one
+/// but the asix network client's) and the running server; dropping it stops both.
+#[cfg(windows)]
+struct UaBeside {
+    tokio: Option<tokio::runtime::Runtime>,
+    running: Option<ctopc_ua::server::Running>,
+}
+
+#[cfg(windows)]
+impl Drop for UaBeside {
+    fn drop(&mut self) {
+        let (Some(tokio), Some(running)) = (self.tokio.take(), self.running.take()) else {
+            return;
+        };
+        tracing::info!("OPC UA: stopping");
+        match tokio.block_on(async { tokio::time::timeout(STOP_LIMIT, running.stop()).await }) {
+            Ok(Ok(())) => tracing::info!("OPC UA: stopped"),
+            Ok(Err(e)) => tracing::warn!("OPC UA: {e}"),
+            Err(_) => tracing::warn!(
+                "OPC UA: the server did not stop within {} s; ending its runtime",
+                STOP_LIMIT.as_secs()
+            ),
+        }
+        tokio.shutdown_timeout(STOP_LIMIT);
+    }
+}
+
+/// Starts the OPC UA front end over the COM server's runtime (`beside`: the same engine,
+/// data source, namespace and browse tree as the DA objects), listening as `settings`
+/// say; the returned guard stops it when dropped.
+#[cfg(windows)]
+pub fn start_beside(
+    settings: &ctopc_ua::server::Settings,
+    beside: ctopc_com::host::Beside,
+) -> Result<Box<dyn std::any::Any>, String> {
+    let tokio = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .thread_name("opc-ua")
+        .build()
+        .map_err(|e| format!("OPC UA: cannot start its runtime: {e}"))?;
+    let serve = ctopc_ua::server::Serve {
+        runtime: beside.runtime,
+        namespace: beside.namespace,
+        tree: beside.address_space,
+        lang: beside.lang,
+    };
+    let running = tokio
+        .block_on(ctopc_ua::server::start(settings, serve))
+        .map_err(|e| format!("OPC UA: {e}"))?;
+    Ok(Box::new(UaBeside {
+        tokio: Some(tokio),
+        running: Some(running),
+    }))
 }
 
 /// `user add NAME --role R [--password-stdin]`.

@@ -211,9 +211,8 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         .local_addr()
         .map_err(|e| format!("cannot listen on {host}:{port}: {e}"))?;
     tracing::info!(
-        "OPC UA: listening on {address}, endpoint opc.tcp://{announced}:{port}/ (security: {}; anonymous {})",
-        if settings.allow_none { "None allowed" } else { "signed or encrypted only" },
-        if settings.allow_anonymous { "allowed" } else { "off" }
+        "OPC UA: listening on {address}; {}",
+        describe(settings, &announced, port)
     );
     let task = tokio::spawn(server.run_with(listener));
     Ok(Running {
@@ -222,6 +221,19 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         node_manager,
         address,
     })
+}
+
+/// The start line's account of the endpoints and their security.
+fn describe(settings: &Settings, announced: &str, port: u16) -> String {
+    let policies: Vec<String> = POLICIES.iter().map(ToString::to_string).collect();
+    format!(
+        "endpoint opc.tcp://{announced}:{port}/ with {} (Sign, SignAndEncrypt){}; anonymous {}; users {}; PKI {}",
+        policies.join(", "),
+        if settings.allow_none { ", None (AllowNone)" } else { "; None off" },
+        if settings.allow_anonymous { "allowed (as readers)" } else { "off" },
+        settings.users_file.display(),
+        settings.pki_dir.display(),
+    )
 }
 
 /// Runs the server until `stop` completes.
@@ -239,6 +251,35 @@ pub async fn run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_start_line_names_the_endpoint_and_its_security() {
+        let mut s = Settings {
+            endpoint: "opc.tcp://0.0.0.0:4840".into(),
+            allow_none: false,
+            allow_anonymous: false,
+            pki_dir: PathBuf::from("pki"),
+            users_file: PathBuf::from("ua-users.txt"),
+            max_sessions: 1,
+            max_subscriptions_per_session: 1,
+            max_monitored_items_per_subscription: 1,
+        };
+        assert_eq!(
+            describe(&s, "plant", 4840),
+            "endpoint opc.tcp://plant:4840/ with Basic256Sha256, Aes128-Sha256-RsaOaep, \
+             Aes256-Sha256-RsaPss (Sign, SignAndEncrypt); None off; anonymous off; \
+             users ua-users.txt; PKI pki"
+        );
+        s.allow_none = true;
+        s.allow_anonymous = true;
+        let line = describe(&s, "plant", 4841);
+        assert!(
+            line.contains(
+                "(Sign, SignAndEncrypt), None (AllowNone); anonymous allowed (as readers)"
+            ),
+            "{line}"
+        );
+    }
 
     #[test]
     fn endpoints_parse_to_host_and_port() {

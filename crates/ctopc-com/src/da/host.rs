@@ -4,7 +4,9 @@
 //! the shutdown signal ([`StopSignal`]) as parameters: [`start`] makes the server's
 //! [`Context`] (no process-wide one), the class object captures it, and the stop request
 //! comes only through the signal, which the console handler ([`stop_on_console_ctrl`]) and
-//! the NT service's control handler (`service::run`) trigger.
+//! the NT service's control handler (`service::run`) trigger. Another front end (OPC UA)
+//! may serve beside DA from the same runtime ([`StartBeside`]): it is started once the
+//! runtime runs and stopped when serving ends.
 
 use crate::com::apartment::Apartment;
 use crate::com::lifetime::{ExitReason, Lifetime, StopSignal};
@@ -382,6 +384,22 @@ pub fn start(setup: Setup, make_backend: Box<MakeBackend<'_>>) -> Result<Arc<Con
     Ok(Arc::new(ctx))
 }
 
+/// What a front end serving beside OPC DA in the same process gets: the server's one
+/// runtime (engine and data source), its namespace with the `_Diagnostics` branch, the
+/// browse tree and the default language; the same the DA objects serve from.
+pub struct Beside {
+    pub runtime: Arc<ctopc_runtime::Runtime>,
+    pub namespace: Arc<dyn ctopc_core::namespace::Namespace>,
+    pub address_space: Arc<ctopc_core::browse::AddressSpace>,
+    pub lang: Lang,
+}
+
+/// Starts a front end beside OPC DA ([`Beside`]) once the runtime runs. What it returns
+/// is dropped when serving ends (after the DA clients got their shutdown request, before
+/// the runtime stops): its drop stops that front end. An `Err` is logged and the server
+/// serves DA alone.
+pub type StartBeside = dyn FnOnce(Beside) -> Result<Box<dyn std::any::Any>, String>;
+
 /// The stop signal the console control handler triggers. A console control handler is a
 /// plain `extern "system" fn` with no user data, so this one process-level hook is
 /// unavoidable; it holds nothing but the signal to trigger (set by
@@ -428,15 +446,18 @@ pub enum ServeMode {
     UntilStopped,
 }
 
-/// Serves in the given mode: start, register the class object for multiple use, serve
-/// until the last client has gone (`ServeMode::UntilUnused`, `-Embedding`) or `stop` is
-/// triggered, then revoke it and exit. On a triggered stop every connected client first
-/// gets IOPCShutdown::ShutdownRequest with the trigger's reason.
+/// Serves in the given mode: start, start the front end `beside` DA if any, register the
+/// class object for multiple use, serve until the last DA client has gone
+/// (`ServeMode::UntilUnused`, `-Embedding`: the other front end's clients do not keep the
+/// process) or `stop` is triggered, then revoke it and exit. On a triggered stop every
+/// connected client first gets IOPCShutdown::ShutdownRequest with the trigger's reason;
+/// then the other front end is stopped.
 pub fn serve_as(
     setup: Setup,
     make_backend: Box<MakeBackend<'_>>,
     mode: ServeMode,
     stop: &StopSignal,
+    beside: Option<Box<StartBeside>>,
 ) -> windows::core::Result<()> {
     let _com = Apartment::mta_without_keepalive()?;
     init_server_security(setup.legacy_open_access);
@@ -446,6 +467,16 @@ pub fn serve_as(
         crate::com::error::error(E_FAIL, &e)
     })?;
     ctx.lifetime.stop_on(stop);
+    let beside = beside.and_then(|start| {
+        start(Beside {
+            runtime: Arc::clone(&ctx.runtime),
+            namespace: Arc::clone(&ctx.namespace),
+            address_space: Arc::clone(&ctx.address_space),
+            lang: ctx.default_lang,
+        })
+        .map_err(|e| tracing::error!("{e}; serving OPC DA only"))
+        .ok()
+    });
     let factory = server::class_factory(&ctx);
     let mut announced = false;
     let reason = serve_class(&CLSID_SERVERCTOPC, &factory, &ctx.lifetime, || {
@@ -464,6 +495,7 @@ pub fn serve_as(
     if reason == ExitReason::StopRequested {
         ctx.runtime.shutdown(ctx.lifetime.stop_reason());
     }
+    drop(beside);
     tracing::info!("exiting ({reason:?})");
     Ok(())
 }
