@@ -8,6 +8,8 @@
 //! - [`tz`]: the station's local time to UTC, across DST changes (pure).
 //! - [`engine`]: a worker per channel (bounded queue, call timeout, watchdog), the images
 //!   of subscribed items, the source state.
+//! - `xconnect` (Windows): the adapter to the real `XConnect.ServerCT`, late-bound
+//!   through `ctopc_com::automation`.
 //! - [`server`]: discovery, TLS links and the requests, writes granted by the
 //!   authenticated identity.
 #![forbid(unsafe_code)]
@@ -18,6 +20,8 @@ pub mod engine;
 pub mod fake;
 pub mod server;
 pub mod tz;
+#[cfg(windows)]
+pub mod xconnect;
 
 use std::path::Path;
 

@@ -10,10 +10,11 @@ fn main() -> ExitCode {
 
 mod asix_gate_main {
     use super::*;
-    use asix_gate::channel::{CallError, ChannelFactory};
+    use asix_gate::channel::ChannelFactory;
     use asix_gate::config;
     use asix_net::tls;
     use ctopc_core::lang::Lang;
+    #[cfg(not(windows))]
     use ctopc_core::OpcError;
 
     const USAGE: &str = "\
@@ -48,13 +49,20 @@ usage: asix-gate [--config FILE] [--check]
         ))
     }
 
-    /// The Automation adapter is not part of this build: every channel reports it (and
-    /// the gate announces SOURCE_FAILED) instead of serving.
+    /// Each channel's `XConnect.ServerCT`, late-bound (`asix_gate::xconnect`).
+    #[cfg(windows)]
+    fn factory() -> ChannelFactory {
+        asix_gate::xconnect::factory()
+    }
+
+    /// No Automation outside Windows: every channel reports it (and the gate announces
+    /// SOURCE_FAILED) instead of serving.
+    #[cfg(not(windows))]
     fn factory() -> ChannelFactory {
         std::sync::Arc::new(|name: &str| {
-            Err(CallError::new(
+            Err(asix_gate::CallError::new(
                 OpcError::NotImpl,
-                format!("channel {name}: this build has no XConnect.ServerCT adapter"),
+                format!("channel {name}: XConnect.ServerCT exists only on Windows"),
             ))
         })
     }
