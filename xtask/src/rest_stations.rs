@@ -25,11 +25,23 @@ pub fn url_of(ready: &str) -> Option<&str> {
         .find_map(|w| w.strip_prefix("rest="))
 }
 
+/// Where the stations' asix-sim comes from.
+pub enum Sim {
+    /// Built now (`cargo build --release -p asix-net --bin asix-sim`).
+    Build,
+    /// The release asix-sim the native tests of the same run built; built now if absent.
+    Built,
+}
+
 impl Stations {
-    /// Builds asix-sim (release) and starts two stations on loopback serving the demo
-    /// database; sets [`ENV`] for this process and its children.
-    pub fn start() -> Result<Stations, String> {
-        let exe = crate::build::asix_sim()?;
+    /// Starts two stations on loopback serving the demo database; sets [`ENV`] for this
+    /// process and its children.
+    pub fn start(sim: Sim) -> Result<Stations, String> {
+        let built = util::root().join("target/release/asix-sim");
+        let exe = match sim {
+            Sim::Built if built.is_file() => built,
+            _ => crate::build::asix_sim()?,
+        };
         let db = util::root().join("demo/wytwornia_kwasu/wytwornia_kwasu.zez");
         let mut s = Stations {
             children: Vec::new(),

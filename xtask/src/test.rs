@@ -96,8 +96,9 @@ fn run_all(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
-        // For tests/tests/rest_source.rs (both bitnesses): ended when the phase ends.
-        let _stations = rest_stations::Stations::start()?;
+        // For tests/tests/rest_source.rs (both bitnesses): ended when the phase ends. The
+        // native tests built asix-sim (a binary of a package with integration tests).
+        let _stations = rest_stations::Stations::start(rest_stations::Sim::Built)?;
         println!("test: end-to-end tests under Wine (one binary at a time, wine/guard.rs)");
         let units = units_64()?;
         let plan = guard::Plan {
@@ -115,8 +116,9 @@ fn run_all(args: &[String]) -> Result<(), String> {
             "test: end-to-end tests as a 32-bit client ({})",
             Arch::X86.target()
         );
-        // marshal_strings (32-bit client) talks to the 64-bit marshal probe.
-        build::e2e_bin("marshal-probe")?;
+        // marshal_strings (32-bit client) talks to the 64-bit marshal probe, which the
+        // 64-bit build above made (a package's binaries are built for its integration
+        // tests); building it again alone would resolve other features and rebuild.
         let units = units_32();
         let plan = guard::Plan {
             target: Arch::X86.target(),
@@ -380,7 +382,7 @@ fn e2e_only(args: &[String]) -> Result<(), String> {
     wine::kill_all();
     let result = (|| {
         register(&artifacts)?;
-        let _stations = rest_stations::Stations::start()?;
+        let _stations = rest_stations::Stations::start(rest_stations::Sim::Build)?;
         let units = if !cargo_args.is_empty() {
             vec![guard::Unit {
                 label: cargo_args.join(" "),

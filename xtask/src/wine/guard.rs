@@ -1,8 +1,12 @@
 //! The end-to-end runs of `cargo xtask test`, one test binary at a time under a **stall
 //! guard**.
 //!
-//! Each binary runs as its own `cargo test --release --target T <unit> -- --test-threads=1`
-//! (after one `--no-run` build of them all), its output passed through line by line. A
+//! One `cargo test --release --target T --no-run` builds every binary first; each then runs
+//! directly under the target's runner (`xtask/wine-runner*.sh`, as cargo would run it: from
+//! its package's folder, `-- --test-threads=1`), its output passed through line by line.
+//! Running the built executables, rather than one `cargo test` per unit, keeps cargo from
+//! resolving each unit's package alone, which unifies other features and rebuilds the
+//! dependencies (minutes per bitness), and saves its check of the whole graph per unit. A
 //! binary that prints nothing for [`QUIET_LIMIT`] has stalled: no test of ours is silent
 //! that long (the slowest, the hostile 800,000-level VARIANTs, prints within 120 s). Then,
 //! before anything is stopped, winedbg backtraces of every thread of the prefix's
@@ -109,6 +113,126 @@ pub fn build_args(units: &[Unit]) -> Vec<String> {
         }
     }
     out
+}
+
+/// A test executable of the `--no-run` build (cargo's `compiler-artifact` message).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Built {
+    pub package: String,
+    /// `lib`, `bin` or `test`.
+    pub kind: String,
+    pub name: String,
+    pub exe: PathBuf,
+    /// The package's folder: cargo runs a test binary from there.
+    pub dir: PathBuf,
+    /// The target's source file, for the `Running` line.
+    pub src: PathBuf,
+}
+
+/// Runs the `--no-run` build with JSON messages on standard output (the diagnostics still
+/// rendered on standard error) and returns its test executables.
+fn build_all(cmd: &mut Command) -> Result<Vec<Built>, String> {
+    let what = format!("{cmd:?}");
+    let out = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot start {what}: {e}"))?;
+    if !out.status.success() {
+        return Err(format!("{what}: {}", out.status));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(built_of)
+        .collect())
+}
+
+/// One line of cargo's JSON messages → a test executable, when it is one.
+pub fn built_of(line: &str) -> Option<Built> {
+    let v: serde_json::Value = serde_json::from_str(line).ok()?;
+    if v["reason"] != "compiler-artifact" || v["profile"]["test"] != true {
+        return None;
+    }
+    let exe = PathBuf::from(v["executable"].as_str()?);
+    let manifest = PathBuf::from(v["manifest_path"].as_str()?);
+    let target = &v["target"];
+    Some(Built {
+        package: package_name(v["package_id"].as_str()?)?.to_owned(),
+        kind: target["kind"][0].as_str()?.to_owned(),
+        name: target["name"].as_str()?.to_owned(),
+        exe,
+        dir: manifest.parent()?.to_path_buf(),
+        src: PathBuf::from(target["src_path"].as_str()?),
+    })
+}
+
+/// A package's name from cargo's package ID: `path+file:///w/tests#e2e-tests@0.1.0`, or
+/// `path+file:///w/crates/ctopc-com#0.1.0` when the folder has the package's name.
+pub fn package_name(id: &str) -> Option<&str> {
+    let (url, frag) = id.rsplit_once('#')?;
+    match frag.split_once('@') {
+        Some((name, _)) => Some(name),
+        None => url.rsplit('/').next(),
+    }
+}
+
+/// The executables of `unit` when it is one of [`Unit::test`] or [`Unit::lib`]'s shapes
+/// and the build made them; `None` for other cargo arguments (they run through cargo).
+pub fn executables(built: &[Built], unit: &Unit) -> Option<Vec<Built>> {
+    let args: Vec<&str> = unit.cargo_args.iter().map(String::as_str).collect();
+    let found: Vec<Built> = match args.as_slice() {
+        ["-p", package, "--test", name] => built
+            .iter()
+            .filter(|b| b.package == *package && b.kind == "test" && b.name == *name)
+            .cloned()
+            .collect(),
+        ["-p", package, "--lib", "--bins"] => built
+            .iter()
+            .filter(|b| b.package == *package && (b.kind == "lib" || b.kind == "bin"))
+            .cloned()
+            .collect(),
+        _ => return None,
+    };
+    (!found.is_empty()).then_some(found)
+}
+
+/// The runner `.cargo/config.toml` names for a Windows target.
+fn runner(target: &str) -> Option<PathBuf> {
+    let script = match target {
+        "x86_64-pc-windows-gnu" => "xtask/wine-runner.sh",
+        "i686-pc-windows-gnu" => "xtask/wine-runner32.sh",
+        _ => return None,
+    };
+    Some(util::root().join(script))
+}
+
+/// Runs a unit's executables one after the other, as `cargo test` would; the first that
+/// does not pass ends the unit.
+fn run_executables(
+    runner: &Path,
+    exes: &[Built],
+    test_args: &[String],
+) -> Result<(Outcome, std::process::Child), String> {
+    let mut last = None;
+    for b in exes {
+        let src = b.src.strip_prefix(&b.dir).unwrap_or(&b.src);
+        println!("     Running {} ({})", src.display(), b.exe.display());
+        let _ = std::io::stdout().flush();
+        let mut c = Command::new(runner);
+        c.arg(&b.exe)
+            .arg("--test-threads=1")
+            .args(test_args)
+            .current_dir(&b.dir)
+            .env("CARGO_MANIFEST_DIR", &b.dir)
+            .env("CARGO_PKG_NAME", &b.package);
+        let (outcome, child) = run_watched(&mut c, quiet_limit())?;
+        let passed = matches!(&outcome, Outcome::Exited(s) if s.success());
+        if !passed {
+            return Ok((outcome, child));
+        }
+        last = Some((outcome, child));
+    }
+    last.ok_or_else(|| "a unit without executables".to_owned())
 }
 
 /// How one run of a unit ended.
@@ -334,7 +458,11 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<(), String> {
         c
     };
     // One build of every binary first, so that no build counts as a test's silence.
-    util::run(&mut command(&["--no-run"], None))?;
+    let built = build_all(&mut command(
+        &["--no-run", "--message-format=json-render-diagnostics"],
+        None,
+    ))?;
+    let runner = runner(target);
     for unit in units {
         let mut tries = 0;
         loop {
@@ -347,9 +475,14 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<(), String> {
             }
             tries += 1;
             let t0 = Instant::now();
-            let mut c = command(&["--", "--test-threads=1"], Some(unit));
-            c.args(test_args);
-            let (outcome, child) = run_watched(&mut c, quiet_limit())?;
+            let (outcome, child) = match (executables(&built, unit), &runner) {
+                (Some(exes), Some(runner)) => run_executables(runner, &exes, test_args)?,
+                _ => {
+                    let mut c = command(&["--", "--test-threads=1"], Some(unit));
+                    c.args(test_args);
+                    run_watched(&mut c, quiet_limit())?
+                }
+            };
             match outcome {
                 Outcome::Exited(status) if status.success() => {
                     println!(
@@ -394,6 +527,52 @@ mod tests {
         );
         assert_eq!(running_test("test a ... ok"), None);
         assert_eq!(running_test("running 12 tests"), None);
+    }
+
+    #[test]
+    fn package_names_from_cargo_package_ids() {
+        assert_eq!(
+            package_name("path+file:///w/tests#e2e-tests@0.1.0"),
+            Some("e2e-tests")
+        );
+        assert_eq!(
+            package_name("path+file:///w/crates/ctopc-com#0.1.0"),
+            Some("ctopc-com")
+        );
+        assert_eq!(package_name("no fragment"), None);
+    }
+
+    #[test]
+    fn test_executables_from_cargo_messages_and_units() {
+        let line = |pkg: &str, kind: &str, name: &str, test: bool| {
+            format!(
+                r#"{{"reason":"compiler-artifact","package_id":"path+file:///w/{pkg}#0.1.0","manifest_path":"/w/{pkg}/Cargo.toml","target":{{"kind":["{kind}"],"name":"{name}","src_path":"/w/{pkg}/src/{name}.rs"}},"profile":{{"test":{test}}},"executable":"/t/{name}.exe"}}"#
+            )
+        };
+        let built: Vec<Built> = [
+            line("ctopc-com", "lib", "ctopc_com", true),
+            line("ctopc-com", "lib", "ctopc_com", false),
+            line("ctopc-com", "test", "inproc_server", true),
+            line("tests", "test", "group_io", true),
+            r#"{"reason":"build-finished","success":true}"#.to_owned(),
+            "not json".to_owned(),
+        ]
+        .iter()
+        .filter_map(|l| built_of(l))
+        .collect();
+        assert_eq!(built.len(), 3, "{built:?}");
+        assert_eq!(built[0].dir, PathBuf::from("/w/ctopc-com"));
+        let lib = executables(&built, &Unit::lib("ctopc-com")).unwrap();
+        assert_eq!(lib.len(), 1);
+        assert_eq!(lib[0].exe, PathBuf::from("/t/ctopc_com.exe"));
+        let t = executables(&built, &Unit::test("tests", "group_io")).unwrap();
+        assert_eq!(t[0].name, "group_io");
+        assert_eq!(executables(&built, &Unit::test("tests", "missing")), None);
+        let other = Unit {
+            label: "custom".into(),
+            cargo_args: vec!["-p".into(), "ctopc-com".into()],
+        };
+        assert_eq!(executables(&built, &other), None);
     }
 
     #[test]
