@@ -15,6 +15,13 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   Bad_NotWritable for a read-only variable, subscribe (data changes arrive; an absolute
   deadband larger than the range, and a percent deadband of 100 % of EURange, let only
   the first one through);
+- the derived values: FormatedCV, PercentageCV and BarCVs are components of KW_A000 whose
+  NodeIds are their item IDs, read (a text, a number, two numbers) and subscribed;
+- `_Diagnostics`: a folder first under ServerCTOPC (Server, Clients, Channels), its
+  variables read Good;
+- the Server object: ServerStatus (State Running, StartTime, CurrentTime, BuildInfo
+  naming ServerCTOPC and its version) and ServerDiagnosticsSummary (the session and
+  subscription counts);
 - the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
   SecurityPolicy None are refused;
 - the server stops on SIGTERM with exit code 0;
@@ -243,9 +250,13 @@ async def scenario(url, work, server):
         await wait_for(lambda: len(changes.values) >= before + 3, 20)
         check("percent deadband (of EURange): only the first value passes", len(percent.values) == 1,
               f"{len(percent.values)} notifications while the unfiltered item got {len(changes.values) - before}")
+        await server_object(c)
         await sub.delete()
         await sub2.delete()
         await sub3.delete()
+
+        await derived_values(c, ns, a000)
+        await diagnostics_folder(c, ns, root)
 
     # 3. The reader: reads, but its write is refused.
     c = client(url, "reader1")
@@ -281,6 +292,87 @@ async def scenario(url, work, server):
     await refused("anonymous refused", anonymous)
     await refused("a wrong password refused", wrong_password)
     await refused("SecurityPolicy None refused", no_security)
+
+
+async def derived_values(c, ns, a000):
+    """FormatedCV, PercentageCV and BarCVs: components of KW_A000 named by their item IDs,
+    read and subscribed like any variable."""
+    children = {}
+    for n in await a000.get_children(refs=ua.ObjectIds.HasComponent):
+        children[(await n.read_browse_name()).Name] = n
+    names = ("FormatedCV", "PercentageCV", "BarCVs")
+    for name in names:
+        node = children.get(name)
+        check(f"KW_A000 has the component {name}, its NodeId the item ID KW_A000.{name}",
+              node is not None and node.nodeid == ua.NodeId(f"KW_A000.{name}", ns), str(children))
+    if not all(n in children for n in names):
+        return
+    text, percent, bars = [await children[n].read_data_value() for n in names]
+    check("read: FormatedCV is a text, Good", isinstance(text.Value.Value, str) and text.Value.Value != ""
+          and text.StatusCode.is_good(), str(text))
+    check("read: PercentageCV is a number, Good", isinstance(percent.Value.Value, float)
+          and percent.StatusCode.is_good(), str(percent))
+    check("read: BarCVs is two numbers, Good", isinstance(bars.Value.Value, list) and len(bars.Value.Value) == 2
+          and bars.StatusCode.is_good(), str(bars))
+    parent = await children["PercentageCV"].get_parent()
+    check("PercentageCV names KW_A000 as its parent", parent is not None and parent.nodeid == a000.nodeid,
+          str(parent))
+    changes = Changes()
+    sub = await c.create_subscription(200, changes)
+    await sub.subscribe_data_change(children["PercentageCV"])
+
+    def good():
+        return [v for v, s in changes.values if s.is_good() and isinstance(v, float)]
+    got = await wait_for(lambda: len(good()) >= 1, 20)
+    check("subscription: Good data changes of KW_A000.PercentageCV arrive", got, str(changes.values[:4]))
+    await sub.delete()
+
+
+async def diagnostics_folder(c, ns, root):
+    """`_Diagnostics`: a folder first under ServerCTOPC, its sections folders, its items
+    variables read Good."""
+    first = (await root.get_children(refs=ua.ObjectIds.Organizes))[0]
+    check("_Diagnostics is the first folder under ServerCTOPC", first.nodeid == ua.NodeId("_Diagnostics", ns)
+          and (await first.read_node_class()) == ua.NodeClass.Object, str(first))
+    sections = [(await n.read_browse_name()).Name for n in await first.get_children()]
+    check("_Diagnostics holds Server, Clients, Channels", sections == ["Server", "Clients", "Channels"],
+          str(sections))
+    server = c.get_node(ua.NodeId("_Diagnostics.Server", ns))
+    fields = {(await n.read_browse_name()).Name: n for n in await server.get_children()}
+    clients = fields.get("Clients")
+    check("_Diagnostics.Server lists Uptime and Clients", "Uptime" in fields and clients is not None,
+          str(list(fields)))
+    if clients is None:
+        return
+    dv = await clients.read_data_value()
+    check("read: _Diagnostics.Server.Clients is Good, at least the UA front end",
+          dv.StatusCode.is_good() and isinstance(dv.Value.Value, int) and dv.Value.Value >= 1, str(dv))
+    desc = await clients.read_description()
+    check("_Diagnostics.Server.Clients has a description", bool(desc.Text), str(desc))
+
+
+async def server_object(c):
+    """The Server object's ServerStatus and ServerDiagnosticsSummary, read while the
+    caller's three subscriptions exist."""
+    ids = ua.ObjectIds
+    node = lambda i: c.get_node(ua.NodeId(i, 0))
+    state = await node(ids.Server_ServerStatus_State).read_value()
+    check("ServerStatus.State is Running", state == ua.ServerState.Running, str(state))
+    start = await node(ids.Server_ServerStatus_StartTime).read_value()
+    now = await node(ids.Server_ServerStatus_CurrentTime).read_value()
+    check("ServerStatus: StartTime before CurrentTime", start is not None and now is not None
+          and start.year > 2000 and start <= now, f"{start} {now}")
+    product = await node(ids.Server_ServerStatus_BuildInfo_ProductName).read_value()
+    check("BuildInfo.ProductName is ServerCTOPC", product == "ServerCTOPC", str(product))
+    version = await node(ids.Server_ServerStatus_BuildInfo_SoftwareVersion).read_value()
+    check("BuildInfo.SoftwareVersion is set", bool(version), str(version))
+    uri = await node(ids.Server_ServerStatus_BuildInfo_ProductUri).read_value()
+    check("BuildInfo.ProductUri", uri == NAMESPACE_URI, str(uri))
+    sessions = await node(ids.Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSessionCount).read_value()
+    check("ServerDiagnosticsSummary.CurrentSessionCount counts this session", sessions >= 1, str(sessions))
+    subs = await node(ids.Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSubscriptionCount).read_value()
+    check("ServerDiagnosticsSummary.CurrentSubscriptionCount counts this session's subscriptions",
+          subs >= 3, str(subs))
 
 
 def main():

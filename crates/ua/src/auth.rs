@@ -1,11 +1,12 @@
 //! Who may connect and what they may do: anonymous sessions only when `AllowAnonymous`
 //! (as readers), user names and passwords checked against the users file
-//! ([`crate::users`]), writes only for the `writer` role.
+//! ([`crate::users`]), writes only for the `writer` role; every session may read the
+//! Server object's diagnostics (as every DA client may read `_Diagnostics`).
 
 use crate::node_manager::Roles;
 use crate::users::{self, Role};
 use opcua::server::authenticator::{
-    user_pass_security_policy_id, AuthManager, Password, UserToken,
+    user_pass_security_policy_id, AuthManager, CoreServerPermissions, Password, UserToken,
 };
 use opcua::server::ServerEndpoint;
 use opcua::types::{Error, StatusCode, UAString, UserTokenPolicy, UserTokenType};
@@ -121,5 +122,11 @@ impl AuthManager for UsersAuth {
             });
         }
         out
+    }
+
+    fn core_permissions(&self, _token: &UserToken) -> CoreServerPermissions {
+        CoreServerPermissions {
+            read_diagnostics: true,
+        }
     }
 }

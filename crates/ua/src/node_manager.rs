@@ -159,6 +159,7 @@ impl AsixNodeManager {
             .engine
             .config()
             .min_update_rate_ms;
+        let diag = Arc::clone(&setup.engine.runtime.diagnostics);
         let monitor = Monitor::new(ns, Arc::clone(&setup.engine));
         monitor.set_subscriptions(notify);
         AsixNodeManager {
@@ -167,6 +168,7 @@ impl AsixNodeManager {
                 namespace: setup.namespace,
                 tree: setup.tree,
                 scan_rate_ms,
+                diag,
             }),
             engine: setup.engine,
             monitor,

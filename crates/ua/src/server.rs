@@ -8,6 +8,10 @@
 //!   `trusted/` is refused and saved in `rejected/` (move it to `trusted/`, or
 //!   `ServerCTOPC pki trust FILE`).
 //! - Users: [`crate::auth::UsersAuth`] (users file; anonymous only with `allow_anonymous`).
+//! - The Server object: ServerStatus (State, StartTime, CurrentTime) and the
+//!   ServerDiagnosticsSummary counts kept by async-opcua (diagnostics on; every user may
+//!   read them, as every DA client may read `_Diagnostics`), BuildInfo ours
+//!   ([`build_info`]).
 //! - Listening: on the endpoint's host and port; an unspecified host (`0.0.0.0`) listens
 //!   on every interface and the endpoints name the machine's host name.
 
@@ -17,10 +21,11 @@ use crate::node_manager::{AsixNodeManager, AsixNodeManagerBuilder, Setup};
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::lang::Lang;
 use ctopc_core::namespace::Namespace;
+use ctopc_core::Timestamp;
 use ctopc_runtime::Runtime;
 use opcua::crypto::SecurityPolicy;
 use opcua::server::{ServerBuilder, ServerEndpoint};
-use opcua::types::MessageSecurityMode;
+use opcua::types::{BuildInfo, DateTime, MessageSecurityMode};
 use std::future::Future;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -48,6 +53,32 @@ pub struct Serve {
     pub namespace: Arc<dyn Namespace>,
     pub tree: Arc<AddressSpace>,
     pub lang: Lang,
+}
+
+/// The product URI of the server (BuildInfo, the application description).
+pub const PRODUCT_URI: &str = "urn:askom:ServerCTOPC";
+
+/// ServerStatus.BuildInfo: the product, its manufacturer (as the installer names it) and
+/// version; BuildDate the modification time of the running executable (when the build
+/// or its installation wrote it), null when it cannot be read.
+pub fn build_info() -> BuildInfo {
+    let version = env!("CARGO_PKG_VERSION");
+    let built = std::env::current_exe()
+        .and_then(std::fs::metadata)
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .and_then(|d| i64::try_from(d.as_nanos() / 100).ok())
+        .map(|ticks| DateTime::from(ticks.saturating_add(Timestamp::UNIX_EPOCH_TICKS)))
+        .unwrap_or_else(DateTime::null);
+    BuildInfo {
+        product_uri: PRODUCT_URI.into(),
+        manufacturer_name: "ServerCTOPC project".into(),
+        product_name: "ServerCTOPC".into(),
+        software_version: version.into(),
+        build_number: version.into(),
+        build_date: built,
+    }
 }
 
 /// The host and port of an `opc.tcp://host:port[/path]` URL.
@@ -152,7 +183,9 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
     let mut b = ServerBuilder::new()
         .application_name("ServerCTOPC")
         .application_uri(format!("urn:{announced}:ASKOM:ServerCTOPC"))
-        .product_uri("urn:askom:ServerCTOPC")
+        .product_uri(PRODUCT_URI)
+        .build_info(build_info())
+        .diagnostics_enabled(true)
         .create_sample_keypair(true)
         .certificate_path("own/cert.der")
         .private_key_path(PRIVATE_KEY)
@@ -279,6 +312,17 @@ mod tests {
             ),
             "{line}"
         );
+    }
+
+    #[test]
+    fn build_info_names_the_product_and_its_version() {
+        let b = build_info();
+        assert_eq!(b.product_name.as_ref(), "ServerCTOPC");
+        assert_eq!(b.product_uri.as_ref(), PRODUCT_URI);
+        assert_eq!(b.software_version.as_ref(), env!("CARGO_PKG_VERSION"));
+        // The test executable was written moments ago.
+        let age = DateTime::now().checked_ticks() - b.build_date.checked_ticks();
+        assert!((0..=86_400 * 10_000_000).contains(&age), "{}", b.build_date);
     }
 
     #[test]

@@ -9,6 +9,13 @@
 //!   object), or an item (a variable: AnalogItemType when it has an analog EU range or
 //!   units, DataItemType otherwise). Any item ID the namespace resolves is a variable,
 //!   browsed or not: an item ID and a NodeId name the same thing;
+//! - the derived items of a variable's value item `<V>` ([`DERIVED`]: `<V>.FormatedCV`,
+//!   `<V>.PercentageCV`, `<V>.BarCVs`, the limit attributes' `<V>.<A>.CV`) are its
+//!   components (HasComponent), those of them the namespace resolves, named by their
+//!   suffix;
+//! - `ns;s=_Diagnostics...`: the `_Diagnostics` branch (`ctopc_core::diagnostics`),
+//!   organized by the `ServerCTOPC` folder before the real branches: its branches are
+//!   folders of the board's current tree, its items variables like any other;
 //! - `ns;b=<DA property ID, 4 bytes little-endian><item ID>`: a property of an item
 //!   (HasProperty, PropertyType): `EURange` (DA 102/103), `EngineeringUnits` (100), and
 //!   every other DA property the item has beyond those that are attributes (1-6:
@@ -16,8 +23,9 @@
 
 use crate::value::{data_type, to_variant};
 use ctopc_core::browse::{AddressSpace, NodeRef};
+use ctopc_core::diagnostics::{self, is_diagnostic_id, Board};
 use ctopc_core::lang::Lang;
-use ctopc_core::namespace::{EuInfo, Namespace, OPC_WRITEABLE};
+use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_WRITEABLE};
 use ctopc_core::properties::{self as props, ItemInfo, PropertyContext};
 use opcua::nodes::AccessLevel;
 use opcua::types::{
@@ -33,6 +41,26 @@ pub const ROOT_ID: u32 = 1;
 pub const ROOT_NAME: &str = "ServerCTOPC";
 /// The namespace URI of the address space.
 pub const NAMESPACE_URI: &str = "urn:askom:ServerCTOPC";
+
+/// The suffixes of the derived items of a variable's value item `<V>`, served as its
+/// components (`<V>.<suffix>`), in this order: the value formatted by `Format`, the
+/// percentage of the range, the bar values, and the current values of the limit
+/// attributes (a number, or the value of the variable the attribute names).
+pub const DERIVED: [&str; 7] = [
+    "FormatedCV",
+    "PercentageCV",
+    "BarCVs",
+    "AlarmHigh.CV",
+    "WarnHigh.CV",
+    "WarnLow.CV",
+    "AlarmLow.CV",
+];
+
+/// True for the value item of a variable (live, keyed by a bare variable name), the
+/// items that have derived items.
+fn is_value_item(def: &ItemDef) -> bool {
+    def.constant.is_none() && !def.source_key.contains('.')
+}
 
 /// DA property IDs served as UA attributes, not as property nodes.
 const ATTRIBUTE_PROPERTIES: [u32; 9] = [
@@ -92,6 +120,8 @@ pub struct Space {
     pub tree: Arc<AddressSpace>,
     /// The server scan rate (the engine's minimum update rate), ms: MinimumSamplingInterval.
     pub scan_rate_ms: u32,
+    /// The `_Diagnostics` board: the branch's current browse tree.
+    pub diag: Arc<Board>,
 }
 
 impl Space {
@@ -138,7 +168,7 @@ impl Space {
         match self.parse(id).ok_or(StatusCode::BadNodeIdUnknown)? {
             Parsed::Root => Ok(Resolved::Root),
             Parsed::Item(item) => {
-                if let Some(n) = self.tree.find_item_id(&item) {
+                if let Some(n) = self.tree_of(&item).find_item_id(&item) {
                     if !n.is_item() {
                         return Ok(Resolved::Folder(item));
                     }
@@ -156,6 +186,38 @@ impl Space {
                 Ok(Resolved::Property(pid, Box::new(info)))
             }
         }
+    }
+
+    /// The browse tree an item ID belongs to: the `_Diagnostics` branch's current tree, or
+    /// the real one.
+    fn tree_of(&self, item_id: &str) -> Arc<AddressSpace> {
+        if is_diagnostic_id(item_id) {
+            self.diag.space()
+        } else {
+            Arc::clone(&self.tree)
+        }
+    }
+
+    /// The derived items of an item that the namespace resolves (none unless it is a
+    /// variable's value item), with their suffixes.
+    pub fn derived_children(&self, info: &ItemInfo) -> Vec<(String, &'static str)> {
+        if !is_value_item(&info.def) || is_diagnostic_id(&info.item_id) {
+            return Vec::new();
+        }
+        DERIVED
+            .iter()
+            .map(|s| (format!("{}.{s}", info.item_id), *s))
+            .filter(|(id, _)| self.namespace.resolve(id, "").is_ok())
+            .collect()
+    }
+
+    /// The value item a derived item belongs to, and the derived item's suffix.
+    pub fn derived_parent(&self, item_id: &str) -> Option<(String, &'static str)> {
+        DERIVED.iter().find_map(|s| {
+            let base = item_id.strip_suffix(s)?.strip_suffix('.')?;
+            let def = self.namespace.resolve(base, "").ok()?;
+            is_value_item(&def).then(|| (base.to_owned(), *s))
+        })
     }
 
     /// The DA properties of an item served as property nodes (EURange for 102/103).
@@ -187,9 +249,36 @@ impl Space {
 
     /// The browse name and display name of a tree node (or of an item not in the tree).
     fn item_names(&self, item_id: &str) -> String {
-        match self.tree.find_item_id(item_id) {
+        match self.tree_of(item_id).find_item_id(item_id) {
             Some(n) if !n.is_root() => n.name().to_owned(),
-            _ => item_id.to_owned(),
+            _ => match self.derived_parent(item_id) {
+                Some((_, suffix)) => suffix.to_owned(),
+                None => item_id.to_owned(),
+            },
+        }
+    }
+
+    /// The identity of the variable `item_id` under the name `name`.
+    fn variable_meta(&self, item_id: &str, name: &str) -> Meta {
+        let analog = self
+            .namespace
+            .resolve_with_attributes(item_id, "")
+            .map(|(_, attrs)| {
+                matches!(attrs.eu, EuInfo::Analog { .. })
+                    || attrs.eu_units.as_deref().is_some_and(|u| !u.is_empty())
+            })
+            .unwrap_or(false);
+        let ty = if analog {
+            VariableTypeId::AnalogItemType
+        } else {
+            VariableTypeId::DataItemType
+        };
+        Meta {
+            node_id: self.item_node_id(item_id),
+            node_class: NodeClass::Variable,
+            browse_name: QualifiedName::new(self.ns, name),
+            display_name: LocalizedText::new("", name),
+            type_definition: ty.into(),
         }
     }
 
@@ -207,30 +296,15 @@ impl Space {
         if n.is_root() {
             return self.root_meta();
         }
-        let (class, ty) = if n.is_item() {
-            let analog = self
-                .namespace
-                .resolve_with_attributes(n.item_id(), "")
-                .map(|(_, attrs)| {
-                    matches!(attrs.eu, EuInfo::Analog { .. })
-                        || attrs.eu_units.as_deref().is_some_and(|u| !u.is_empty())
-                })
-                .unwrap_or(false);
-            let ty = if analog {
-                VariableTypeId::AnalogItemType
-            } else {
-                VariableTypeId::DataItemType
-            };
-            (NodeClass::Variable, ty.into())
-        } else {
-            (NodeClass::Object, ObjectTypeId::FolderType.into())
-        };
+        if n.is_item() {
+            return self.variable_meta(n.item_id(), n.name());
+        }
         Meta {
             node_id: self.item_node_id(n.item_id()),
-            node_class: class,
+            node_class: NodeClass::Object,
             browse_name: QualifiedName::new(self.ns, n.name()),
             display_name: LocalizedText::new("", n.name()),
-            type_definition: ty,
+            type_definition: ObjectTypeId::FolderType.into(),
         }
     }
 
@@ -249,7 +323,7 @@ impl Space {
     pub fn meta(&self, r: &Resolved) -> Meta {
         match r {
             Resolved::Root => self.root_meta(),
-            Resolved::Folder(item) => match self.tree.find_item_id(item) {
+            Resolved::Folder(item) => match self.tree_of(item).find_item_id(item) {
                 Some(n) => self.tree_meta(n),
                 None => self.root_meta(),
             },
@@ -300,18 +374,50 @@ impl Space {
                     forward: false,
                     target: objects_folder_meta(),
                 });
+                let diag = self.diag.space();
+                if let Some(n) = diag.find_item_id(diagnostics::ROOT) {
+                    out.push(Reference {
+                        reference_type: ReferenceTypeId::Organizes.into(),
+                        forward: true,
+                        target: self.tree_meta(n),
+                    });
+                }
                 self.children(self.tree.root(), ReferenceTypeId::Organizes, &mut out);
             }
             Resolved::Folder(item) => {
-                if let Some(n) = self.tree.find_item_id(item) {
+                let tree = self.tree_of(item);
+                if let Some(n) = tree.find_item_id(item) {
                     self.parent(n, &mut out);
                     self.children(n, ReferenceTypeId::Organizes, &mut out);
                 }
             }
             Resolved::Variable(info) => {
-                if let Some(n) = self.tree.find_item_id(&info.item_id) {
+                let tree = self.tree_of(&info.item_id);
+                let in_tree = tree.find_item_id(&info.item_id);
+                if let Some(n) = in_tree {
                     self.parent(n, &mut out);
                     self.children(n, ReferenceTypeId::HasComponent, &mut out);
+                } else if let Some((base, _)) = self.derived_parent(&info.item_id) {
+                    let name = self.item_names(&base);
+                    out.push(Reference {
+                        reference_type: ReferenceTypeId::HasComponent.into(),
+                        forward: false,
+                        target: self.variable_meta(&base, &name),
+                    });
+                }
+                for (id, suffix) in self.derived_children(info) {
+                    let target = self.variable_meta(&id, suffix);
+                    if out
+                        .iter()
+                        .any(|r| r.forward && r.target.node_id == target.node_id)
+                    {
+                        continue;
+                    }
+                    out.push(Reference {
+                        reference_type: ReferenceTypeId::HasComponent.into(),
+                        forward: true,
+                        target,
+                    });
                 }
                 for pid in self.property_ids(info) {
                     out.push(Reference {

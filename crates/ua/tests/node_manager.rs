@@ -440,3 +440,196 @@ fn a_ua_monitored_item_and_a_da_group_share_one_source_subscription() {
     assert_eq!(subscribed(), 1, "the DA group still subscribes it");
     rt.close_session(da);
 }
+
+/// The forward references of a node, as (reference type, browse name, NodeId).
+fn forward(space: &ctopc_ua::space::Space, r: &Resolved) -> Vec<(NodeId, String, NodeId)> {
+    space
+        .references(r)
+        .into_iter()
+        .filter(|r| r.forward && r.reference_type != ReferenceTypeId::HasTypeDefinition)
+        .map(|r| {
+            (
+                r.reference_type,
+                r.target.browse_name.name.as_ref().to_owned(),
+                r.target.node_id,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_derived_values_are_components_of_the_variable_named_by_their_item_ids() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let v = space.resolve(&item("KW_A000")).unwrap();
+    let components: Vec<(String, NodeId)> = forward(space, &v)
+        .into_iter()
+        .filter(|(t, _, _)| *t == ReferenceTypeId::HasComponent)
+        .map(|(_, name, id)| (name, id))
+        .collect();
+    for suffix in ["FormatedCV", "PercentageCV", "BarCVs"] {
+        let id = item(&format!("KW_A000.{suffix}"));
+        assert!(
+            components.contains(&(suffix.to_owned(), id.clone())),
+            "{suffix} in {components:?}"
+        );
+        // The child names its parent, and is a variable under its suffix.
+        let child = space.resolve(&id).unwrap();
+        let meta = space.meta(&child);
+        assert_eq!(meta.browse_name.name.as_ref(), suffix);
+        assert_eq!(meta.node_class, NodeClass::Variable);
+        let up: Vec<_> = space
+            .references(&child)
+            .into_iter()
+            .filter(|r| !r.forward && r.reference_type == ReferenceTypeId::HasComponent)
+            .map(|r| r.target.node_id)
+            .collect();
+        assert_eq!(up, vec![item("KW_A000")], "{suffix}");
+        // A derived item has no derived items of its own.
+        assert!(
+            forward(space, &child)
+                .iter()
+                .all(|(t, _, _)| *t != ReferenceTypeId::HasComponent),
+            "{suffix}"
+        );
+    }
+    let percent = space.resolve(&item("KW_A000.PercentageCV")).unwrap();
+    assert_eq!(
+        space.meta(&percent).type_definition,
+        NodeId::from(VariableTypeId::AnalogItemType)
+    );
+    // Only those that resolve: a variable without a range has a FormatedCV and no
+    // PercentageCV.
+    let names = |id: &str| -> Vec<String> {
+        let r = space.resolve(&item(id)).unwrap();
+        forward(space, &r)
+            .into_iter()
+            .filter(|(t, _, _)| *t == ReferenceTypeId::HasComponent)
+            .map(|(_, n, _)| n)
+            .collect()
+    };
+    let all = names("KW_A000");
+    assert!(all
+        .iter()
+        .all(|n| ctopc_ua::space::DERIVED.contains(&n.as_str())));
+    // Constant items (attributes) have none.
+    assert!(names("KW_A000.DESC").is_empty());
+}
+
+#[test]
+fn the_derived_values_are_read_and_monitored_like_variables() {
+    let f = fixture();
+    let v = f.nm.read_values(
+        &[
+            "KW_A000".into(),
+            "KW_A000.FormatedCV".into(),
+            "KW_A000.PercentageCV".into(),
+            "KW_A000.BarCVs".into(),
+        ],
+        max_age_ms(0.0),
+    );
+    for dv in &v {
+        assert_eq!(dv.status, Some(StatusCode::Good), "{dv:?}");
+    }
+    let Some(Variant::Float(level)) = v[0].value else {
+        panic!("{:?}", v[0])
+    };
+    assert!(
+        matches!(&v[1].value, Some(Variant::String(s)) if !s.is_empty()),
+        "{:?}",
+        v[1]
+    );
+    // KW_A000's range is [0, 8]: the percentage of the value read at the same time.
+    let Some(Variant::Double(p)) = v[2].value else {
+        panic!("{:?}", v[2])
+    };
+    assert!(
+        (p - f64::from(level) / 8.0 * 100.0).abs() < 1e-3,
+        "{p} for {level}"
+    );
+    assert!(matches!(v[3].value, Some(Variant::Array(_))), "{:?}", v[3]);
+    let m = &f.nm.monitor;
+    let rate = m.revise(1000.0);
+    m.add("KW_A000.PercentageCV", rate).unwrap();
+    wait_until("a data change of KW_A000.PercentageCV", || {
+        f.notes.count_for(&item("KW_A000.PercentageCV")) >= 1
+    });
+    m.remove("KW_A000.PercentageCV", rate);
+}
+
+#[test]
+fn diagnostics_is_a_folder_of_readable_variables_first_under_the_root() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let root = space.resolve(&NodeId::new(NS, ROOT_ID)).unwrap();
+    let organized: Vec<_> = forward(space, &root)
+        .into_iter()
+        .filter(|(t, _, _)| *t == ReferenceTypeId::Organizes)
+        .collect();
+    assert_eq!(organized[0].1, "_Diagnostics");
+    assert_eq!(organized[0].2, item("_Diagnostics"));
+    assert!(organized.len() > 1, "the real branches follow");
+    let diag = space.resolve(&item("_Diagnostics")).unwrap();
+    assert!(matches!(diag, Resolved::Folder(_)));
+    let meta = space.meta(&diag);
+    assert_eq!(meta.type_definition, NodeId::from(ObjectTypeId::FolderType));
+    let up: Vec<_> = space
+        .references(&diag)
+        .into_iter()
+        .filter(|r| !r.forward && r.reference_type == ReferenceTypeId::Organizes)
+        .map(|r| r.target.node_id)
+        .collect();
+    assert_eq!(up, vec![NodeId::new(NS, ROOT_ID)]);
+    let sections: Vec<String> = forward(space, &diag)
+        .into_iter()
+        .map(|(_, n, _)| n)
+        .collect();
+    assert_eq!(sections, ["Server", "Clients", "Channels"]);
+    let server = space.resolve(&item("_Diagnostics.Server")).unwrap();
+    let fields: Vec<_> = forward(space, &server);
+    let uptime = fields
+        .iter()
+        .find(|(_, n, _)| n == "Uptime")
+        .expect("_Diagnostics.Server.Uptime");
+    assert_eq!(uptime.2, item("_Diagnostics.Server.Uptime"));
+    let u = space.resolve(&uptime.2).unwrap();
+    assert!(matches!(u, Resolved::Variable(_)));
+    assert_eq!(space.meta(&u).node_class, NodeClass::Variable);
+    assert_eq!(
+        space
+            .attribute(&u, AttributeId::Description, false, Lang::Polish)
+            .unwrap(),
+        Variant::from(opcua::types::LocalizedText::new(
+            "pl",
+            "Czas pracy serwera od startu"
+        ))
+    );
+    assert_eq!(
+        space
+            .attribute(&u, AttributeId::Description, false, Lang::English)
+            .unwrap(),
+        Variant::from(opcua::types::LocalizedText::new(
+            "en",
+            "Time since the server started"
+        ))
+    );
+    // Read and monitored as in DA: the value of the current snapshot.
+    wait_until("a Good read of _Diagnostics.Server.Clients", || {
+        let v = f.nm.read_values(&["_Diagnostics.Server.Clients".into()], 0);
+        v[0].status == Some(StatusCode::Good) && matches!(v[0].value, Some(Variant::Int32(_)))
+    });
+    let m = &f.nm.monitor;
+    let rate = m.revise(1000.0);
+    m.add("_Diagnostics.Server.Uptime", rate).unwrap();
+    wait_until("a data change of _Diagnostics.Server.Uptime", || {
+        f.notes.count_for(&item("_Diagnostics.Server.Uptime")) >= 1
+    });
+    m.remove("_Diagnostics.Server.Uptime", rate);
+    // The channels' branch lists the basic channel.
+    let channels = space.resolve(&item("_Diagnostics.Channels")).unwrap();
+    assert!(!forward(space, &channels).is_empty());
+    assert_eq!(
+        space.resolve(&item("_Diagnostics.NoSuchSection")).err(),
+        Some(StatusCode::BadNodeIdUnknown)
+    );
+}
