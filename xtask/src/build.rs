@@ -11,7 +11,8 @@ pub struct Artifacts {
     /// OpcServerList.exe, our OPC.ServerList.1 (64-bit, as the server).
     pub server_list: PathBuf,
     pub proxy: PathBuf,
-    /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
+    /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub, opcdiag and asix-gate
+    /// (32-bit only: AsixConnect's Automation server is a 32-bit in-process DLL).
     pub dir32: PathBuf,
     pub proxy32: PathBuf,
     /// target/i686-pc-windows-gnu/release/xconnect_double.dll: the 32-bit test double of
@@ -44,7 +45,8 @@ pub fn e2e_bin(name: &str) -> Result<(), String> {
 pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     let root = util::root();
     // The server is 64-bit only (COM starts it for clients of either bitness); opcdiag
-    // is built for both, so that a plant engineer can check what a 32-bit client sees.
+    // is built for both, so that a plant engineer can check what a 32-bit client sees;
+    // asix-gate, for the asix station, at 32-bit only.
     util::run(util::cargo().args([
         "build",
         "--release",
@@ -65,6 +67,8 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
         Arch::X86.target(),
         "-p",
         "opc-client",
+        "-p",
+        "asix-gate",
         "--bins",
     ]))?;
     proxy::build_proxy(&root, Arch::X64)?;

@@ -1,6 +1,7 @@
 //! `cargo xtask dist`: target/dist/ServerCTOPC-<version>.zip with the server, the
 //! proxy/stub DLL, the diagnostic client (the last two also 32-bit, in `x86/`), the example configuration, the demo database
-//! and the documentation (the deployment guide first).
+//! and the documentation (the deployment guide first), and in `asix-gate/` the gateway
+//! for the asix station (32-bit) with its example configuration.
 //!
 //! The executables ship **stripped**: the release profile keeps line tables for the
 //! project's own crates (`debug = 1`, so that the tests and panics name our lines), which
@@ -36,6 +37,9 @@ pub fn run(_args: &[String]) -> Result<(), String> {
         // For 32-bit OPC clients (docs/deployment.md: the 32-bit regsvr32 registers it).
         ("x86/opc_ps.dll".into(), a.proxy32.clone()),
         ("x86/opcdiag.exe".into(), a.dir32.join("opcdiag.exe")),
+        // The gateway for the asix station (32-bit), with its example configuration.
+        (GATE_EXE.into(), a.dir32.join("asix-gate.exe")),
+        (GATE_INI.into(), root.join("asix-gate.ini.example")),
         (
             "asixconnect.ini.example".into(),
             root.join("asixconnect.ini.example"),
@@ -55,6 +59,7 @@ pub fn run(_args: &[String]) -> Result<(), String> {
             root.join("docs/configuration.md"),
         ),
         ("docs/operations.md".into(), root.join("docs/operations.md")),
+        ("docs/asix-gate.md".into(), root.join("docs/asix-gate.md")),
     ];
     for f in ["atrybuty.csv", "wytwornia_kwasu.zez"] {
         files.push((
@@ -88,8 +93,18 @@ pub fn run(_args: &[String]) -> Result<(), String> {
     crate::msi::dist(&files, version).map(|_| ())
 }
 
-/// The bitness of a file of the archive: `x86/...` is 32-bit, the rest 64-bit.
+/// asix-gate in the archive and the install folder: a folder of its own, since it runs
+/// on another computer (the asix station) and reads `asix-gate.ini` beside itself.
+pub const GATE_DIR: &str = "asix-gate";
+pub const GATE_EXE: &str = "asix-gate/asix-gate.exe";
+pub const GATE_INI: &str = "asix-gate/asix-gate.ini.example";
+
+/// The bitness of a file of the archive: `x86/...` and asix-gate are 32-bit, the rest
+/// 64-bit.
 fn arch_of(name: &str) -> Arch {
+    if name.starts_with(&format!("{GATE_DIR}/")) {
+        return Arch::X86;
+    }
     Arch::ALL
         .into_iter()
         .find(|a| {
@@ -413,6 +428,7 @@ mod tests {
     fn files_under_x86_are_32_bit() {
         assert_eq!(arch_of("x86/opcdiag.exe"), Arch::X86);
         assert_eq!(arch_of("ServerCTOPC.exe"), Arch::X64);
+        assert_eq!(arch_of(GATE_EXE), Arch::X86);
         assert_eq!(objcopy(Arch::X86), "i686-w64-mingw32-objcopy");
         assert_eq!(objcopy(Arch::X64), "x86_64-w64-mingw32-objcopy");
     }

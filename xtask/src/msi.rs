@@ -15,6 +15,11 @@
 //! neither know the clients' group's SID nor write the AppID's security values only where
 //! absent.
 //!
+//! The feature `Gate` (level 2, so off by default: `ADDLOCAL=ALL`) installs asix-gate, the
+//! 32-bit gateway for the asix station, in `asix-gate\` with its example configuration
+//! and its NT service (ServiceInstall/ServiceControl rows of the gate's component: on
+//! demand, `asix-gate.exe -ServiceRun`, stopped and removed with the component).
+//!
 //! The proxy/stubs register themselves (deferred regsvr32 custom actions of the right
 //! bitness in the template, with rollback and uninstall counterparts): their keys are
 //! what widl generates from idl/ into DllRegisterServer, so the DLL itself stays the one
@@ -27,6 +32,8 @@
 //! hold it while each bitness's opcdiag runs status, write, read back (from the device)
 //! and servers, and must see the first value and both writes; the server's command line
 //! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
+//! The default install has no gate; the upgrade adds it (`ADDLOCAL=ALL`: the files and
+//! the service are checked); the uninstall removes it.
 //! The three MSIs are built at once; a prefix copy is 1.3 GB. The time of each step, as
 //! measured: docs/benchmarks.md (about 2 minutes with the template kept and the Windows
 //! build up to date, about 3 from a clean target/wine, as in CI).
@@ -59,6 +66,8 @@ pub const FILES: &[&str] = &[
     "opcdiag.exe",
     "x86/opc_ps.dll",
     "x86/opcdiag.exe",
+    crate::dist::GATE_EXE,
+    crate::dist::GATE_INI,
     "asixconnect.ini.example",
     "README.md",
     "docs/deployment.md",
@@ -66,6 +75,7 @@ pub const FILES: &[&str] = &[
     "docs/asix-net-protocol.md",
     "docs/configuration.md",
     "docs/operations.md",
+    "docs/asix-gate.md",
     "demo/wytwornia_kwasu/atrybuty.csv",
     "demo/wytwornia_kwasu/wytwornia_kwasu.zez",
 ];
@@ -518,6 +528,45 @@ mod tests {
         }
     }
 
+    /// asix-gate is a feature of its own, off by default, whose component carries the
+    /// gate's service (installed on demand, stopped and removed with the component).
+    #[test]
+    fn the_gate_is_a_feature_off_by_default_with_its_service() {
+        let msi = built_msi("gate");
+        let features = table(&msi, "Feature").unwrap();
+        let level = |id: &str| -> u32 {
+            let row = features.iter().find(|r| r[0] == id).unwrap();
+            // Feature, Feature_Parent, Title, Description, Display, Level, ...
+            row[5].parse().unwrap()
+        };
+        assert_eq!(level("Complete"), 1);
+        assert!(level("Gate") > 1, "INSTALLLEVEL is 1: {features:?}");
+        let in_feature = table(&msi, "FeatureComponents").unwrap();
+        for c in ["Gate", "GateIniExample"] {
+            assert!(
+                in_feature.iter().any(|r| r[0] == "Gate" && r[1] == c),
+                "{c} in {in_feature:?}"
+            );
+            assert!(!in_feature.iter().any(|r| r[0] == "Complete" && r[1] == c));
+        }
+        let files = table(&msi, "File").unwrap();
+        let gate_exe = files.iter().find(|r| r[0] == "GateExe").unwrap();
+        assert_eq!(gate_exe[1], "Gate");
+        let install = table(&msi, "ServiceInstall").unwrap();
+        // ServiceInstall, Name, DisplayName, ServiceType, StartType, ErrorControl,
+        // LoadOrderGroup, Dependencies, StartName, Password, Arguments, Component_, ...
+        let svc = install.iter().find(|r| r[1] == "asix-gate").unwrap();
+        assert_eq!(svc[3], "16", "SERVICE_WIN32_OWN_PROCESS");
+        assert_eq!(svc[4], "3", "SERVICE_DEMAND_START");
+        assert_eq!(svc[10], "-ServiceRun");
+        assert_eq!(svc[11], "Gate");
+        let control = table(&msi, "ServiceControl").unwrap();
+        let ctl = control.iter().find(|r| r[1] == "asix-gate").unwrap();
+        // Event: stop on install and uninstall (0x2 | 0x20), delete on uninstall (0x80).
+        assert_eq!(ctl[2].parse::<u32>().unwrap(), 0x2 | 0x20 | 0x80);
+        assert_eq!(ctl[5], "Gate");
+    }
+
     /// A `system.reg` as Wine writes it: the AppID key in both views, a long binary value
     /// continued over lines.
     #[test]
@@ -884,6 +933,50 @@ mod wine_test {
             self.security("after /Service again (nothing overwritten)", true, 6)
         }
 
+        /// Whether the feature Gate is in place (`want`): asix-gate.exe and its example in
+        /// `asix-gate\`, and its service registered (on demand, `-ServiceRun`); or none of
+        /// them.
+        fn gate(&self, what: &str, want: bool) -> Result<(), String> {
+            let dir = self.install_dir().join(crate::dist::GATE_DIR);
+            let files = [crate::dist::GATE_EXE, crate::dist::GATE_INI]
+                .map(|f| self.install_dir().join(f).is_file());
+            let reg = self.system_reg();
+            let head = "[system\\\\currentcontrolset\\\\services\\\\asix-gate]";
+            let svc = reg.find(head).map(|start| {
+                let body = &reg[start..];
+                body[..body.find("\n\n").unwrap_or(body.len())].to_owned()
+            });
+            if !want {
+                if dir.exists() || svc.is_some() {
+                    return Err(format!(
+                        "msi-test: {what}: the gate is installed without being asked for: folder {}, service {svc:?}",
+                        dir.exists()
+                    ));
+                }
+                println!("msi-test: {what}: no asix-gate (the feature is off by default)");
+                return Ok(());
+            }
+            if files != [true, true] {
+                return Err(format!(
+                    "msi-test: {what}: asix-gate.exe, asix-gate.ini.example installed: {files:?}"
+                ));
+            }
+            let svc = svc.ok_or_else(|| format!("msi-test: {what}: no asix-gate service"))?;
+            for want in [
+                "\"start\"=dword:00000003",
+                "asix-gate\\\\asix-gate.exe",
+                "-servicerun",
+            ] {
+                if !svc.contains(want) {
+                    return Err(format!(
+                        "msi-test: {what}: the asix-gate service's key lacks {want}:\n{svc}"
+                    ));
+                }
+            }
+            println!("msi-test: {what}: asix-gate.exe, its example ini and its service (on demand) installed");
+            Ok(())
+        }
+
         /// `AuthenticationLevel` = `level` in both views, as an administrator would set it.
         fn set_authentication_level(&self, level: u32) -> Result<(), String> {
             let key = format!("HKLM\\Software\\Classes\\AppID\\{{{CLSID}}}");
@@ -1125,6 +1218,7 @@ mod wine_test {
                 "serverctopc.app",
                 "opc_ps.dll",
                 "services\\\\serverctopc",
+                "services\\\\asix-gate",
                 "appid\\\\serverctopc.exe",
                 "13486d51-4821-11d2-a494-3cb306c10000",
                 "opc.serverlist",
@@ -1290,6 +1384,8 @@ mod wine_test {
                     "opcdiag.exe" => a.dir.join("opcdiag.exe"),
                     "x86/opc_ps.dll" => a.proxy32.clone(),
                     "x86/opcdiag.exe" => a.dir32.join("opcdiag.exe"),
+                    crate::dist::GATE_EXE => a.dir32.join("asix-gate.exe"),
+                    crate::dist::GATE_INI => root.join("asix-gate.ini.example"),
                     // The example, the README, the docs and the demo database.
                     other => root.join(other),
                 };
@@ -1383,6 +1479,7 @@ mod wine_test {
         ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
+        ctx.gate("after install", false)?;
 
         // 3. The user's configuration survives a major upgrade (which installs the
         //    service too).
@@ -1417,7 +1514,8 @@ mod wine_test {
         // An administrator's change (dcomcnfg's "Authentication Level" raised to packet
         // privacy, 6) in both views: the upgrade must keep it.
         ctx.set_authentication_level(6)?;
-        let code = ctx.msiexec("/i", &new, &["SERVICE=1"], "upgrade.log");
+        // The upgrade adds the feature Gate (with the default one: ADDLOCAL=ALL).
+        let code = ctx.msiexec("/i", &new, &["SERVICE=1", "ADDLOCAL=ALL"], "upgrade.log");
         if code != 0 {
             return Err(format!(
                 "msi-test: upgrade to {new_version} failed: exit {code} (log {})",
@@ -1436,6 +1534,7 @@ mod wine_test {
         ));
         ctx.installed("after upgrade")?;
         service_installed(&ctx.system_reg())?;
+        ctx.gate("after upgrade with ADDLOCAL=ALL", true)?;
         // Measured under Wine 8: its RemoveExistingProducts removes the older version
         // without setting UPGRADINGPRODUCTCODE, so the older version's `/UnregServer` (not
         // `/UnregServer /KeepSecurity`, which Windows Installer's upgrade runs) removed the

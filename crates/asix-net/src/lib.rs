@@ -28,6 +28,7 @@ pub mod datasource;
 pub mod discovery;
 pub mod naming;
 pub mod pipeline;
+pub mod probe;
 pub mod proto;
 pub mod rest;
 pub mod secure;

@@ -481,6 +481,135 @@ pub fn server_config(
     Ok(Arc::new(c))
 }
 
+/// The certificate a server presented to a [`recording_client_config`]'s handshake.
+pub type Seen = Arc<std::sync::Mutex<Option<CertificateDer<'static>>>>;
+
+/// A copy of a client configuration whose server check (the pins of `trust`, as
+/// [`client_config`]'s) first records the certificate the server presents: a link
+/// check (`opcdiag doctor`) can name the certificate of a server its pins refuse. The
+/// verdict is the pins' own; nothing more is accepted.
+pub fn recording_client_config(
+    base: &rustls::ClientConfig,
+    trust: Trust,
+) -> (Arc<rustls::ClientConfig>, Seen) {
+    let seen: Seen = Arc::default();
+    let verifier = Arc::new(RecordingVerifier {
+        inner: PinVerifier {
+            trust,
+            server: true,
+            algs: provider().signature_verification_algorithms,
+        },
+        seen: seen.clone(),
+    });
+    let mut c = base.clone();
+    c.dangerous().set_certificate_verifier(verifier);
+    (Arc::new(c), seen)
+}
+
+#[derive(Debug)]
+struct RecordingVerifier {
+    inner: PinVerifier,
+    seen: Seen,
+}
+
+impl ServerCertVerifier for RecordingVerifier {
+    fn verify_server_cert(
+        &self,
+        end_entity: &CertificateDer<'_>,
+        intermediates: &[CertificateDer<'_>],
+        server_name: &ServerName<'_>,
+        ocsp_response: &[u8],
+        now: UnixTime,
+    ) -> Result<ServerCertVerified, Error> {
+        *self.seen.lock().unwrap_or_else(|p| p.into_inner()) =
+            Some(end_entity.clone().into_owned());
+        self.inner
+            .verify_server_cert(end_entity, intermediates, server_name, ocsp_response, now)
+    }
+
+    fn verify_tls12_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, Error> {
+        ServerCertVerifier::verify_tls12_signature(&self.inner, message, cert, dss)
+    }
+
+    fn verify_tls13_signature(
+        &self,
+        message: &[u8],
+        cert: &CertificateDer<'_>,
+        dss: &DigitallySignedStruct,
+    ) -> Result<HandshakeSignatureValid, Error> {
+        ServerCertVerifier::verify_tls13_signature(&self.inner, message, cert, dss)
+    }
+
+    fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
+        ServerCertVerifier::supported_verify_schemes(&self.inner)
+    }
+}
+
+/// The end of a certificate's validity (`notAfter`) in seconds since 1970 (UTC); `None`
+/// when the DER does not hold one where X.509 puts it.
+pub fn not_after(cert: &CertificateDer<'_>) -> Option<i64> {
+    // One DER element at the start of `d`: (tag, contents, rest).
+    fn element(d: &[u8]) -> Option<(u8, &[u8], &[u8])> {
+        let (&tag, d) = d.split_first()?;
+        let (&first, mut d) = d.split_first()?;
+        let len = if first < 0x80 {
+            usize::from(first)
+        } else {
+            let n = usize::from(first & 0x7F);
+            if n == 0 || n > 4 || d.len() < n {
+                return None;
+            }
+            let (bytes, rest) = d.split_at(n);
+            d = rest;
+            bytes.iter().fold(0usize, |a, b| (a << 8) | usize::from(*b))
+        };
+        (d.len() >= len).then(|| (tag, &d[..len], &d[len..]))
+    }
+    let (_, cert, _) = element(cert.as_ref())?;
+    let (_, tbs, _) = element(cert)?;
+    let mut rest = tbs;
+    let (tag, _, r) = element(rest)?;
+    if tag == 0xA0 {
+        rest = r; // the explicit version
+    }
+    // serialNumber, signature, issuer, then validity.
+    for _ in 0..3 {
+        rest = element(rest)?.2;
+    }
+    let (_, validity, _) = element(rest)?;
+    let (_, _, after) = element(validity)?;
+    let (tag, time, _) = element(after)?;
+    let text = std::str::from_utf8(time).ok()?;
+    let digits = text.strip_suffix('Z')?;
+    let (year, rest) = match tag {
+        0x17 if digits.len() == 12 => {
+            let yy: i64 = digits[..2].parse().ok()?;
+            (if yy >= 50 { 1900 + yy } else { 2000 + yy }, &digits[2..])
+        }
+        0x18 if digits.len() == 14 => (digits[..4].parse().ok()?, &digits[4..]),
+        _ => return None,
+    };
+    let field = |i: usize| -> Option<i64> { rest.get(i..i + 2)?.parse().ok() };
+    let (month, day) = (field(0)?, field(2)?);
+    let secs = field(4)? * 3600 + field(6)? * 60 + field(8)?;
+    // Days from 1970-01-01 to the civil date (proleptic Gregorian).
+    let (y, m) = if month <= 2 {
+        (year - 1, month + 9)
+    } else {
+        (year, month - 3)
+    };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let doy = (153 * m + 2) / 5 + day - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    Some((era * 146_097 + doe - 719_468) * 86_400 + secs)
+}
+
 /// The fingerprint of the peer's certificate after a handshake.
 pub fn peer_fingerprint(conn: &rustls::CommonState) -> Option<Fingerprint> {
     conn.peer_certificates()
@@ -528,6 +657,23 @@ mod tests {
         assert_eq!(
             parse_fingerprints(&format!("{hex}, {hex},")).map(|v| v.len()),
             Ok(2)
+        );
+    }
+
+    #[test]
+    fn not_after_is_read_from_the_certificate() {
+        // rcgen writes UTCTime up to 2049 and GeneralizedTime from 2050 (RFC 5280).
+        for (to, unix) in [
+            (2031, 1_924_992_000),
+            (2001, 978_307_200),
+            (2061, 2_871_763_200),
+        ] {
+            let g = generate("S1", Some((2000, to))).unwrap();
+            assert_eq!(not_after(g.identity.certificate()), Some(unix), "{to}");
+        }
+        assert_eq!(
+            not_after(&CertificateDer::from(vec![0x30, 0x03, 0x02, 0x01])),
+            None
         );
     }
 

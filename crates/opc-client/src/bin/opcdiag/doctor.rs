@@ -690,6 +690,92 @@ pub fn link_check(
     }
 }
 
+/// What the link-identity probe of one server showed (`asix_net::probe`, as text): the
+/// handshake made with the channel's security as configured.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LinkSeen {
+    /// The server's certificate (fingerprint in hex), whether the channel's pins accept
+    /// it (`refused`: why the handshake failed), its end of validity (seconds since 1970).
+    Tls {
+        fingerprint: String,
+        pinned: bool,
+        not_after: Option<i64>,
+        refused: Option<String>,
+    },
+    Plaintext,
+}
+
+/// A certificate ending sooner than this is a warning.
+pub const EXPIRY_WARNING_DAYS: i64 = 30;
+
+/// `YYYY-MM-DD` (UTC) of a time in seconds since 1970.
+pub fn utc_date(unix: i64) -> String {
+    let z = unix.div_euclid(86_400) + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
+/// The identity of one server's link (`server` at `addr`, found by discovery whatever it
+/// announced), judged at `now` (seconds since 1970): a pinned certificate valid for
+/// more than [`EXPIRY_WARNING_DAYS`] is OK; one about to expire or a plaintext link a
+/// warning; an expired or unpinned certificate, or no link at all, a failure.
+pub fn identity_check(
+    opc_channel: &str,
+    asix_channel: &str,
+    server: &str,
+    addr: &str,
+    seen: &Result<LinkSeen, String>,
+    now: i64,
+) -> Check {
+    let name =
+        format!("asix link identity [Channel:{opc_channel}] {asix_channel}: {server} at {addr}");
+    let renew = "make a new certificate on the server (`asix-gate --gen-cert DIR`, then Certificate/PrivateKey in asix-gate.ini) and pin its fingerprint in the channel's AsixNetServerFingerprint";
+    match seen {
+        Err(e) => Check::fail(
+            name,
+            format!("no link: {e}"),
+            "check that the server runs and that its link port (asix-gate.ini Listen) is open in the firewalls between the two computers; a server speaking protocol version 1 must be upgraded",
+        ),
+        Ok(LinkSeen::Plaintext) => Check::warn(
+            name,
+            "plaintext link (AsixNetPlaintext): neither authenticated nor encrypted, anyone on the network can read and write",
+            "only on a closed test network; otherwise give the channel AsixNetCertFile/AsixNetKeyFile, pin the server (AsixNetServerFingerprint) and remove AsixNetPlaintext",
+        ),
+        Ok(LinkSeen::Tls { fingerprint, pinned, not_after, refused }) => {
+            let expired = not_after.is_some_and(|t| t <= now);
+            let until = not_after.map(utc_date).unwrap_or_else(|| "an unknown date".into());
+            if expired {
+                Check::fail(name, format!("certificate {fingerprint} expired on {until}"), renew)
+            } else if !pinned {
+                Check::fail(
+                    name,
+                    format!(
+                        "the server presents certificate {fingerprint}, which the channel does not pin{}",
+                        refused.as_ref().map(|r| format!(" ({r})")).unwrap_or_default()
+                    ),
+                    format!("if this is your server (`asix-gate --gen-cert` printed its fingerprint), pin it: AsixNetServerFingerprint = {fingerprint} in the channel's section of ASIXConnect.ini; otherwise find out what answers at {addr}"),
+                )
+            } else if not_after.is_some_and(|t| t - now < EXPIRY_WARNING_DAYS * 86_400) {
+                let days = not_after.map(|t| (t - now) / 86_400).unwrap_or(0);
+                Check::warn(
+                    name,
+                    format!("certificate {fingerprint} pinned; it expires on {until} (in {days} days)"),
+                    renew,
+                )
+            } else {
+                Check::ok(name, format!("certificate {fingerprint} pinned, valid until {until}"))
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // DCOM, firewall
 
@@ -1312,6 +1398,65 @@ mod tests {
         assert_eq!(c.status, Status::Fail);
         assert!(c.detail.contains("500 ms"), "{c:?}");
         assert!(c.fix.contains("DiscoveryPort"));
+    }
+
+    #[test]
+    fn a_links_identity_is_ok_pinned_warned_near_expiry_or_plaintext_and_failed_otherwise() {
+        const DAY: i64 = 86_400;
+        let now = 1_800_000_000; // 2027-01-15
+        let fp = "ab".repeat(32);
+        let tls = |pinned: bool, not_after: i64| {
+            Ok(LinkSeen::Tls {
+                fingerprint: fp.clone(),
+                pinned,
+                not_after: Some(not_after),
+                refused: (!pinned).then(|| "TLS handshake failed".to_owned()),
+            })
+        };
+        let check = |seen| identity_check("*", "K1", "GATE1", "10.0.0.5:48101", &seen, now);
+        let c = check(tls(true, now + 400 * DAY));
+        assert_eq!(c.status, Status::Ok, "{c:?}");
+        assert!(c.name.contains("GATE1") && c.name.contains("10.0.0.5:48101"));
+        assert!(
+            c.detail.contains(&fp) && c.detail.contains("2028-02-19"),
+            "{c:?}"
+        );
+        let c = check(tls(true, now + 10 * DAY));
+        assert_eq!(c.status, Status::Warn);
+        assert!(
+            c.detail.contains("in 10 days") && c.fix.contains("--gen-cert"),
+            "{c:?}"
+        );
+        let c = check(tls(false, now + 400 * DAY));
+        assert_eq!(c.status, Status::Fail);
+        assert!(
+            c.detail.contains(&fp) && c.detail.contains("does not pin"),
+            "{c:?}"
+        );
+        assert!(
+            c.fix.contains(&format!("AsixNetServerFingerprint = {fp}")),
+            "{c:?}"
+        );
+        let c = check(tls(false, now - DAY));
+        assert_eq!(c.status, Status::Fail);
+        assert!(c.detail.contains("expired on 2027-01-14"), "{c:?}");
+        let c = check(Ok(LinkSeen::Plaintext));
+        assert_eq!(c.status, Status::Warn);
+        assert!(c.detail.contains("plaintext"), "{c:?}");
+        let c = check(Err("unreachable: connection refused".into()));
+        assert_eq!(c.status, Status::Fail);
+        assert!(
+            c.detail.contains("unreachable") && c.fix.contains("firewall"),
+            "{c:?}"
+        );
+    }
+
+    #[test]
+    fn dates_are_civil_utc() {
+        assert_eq!(utc_date(0), "1970-01-01");
+        assert_eq!(utc_date(978_307_200), "2001-01-01");
+        assert_eq!(utc_date(951_782_400), "2000-02-29");
+        assert_eq!(utc_date(1_800_000_000), "2027-01-15");
     }
 
     #[test]

@@ -335,7 +335,25 @@ fn asix_link_checks(ns: &Arc<AsixNamespace>, channels: &[(String, Vec<String>)])
             ));
         }
     }
-    jobs.into_iter()
+    // The identity of every server's link, all at once (discovery, connection and
+    // handshake bounded by the channel's FindServerTimeout and NetTimeout).
+    let mut probes = Vec::new();
+    for (opc, asix) in channels {
+        let client = resolver.client_config(opc);
+        for a in asix {
+            let c = client.clone();
+            let a2 = a.clone();
+            probes.push((
+                opc.clone(),
+                a.clone(),
+                rt.spawn(async move {
+                    asix_net::probe::probe_resource(&c, Resource::channel(a2)).await
+                }),
+            ));
+        }
+    }
+    let mut out: Vec<Check> = jobs
+        .into_iter()
         .map(|(opc, asix, timeout_ms, job)| {
             let result = match rt.block_on(job) {
                 Ok(Ok(found)) => Ok(found
@@ -347,7 +365,42 @@ fn asix_link_checks(ns: &Arc<AsixNamespace>, channels: &[(String, Vec<String>)])
             };
             link_check(&opc, &asix, timeout_ms, &result)
         })
-        .collect()
+        .collect();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0);
+    for (opc, asix, job) in probes {
+        // No server answered: the discovery's check above says so.
+        let Ok(Ok(found)) = rt.block_on(job) else {
+            continue;
+        };
+        for p in found {
+            let seen = p.result.map(|r| match r {
+                asix_net::probe::LinkIdentity::Tls {
+                    fingerprint,
+                    pinned,
+                    not_after,
+                    refused,
+                } => LinkSeen::Tls {
+                    fingerprint: asix_net::tls::fingerprint_hex(&fingerprint),
+                    pinned,
+                    not_after,
+                    refused,
+                },
+                asix_net::probe::LinkIdentity::Plaintext => LinkSeen::Plaintext,
+            });
+            out.push(identity_check(
+                &opc,
+                &asix,
+                &p.server,
+                &p.addr.to_string(),
+                &seen,
+                now,
+            ));
+        }
+    }
+    out
 }
 
 /// Connects, reads one item and waits for one OnDataChange, on a thread of its own: doctor
