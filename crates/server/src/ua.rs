@@ -50,9 +50,25 @@ pub fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
         allow_anonymous: ua.allow_anonymous,
         pki_dir: path(&ua.pki_directory, "pki"),
         users_file: path(&ua.users_file, "ua-users.txt"),
-        max_sessions: ua.max_sessions as usize,
-        max_subscriptions_per_session: ua.max_subscriptions_per_session as usize,
-        max_monitored_items_per_subscription: ua.max_monitored_items_per_subscription as usize,
+        limits: limits(ua),
+    }
+}
+
+/// `[UA]`'s `Max…` options as the front end's limits.
+pub fn limits(ua: &asix_model::UaOptions) -> ctopc_ua::limits::Limits {
+    let n = |v: u32| v as usize;
+    ctopc_ua::limits::Limits {
+        max_sessions: n(ua.max_sessions),
+        max_subscriptions_per_session: n(ua.max_subscriptions_per_session),
+        max_monitored_items_per_subscription: n(ua.max_monitored_items_per_subscription),
+        max_monitored_items: n(ua.max_monitored_items),
+        max_browse_continuation_points: n(ua.max_browse_continuation_points),
+        max_operations_per_request: n(ua.max_operations_per_request),
+        max_message_size: n(ua.max_message_size),
+        max_chunk_count: n(ua.max_chunk_count),
+        max_array_length: n(ua.max_array_length),
+        max_string_length: n(ua.max_string_length),
+        max_requests_per_second: ua.max_requests_per_second,
     }
 }
 
@@ -264,5 +280,52 @@ pub fn pki_trust(file: &str) -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => fail(&e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ini_defaults_are_the_front_ends_defaults() {
+        let l = limits(&asix_model::UaOptions::default());
+        assert_eq!(l, ctopc_ua::limits::Limits::default());
+        l.check().unwrap();
+    }
+
+    #[test]
+    fn every_limit_option_reaches_its_limit() {
+        let ua = asix_model::UaOptions {
+            max_sessions: 1,
+            max_subscriptions_per_session: 2,
+            max_monitored_items_per_subscription: 3,
+            max_monitored_items: 4,
+            max_browse_continuation_points: 5,
+            max_operations_per_request: 6,
+            max_message_size: 70_000,
+            max_chunk_count: 8,
+            max_array_length: 9,
+            max_string_length: 10_000,
+            max_requests_per_second: 11,
+            ..Default::default()
+        };
+        let l = limits(&ua);
+        assert_eq!(
+            l,
+            ctopc_ua::limits::Limits {
+                max_sessions: 1,
+                max_subscriptions_per_session: 2,
+                max_monitored_items_per_subscription: 3,
+                max_monitored_items: 4,
+                max_browse_continuation_points: 5,
+                max_operations_per_request: 6,
+                max_message_size: 70_000,
+                max_chunk_count: 8,
+                max_array_length: 9,
+                max_string_length: 10_000,
+                max_requests_per_second: 11,
+            }
+        );
     }
 }
