@@ -17,7 +17,7 @@
 //! | `MaxRequestsPerSecond` (per session) | [`RateLimiter`], for the requests reaching the plant's node manager | Bad_TooManyOperations |
 //!
 //! async-opcua answers the limits it counts with their code but logs nothing; the two
-//! counted here log a warning line.
+//! counted here log a warning (the request rate once per run of refusals).
 //!
 //! Subscriptions in total are bounded by `MaxSessions` × `MaxSubscriptionsPerSession`:
 //! async-opcua 0.19 counts subscriptions per session only. Its request dispatch has no
@@ -275,7 +275,9 @@ const IDLE: Duration = Duration::from_secs(2);
 pub struct RateLimiter {
     rate: u32,
     max_sessions: usize,
-    buckets: Mutex<HashMap<u32, TokenBucket>>,
+    /// Each session's bucket and the requests refused since it last admitted one (one
+    /// log line at the first refusal and one when it admits again, not one per request).
+    buckets: Mutex<HashMap<u32, (TokenBucket, u64)>>,
 }
 
 impl RateLimiter {
@@ -287,26 +289,36 @@ impl RateLimiter {
         }
     }
 
-    /// Admits one request of `session` at `now`: Bad_TooManyOperations (and a log
-    /// line) when the session is over its rate.
+    /// Admits one request of `session` at `now`: Bad_TooManyOperations when the session
+    /// is over its rate (a warning line at the first refusal of a run of them, and a
+    /// line with their count when the session is admitted again).
     pub fn admit(&self, session: u32, now: Instant) -> Result<(), StatusCode> {
         if self.rate == 0 {
             return Ok(());
         }
         let mut b = self.buckets.lock().unwrap_or_else(|p| p.into_inner());
         if !b.contains_key(&session) && b.len() >= self.max_sessions {
-            b.retain(|_, t| now.saturating_duration_since(t.last) < IDLE);
+            b.retain(|_, (t, _)| now.saturating_duration_since(t.last) < IDLE);
         }
         let rate = self.rate;
-        let bucket = b
+        let (bucket, refused) = b
             .entry(session)
-            .or_insert_with(|| TokenBucket::full(rate, now));
+            .or_insert_with(|| (TokenBucket::full(rate, now), 0));
         if bucket.admit(rate, now) {
+            if *refused > 0 {
+                tracing::info!(
+                    "OPC UA: session {session} admitted again after {refused} requests refused over MaxRequestsPerSecond"
+                );
+                *refused = 0;
+            }
             Ok(())
         } else {
-            tracing::warn!(
-                "OPC UA: a request of session {session} refused: over MaxRequestsPerSecond ({rate})"
-            );
+            if *refused == 0 {
+                tracing::warn!(
+                    "OPC UA: refusing requests of session {session}: over MaxRequestsPerSecond ({rate})"
+                );
+            }
+            *refused += 1;
             Err(StatusCode::BadTooManyOperations)
         }
     }
