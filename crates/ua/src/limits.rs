@@ -336,7 +336,8 @@ mod tests {
     #[test]
     fn the_defaults_pass_and_each_impossible_limit_is_named() {
         Limits::default().check().unwrap();
-        let cases: [(fn(&mut Limits), &str); 5] = [
+        type Case = (fn(&mut Limits), &'static str);
+        let cases: [Case; 5] = [
             (|l| l.max_sessions = 0, "MaxSessions"),
             (|l| l.max_monitored_items = 0, "MaxMonitoredItems"),
             (|l| l.max_chunk_count = 0, "MaxChunkCount"),
