@@ -34,6 +34,10 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("format", targets::format),
     ("value_convert", targets::value_convert),
     ("asix_rest_answer", targets::asix_rest_answer),
+    ("ua_request", targets::ua_request),
+    ("ua_variant", targets::ua_variant),
+    ("ua_users", targets::ua_users),
+    ("ua_node_id", targets::ua_node_id),
 ];
 
 /// The target called `name`.
@@ -49,9 +53,24 @@ pub fn seeds(name: &str) -> Vec<Vec<u8>> {
         "asix_frame" => targets::sample_frames(),
         "asix_datagram" => targets::sample_datagrams(),
         "asix_rest_answer" => targets::sample_rest_answers(),
+        "ua_request" => targets::sample_ua_requests(),
+        // Variants: Double 12.5, String "12", Boolean true, Int32 array [1, 2].
+        "ua_variant" => vec![
+            [vec![11], 12.5f64.to_le_bytes().to_vec()].concat(),
+            vec![12, 2, 0, 0, 0, b'1', b'2'],
+            vec![1, 1],
+            vec![0x86, 2, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0],
+        ],
+        "ua_users" => text(&[
+            "# name:role:scheme:iterations:salt:hash\njan:writer:pbkdf2-sha256:100000:00ff:a1b2\n",
+            "ola:reader:pbkdf2-sha256:1:x:y\n::\n",
+        ]),
+        "ua_node_id" => text(&["KW_A000", "ns=2;s=KW_A000", "i=85", "ns=2;b=AQAAAEtXX0EwMDA="]),
         "ini" => vec![
             DEMO_INI.as_bytes().to_vec(),
             b"[Server]\r\nMinUpdateRate = 250\r\nLogLevel = debug\r\n[Channel:K1]\r\nItemsDatabase = a.csv\r\n[AsixCTServers]\r\nS1 = 10.0.0.1\r\n".to_vec(),
+            // The OPC UA front end's section, every option.
+            b"[UA]\nEndpoint = opc.tcp://0.0.0.0:4840\nAllowNone = nie\nAllowAnonymous = tak\nPkiDirectory = pki\nUsersFile = u.txt\nMaxSessions = 5\nMaxSubscriptionsPerSession = 4\nMaxMonitoredItemsPerSubscription = 5\nMaxMonitoredItems = 8\nMaxBrowseContinuationPoints = 2\nMaxOperationsPerRequest = 50\nMaxMessageSize = 65536\nMaxChunkCount = 8\nMaxArrayLength = 100\nMaxStringLength = 8192\nMaxRequestsPerSecond = 100\n".to_vec(),
         ],
         "csv_attributes" => vec![DEMO_TABLE.to_vec(), DEMO_TABLE[..DEMO_TABLE.len().min(600)].to_vec()],
         "paradox" => {

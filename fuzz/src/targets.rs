@@ -362,3 +362,153 @@ pub fn sample_rest_answers() -> Vec<Vec<u8>> {
     .map(|s| s.as_bytes().to_vec())
     .collect()
 }
+
+/// OPC UA: a request body (its type's NodeId, then the request) decoded by async-opcua
+/// with the server's limits (the defaults, and small ones), as the server decodes a
+/// message; a refusal is a status code, never a panic.
+pub fn ua_request(data: &[u8]) {
+    use ctopc_ua::limits::{decode_request, Limits};
+    let _ = decode_request(data, &Limits::default());
+    let small = Limits {
+        max_array_length: 16,
+        max_string_length: 4096,
+        max_message_size: 8192,
+        ..Limits::default()
+    };
+    let _ = decode_request(data, &small);
+}
+
+/// Encoded request bodies of the services the server answers, for the seeds.
+pub fn sample_ua_requests() -> Vec<Vec<u8>> {
+    use opcua::types::{
+        BinaryEncodable, BrowseDescription, BrowseRequest, ContextOwned, NodeId, ObjectId,
+        ReadRequest, ReadValueId, WriteRequest, WriteValue,
+    };
+    let owned = ContextOwned::default();
+    let ctx = owned.context();
+    let item = || NodeId::new(2, "KW_A000");
+    let body = |id: ObjectId, enc: &dyn Fn(&mut Vec<u8>)| {
+        let mut out = Vec::new();
+        let _ = NodeId::from(id).encode(&mut out, &ctx);
+        enc(&mut out);
+        out
+    };
+    let read = ReadRequest {
+        nodes_to_read: Some(vec![ReadValueId::from(item())]),
+        ..Default::default()
+    };
+    let browse = BrowseRequest {
+        nodes_to_browse: Some(vec![BrowseDescription {
+            node_id: item(),
+            ..Default::default()
+        }]),
+        ..Default::default()
+    };
+    let write = WriteRequest {
+        nodes_to_write: Some(vec![WriteValue {
+            node_id: item(),
+            attribute_id: 13,
+            value: opcua::types::DataValue::value_only(12.5f64),
+            ..Default::default()
+        }]),
+        ..Default::default()
+    };
+    vec![
+        body(ObjectId::ReadRequest_Encoding_DefaultBinary, &|o| {
+            let _ = read.encode(o, &ctx);
+        }),
+        body(ObjectId::BrowseRequest_Encoding_DefaultBinary, &|o| {
+            let _ = browse.encode(o, &ctx);
+        }),
+        body(ObjectId::WriteRequest_Encoding_DefaultBinary, &|o| {
+            let _ = write.encode(o, &ctx);
+        }),
+    ]
+}
+
+/// OPC UA Variant → Value (a write's value) and back: a Variant decoded with the
+/// server's limits converts to a Value or is refused with a status code; a Value converts
+/// to a Variant that converts back; the Value goes through the write conversion to the
+/// variable types.
+pub fn ua_variant(data: &[u8]) {
+    use opcua::types::{BinaryDecodable, ContextOwned, NamespaceMap, Variant};
+    let owned = ContextOwned::new_default(
+        NamespaceMap::new(),
+        ctopc_ua::limits::Limits::default().decoding_options(),
+    );
+    let ctx = owned.context();
+    let mut stream = std::io::Cursor::new(data);
+    let Ok(variant) = Variant::decode(&mut stream, &ctx) else {
+        return;
+    };
+    let Ok(value) = ctopc_ua::value::from_variant(&variant) else {
+        return;
+    };
+    let back = ctopc_ua::value::to_variant(&value);
+    assert!(
+        ctopc_ua::value::from_variant(&back).is_ok(),
+        "{value:?} -> {back:?} does not convert back"
+    );
+    for to in [VarType::R8, VarType::I4, VarType::BSTR, VarType::BOOL] {
+        let _ = value.convert_in(to, Locale::EnUs);
+    }
+}
+
+/// The OPC UA users file: any text parses to users (malformed lines skipped).
+pub fn ua_users(data: &[u8]) {
+    let text = String::from_utf8_lossy(data);
+    let users = ctopc_ua::users::parse(&text, "fuzz-users.txt");
+    assert!(users.len() <= text.lines().count());
+}
+
+/// The lazy address space over the embedded demo plant (for [`ua_node_id`]).
+fn demo_space() -> &'static ctopc_ua::space::Space {
+    use std::sync::{Arc, OnceLock};
+    static SPACE: OnceLock<ctopc_ua::space::Space> = OnceLock::new();
+    SPACE.get_or_init(|| {
+        let loaded = asix_model::startup::embedded_demo().expect("the embedded demo loads");
+        let ns = Arc::new(loaded.namespace);
+        let tree =
+            Arc::new(asix_model::address_space::build_address_space(&ns).expect("the demo's tree"));
+        ctopc_ua::space::Space {
+            ns: 2,
+            namespace: ns,
+            tree,
+            scan_rate_ms: 100,
+        }
+    })
+}
+
+/// OPC UA NodeId ↔ item ID: a NodeId (binary, with the server's limits, or text)
+/// resolves to an item, a property, a folder or a status code; an item ID's NodeId
+/// parses back to the item ID.
+pub fn ua_node_id(data: &[u8]) {
+    use ctopc_ua::space::Parsed;
+    use opcua::types::{BinaryDecodable, ContextOwned, NamespaceMap, NodeId};
+    let space = demo_space();
+    let owned = ContextOwned::new_default(
+        NamespaceMap::new(),
+        ctopc_ua::limits::Limits::default().decoding_options(),
+    );
+    let ctx = owned.context();
+    let mut ids = Vec::new();
+    if let Ok(id) = NodeId::decode(&mut std::io::Cursor::new(data), &ctx) {
+        ids.push(id);
+    }
+    let text = String::from_utf8_lossy(data);
+    if let Ok(id) = text.parse::<NodeId>() {
+        ids.push(id);
+    }
+    ids.push(space.item_node_id(&text));
+    for mut id in ids {
+        let _ = space.resolve(&id);
+        id.namespace = space.ns;
+        let _ = space.resolve(&id);
+    }
+    if !text.is_empty() {
+        assert_eq!(
+            space.parse(&space.item_node_id(&text)),
+            Some(Parsed::Item(text.clone().into_owned()))
+        );
+    }
+}

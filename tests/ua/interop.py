@@ -24,6 +24,14 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   subscription counts);
 - the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
   SecurityPolicy None are refused;
+- services: RegisterNodes (the registered NodeIds read) and UnregisterNodes, Republish
+  (an unknown sequence number is Bad_MessageNotAvailable), TransferSubscriptions to a
+  second session of the same user, a monitored item's queue of 3 with DiscardOldest true
+  and false while the value changes faster than the publishing (publishing off, then on);
+- limits (small ones in the test's [UA] section): sessions, subscriptions per session,
+  monitored items per subscription and in all, browse continuation points, operations per
+  request, the request rate, a string over MaxStringLength: each is answered with its
+  Bad_ code and the server goes on serving;
 - the server stops on SIGTERM with exit code 0;
 - secrets at rest: the users file and the private key made at first start are 0600 (the
   key's folder 0700), and the server's log of the whole run, at TRACE for every crate,
@@ -293,6 +301,267 @@ async def scenario(url, work, server):
     await refused("a wrong password refused", wrong_password)
     await refused("SecurityPolicy None refused", no_security)
 
+    await services(url, cert, key)
+    await limits(url, cert, key)
+
+
+# The small limits of the test's [UA] section (main() writes them), checked by limits().
+LIMITS = {
+    "MaxSessions": 5,
+    "MaxSubscriptionsPerSession": 4,
+    "MaxMonitoredItemsPerSubscription": 5,
+    "MaxMonitoredItems": 8,
+    "MaxBrowseContinuationPoints": 2,
+    "MaxOperationsPerRequest": 50,
+    "MaxStringLength": 8192,
+    "MaxRequestsPerSecond": 100,
+}
+
+
+def status_of(e):
+    """The status code of an asyncua error, or None."""
+    return getattr(e, "code", None)
+
+
+async def send(c, request, response_type):
+    """A request asyncua has no helper for: its response, or the status code of the
+    ServiceFault it was answered with."""
+    from asyncua.ua.ua_binary import struct_from_binary
+    try:
+        data = await c.uaclient.protocol.send_request(request)
+    except ua.UaStatusCodeError as e:
+        return e.code
+    return struct_from_binary(response_type, data)
+
+
+async def services(url, cert, key):
+    async def writer():
+        c = client(url, "writer1")
+        await secure(c, cert, key)
+        return c
+
+    c = await writer()
+    async with c:
+        # asyncua's publish loop ends when the session's last subscription is deleted, and
+        # one created just then may be left without Publish requests: this one stays.
+        await c.create_subscription(1000, Changes())
+        ns = await c.get_namespace_index(NAMESPACE_URI)
+        nodes = [c.get_node(ua.NodeId(n, ns)) for n in ("KW_A000", "KW_A110")]
+        registered = await c.register_nodes(nodes)
+        values = [await n.read_value() for n in registered]
+        check("RegisterNodes: the registered NodeIds read",
+              len(registered) == 2 and all(isinstance(v, float) for v in values), str(values))
+        await c.unregister_nodes(registered)
+        check("UnregisterNodes answers Good", True)
+
+        # Republish of a sequence number the server never sent.
+        changes = Changes()
+        sub = await c.create_subscription(100, changes)
+        await sub.subscribe_data_change(c.get_node(ua.NodeId("KW_A001", ns)))
+        await wait_for(lambda: len(changes.values) >= 1, 20)
+        req = ua.RepublishRequest()
+        req.Parameters = ua.RepublishParameters(SubscriptionId=sub.subscription_id,
+                                                RetransmitSequenceNumber=0x7FFF0000)
+        res = await send(c, req, ua.RepublishResponse)
+        check("Republish of an unknown message is Bad_MessageNotAvailable",
+              res == ua.StatusCodes.BadMessageNotAvailable, str(res))
+        await sub.delete()
+
+        # A monitored item's queue of 3: six values written while publishing is off.
+        kept = {}
+        a110 = c.get_node(ua.NodeId("KW_A110", ns))
+        for oldest in (True, False):
+            got = Changes()
+            sub = await c.create_subscription(100, got)
+            params = ua.MonitoringParameters(ClientHandle=1, SamplingInterval=0.0, QueueSize=3,
+                                             DiscardOldest=oldest)
+            item = ua.MonitoredItemCreateRequest(
+                ItemToMonitor=ua.ReadValueId(NodeId_=a110.nodeid, AttributeId=ua.AttributeIds.Value),
+                MonitoringMode_=ua.MonitoringMode.Reporting, RequestedParameters=params)
+            await a110.write_value(ua.DataValue(ua.Variant(100.0, ua.VariantType.Float)))
+            await sub.create_monitored_items([item])
+            await wait_for(lambda: any(v == 100.0 for v, _ in got.values), 20)
+            await sub.set_publishing_mode(False)
+            before = len(got.values)
+            for v in range(101, 107):
+                await a110.write_value(ua.DataValue(ua.Variant(float(v), ua.VariantType.Float)))
+                # Apart by more than the sampling interval: each value is its own sample.
+                await asyncio.sleep(0.35)
+            await sub.set_publishing_mode(True)
+            await wait_for(lambda: len(got.values) >= before + 3, 20)
+            kept[oldest] = [v for v, _ in got.values[before:]]
+            await sub.delete()
+        check("queue of 3, DiscardOldest: the newest three are delivered",
+              kept[True] == [104.0, 105.0, 106.0], str(kept[True]))
+        # The first two queued are 101 and 102, or the item's first sample of 100 (the
+        # engine may sample the value it already had) and 101.
+        check("queue of 3, DiscardOldest false: the first two and the newest are delivered",
+              kept[False] in ([101.0, 102.0, 106.0], [100.0, 101.0, 106.0]), str(kept[False]))
+
+        # TransferSubscriptions: a second session of the same user takes the subscription over.
+        sub = await c.create_subscription(100, Changes())
+        await sub.subscribe_data_change(c.get_node(ua.NodeId("KW_A001", ns)))
+        c2 = await writer()
+        async with c2:
+            req = ua.TransferSubscriptionsRequest()
+            req.Parameters = ua.TransferSubscriptionsParameters(
+                SubscriptionIds=[sub.subscription_id], SendInitialValues=True)
+            res = await send(c2, req, ua.TransferSubscriptionsResponse)
+            results = [] if isinstance(res, int) else (res.Parameters.Results or [])
+            check("TransferSubscriptions to a second session is Good",
+                  len(results) == 1 and results[0].StatusCode_.is_good(), str(res))
+            # Now the second session's: it deletes it, the first one no longer can.
+            req = ua.DeleteSubscriptionsRequest()
+            req.Parameters = ua.DeleteSubscriptionsParameters(SubscriptionIds=[sub.subscription_id])
+            res = await send(c2, req, ua.DeleteSubscriptionsResponse)
+            deleted = [] if isinstance(res, int) else [r.value for r in res.Results]
+            check("the transferred subscription belongs to the second session (it deletes it)",
+                  deleted == [ua.StatusCodes.Good], str(res))
+
+
+async def limits(url, cert, key):
+    async def writer():
+        c = client(url, "writer1")
+        await secure(c, cert, key)
+        return c
+
+    # MaxSessions: sessions are opened until one is refused (a refused login's session
+    # may still count until it times out), at most MaxSessions of them.
+    held = []
+    why = None
+    try:
+        for _ in range(LIMITS["MaxSessions"] + 1):
+            c = await writer()
+            try:
+                await c.connect()
+            except Exception as e:
+                why = str(e)
+                break
+            held.append(c)
+        check("a session past MaxSessions is refused with Bad_TooManySessions",
+              why is not None and "TooManySessions" in why and len(held) <= LIMITS["MaxSessions"],
+              f"{len(held)} sessions held, then {why}")
+    finally:
+        for c in held:
+            await c.disconnect()
+
+    c = await writer()
+    async with c:
+        ns = await c.get_namespace_index(NAMESPACE_URI)
+        items = [c.get_node(ua.NodeId(f"KW_A{n:03}", ns)) for n in (0, 1, 2, 110, 111, 112)]
+
+        # MaxSubscriptionsPerSession.
+        subs = [await c.create_subscription(500, Changes()) for _ in range(LIMITS["MaxSubscriptionsPerSession"])]
+        try:
+            subs.append(await c.create_subscription(500, Changes()))
+            check("a subscription past MaxSubscriptionsPerSession refused", False, "created")
+        except ua.UaStatusCodeError as e:
+            check("a subscription past MaxSubscriptionsPerSession is Bad_TooManySubscriptions",
+                  status_of(e) == ua.StatusCodes.BadTooManySubscriptions, hex(status_of(e) or 0))
+
+        # MaxMonitoredItemsPerSubscription: six items in one subscription of at most five.
+        try:
+            handles = await subs[0].subscribe_data_change(items)
+            bad = [h for h in handles if isinstance(h, ua.StatusCode)]
+            check("monitored items past MaxMonitoredItemsPerSubscription are Bad_TooManyMonitoredItems",
+                  bad and all(h.value == ua.StatusCodes.BadTooManyMonitoredItems for h in bad), str(handles))
+        except ua.UaStatusCodeError as e:
+            check("monitored items past MaxMonitoredItemsPerSubscription are Bad_TooManyMonitoredItems",
+                  status_of(e) == ua.StatusCodes.BadTooManyMonitoredItems, hex(status_of(e) or 0))
+        # MaxMonitoredItems in all (8): five in one subscription, four in another.
+        for s in subs:
+            await s.delete()
+        a = await c.create_subscription(500, Changes())
+        b = await c.create_subscription(500, Changes())
+        first = await a.subscribe_data_change(items[:5])
+        second = []
+        try:
+            second = await b.subscribe_data_change(items[:4])
+        except ua.UaStatusCodeError as e:
+            second = [ua.StatusCode(status_of(e))]
+        refused_items = [h for h in second if isinstance(h, ua.StatusCode)]
+        check("monitored items past MaxMonitoredItems (every subscription's) are Bad_TooManyMonitoredItems",
+              all(isinstance(h, int) for h in first) and len(refused_items) == 1
+              and refused_items[0].value == ua.StatusCodes.BadTooManyMonitoredItems, f"{first} {second}")
+        await a.delete()
+        await b.delete()
+        again = await c.create_subscription(500, Changes())
+        back = await again.subscribe_data_change(items[:5])
+        check("deleted monitored items are given back to MaxMonitoredItems",
+              all(isinstance(h, int) for h in back), str(back))
+        await again.delete()
+
+        # MaxBrowseContinuationPoints (2): three nodes browsed one reference at a time.
+        root = (await c.nodes.objects.get_child([f"{ns}:ServerCTOPC"]))
+        groups = await root.get_children()
+        descs = []
+        for g in groups[:3]:
+            d = ua.BrowseDescription()
+            d.NodeId = g.nodeid
+            d.BrowseDirection = ua.BrowseDirection.Forward
+            d.ReferenceTypeId = ua.NodeId(ua.ObjectIds.HierarchicalReferences)
+            d.IncludeSubtypes = True
+            d.ResultMask = ua.BrowseResultMask.All
+            descs.append(d)
+        params = ua.BrowseParameters()
+        params.View.Timestamp = ua.get_win_epoch()
+        params.RequestedMaxReferencesPerNode = 1
+        params.NodesToBrowse = descs
+        results = await c.uaclient.browse(params)
+        codes = [r.StatusCode.value for r in results]
+        check("a continuation point past MaxBrowseContinuationPoints is Bad_NoContinuationPoints",
+              len(descs) == 3 and codes.count(ua.StatusCodes.BadNoContinuationPoints) == 1, str(codes))
+        release = ua.BrowseNextParameters()
+        release.ReleaseContinuationPoints = True
+        release.ContinuationPoints = [r.ContinuationPoint for r in results if r.ContinuationPoint]
+        await c.uaclient.browse_next(release)
+
+        # MaxOperationsPerRequest (50): a Read of 51 nodes.
+        many = [c.get_node(ua.NodeId("KW_A000", ns))] * (LIMITS["MaxOperationsPerRequest"] + 1)
+        try:
+            await c.read_values(many)
+            check("a Read past MaxOperationsPerRequest refused", False, "read")
+        except ua.UaStatusCodeError as e:
+            check("a Read past MaxOperationsPerRequest is Bad_TooManyOperations",
+                  status_of(e) == ua.StatusCodes.BadTooManyOperations, hex(status_of(e) or 0))
+
+        # MaxRequestsPerSecond (100): 1,500 Reads at once; some are refused, none fails otherwise.
+        node = c.get_node(ua.NodeId("KW_A000", ns))
+
+        async def one():
+            try:
+                await node.read_value()
+                return 0
+            except ua.UaStatusCodeError as e:
+                return status_of(e)
+        outcomes = await asyncio.gather(*[one() for _ in range(1500)])
+        over = outcomes.count(ua.StatusCodes.BadTooManyOperations)
+        check("Reads past MaxRequestsPerSecond are Bad_TooManyOperations, the rest Good",
+              over > 0 and all(o in (0, ua.StatusCodes.BadTooManyOperations) for o in outcomes),
+              f"{outcomes.count(0)} Good, {over} refused, others {set(outcomes) - {0, ua.StatusCodes.BadTooManyOperations}}")
+        # The bucket refills: a second later a Read is Good again.
+        await asyncio.sleep(1.1)
+        check("after a second the session reads again", isinstance(await node.read_value(), float))
+
+    # MaxStringLength (8192): a Write of a longer string is refused; the server goes on.
+    c = await writer()
+    try:
+        async with c:
+            ns = await c.get_namespace_index(NAMESPACE_URI)
+            try:
+                await c.get_node(ua.NodeId("KW_A110", ns)).write_value(
+                    ua.DataValue(ua.Variant("x" * 20000, ua.VariantType.String)))
+                check("a string past MaxStringLength refused", False, "written")
+            except Exception as e:  # a status code, or the channel closed by the server
+                check("a string past MaxStringLength refused", True, repr(e))
+    except Exception:
+        pass
+    c = await writer()
+    async with c:
+        ns = await c.get_namespace_index(NAMESPACE_URI)
+        check("the server still serves after every limit",
+              isinstance(await c.get_node(ua.NodeId("KW_A000", ns)).read_value(), float))
+
 
 async def derived_values(c, ns, a000):
     """FormatedCV, PercentageCV and BarCVs: components of KW_A000 named by their item IDs,
@@ -393,9 +662,12 @@ def main():
     port = free_port()
     ini = work / "ASIXConnect.ini"
     ini.write_text(
-        "[Server]\nSimulateCurrentData = tak\n"
+        # Sampling at 100 ms: the queue checks write faster than the publishing, each
+        # value its own sample.
+        "[Server]\nSimulateCurrentData = tak\nMinUpdateRate = 100\n"
         f"[Channel:*]\nItemsDatabase = {Path(a.db).resolve()}\n"
-        f"[UA]\nEndpoint = opc.tcp://127.0.0.1:{port}\n",
+        f"[UA]\nEndpoint = opc.tcp://127.0.0.1:{port}\n"
+        + "".join(f"{k} = {v}\n" for k, v in LIMITS.items()),
         encoding="utf-8",
     )
     env = dict(os.environ, SERVERCTOPC_INI=str(ini))

@@ -4,8 +4,9 @@
 //! --workspace --release` has just built for the server's command-line tests, as `cargo
 //! xtask test` does; else built here) and runs `tests/ua/interop.py`: the in-process simulation of the demo
 //! plant served over Basic256Sha256 SignAndEncrypt; browse, read, write, subscribe with
-//! users and roles; anonymous, None and an untrusted client certificate refused (what it
-//! checks: the script's docstring). Then our own client, `opcdiag --url`, through the
+//! users and roles; anonymous, None and an untrusted client certificate refused;
+//! RegisterNodes, Republish, TransferSubscriptions, monitored item queues; every `[UA]`
+//! limit answered with its code (what it checks: the script's docstring). Then our own client, `opcdiag --url`, through the
 //! same server (`ua_client.rs`: browse in pages, read, write as writer and reader,
 //! subscribe, a wrong password, anonymous and None refused, the server's certificate
 //! refused until pinned). Part of `cargo xtask test`'s native phase.

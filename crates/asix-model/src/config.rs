@@ -87,6 +87,14 @@ pub const UA_OPTIONS: &[&str] = &[
     "MaxSessions",
     "MaxSubscriptionsPerSession",
     "MaxMonitoredItemsPerSubscription",
+    "MaxMonitoredItems",
+    "MaxBrowseContinuationPoints",
+    "MaxOperationsPerRequest",
+    "MaxMessageSize",
+    "MaxChunkCount",
+    "MaxArrayLength",
+    "MaxStringLength",
+    "MaxRequestsPerSecond",
 ];
 
 /// The OPC UA front end (`[UA]`): where it listens, its security and its limits.
@@ -116,6 +124,23 @@ pub struct UaOptions {
     pub max_subscriptions_per_session: u32,
     /// `MaxMonitoredItemsPerSubscription` (default 100,000).
     pub max_monitored_items_per_subscription: u32,
+    /// `MaxMonitoredItems`: of the plant's variables, every session's (default 1,000,000).
+    pub max_monitored_items: u32,
+    /// `MaxBrowseContinuationPoints`: per session (default 100).
+    pub max_browse_continuation_points: u32,
+    /// `MaxOperationsPerRequest`: nodes of one Read, Write, Browse, RegisterNodes,
+    /// TranslateBrowsePaths; monitored items of one call (default 10,000).
+    pub max_operations_per_request: u32,
+    /// `MaxMessageSize`: bytes (default 16 MiB).
+    pub max_message_size: u32,
+    /// `MaxChunkCount`: chunks of one message (default 512).
+    pub max_chunk_count: u32,
+    /// `MaxArrayLength`: elements of an array in a request (default 100,000).
+    pub max_array_length: u32,
+    /// `MaxStringLength`: bytes of a string in a request (default 65,535).
+    pub max_string_length: u32,
+    /// `MaxRequestsPerSecond`: per session, 0 for no limit (default 10,000).
+    pub max_requests_per_second: u32,
 }
 
 impl Default for UaOptions {
@@ -131,6 +156,14 @@ impl Default for UaOptions {
             max_sessions: 100,
             max_subscriptions_per_session: 100,
             max_monitored_items_per_subscription: 100_000,
+            max_monitored_items: 1_000_000,
+            max_browse_continuation_points: 100,
+            max_operations_per_request: 10_000,
+            max_message_size: 16 * 1024 * 1024,
+            max_chunk_count: 512,
+            max_array_length: 100_000,
+            max_string_length: 65_535,
+            max_requests_per_second: 10_000,
         }
     }
 }
@@ -756,6 +789,20 @@ fn apply_ua_option(o: &mut UaOptions, file: &str, e: &IniEntry) -> Result<bool, 
             1,
             10_000_000,
         )?,
+        "maxmonitoreditems" => set_number(&mut o.max_monitored_items, file, e, 1, 100_000_000)?,
+        "maxbrowsecontinuationpoints" => {
+            set_number(&mut o.max_browse_continuation_points, file, e, 1, 10_000)?
+        }
+        "maxoperationsperrequest" => {
+            set_number(&mut o.max_operations_per_request, file, e, 1, 1_000_000)?
+        }
+        "maxmessagesize" => set_number(&mut o.max_message_size, file, e, 8192, 1 << 30)?,
+        "maxchunkcount" => set_number(&mut o.max_chunk_count, file, e, 1, 65_535)?,
+        "maxarraylength" => set_number(&mut o.max_array_length, file, e, 1, 100_000_000)?,
+        "maxstringlength" => set_number(&mut o.max_string_length, file, e, 4096, 1 << 30)?,
+        "maxrequestspersecond" => {
+            set_number(&mut o.max_requests_per_second, file, e, 0, 10_000_000)?
+        }
         _ => return Ok(false),
     }
     Ok(true)
@@ -1266,7 +1313,7 @@ mod tests {
         assert!(!c.ua.allow_none && !c.ua.allow_anonymous);
         assert_eq!(c.ua.endpoint, "opc.tcp://0.0.0.0:4840");
         let (c, w) = parse(
-            "[UA]\nEndpoint = opc.tcp://plant:4841\nAllowNone = tak\nAllowAnonymous = 1\nPkiDirectory = certs\nUsersFile = users.txt\nMaxSessions = 5\nMaxSubscriptionsPerSession = 3\nMaxMonitoredItemsPerSubscription = 1000\nFoo = 1\n",
+            "[UA]\nEndpoint = opc.tcp://plant:4841\nAllowNone = tak\nAllowAnonymous = 1\nPkiDirectory = certs\nUsersFile = users.txt\nMaxSessions = 5\nMaxSubscriptionsPerSession = 3\nMaxMonitoredItemsPerSubscription = 1000\nMaxMonitoredItems = 11\nMaxBrowseContinuationPoints = 12\nMaxOperationsPerRequest = 13\nMaxMessageSize = 65536\nMaxChunkCount = 15\nMaxArrayLength = 16\nMaxStringLength = 8192\nMaxRequestsPerSecond = 0\nFoo = 1\n",
         )
         .unwrap();
         assert_eq!(w.len(), 1, "{w:?}");
@@ -1282,10 +1329,27 @@ mod tests {
             ),
             (5, 3, 1000)
         );
+        let u = &c.ua;
+        assert_eq!(
+            (
+                u.max_monitored_items,
+                u.max_browse_continuation_points,
+                u.max_operations_per_request,
+                u.max_message_size,
+                u.max_chunk_count,
+                u.max_array_length,
+                u.max_string_length,
+                u.max_requests_per_second
+            ),
+            (11, 12, 13, 65536, 15, 16, 8192, 0)
+        );
         for bad in [
             "[UA]\nEndpoint = http://plant:4840\n",
             "[UA]\nEndpoint = opc.tcp://\n",
             "[UA]\nMaxSessions = 0\n",
+            "[UA]\nMaxMessageSize = 8191\n",
+            "[UA]\nMaxStringLength = 100\n",
+            "[UA]\nMaxChunkCount = 0\n",
             "[UA]\nAllowNone = maybe\n",
             "[UA]\nEnabled = maybe\n",
         ] {

@@ -98,3 +98,27 @@ fn bad_options_are_exit_2() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {o:?}");
     }
 }
+
+#[test]
+fn a_user_without_a_terminal_is_told_to_use_password_stdin() {
+    let pki = scratch("no-terminal");
+    // Standard input is not a terminal: no prompt, no connection, exit 2 at once.
+    let o = opcdiag(&[
+        "--url",
+        "opc.tcp://127.0.0.1:9",
+        "--pki",
+        pki.to_str().expect("utf-8"),
+        "--user",
+        "jan",
+        "read",
+        "A000",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(
+            "standard input is not a terminal: cannot ask for the password of jan; pipe it with --password-stdin"
+        ),
+        "{err}"
+    );
+}

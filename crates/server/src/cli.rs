@@ -61,8 +61,9 @@ a [UA] section (unless Enabled = nie), and with /Serve unless Enabled = nie; on 
   serve                                   serve OPC UA ([UA] section) until Ctrl+C
   user add NAME --role reader|writer [--password-stdin]
                                           add or replace a user of the users file; the
-                                          password is asked for, or read from the first
-                                          line of standard input
+                                          password is asked twice on the terminal
+                                          (no echo), or read from the first line of
+                                          standard input (--password-stdin)
   pki trust FILE                          trust a client certificate (DER): copy it to
                                           pki/trusted/ (from pki/rejected/, for example)
 ";

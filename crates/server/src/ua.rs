@@ -50,9 +50,25 @@ pub fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
         allow_anonymous: ua.allow_anonymous,
         pki_dir: path(&ua.pki_directory, "pki"),
         users_file: path(&ua.users_file, "ua-users.txt"),
-        max_sessions: ua.max_sessions as usize,
-        max_subscriptions_per_session: ua.max_subscriptions_per_session as usize,
-        max_monitored_items_per_subscription: ua.max_monitored_items_per_subscription as usize,
+        limits: limits(ua),
+    }
+}
+
+/// `[UA]`'s `Max…` options as the front end's limits.
+pub fn limits(ua: &asix_model::UaOptions) -> ctopc_ua::limits::Limits {
+    let n = |v: u32| v as usize;
+    ctopc_ua::limits::Limits {
+        max_sessions: n(ua.max_sessions),
+        max_subscriptions_per_session: n(ua.max_subscriptions_per_session),
+        max_monitored_items_per_subscription: n(ua.max_monitored_items_per_subscription),
+        max_monitored_items: n(ua.max_monitored_items),
+        max_browse_continuation_points: n(ua.max_browse_continuation_points),
+        max_operations_per_request: n(ua.max_operations_per_request),
+        max_message_size: n(ua.max_message_size),
+        max_chunk_count: n(ua.max_chunk_count),
+        max_array_length: n(ua.max_array_length),
+        max_string_length: n(ua.max_string_length),
+        max_requests_per_second: ua.max_requests_per_second,
     }
 }
 
@@ -231,24 +247,60 @@ pub fn user_add(name: &str, role: &str, password_stdin: bool) -> ExitCode {
         Err(e) => return fail(&e),
     };
     let path = settings(&loaded.namespace, &config_dir(&source)).users_file;
-    if !password_stdin {
-        eprint!("Password for {name}: ");
-    }
-    let mut line = String::new();
-    if let Err(e) = std::io::stdin().read_line(&mut line) {
-        return fail(&format!("cannot read the password: {e}"));
-    }
-    let password = line.trim_end_matches(['\n', '\r']);
-    if password.is_empty() {
-        return fail("the password is empty");
-    }
-    match users::add(&path, &User::new(name, role, password)) {
+    let password = match new_password(name, password_stdin) {
+        Ok(p) => p,
+        Err(e) => return fail(&e),
+    };
+    match users::add(&path, &User::new(name, role, &password)) {
         Ok(()) => {
             println!("user {name} ({}) saved in {}", role.name(), path.display());
             ExitCode::SUCCESS
         }
         Err(e) => fail(&e),
     }
+}
+
+/// What `user add` says when it cannot ask (standard input is not a terminal).
+pub const NO_TERMINAL: &str =
+    "standard input is not a terminal: cannot ask for the password; pipe it with --password-stdin";
+
+/// The new user's password: the first line of standard input with `--password-stdin`,
+/// else asked twice on the terminal without echo.
+fn new_password(name: &str, password_stdin: bool) -> Result<String, String> {
+    use std::io::IsTerminal;
+    if password_stdin {
+        let mut line = String::new();
+        std::io::stdin()
+            .read_line(&mut line)
+            .map_err(|e| format!("cannot read the password: {e}"))?;
+        let password = line.trim_end_matches(['\n', '\r']);
+        if password.is_empty() {
+            return Err("the password is empty".to_owned());
+        }
+        return Ok(password.to_owned());
+    }
+    if !std::io::stdin().is_terminal() {
+        return Err(NO_TERMINAL.to_owned());
+    }
+    ask_twice(name, |prompt| rpassword::prompt_password(prompt))
+}
+
+/// Asks for a new password twice (through `ask`, which shows a prompt and reads a line
+/// without echo): the password when both answers are the same and not empty.
+pub fn ask_twice(
+    name: &str,
+    mut ask: impl FnMut(&str) -> std::io::Result<String>,
+) -> Result<String, String> {
+    let read = |e: std::io::Error| format!("cannot read the password: {e}");
+    let first = ask(&format!("Password for {name}: ")).map_err(read)?;
+    if first.is_empty() {
+        return Err("the password is empty".to_owned());
+    }
+    let again = ask(&format!("The password for {name} again: ")).map_err(read)?;
+    if first != again {
+        return Err("the two passwords differ; nothing saved".to_owned());
+    }
+    Ok(first)
 }
 
 /// `pki trust FILE`.
@@ -264,5 +316,84 @@ pub fn pki_trust(file: &str) -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => fail(&e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn answers(a: &[&str]) -> impl FnMut(&str) -> std::io::Result<String> {
+        let mut it: Vec<String> = a.iter().rev().map(|s| (*s).to_owned()).collect();
+        move |_prompt| {
+            it.pop()
+                .ok_or_else(|| std::io::Error::from(std::io::ErrorKind::UnexpectedEof))
+        }
+    }
+
+    #[test]
+    fn a_new_password_is_asked_twice_and_must_match() {
+        let mut prompts = Vec::new();
+        let r = ask_twice("jan", |p| {
+            prompts.push(p.to_owned());
+            Ok("Kwas-98%".to_owned())
+        });
+        assert_eq!(r.as_deref(), Ok("Kwas-98%"));
+        assert_eq!(
+            prompts,
+            ["Password for jan: ", "The password for jan again: "]
+        );
+        assert_eq!(
+            ask_twice("jan", answers(&["a1", "a2"])).unwrap_err(),
+            "the two passwords differ; nothing saved"
+        );
+        assert_eq!(
+            ask_twice("jan", answers(&[""])).unwrap_err(),
+            "the password is empty"
+        );
+        let e = ask_twice("jan", answers(&["a1"])).unwrap_err();
+        assert!(e.starts_with("cannot read the password"), "{e}");
+    }
+
+    #[test]
+    fn the_ini_defaults_are_the_front_ends_defaults() {
+        let l = limits(&asix_model::UaOptions::default());
+        assert_eq!(l, ctopc_ua::limits::Limits::default());
+        l.check().unwrap();
+    }
+
+    #[test]
+    fn every_limit_option_reaches_its_limit() {
+        let ua = asix_model::UaOptions {
+            max_sessions: 1,
+            max_subscriptions_per_session: 2,
+            max_monitored_items_per_subscription: 3,
+            max_monitored_items: 4,
+            max_browse_continuation_points: 5,
+            max_operations_per_request: 6,
+            max_message_size: 70_000,
+            max_chunk_count: 8,
+            max_array_length: 9,
+            max_string_length: 10_000,
+            max_requests_per_second: 11,
+            ..Default::default()
+        };
+        let l = limits(&ua);
+        assert_eq!(
+            l,
+            ctopc_ua::limits::Limits {
+                max_sessions: 1,
+                max_subscriptions_per_session: 2,
+                max_monitored_items_per_subscription: 3,
+                max_monitored_items: 4,
+                max_browse_continuation_points: 5,
+                max_operations_per_request: 6,
+                max_message_size: 70_000,
+                max_chunk_count: 8,
+                max_array_length: 9,
+                max_string_length: 10_000,
+                max_requests_per_second: 11,
+            }
+        );
     }
 }

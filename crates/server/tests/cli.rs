@@ -109,7 +109,13 @@ fn user_add_keeps_a_salted_hash_and_never_the_password() {
 #[test]
 fn user_add_refuses_bad_input_and_writes_nothing() {
     let dir = scratch("user-add-bad");
-    let cases: [(&[&str], &str, &str); 3] = [
+    let cases: [(&[&str], &str, &str); 4] = [
+        (
+            // Without --password-stdin it asks on the terminal; piped, it cannot.
+            &["user", "add", "x", "--role", "reader"],
+            "pw\n",
+            "standard input is not a terminal: cannot ask for the password; pipe it with --password-stdin",
+        ),
         (
             &["user", "add", "x", "--role", "admin", "--password-stdin"],
             "pw\n",

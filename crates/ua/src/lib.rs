@@ -8,6 +8,7 @@
 //! - [`engine`]: the front end's engine session (reads, writes, the write audit);
 //! - [`monitor`]: monitored items as items of engine groups, one per rate;
 //! - [`status`], [`value`]: quality, errors and values in UA terms;
+//! - [`limits`]: the limits, onto async-opcua's, and the ones the front end counts;
 //! - [`server`]: the server (endpoints, certificates, limits), [`auth`] and [`users`]:
 //!   who may connect and write.
 
@@ -15,6 +16,7 @@
 
 pub mod auth;
 pub mod engine;
+pub mod limits;
 pub mod monitor;
 pub mod node_manager;
 pub mod pki;

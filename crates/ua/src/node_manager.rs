@@ -74,6 +74,7 @@ pub struct Setup {
 /// the subscription cache then).
 pub struct AsixNodeManagerBuilder {
     setup: Setup,
+    limits: crate::limits::Limits,
     /// Where the built node manager is handed back (the server keeps it for its tests
     /// and its shutdown).
     out: Arc<Mutex<Option<Arc<AsixNodeManager>>>>,
@@ -85,10 +86,17 @@ impl AsixNodeManagerBuilder {
         (
             AsixNodeManagerBuilder {
                 setup,
+                limits: crate::limits::Limits::default(),
                 out: Arc::clone(&out),
             },
             out,
         )
+    }
+
+    /// The limits the node manager counts (monitored items in all, the request rate).
+    pub fn limits(mut self, limits: &crate::limits::Limits) -> Self {
+        self.limits = limits.clone();
+        self
     }
 }
 
@@ -100,7 +108,13 @@ impl NodeManagerBuilder for AsixNodeManagerBuilder {
             .namespaces_mut()
             .add_namespace(NAMESPACE_URI);
         let notify = Arc::clone(&context.subscriptions) as Arc<dyn crate::monitor::Notify>;
-        let nm = Arc::new(AsixNodeManager::new(self.setup, ns, notify));
+        let mut nm = AsixNodeManager::new(self.setup, ns, notify);
+        nm.budget = crate::limits::ItemBudget::new(self.limits.max_monitored_items);
+        nm.rate = crate::limits::RateLimiter::new(
+            self.limits.max_requests_per_second,
+            self.limits.max_sessions,
+        );
+        let nm = Arc::new(nm);
         *self.out.lock().unwrap_or_else(|p| p.into_inner()) = Some(Arc::clone(&nm));
         nm
     }
@@ -120,6 +134,10 @@ pub struct AsixNodeManager {
     lang: Lang,
     /// The Value monitored items: their item ID and engine rate.
     items: Mutex<HashMap<MonitoredItemHandle, (String, u32)>>,
+    /// `MaxMonitoredItems`, over the Value monitored items.
+    budget: crate::limits::ItemBudget,
+    /// `MaxRequestsPerSecond`, over the requests reaching this node manager.
+    rate: crate::limits::RateLimiter,
 }
 
 fn to_description(m: Meta, reference_type: NodeId, forward: bool) -> ReferenceDescription {
@@ -175,7 +193,17 @@ impl AsixNodeManager {
             roles: setup.roles,
             lang: setup.lang,
             items: Mutex::new(HashMap::new()),
+            budget: crate::limits::ItemBudget::new(
+                crate::limits::Limits::default().max_monitored_items,
+            ),
+            rate: crate::limits::RateLimiter::new(0, 1),
         }
+    }
+
+    /// One request of the context's session against `MaxRequestsPerSecond`.
+    fn admit(&self, context: &RequestContext) -> Result<(), StatusCode> {
+        self.rate
+            .admit(context.session_id, std::time::Instant::now())
     }
 
     fn items(&self) -> std::sync::MutexGuard<'_, HashMap<MonitoredItemHandle, (String, u32)>> {
@@ -388,6 +416,7 @@ impl NodeManager for AsixNodeManager {
         context: &RequestContext,
         nodes_to_browse: &mut [BrowseNode],
     ) -> Result<(), StatusCode> {
+        self.admit(context)?;
         let type_tree = context.type_tree.read();
         for node in nodes_to_browse {
             self.browse_one(node, &type_tree);
@@ -410,6 +439,7 @@ impl NodeManager for AsixNodeManager {
         _timestamps_to_return: TimestampsToReturn,
         nodes_to_read: &mut [&mut ReadNode],
     ) -> Result<(), StatusCode> {
+        self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let mut values: Vec<(usize, String)> = Vec::new();
         for (i, node) in nodes_to_read.iter_mut().enumerate() {
@@ -451,6 +481,7 @@ impl NodeManager for AsixNodeManager {
         context: &RequestContext,
         nodes_to_write: &mut [&mut WriteNode],
     ) -> Result<(), StatusCode> {
+        self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let mut writes: Vec<(usize, (String, ItemVqt))> = Vec::new();
         for (i, node) in nodes_to_write.iter_mut().enumerate() {
@@ -491,6 +522,7 @@ impl NodeManager for AsixNodeManager {
         context: &RequestContext,
         items: &mut [&mut CreateMonitoredItem],
     ) -> Result<(), StatusCode> {
+        self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let mut initial: Vec<(usize, String)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
@@ -504,6 +536,10 @@ impl NodeManager for AsixNodeManager {
             };
             match resolved {
                 Resolved::Variable(info) if target.attribute_id == AttributeId::Value => {
+                    if let Err(e) = self.budget.take() {
+                        item.set_status(e);
+                        continue;
+                    }
                     let rate = self.monitor.revise(item.sampling_interval());
                     match self.monitor.add(&info.item_id, rate) {
                         Ok(()) => {
@@ -513,7 +549,10 @@ impl NodeManager for AsixNodeManager {
                             item.set_status(StatusCode::Good);
                             initial.push((i, info.item_id.clone()));
                         }
-                        Err(e) => item.set_status(error_to_status(e, false)),
+                        Err(e) => {
+                            self.budget.give_back();
+                            item.set_status(error_to_status(e, false));
+                        }
                     }
                 }
                 r => match self
@@ -579,6 +618,7 @@ impl NodeManager for AsixNodeManager {
         for item in items {
             let removed = self.items().remove(&item.handle());
             if let Some((id, rate)) = removed {
+                self.budget.give_back();
                 self.monitor.remove(&id, rate);
             }
         }

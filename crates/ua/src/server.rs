@@ -17,6 +17,7 @@
 
 use crate::auth::UsersAuth;
 use crate::engine::EngineClient;
+use crate::limits::Limits;
 use crate::node_manager::{AsixNodeManager, AsixNodeManagerBuilder, Setup};
 use ctopc_core::browse::AddressSpace;
 use ctopc_core::lang::Lang;
@@ -42,9 +43,7 @@ pub struct Settings {
     pub allow_anonymous: bool,
     pub pki_dir: PathBuf,
     pub users_file: PathBuf,
-    pub max_sessions: usize,
-    pub max_subscriptions_per_session: usize,
-    pub max_monitored_items_per_subscription: usize,
+    pub limits: Limits,
 }
 
 /// What the server serves: the runtime's namespace and engine, the browse tree.
@@ -147,6 +146,7 @@ impl Running {
 /// Builds the server and starts listening (on the current tokio runtime).
 pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String> {
     let (host, port) = parse_endpoint(&settings.endpoint)?;
+    settings.limits.check()?;
     let everywhere = matches!(host.as_str(), "0.0.0.0" | "::");
     let announced = if everywhere {
         host_name()
@@ -180,6 +180,7 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         roles: Arc::clone(&auth) as Arc<dyn crate::node_manager::Roles>,
         lang: serve.lang,
     });
+    let nm_builder = nm_builder.limits(&settings.limits);
     let mut b = ServerBuilder::new()
         .application_name("ServerCTOPC")
         .application_uri(format!("urn:{announced}:ASKOM:ServerCTOPC"))
@@ -196,14 +197,8 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         .port(port)
         .with_authenticator(auth)
         .with_node_manager(nm_builder)
-        .max_sessions(settings.max_sessions)
         .discovery_urls(vec!["/".to_owned()]);
-    {
-        let limits = b.limits_mut();
-        limits.subscriptions.max_subscriptions_per_session = settings.max_subscriptions_per_session;
-        limits.subscriptions.max_monitored_items_per_sub =
-            settings.max_monitored_items_per_subscription;
-    }
+    settings.limits.apply(b.limits_mut());
     for policy in POLICIES {
         for mode in [
             MessageSecurityMode::Sign,
@@ -247,6 +242,7 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         "OPC UA: listening on {address}; {}",
         describe(settings, &announced, port)
     );
+    tracing::info!("OPC UA: {}", settings.limits.describe());
     let task = tokio::spawn(server.run_with(listener));
     Ok(Running {
         handle,
@@ -293,9 +289,7 @@ mod tests {
             allow_anonymous: false,
             pki_dir: PathBuf::from("pki"),
             users_file: PathBuf::from("ua-users.txt"),
-            max_sessions: 1,
-            max_subscriptions_per_session: 1,
-            max_monitored_items_per_subscription: 1,
+            limits: Limits::default(),
         };
         assert_eq!(
             describe(&s, "plant", 4840),

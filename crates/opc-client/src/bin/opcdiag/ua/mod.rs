@@ -191,18 +191,31 @@ fn mode_of(s: Security) -> MessageSecurityMode {
     }
 }
 
-/// The user's identity: anonymous, or the user with the password from stdin or a prompt.
+/// The user's identity: anonymous, or the user with the password from the first line of
+/// standard input (`--password-stdin`) or asked on the terminal without echo.
 fn identity(o: &UaOptions) -> Result<IdentityToken, Failure> {
+    use std::io::IsTerminal;
     let Some(user) = &o.user else {
         return Ok(IdentityToken::Anonymous);
     };
-    if !o.password_stdin {
-        eprint!("Password for {user}: ");
-    }
-    let mut line = String::new();
-    std::io::stdin()
-        .read_line(&mut line)
-        .map_err(|e| failed(format!("cannot read the password: {e}")))?;
+    let line = if o.password_stdin {
+        let mut line = String::new();
+        std::io::stdin()
+            .read_line(&mut line)
+            .map_err(|e| failed(format!("cannot read the password: {e}")))?;
+        line
+    } else if std::io::stdin().is_terminal() {
+        rpassword::prompt_password(format!("Password for {user}: "))
+            .map_err(|e| failed(format!("cannot read the password: {e}")))?
+    } else {
+        return Err(Failure {
+            code: EXIT_USAGE,
+            message: format!(
+                "standard input is not a terminal: cannot ask for the password of {user}; \
+                 pipe it with --password-stdin"
+            ),
+        });
+    };
     let password = line.trim_end_matches(['\n', '\r']);
     if password.is_empty() {
         return Err(Failure {
