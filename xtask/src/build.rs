@@ -11,7 +11,8 @@ pub struct Artifacts {
     /// OpcServerList.exe, our OPC.ServerList.1 (64-bit, as the server).
     pub server_list: PathBuf,
     pub proxy: PathBuf,
-    /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub and opcdiag.
+    /// target/i686-pc-windows-gnu/release: the 32-bit proxy/stub, opcdiag and asix-gate
+    /// (the gateway on the asix station, 32-bit as AsixConnect's Automation server).
     pub dir32: PathBuf,
     pub proxy32: PathBuf,
     /// target/i686-pc-windows-gnu/release/xconnect_double.dll: the 32-bit test double of
@@ -65,6 +66,8 @@ pub fn run(_args: &[String]) -> Result<Artifacts, String> {
         Arch::X86.target(),
         "-p",
         "opc-client",
+        "-p",
+        "asix-gate",
         "--bins",
     ]))?;
     proxy::build_proxy(&root, Arch::X64)?;
