@@ -220,14 +220,16 @@ impl Background {
 /// included). Left out: `service` (it tests the server as an NT service, not the
 /// client's side of the wire). Measured: that one passes at 32-bit too. `xconnect` (the
 /// late-bound Automation client against the test double of AsixConnect's
-/// `XConnect.ServerCT`, a 32-bit in-process server) and `gate_xconnect` (asix-gate's engine
-/// over its Automation adapter, against the same double) run only here: their files are
-/// empty in a 64-bit build.
+/// `XConnect.ServerCT`, a 32-bit in-process server), `gate_xconnect` (asix-gate's engine
+/// over its Automation adapter, against the same double) and `gate_service` (the 32-bit
+/// asix-gate.exe as an NT service) run only here: their files are empty in a 64-bit build.
 pub const E2E_32: &[&str] = &[
     "da10",
     "diagnostics",
     "doctor",
     "foundation",
+    "gate_e2e",
+    "gate_service",
     "gate_xconnect",
     "generic_clients",
     "group_async",

@@ -12,6 +12,7 @@ mod asix_gate_main {
     use super::*;
     use asix_gate::channel::ChannelFactory;
     use asix_gate::config;
+    use asix_net::secure::ServerSecurity;
     use asix_net::tls;
     use ctopc_core::lang::Lang;
     #[cfg(not(windows))]
@@ -20,11 +21,26 @@ mod asix_gate_main {
     const USAGE: &str = "\
 usage: asix-gate [--config FILE] [--check]
        asix-gate --gen-cert DIR [--name NAME]
+       asix-gate /Service [--config FILE]
+       asix-gate /UnregServer
   --config FILE   the configuration (default: asix-gate.ini beside the program)
   --check         read the configuration, report, exit
   --gen-cert DIR  write DIR/asix-gate-cert.pem and DIR/asix-gate-key.pem, print the
                   fingerprint (paste it as AsixNetServerFingerprint into ServerCTOPC's channel)
+  /Service        install (or update) the NT service AsixGate: automatic start, LocalService,
+                  serving FILE (its absolute path) or asix-gate.ini beside the program
+  /UnregServer    stop and remove the NT service
 ";
+
+    /// What the command line asks for.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    enum Mode {
+        Console,
+        Install,
+        Uninstall,
+        /// Started by the service control manager (`-ServiceRun`).
+        Service,
+    }
 
     fn default_config() -> PathBuf {
         std::env::current_exe()
@@ -111,9 +127,26 @@ usage: asix-gate [--config FILE] [--check]
         let mut path = None;
         let mut check = false;
         let mut gen = None;
+        let mut mode = Mode::Console;
         let mut name = "ASIX-GATE".to_owned();
         let mut it = args.into_iter();
         while let Some(a) = it.next() {
+            // The service switches as the server's: `/` or `-`, any case.
+            match a.to_ascii_lowercase().as_str() {
+                "/service" | "-service" => {
+                    mode = Mode::Install;
+                    continue;
+                }
+                "/unregserver" | "-unregserver" => {
+                    mode = Mode::Uninstall;
+                    continue;
+                }
+                "-servicerun" => {
+                    mode = Mode::Service;
+                    continue;
+                }
+                _ => {}
+            }
             match a.as_str() {
                 "--config" => path = it.next().map(PathBuf::from),
                 "--check" => check = true,
@@ -140,6 +173,11 @@ usage: asix-gate [--config FILE] [--check]
                     ExitCode::FAILURE
                 }
             };
+        }
+        match mode {
+            Mode::Install => return install(path),
+            Mode::Uninstall => return uninstall(),
+            Mode::Console | Mode::Service => {}
         }
         let path = path.unwrap_or_else(default_config);
         let cfg = match config::load(&path) {
@@ -175,16 +213,44 @@ usage: asix-gate [--config FILE] [--check]
             );
             return ExitCode::SUCCESS;
         }
-        let rt = match tokio::runtime::Builder::new_multi_thread()
-            .enable_all()
-            .build()
-        {
-            Ok(rt) => rt,
+        if mode == Mode::Service {
+            return service(cfg, security);
+        }
+        // `quit` on stdin stops the gate (Ctrl+C ends the process).
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            // Without a console (stdin at its end) the gate runs until killed.
+            for line in std::io::stdin().lock().lines() {
+                if line.is_ok_and(|l| l.trim() == "quit") {
+                    let _ = tx.send(());
+                    return;
+                }
+            }
+            std::mem::forget(tx);
+        });
+        match serve(cfg, security, async move {
+            let _ = rx.await;
+        }) {
+            Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
                 eprintln!("asix-gate: {e}");
-                return ExitCode::FAILURE;
+                ExitCode::FAILURE
             }
-        };
+        }
+    }
+
+    /// Serves `cfg` until `stop` completes; prints the ready line
+    /// (`asix-gate NAME udp=ADDR tcp=ADDR fingerprint=HEX`) once it listens.
+    fn serve(
+        cfg: config::GateConfig,
+        security: ServerSecurity,
+        stop: impl std::future::Future<Output = ()>,
+    ) -> Result<(), String> {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| e.to_string())?;
         rt.block_on(async move {
             let engine = asix_gate::Engine::start(&cfg, factory());
             let server =
@@ -193,37 +259,121 @@ usage: asix-gate [--config FILE] [--check]
                 {
                     Ok(s) => s,
                     Err(e) => {
-                        eprintln!("asix-gate: {e}");
-                        return ExitCode::FAILURE;
+                        engine.stop();
+                        return Err(e.to_string());
                     }
                 };
+            let fingerprint = server
+                .fingerprint()
+                .map(|f| tls::fingerprint_hex(&f))
+                .unwrap_or_default();
             println!(
-                "asix-gate {} udp={} tcp={} fingerprint={}",
+                "asix-gate {} udp={} tcp={} fingerprint={fingerprint}",
                 cfg.server_name,
                 server.discovery_addr(),
                 server.tcp_addr(),
-                server
-                    .fingerprint()
-                    .map(|f| tls::fingerprint_hex(&f))
-                    .unwrap_or_default()
             );
-            // `quit` on stdin stops the gate (Ctrl+C ends the process).
-            let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-            std::thread::spawn(move || {
-                use std::io::BufRead;
-                // Without a console (stdin at its end) the gate runs until killed.
-                for line in std::io::stdin().lock().lines() {
-                    if line.is_ok_and(|l| l.trim() == "quit") {
-                        let _ = tx.send(());
-                        return;
-                    }
-                }
-                std::mem::forget(tx);
-            });
-            let _ = rx.await;
+            tracing::info!(
+                server = %cfg.server_name,
+                udp = %server.discovery_addr(),
+                tcp = %server.tcp_addr(),
+                %fingerprint,
+                "asix-gate serving"
+            );
+            stop.await;
+            tracing::info!("asix-gate stopping");
             engine.stop();
             server.shutdown().await;
-            ExitCode::SUCCESS
+            Ok(())
         })
+    }
+
+    /// `/Service [--config FILE]`: the NT service, started with the configuration's
+    /// absolute path (the service starts in the system folder).
+    #[cfg(windows)]
+    fn install(path: Option<PathBuf>) -> ExitCode {
+        use ctopc_com::service;
+        let exe = match std::env::current_exe() {
+            Ok(e) => e,
+            Err(e) => {
+                eprintln!("asix-gate: /Service: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        let mut args = Vec::new();
+        if let Some(p) = path {
+            let p = std::path::absolute(&p).unwrap_or(p);
+            args.push("--config".into());
+            args.push(p.into_os_string());
+        }
+        match service::install_with_args(&service::ASIX_GATE, &exe, &args) {
+            Ok(()) => {
+                println!("asix-gate: service {} installed", service::ASIX_GATE.name);
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("asix-gate: /Service: {e}");
+                ExitCode::FAILURE
+            }
+        }
+    }
+
+    /// `/UnregServer`: stops and removes the NT service (quietly when there is none).
+    #[cfg(windows)]
+    fn uninstall() -> ExitCode {
+        use ctopc_com::service;
+        match service::uninstall_as(&service::ASIX_GATE) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("asix-gate: /UnregServer: {e}");
+                ExitCode::FAILURE
+            }
+        }
+    }
+
+    /// `-ServiceRun`: the service control dispatcher; the gate serves until the service
+    /// manager stops the service (or the system shuts down).
+    #[cfg(windows)]
+    fn service(cfg: config::GateConfig, security: ServerSecurity) -> ExitCode {
+        use ctopc_com::service;
+        let r = service::run_as(
+            &service::ASIX_GATE,
+            Box::new(move |stop| {
+                let notify = std::sync::Arc::new(tokio::sync::Notify::new());
+                let wake = std::sync::Arc::clone(&notify);
+                // `notify_one` keeps the wake-up for a stop that comes before the wait.
+                stop.on_trigger(move |reason| {
+                    tracing::info!("{reason}");
+                    wake.notify_one();
+                });
+                serve(cfg, security, async move { notify.notified().await })
+            }),
+        );
+        match r {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                tracing::error!("{e}");
+                eprintln!("asix-gate: {e}");
+                ExitCode::FAILURE
+            }
+        }
+    }
+
+    #[cfg(not(windows))]
+    fn install(_path: Option<PathBuf>) -> ExitCode {
+        eprintln!("asix-gate: /Service: an NT service exists only on Windows");
+        ExitCode::from(2)
+    }
+
+    #[cfg(not(windows))]
+    fn uninstall() -> ExitCode {
+        eprintln!("asix-gate: /UnregServer: an NT service exists only on Windows");
+        ExitCode::from(2)
+    }
+
+    #[cfg(not(windows))]
+    fn service(_cfg: config::GateConfig, _security: ServerSecurity) -> ExitCode {
+        eprintln!("asix-gate: -ServiceRun: an NT service exists only on Windows");
+        ExitCode::from(2)
     }
 }

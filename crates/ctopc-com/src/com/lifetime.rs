@@ -238,6 +238,13 @@ impl StopSignal {
         self.0.lock().unwrap_or_else(|p| p.into_inner()).reason
     }
 
+    /// Calls `f` on a trigger (at once if already triggered): for a serving function that
+    /// is not a COM context (asix-gate's service). `f` runs under the signal's lock: it
+    /// must not trigger or subscribe to this signal.
+    pub fn on_trigger(&self, f: impl Fn(&'static str) + Send + Sync + 'static) {
+        self.subscribe(Box::new(f));
+    }
+
     /// Calls `f` on a trigger (at once if already triggered). `f` runs under the signal's
     /// lock: it must not trigger or subscribe to this signal.
     fn subscribe(&self, f: Listener) {

@@ -1,10 +1,12 @@
-//! ServerCTOPC (and the server browser, OpcServerList.exe) as an NT service: installation
-//! (on demand, as LocalService; COM starts it when a client activates the server because
-//! the AppID names it in `LocalService`), removal, and the service main, which serves
-//! until the service control manager stops it and then sends IOPCShutdown to every
-//! connected client: the control handler only triggers the [`StopSignal`] it hands to the
-//! serving function. Which service: a [`ServiceSpec`] ([`SERVERCTOPC`], [`SERVER_LIST`]);
-//! the functions without `_as` are ServerCTOPC's.
+//! ServerCTOPC (and the server browser, OpcServerList.exe, and the asix-side gateway,
+//! asix-gate.exe) as an NT service: installation (as LocalService; the COM servers on
+//! demand, COM starting them when a client activates the server because the AppID names
+//! it in `LocalService`; the gateway automatically, at boot), removal, and the service
+//! main, which serves until the service control manager stops it (ServerCTOPC then sends
+//! IOPCShutdown to every connected client): the control handler only triggers the
+//! [`StopSignal`] it hands to the serving function. Which service: a [`ServiceSpec`]
+//! ([`SERVERCTOPC`], [`SERVER_LIST`], [`ASIX_GATE`]); the functions without `_as` are
+//! ServerCTOPC's.
 
 use crate::com::lifetime::StopSignal;
 use std::ffi::OsString;
@@ -26,13 +28,17 @@ pub const ACCOUNT: &str = "NT AUTHORITY\\LocalService";
 /// The switch the service control manager starts the executable with.
 pub const SERVICE_SWITCH: &str = "-ServiceRun";
 
-/// One of our NT services: its name (also `AppID\{..}\LocalService`), display name and
-/// description. Both run as [`ACCOUNT`], on demand, started with [`SERVICE_SWITCH`].
+/// One of our NT services: its name (also `AppID\{..}\LocalService` for a COM server),
+/// display name, description, the reason its stop gives the serving function, and whether
+/// it starts at boot (else on demand). All run as [`ACCOUNT`], started with
+/// [`SERVICE_SWITCH`] (and the arguments given to [`install_with_args`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ServiceSpec {
     pub name: &'static str,
     pub display_name: &'static str,
     pub description: &'static str,
+    pub stopping: &'static str,
+    pub auto_start: bool,
 }
 
 /// ServerCTOPC.exe's service.
@@ -40,6 +46,8 @@ pub const SERVERCTOPC: ServiceSpec = ServiceSpec {
     name: SERVICE_NAME,
     display_name: DISPLAY_NAME,
     description: DESCRIPTION,
+    stopping: "the ServerCTOPC service is stopping",
+    auto_start: false,
 };
 
 /// OpcServerList.exe's service (`OPC.ServerList.1` for remote clients, as OpcEnum is).
@@ -48,17 +56,36 @@ pub const SERVER_LIST: ServiceSpec = ServiceSpec {
     display_name: "ServerCTOPC OPC Server List",
     description: "OPC.ServerList.1 (OpcEnum-compatible): lists the OPC servers of this \
                   machine to local and remote OPC clients.",
+    stopping: "the OPC Server List service is stopping",
+    auto_start: false,
 };
 
-fn service_info(spec: &ServiceSpec, exe: &Path) -> ServiceInfo {
+/// asix-gate.exe's service: the gateway serves the asix station's data to ServerCTOPC from
+/// boot on (nothing activates it on demand).
+pub const ASIX_GATE: ServiceSpec = ServiceSpec {
+    name: "AsixGate",
+    display_name: "asix-gate (asix network gateway over XConnect.ServerCT)",
+    description: "Serves the current data of this asix station's AsixConnect channels to \
+                  ServerCTOPC over the asix network protocol (TLS).",
+    stopping: "the asix-gate service is stopping",
+    auto_start: true,
+};
+
+fn service_info(spec: &ServiceSpec, exe: &Path, args: &[OsString]) -> ServiceInfo {
+    let mut launch_arguments = vec![OsString::from(SERVICE_SWITCH)];
+    launch_arguments.extend(args.iter().cloned());
     ServiceInfo {
         name: OsString::from(spec.name),
         display_name: OsString::from(spec.display_name),
         service_type: ServiceType::OWN_PROCESS,
-        start_type: ServiceStartType::OnDemand,
+        start_type: if spec.auto_start {
+            ServiceStartType::AutoStart
+        } else {
+            ServiceStartType::OnDemand
+        },
         error_control: ServiceErrorControl::Normal,
         executable_path: exe.to_path_buf(),
-        launch_arguments: vec![OsString::from(SERVICE_SWITCH)],
+        launch_arguments,
         dependencies: vec![],
         account_name: Some(OsString::from(ACCOUNT)),
         account_password: None,
@@ -77,13 +104,19 @@ pub fn uninstall() -> Result<(), String> {
 
 /// Creates the service, or updates its configuration when it exists (idempotent).
 pub fn install_as(spec: &ServiceSpec, exe: &Path) -> Result<(), String> {
+    install_with_args(spec, exe, &[])
+}
+
+/// As [`install_as`], the service started with `args` after [`SERVICE_SWITCH`] (each
+/// quoted by the service manager as needed).
+pub fn install_with_args(spec: &ServiceSpec, exe: &Path, args: &[OsString]) -> Result<(), String> {
     let name = spec.name;
     let manager = ServiceManager::local_computer(
         None::<&str>,
         ServiceManagerAccess::CONNECT | ServiceManagerAccess::CREATE_SERVICE,
     )
     .map_err(|e| format!("cannot open the service control manager (run as administrator): {e}"))?;
-    let info = service_info(spec, exe);
+    let info = service_info(spec, exe, args);
     match manager.open_service(name, ServiceAccess::CHANGE_CONFIG) {
         Ok(existing) => existing
             .change_config(&info)
@@ -165,11 +198,7 @@ fn service_main(_args: Vec<OsString>) {
     };
     let stop = StopSignal::new();
     let trigger = stop.clone();
-    let stopping: &'static str = if spec == SERVERCTOPC {
-        "the ServerCTOPC service is stopping"
-    } else {
-        "the OPC Server List service is stopping"
-    };
+    let stopping = spec.stopping;
     let handler = move |control| match control {
         ServiceControl::Stop => {
             tracing::info!("service control: stop");
