@@ -555,13 +555,13 @@ mod tests {
         let install = table(&msi, "ServiceInstall").unwrap();
         // ServiceInstall, Name, DisplayName, ServiceType, StartType, ErrorControl,
         // LoadOrderGroup, Dependencies, StartName, Password, Arguments, Component_, ...
-        let svc = install.iter().find(|r| r[1] == "asix-gate").unwrap();
+        let svc = install.iter().find(|r| r[1] == "AsixGate").unwrap();
         assert_eq!(svc[3], "16", "SERVICE_WIN32_OWN_PROCESS");
         assert_eq!(svc[4], "3", "SERVICE_DEMAND_START");
         assert_eq!(svc[10], "-ServiceRun");
         assert_eq!(svc[11], "Gate");
         let control = table(&msi, "ServiceControl").unwrap();
-        let ctl = control.iter().find(|r| r[1] == "asix-gate").unwrap();
+        let ctl = control.iter().find(|r| r[1] == "AsixGate").unwrap();
         // Event: stop on install and uninstall (0x2 | 0x20), delete on uninstall (0x80).
         assert_eq!(ctl[2].parse::<u32>().unwrap(), 0x2 | 0x20 | 0x80);
         assert_eq!(ctl[5], "Gate");
@@ -941,7 +941,7 @@ mod wine_test {
             let files = [crate::dist::GATE_EXE, crate::dist::GATE_INI]
                 .map(|f| self.install_dir().join(f).is_file());
             let reg = self.system_reg();
-            let head = "[system\\\\currentcontrolset\\\\services\\\\asix-gate]";
+            let head = "[system\\\\currentcontrolset\\\\services\\\\asixgate]";
             let svc = reg.find(head).map(|start| {
                 let body = &reg[start..];
                 body[..body.find("\n\n").unwrap_or(body.len())].to_owned()
