@@ -5,7 +5,8 @@
 //! serving the synthetic variable set `asix_model::synthetic` as ServerCTOPC serves it: the
 //! same namespace URI, tree, NodeIds and types, values changing every 250 ms (the in-process
 //! simulation's tick). ServerCTOPC serves the synthetic database (`scale::synthetic_db`)
-//! simulated in process, `MinUpdateRate = 100`, SecurityPolicy None allowed.
+//! simulated in process, named by its aliases (`T0000000`...), `MinUpdateRate = 100`,
+//! SecurityPolicy None allowed.
 //!
 //! For each security mode (None, Basic256Sha256 SignAndEncrypt) each server is started fresh
 //! and measured by the same load client, `ua-bench` (crates/opc-client/src/bin/ua-bench,
@@ -251,6 +252,7 @@ SimulateCurrentData = tak
 MinUpdateRate = 100
 [Channel:*]
 ItemsDatabase = {}
+AliasAttributeName = Alias
 [UA]
 Endpoint = opc.tcp://127.0.0.1:{port}
 AllowNone = tak
@@ -571,6 +573,7 @@ mod tests {
             "MinUpdateRate = 100",
             "AllowNone = tak",
             "ItemsDatabase = /d/s.zez",
+            "AliasAttributeName = Alias",
             "Endpoint = opc.tcp://127.0.0.1:4999",
         ] {
             assert!(ini.lines().any(|l| l == line), "{line}: {ini}");
