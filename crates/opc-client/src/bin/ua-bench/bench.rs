@@ -395,7 +395,7 @@ impl Bench<'_> {
         });
         let interval = Duration::from_millis(u64::from(self.args.sampling));
         let sub = session
-            .create_subscription(interval, 600, 20, 0, 0, true, callback)
+            .create_subscription(interval, 6000, 50, 0, 0, true, callback)
             .await
             .map_err(|e| format!("CreateSubscription: {e}"))?;
         let started = Instant::now();
