@@ -16,7 +16,9 @@
 //! the transport floor (the same call with invalid handles). `--only-distinct` runs only
 //! that part.
 //!
-//! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`).
+//! `cargo xtask bench --scale [OPTIONS]` is the scale benchmark instead (`scale.rs`);
+//! `cargo xtask bench --ua [OPTIONS]` the OPC UA benchmark beside node-opcua, natively
+//! (`ua_bench.rs`).
 
 use crate::{build, setup, util, wine};
 use std::path::PathBuf;
@@ -40,6 +42,9 @@ fn distinct_db() -> Result<String, String> {
 pub fn run(args: &[String]) -> Result<(), String> {
     if let Some(rest) = args.strip_prefix(&["--scale".to_owned()]) {
         return crate::scale::run(rest);
+    }
+    if let Some(rest) = args.strip_prefix(&["--ua".to_owned()]) {
+        return crate::ua_bench::run_bench(rest);
     }
     setup::run(&[])?;
     let artifacts = build::run(&[])?;

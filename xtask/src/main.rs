@@ -16,6 +16,7 @@ mod setup;
 mod soak;
 mod test;
 mod ua;
+mod ua_bench;
 mod ua_client;
 mod util;
 mod wine;
@@ -80,7 +81,15 @@ commands:
           (xtask/src/scale.rs): start time, resident memory per variable, flat and
           tree browse, AddItems, memory per group item and of an active subscription,
           a soak; medians beside the demo's; `--sizes 100000,1000000`, `--runs 3`,
-          `--items 100000`, `--soak-minutes 10`, `--only load|browse|items|soak`
+          `--items 100000`, `--soak-minutes 10`, `--only load|browse|items|soak`.
+          `bench --ua`: natively, no Wine: ServerCTOPC serve (synthetic database of
+          `--size` variables, default 1000000) beside a node-opcua peer (`--peer-size`,
+          default 100000; xtask/bench/ua-peer), measured by one async-opcua load client
+          (ua-bench): tree browse, Read of 10,000 values, 100,000 monitored items at
+          100 ms, 10 sessions x 10,000 items, with None and SignAndEncrypt; ratios
+          ours/peer; `--quick` (a few seconds), `--security none|encrypt|both`, `--only
+          ours|peer`, `--items N`, `--read N`, `--runs N`, `--sessions N`,
+          `--session-items N`, `--windows N`, `--window-ms MS`, `--no-browse`
 ";
 
 fn main() -> ExitCode {

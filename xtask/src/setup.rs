@@ -30,6 +30,10 @@ pub const PACKAGES: &[&str] = &[
     "pxlib-dev",
     // The OPC UA interop test's client (Python asyncua, xtask/src/ua.rs) lives in a venv.
     "python3-venv",
+    // The peer server of `cargo xtask bench --ua` (node-opcua, xtask/bench/ua-peer),
+    // installed with npm from its package-lock.json.
+    "nodejs",
+    "npm",
 ];
 /// The server's target (64-bit): what `cargo xtask build` builds everything for.
 pub const TARGET: &str = "x86_64-pc-windows-gnu";
@@ -42,6 +46,10 @@ pub fn run(_args: &[String]) -> Result<(), String> {
     }
     wine::ensure_prefix(&wine::prefix())?;
     crate::ua::venv()?;
+    // Only `bench --ua` needs the peer: without the network, setup goes on without it.
+    if let Err(e) = crate::ua_bench::install_peer() {
+        println!("setup: the node-opcua peer of bench --ua is not installed: {e}");
+    }
     println!("setup: done (prefix {})", wine::prefix().display());
     Ok(())
 }
@@ -52,6 +60,12 @@ fn installed(pkg: &str) -> bool {
         .unwrap_or(false)
 }
 
+/// npm on the PATH: the nodejs of NodeSource's repository brings its own (and conflicts
+/// with Debian's npm package).
+fn npm_present() -> bool {
+    util::output(Command::new("npm").arg("--version")).is_ok()
+}
+
 fn has_i386() -> bool {
     util::output(Command::new("dpkg").arg("--print-foreign-architectures"))
         .map(|s| s.lines().any(|l| l.trim() == "i386"))
@@ -59,7 +73,11 @@ fn has_i386() -> bool {
 }
 
 fn apt_packages() -> Result<(), String> {
-    let missing: Vec<&str> = PACKAGES.iter().copied().filter(|p| !installed(p)).collect();
+    let missing: Vec<&str> = PACKAGES
+        .iter()
+        .copied()
+        .filter(|p| !(installed(p) || (*p == "npm" && npm_present())))
+        .collect();
     if missing.is_empty() {
         println!("setup: apt packages present ({})", PACKAGES.join(", "));
         return Ok(());
