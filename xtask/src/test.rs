@@ -7,9 +7,8 @@
 //! 3. native `cargo test` of every host crate, then every fuzz target for a few seconds
 //!    (the stable runner, `xtask/src/fuzz.rs`), then the OPC UA interop test
 //!    (`cargo xtask ua-interop`, `xtask/src/ua.rs`: `ServerCTOPC serve` natively against
-//!    Python asyncua), then `cargo xtask bench --ua --quick` (`xtask/src/ua_bench.rs`: the
-//!    OPC UA benchmark end to end at a tiny size, beside the node-opcua peer when npm
-//!    installed it);
+//!    Python asyncua); the OPC UA benchmark (`cargo xtask bench --ua [--quick]`) is not
+//!    part of the run: it prints figures, and its node-opcua peer starts for minutes;
 //! 4. the Windows build (both bitnesses, `build.rs`); then, **in the background** beside
 //!    steps 5 to 7 (which mostly wait on Wine and the server, not the CPU), the
 //!    third-party client's builds (both bitnesses, in `target/thirdparty`, which cargo
@@ -84,10 +83,6 @@ fn run_all(args: &[String]) -> Result<(), String> {
     // The release ServerCTOPC the native tests built (crates/server/tests/cli.rs).
     crate::ua::run(&["--built".into()])?;
     took("the OPC UA interop test", t);
-    // The OPC UA benchmark end to end at a tiny size (figures printed, never judged).
-    let t = std::time::Instant::now();
-    crate::ua_bench::run_bench(&["--quick".into(), "--built".into()])?;
-    took("the OPC UA benchmark, quick", t);
     if native_only {
         return Ok(());
     }
