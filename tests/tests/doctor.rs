@@ -3,7 +3,8 @@
 //! copy of the prefix (`e2e_tests::doctor::BrokenPrefix`, so the prefix the other tests
 //! use is never broken): the proxy/stub unregistered, the exe moved, an invalid
 //! configuration, a missing variable database, an unreachable asix server. Each is found
-//! with FAIL and its fix, and the exit code is 1.
+//! with FAIL and its fix, and the exit code is 1. A users file open to Everyone is a
+//! WARN with the fix.
 //!
 //! Spec: OPC DA 2.05a §5.1 Component Categories and §5.2 Registry Entries for Custom
 //! Interface (the server's and the proxy/stub's registration that doctor checks); OPC DA
@@ -263,4 +264,41 @@ fn an_unreachable_asix_server_is_a_failure_after_find_server_timeout() {
     }
     assert_eq!(run.check("database [Channel:*]").status, "OK", "{run:?}");
     assert_eq!(run.code, 1, "{run:?}");
+}
+
+#[test]
+fn a_users_file_open_to_everyone_is_a_warning_with_the_fix() {
+    use ctopc_com::com::secret_file;
+    use ctopc_registration::security::{Ace, Sid, EVERYONE};
+    let dir = std::env::temp_dir().join(format!("ctopc-doctor-secrets-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    // Made private, then opened to Everyone (read) as a careless copy would leave it.
+    let users = dir.join("users.txt");
+    secret_file::create(&users).unwrap();
+    let mut open = secret_file::descriptor_to_write(false).unwrap();
+    open.dacl
+        .get_or_insert_with(Vec::new)
+        .push(Ace::allow(Sid::parse(EVERYONE).unwrap(), 0x0012_00A9));
+    secret_file::set_dacl(&users, &open).unwrap();
+    let run = with_config(
+        "secrets",
+        &format!(
+            "[UA]\nEnabled = nie\nUsersFile = {}\nPkiDirectory = {}\n",
+            users.display(),
+            dir.join("pki").display()
+        ),
+    );
+    let c = run.check("secret: OPC UA users file");
+    assert_eq!(c.status, "WARN", "{run:?}");
+    assert!(c.detail.contains("Everyone (S-1-1-0) may read it"), "{c:?}");
+    assert!(c.fix.contains("icacls"), "{c:?}");
+    // The key that is not there yet is no finding.
+    let key = run.check("secret: OPC UA private key");
+    assert_eq!(key.status, "OK", "{key:?}");
+    assert!(key.detail.contains("not there"), "{key:?}");
+    // Narrowed again (as ServerCTOPC.exe writes it): private.
+    secret_file::narrow(&users, false).unwrap();
+    assert_eq!(secret_file::findings(&users, &[]), None);
+    std::fs::remove_dir_all(&dir).unwrap();
 }

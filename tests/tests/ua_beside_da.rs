@@ -74,6 +74,27 @@ fn server_command(args: &[&str], stdin: &str) -> String {
     text
 }
 
+/// `path` has no finding, and where the platform keeps file DACLs exactly the secrets'
+/// DACL (`security::secret_descriptor` for this account: the server's, under Wine the same
+/// user), protected. Under Wine (no file DACL kept: `platform::keeps_file_dacls`) that
+/// means its Unix mode gives others nothing.
+fn assert_private(path: &Path, folder: bool) {
+    use ctopc_com::com::{platform, secret_file};
+    let d = secret_file::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    if platform::keeps_file_dacls() {
+        let want = secret_file::descriptor_to_write(folder).expect("this process's account");
+        assert!(d.protected, "{}: {}", path.display(), d.sddl());
+        assert_eq!(d.dacl, want.dacl, "{}: {}", path.display(), d.sddl());
+    }
+    assert_eq!(
+        secret_file::findings(path, &[]),
+        None,
+        "{}: {}",
+        path.display(),
+        d.sddl()
+    );
+}
+
 /// A free loopback port (Wine's sockets are the host's).
 fn free_port() -> u16 {
     let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
@@ -310,6 +331,13 @@ fn a_da_client_and_a_ua_client_see_the_same_values_from_one_server() {
     );
 
     let ua = UaClient::connect(&url, &client_pki);
+
+    // Secrets at rest: the users file `user add` wrote, and the private key and its folder
+    // the first start made, each with the protected DACL, read back from Wine's store.
+    let private = dir.join("pki").join("private");
+    assert_private(&dir.join("ua-users.txt"), false);
+    assert_private(&private, true);
+    assert_private(&private.join("private.pem"), false);
 
     // A value the simulation changes: the same sample through both.
     let (da, ua_seen) = same_sample(&group, handles[0], || ua.read_cache(CHANGING));

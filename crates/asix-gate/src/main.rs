@@ -5,6 +5,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // Private keys get a protected DACL on Windows (0600 on Unix without it).
+    #[cfg(windows)]
+    ctopc_runtime::secret_file::install(ctopc_com::com::secret_file::PLATFORM);
     asix_gate_main::run(std::env::args().skip(1).collect())
 }
 
@@ -56,7 +59,8 @@ usage: asix-gate [--config FILE] [--check]
         let cert = dir.join("asix-gate-cert.pem");
         let key = dir.join("asix-gate-key.pem");
         std::fs::write(&cert, &g.cert_pem).map_err(|e| format!("{}: {e}", cert.display()))?;
-        std::fs::write(&key, &g.key_pem).map_err(|e| format!("{}: {e}", key.display()))?;
+        ctopc_runtime::secret_file::write(&key, g.key_pem.as_bytes())
+            .map_err(|e| format!("{}: {e}", key.display()))?;
         Ok(format!(
             "certificate {}\nprivate key {} (keep it secret)\nfingerprint {}",
             cert.display(),

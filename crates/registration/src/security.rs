@@ -68,6 +68,7 @@ pub const LAUNCH_PERMISSION: &str = "LaunchPermission";
 pub const AUTHENTICATION_LEVEL: &str = "AuthenticationLevel";
 
 const SE_DACL_PRESENT: u16 = 0x0004;
+const SE_DACL_PROTECTED: u16 = 0x1000;
 const SE_SELF_RELATIVE: u16 = 0x8000;
 const ACL_REVISION: u8 = 2;
 const ACCESS_ALLOWED_ACE_TYPE: u8 = 0;
@@ -130,6 +131,8 @@ impl std::fmt::Display for Sid {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Ace {
     pub allow: bool,
+    /// The ACE flags (`OBJECT_INHERIT_ACE`, `CONTAINER_INHERIT_ACE`, `INHERITED_ACE`, ...).
+    pub flags: u8,
     pub mask: u32,
     pub sid: Sid,
 }
@@ -138,9 +141,15 @@ impl Ace {
     pub fn allow(sid: Sid, mask: u32) -> Ace {
         Ace {
             allow: true,
+            flags: 0,
             mask,
             sid,
         }
+    }
+
+    /// Was the ACE inherited from the parent (`INHERITED_ACE`)?
+    pub fn inherited(&self) -> bool {
+        self.flags & INHERITED_ACE != 0
     }
 }
 
@@ -151,6 +160,8 @@ pub struct Descriptor {
     pub group: Option<Sid>,
     /// `None`: no DACL (a NULL DACL: everyone may).
     pub dacl: Option<Vec<Ace>>,
+    /// `SE_DACL_PROTECTED`: the DACL takes nothing from the parent's inheritable ACEs.
+    pub protected: bool,
 }
 
 impl Descriptor {
@@ -170,6 +181,9 @@ impl Descriptor {
         let mut control = SE_SELF_RELATIVE;
         if self.dacl.is_some() {
             control |= SE_DACL_PRESENT;
+        }
+        if self.protected {
+            control |= SE_DACL_PROTECTED;
         }
         let mut out = vec![1, 0];
         out.extend_from_slice(&control.to_le_bytes());
@@ -206,7 +220,12 @@ impl Descriptor {
         } else {
             Some(parse_acl(b.get(dacl_at..)?)?)
         };
-        Some(Descriptor { owner, group, dacl })
+        Some(Descriptor {
+            owner,
+            group,
+            dacl,
+            protected: control & SE_DACL_PROTECTED != 0,
+        })
     }
 
     /// The descriptor in SDDL (`O:..G:..D:(A;;0x3;;;S-1-5-18)...`, SIDs and masks as
@@ -242,7 +261,7 @@ fn acl_bytes(aces: &[Ace]) -> Vec<u8> {
         } else {
             ACCESS_DENIED_ACE_TYPE
         });
-        body.push(0);
+        body.push(a.flags);
         body.extend_from_slice(&size.to_le_bytes());
         body.extend_from_slice(&a.mask.to_le_bytes());
         body.extend_from_slice(&a.sid.0);
@@ -274,6 +293,7 @@ fn parse_acl(b: &[u8]) -> Option<Vec<Ace>> {
         if matches!(header[0], ACCESS_ALLOWED_ACE_TYPE | ACCESS_DENIED_ACE_TYPE) {
             aces.push(Ace {
                 allow: header[0] == ACCESS_ALLOWED_ACE_TYPE,
+                flags: header[1],
                 mask: u32::from_le_bytes([ace[4], ace[5], ace[6], ace[7]]),
                 sid: Sid::from_bytes(&ace[8..])?,
             });
@@ -302,6 +322,7 @@ fn granted(service: bool, clients: Option<&Sid>, local: u32, remote: u32) -> Des
         owner: Some(admins.clone()),
         group: Some(admins),
         dacl: Some(aces),
+        protected: false,
     }
 }
 
@@ -393,6 +414,108 @@ pub fn authentication_level_weaker(level: Option<u32>) -> bool {
     level.is_none_or(|l| l < AUTHN_LEVEL_PKT_INTEGRITY)
 }
 
+/// `S-1-5-32-545`: BUILTIN\Users.
+pub const USERS: &str = "S-1-5-32-545";
+
+/// ACE flags: inherited by files, by folders, and inherited from the parent.
+pub const OBJECT_INHERIT_ACE: u8 = 0x01;
+pub const CONTAINER_INHERIT_ACE: u8 = 0x02;
+pub const INHERITED_ACE: u8 = 0x10;
+
+/// `FILE_ALL_ACCESS`: full control of a file or folder.
+pub const FILE_ALL_ACCESS: u32 = 0x001F_01FF;
+
+/// Who always may hold rights on a file of secrets (a private key, the OPC UA users file)
+/// or its folder: SYSTEM, Administrators and LOCAL SERVICE (the account of the service the
+/// MSI installs), besides the account that writes the file (its owner).
+pub const SECRET_HOLDERS: [&str; 3] = [SYSTEM, ADMINISTRATORS, LOCAL_SERVICE];
+
+/// The descriptor a file of secrets is written with (`folder`: its folder): a protected
+/// DACL (nothing inherited from the parent) giving full control to [`SECRET_HOLDERS`] and
+/// `writer`, the account that writes it; a folder's ACEs are inherited by what is made in
+/// it, so a file another library writes there is private from its first byte. No owner
+/// or group: Windows makes the writer the owner.
+pub fn secret_descriptor(writer: &Sid, folder: bool) -> Descriptor {
+    let flags = if folder {
+        OBJECT_INHERIT_ACE | CONTAINER_INHERIT_ACE
+    } else {
+        0
+    };
+    let mut holders: Vec<Sid> = SECRET_HOLDERS.iter().map(|s| Sid::known(s)).collect();
+    if !holders.contains(writer) {
+        holders.push(writer.clone());
+    }
+    Descriptor {
+        owner: None,
+        group: None,
+        dacl: Some(
+            holders
+                .into_iter()
+                .map(|sid| Ace {
+                    allow: true,
+                    flags,
+                    mask: FILE_ALL_ACCESS,
+                    sid,
+                })
+                .collect(),
+        ),
+        protected: true,
+    }
+}
+
+/// Rights that read a file's data: `FILE_READ_DATA`, `GENERIC_READ`, `GENERIC_ALL`.
+const READS: u32 = 0x0000_0001 | 0x8000_0000 | 0x1000_0000;
+
+/// What in the descriptor of a file of secrets is weaker than allowed, one sentence each:
+/// no DACL; an allow ACE for anyone but [`SECRET_HOLDERS`], the file's owner and `also`
+/// (the service's account); ACEs inherited from the folder; a DACL that is not protected
+/// (what the folder passes on would reach it). Deny ACEs narrow, so they are never a
+/// finding. Empty: private.
+pub fn secret_findings(d: &Descriptor, also: &[Sid]) -> Vec<String> {
+    let Some(aces) = &d.dacl else {
+        return vec!["no DACL: everyone may read and change it".into()];
+    };
+    let names = [
+        (EVERYONE, "Everyone"),
+        (USERS, "Users"),
+        (AUTHENTICATED_USERS, "Authenticated Users"),
+        (ANONYMOUS, "ANONYMOUS LOGON"),
+        (INTERACTIVE, "INTERACTIVE"),
+        (NETWORK, "NETWORK"),
+    ];
+    let allowed = |sid: &Sid| {
+        SECRET_HOLDERS.iter().any(|h| Sid::known(h) == *sid)
+            || d.owner.as_ref() == Some(sid)
+            || also.contains(sid)
+    };
+    let mut out = Vec::new();
+    for a in aces
+        .iter()
+        .filter(|a| a.allow && a.mask != 0 && !allowed(&a.sid))
+    {
+        let who = match names.iter().find(|(s, _)| Sid::known(s) == a.sid) {
+            Some((_, name)) => format!("{name} ({})", a.sid),
+            None => a.sid.to_string(),
+        };
+        let what = if a.mask & READS != 0 {
+            "may read it"
+        } else {
+            "has rights on it"
+        };
+        out.push(format!("{who} {what} ({:#x})", a.mask));
+    }
+    let inherited = aces.iter().filter(|a| a.inherited()).count();
+    if inherited > 0 {
+        out.push(format!(
+            "{inherited} of its {} ACEs are inherited from its folder",
+            aces.len()
+        ));
+    } else if !d.protected {
+        out.push("its DACL is not protected: what its folder passes on reaches it".into());
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -438,6 +561,7 @@ mod tests {
             owner: Some(Sid::known(ADMINISTRATORS)),
             group: Some(Sid::known(ADMINISTRATORS)),
             dacl: Some(vec![Ace::allow(Sid::known(SYSTEM), ACCESS_LOCAL)]),
+            protected: false,
         };
         let mut want = vec![
             1, 0, 0x04, 0x80, // revision, sbz1, control
@@ -523,10 +647,12 @@ mod tests {
                 Ace::allow(Sid::known(ADMINISTRATORS), LAUNCH_REMOTE),
                 Ace {
                     allow: false,
+                    flags: 0,
                     mask: ACCESS_REMOTE,
                     sid: Sid::known(ANONYMOUS),
                 },
             ]),
+            protected: false,
         };
         let w = weaker_than_default(&open, None);
         assert_eq!(w.len(), 2, "{w:?}");
@@ -544,6 +670,7 @@ mod tests {
             owner: None,
             group: None,
             dacl: None,
+            protected: false,
         };
         assert_eq!(weaker_than_default(&null, None).len(), 1);
         let b = null.to_bytes();
@@ -595,6 +722,162 @@ mod tests {
         assert_eq!(
             v[0].data,
             Data::Binary(default_access(false, None).to_bytes())
+        );
+    }
+
+    fn sddl_aces(d: &Descriptor) -> Vec<(String, u8, u32)> {
+        d.dacl
+            .iter()
+            .flatten()
+            .map(|a| (a.sid.to_string(), a.flags, a.mask))
+            .collect()
+    }
+
+    #[test]
+    fn secret_descriptors_are_protected_full_control_for_the_holders_and_the_writer() {
+        let writer = Sid::parse("S-1-5-21-7-8-9-1001").unwrap();
+        let file = secret_descriptor(&writer, false);
+        assert!(file.protected);
+        assert_eq!((file.owner.as_ref(), file.group.as_ref()), (None, None));
+        assert_eq!(
+            sddl_aces(&file),
+            [
+                ("S-1-5-18".to_owned(), 0, FILE_ALL_ACCESS),
+                ("S-1-5-32-544".to_owned(), 0, FILE_ALL_ACCESS),
+                ("S-1-5-19".to_owned(), 0, FILE_ALL_ACCESS),
+                ("S-1-5-21-7-8-9-1001".to_owned(), 0, FILE_ALL_ACCESS),
+            ]
+        );
+        // The control word: self-relative, DACL present and protected (0x9004); the ACE
+        // flags and the protection survive the bytes.
+        let b = file.to_bytes();
+        assert_eq!(&b[2..4], &[0x04, 0x90]);
+        assert_eq!(Descriptor::from_bytes(&b), Some(file.clone()));
+        // On disk the writer owns it.
+        let on_disk = Descriptor {
+            owner: Some(writer.clone()),
+            ..file.clone()
+        };
+        assert!(secret_findings(&on_disk, &[]).is_empty());
+        assert_eq!(
+            secret_findings(&file, &[]),
+            ["S-1-5-21-7-8-9-1001 may read it (0x1f01ff)"]
+        );
+        // A folder's ACEs go to files and folders made in it; the writer SYSTEM is not
+        // named twice.
+        let folder = secret_descriptor(&Sid::known(SYSTEM), true);
+        let aces = sddl_aces(&folder);
+        assert_eq!(aces.len(), 3);
+        assert!(aces.iter().all(|(_, f, _)| *f == 0x3), "{aces:?}");
+        assert_eq!(
+            Descriptor::from_bytes(&folder.to_bytes()),
+            Some(folder.clone())
+        );
+        assert!(secret_findings(&folder, &[]).is_empty());
+    }
+
+    /// The rule as a table: the ACEs (SID, flags, mask; mask 0: a deny ACE of full
+    /// control) and protection of a file's DACL, the service account the caller also
+    /// allows, and the findings.
+    #[test]
+    fn what_is_weaker_than_a_secret_allows_is_named() {
+        const OWNER: &str = "S-1-5-21-1-2-3-1001";
+        const OTHER: &str = "S-1-5-21-1-2-3-1002";
+        const SERVICE: &str = "S-1-5-80-1-2-3-4-5";
+        const READ: u32 = 0x0012_00A9;
+        fn full(s: &'static str) -> (&'static str, u8, u32) {
+            (s, 0, FILE_ALL_ACCESS)
+        }
+        type Row<'a> = (&'a [(&'a str, u8, u32)], bool, &'a [&'a str], &'a [&'a str]);
+        let table: &[Row] = &[
+            // What ServerCTOPC writes.
+            (
+                &[
+                    full(SYSTEM),
+                    full(ADMINISTRATORS),
+                    full(LOCAL_SERVICE),
+                    full(OWNER),
+                ],
+                true,
+                &[],
+                &[],
+            ),
+            // The service's own account, given by the caller.
+            (&[full(SYSTEM), full(SERVICE)], true, &[SERVICE], &[]),
+            (
+                &[full(SYSTEM), full(SERVICE)],
+                true,
+                &[],
+                &["S-1-5-80-1-2-3-4-5 may read it (0x1f01ff)"],
+            ),
+            // A deny ACE narrows: never a finding.
+            (&[(EVERYONE, 0, 0)], true, &[], &[]),
+            // What Windows gives a file made in an ordinary folder.
+            (
+                &[
+                    (SYSTEM, INHERITED_ACE, FILE_ALL_ACCESS),
+                    (USERS, INHERITED_ACE, READ),
+                ],
+                false,
+                &[],
+                &[
+                    "Users (S-1-5-32-545) may read it (0x1200a9)",
+                    "2 of its 2 ACEs are inherited from its folder",
+                ],
+            ),
+            (
+                &[(EVERYONE, 0, READ)],
+                true,
+                &[],
+                &["Everyone (S-1-1-0) may read it (0x1200a9)"],
+            ),
+            (
+                &[(AUTHENTICATED_USERS, 0, 0x8000_0000)],
+                true,
+                &[],
+                &["Authenticated Users (S-1-5-11) may read it (0x80000000)"],
+            ),
+            (
+                &[(OTHER, 0, 0x2)],
+                true,
+                &[],
+                &["S-1-5-21-1-2-3-1002 has rights on it (0x2)"],
+            ),
+            (
+                &[full(SYSTEM)],
+                false,
+                &[],
+                &["its DACL is not protected: what its folder passes on reaches it"],
+            ),
+        ];
+        for (aces, protected, also, want) in table {
+            let d = Descriptor {
+                owner: Some(Sid::known(OWNER)),
+                group: None,
+                dacl: Some(
+                    aces.iter()
+                        .map(|(sid, flags, mask)| Ace {
+                            allow: *mask != 0,
+                            flags: *flags,
+                            mask: if *mask == 0 { FILE_ALL_ACCESS } else { *mask },
+                            sid: Sid::known(sid),
+                        })
+                        .collect(),
+                ),
+                protected: *protected,
+            };
+            let also: Vec<Sid> = also.iter().map(|s| Sid::known(s)).collect();
+            assert_eq!(secret_findings(&d, &also), *want, "{}", d.sddl());
+        }
+        let null = Descriptor {
+            owner: None,
+            group: None,
+            dacl: None,
+            protected: true,
+        };
+        assert_eq!(
+            secret_findings(&null, &[]),
+            ["no DACL: everyone may read and change it"]
         );
     }
 }

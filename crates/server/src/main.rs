@@ -16,6 +16,9 @@ mod ua;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    // Private keys and the users file get a protected DACL on Windows (0600 on Unix).
+    #[cfg(windows)]
+    ctopc_runtime::secret_file::install(ctopc_com::com::secret_file::PLATFORM);
     let cmd = match cli::parse(std::env::args().skip(1)) {
         Ok(cmd) => cmd,
         Err(msg) => {

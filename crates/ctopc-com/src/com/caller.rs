@@ -250,6 +250,32 @@ fn lookup(sid: PSID) -> Option<String> {
     None
 }
 
+/// The SID (binary) of the account this process runs as, from its token's user; `Err`
+/// says which call failed.
+pub fn process_user_sid() -> Result<Vec<u8>, String> {
+    use windows::Win32::System::Threading::{GetCurrentProcess, OpenProcessToken};
+    let mut token = HANDLE::default();
+    // SAFETY: the pseudo handle of this process; `token` is a live out-parameter.
+    unsafe { OpenProcessToken(GetCurrentProcess(), TOKEN_QUERY, &mut token) }
+        .map_err(|e| format!("OpenProcessToken: {:#010x}", e.code().0 as u32))?;
+    let token = Owned(token);
+    let user = token_info(&token, TokenUser)?;
+    if user.len() * 8 < std::mem::size_of::<TOKEN_USER>() {
+        return Err("the process's token has no user".into());
+    }
+    // SAFETY: `user` holds what GetTokenInformation(TokenUser) wrote, at least one
+    // TOKEN_USER, 8-byte aligned (a Vec<u64>); its SID points into the same buffer.
+    let sid = unsafe { (*(user.as_ptr() as *const TOKEN_USER)).User.Sid };
+    // SAFETY: `sid` points into `user`, alive for this call.
+    if sid.is_invalid() || !unsafe { IsValidSid(sid) }.as_bool() {
+        return Err("the process's token has an invalid user SID".into());
+    }
+    // SAFETY: a valid SID (checked above).
+    let len = unsafe { GetLengthSid(sid) } as usize;
+    // SAFETY: a valid SID is `len` bytes long.
+    Ok(unsafe { std::slice::from_raw_parts(sid.0 as *const u8, len) }.to_vec())
+}
+
 /// The SID of the account or group `name` on this machine (`LookupAccountNameW`), `None`
 /// when there is none; for registration's clients' group.
 pub fn account_sid(name: &str) -> Option<Vec<u8>> {

@@ -20,6 +20,7 @@ pub mod factory;
 pub mod interfaces;
 pub mod lifetime;
 pub mod platform;
+pub mod secret_file;
 pub mod service;
 pub mod variant;
 pub mod winreg;

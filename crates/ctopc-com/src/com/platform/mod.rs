@@ -1,7 +1,8 @@
 //! The platform's quirks, one file per platform, entered from the apartment guard
-//! (`super::apartment`) and from the caller's identity (`super::caller`, which asks why a
-//! call has no security context): nothing else in the product asks which platform it runs
-//! on.
+//! (`super::apartment`), from the caller's identity (`super::caller`, which asks why a
+//! call has no security context) and from the files of secrets (`super::secret_file`,
+//! which asks what a file's DACL read back means): nothing else in the product asks which
+//! platform it runs on.
 
 pub mod wine;
 
@@ -34,4 +35,26 @@ pub fn local_group_missing_reason(name: &str) -> String {
     } else {
         format!("LookupAccountName finds no \"{name}\" after NetLocalGroupAdd reported success")
     }
+}
+
+/// Whether a file's DACL read back is the one written. Not under Wine: upstream Wine (8)
+/// keeps no security descriptor of a file (the `user.wine.sd` extended attribute is a
+/// wine-staging patch); it maps a DACL set on a file onto the Unix mode (an ACE for
+/// Everyone becomes the others' bits) and, when asked, makes a DACL from the mode: full
+/// control for SYSTEM and the owner, Everyone for the others' bits, never protected, no
+/// inheritance flags.
+pub fn keeps_file_dacls() -> bool {
+    !wine::under_wine()
+}
+
+/// A file's descriptor as read back, judged as Windows would keep it: under Wine (see
+/// [`keeps_file_dacls`]) the protection cannot be read, so it is taken as written, and
+/// what Wine can tell (who besides the owner may read, from the mode) is judged.
+pub fn file_descriptor_as_kept(
+    mut d: ctopc_registration::security::Descriptor,
+) -> ctopc_registration::security::Descriptor {
+    if !keeps_file_dacls() {
+        d.protected = true;
+    }
+    d
 }

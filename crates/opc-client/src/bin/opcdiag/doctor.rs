@@ -926,6 +926,70 @@ pub fn appid_security_checks(a: &AppIdSecurity) -> Vec<Check> {
     out
 }
 
+/// The files of secrets a configuration names, with what each is: with a `[UA]` section
+/// the OPC UA private key's folder and the key (`PkiDirectory`, default `pki`, its
+/// `private\private.pem`) and the users file (`UsersFile`, default `ua-users.txt`); each
+/// channel's asix-link client key (`AsixNetKeyFile`). Relative paths are beside the
+/// configuration (`dir`), as the server resolves them.
+pub fn secret_files(
+    cfg: &asix_model::config::AsixConfig,
+    dir: &std::path::Path,
+) -> Vec<(String, std::path::PathBuf)> {
+    let path = |configured: Option<&str>, default: &str| {
+        let p = configured.map_or_else(
+            || std::path::PathBuf::from(default),
+            |c| cfg.resolve_path(c),
+        );
+        if p.is_absolute() || p.to_string_lossy().starts_with('\\') {
+            p
+        } else {
+            dir.join(p)
+        }
+    };
+    let mut out = Vec::new();
+    if cfg.ua.section {
+        let private = path(cfg.ua.pki_directory.as_deref(), "pki").join("private");
+        out.push(("OPC UA private key".to_owned(), private.join("private.pem")));
+        out.push(("OPC UA private key folder".to_owned(), private));
+        out.push((
+            "OPC UA users file".to_owned(),
+            path(cfg.ua.users_file.as_deref(), "ua-users.txt"),
+        ));
+    }
+    for (name, o) in &cfg.channels {
+        if let Some(key) = &o.asix_net_key_file {
+            out.push((
+                format!("asix link key [Channel:{name}]"),
+                path(Some(key), ""),
+            ));
+        }
+    }
+    out
+}
+
+/// A file of secrets as it was found: absent, or what is weaker than allowed on it
+/// (`ctopc_registration::security::secret_findings` on Windows, the mode on Unix; `None`:
+/// private).
+pub fn secret_check(what: &str, path: &str, exists: bool, finding: Option<&str>) -> Check {
+    let name = format!("secret: {what}");
+    match (exists, finding) {
+        (false, _) => Check::ok(
+            name,
+            format!("{path}: not there (made private when written)"),
+        ),
+        (true, None) => Check::ok(name, format!("{path}: private")),
+        (true, Some(f)) => Check::warn(
+            name,
+            format!("{path} is not private: {f}"),
+            if cfg!(windows) {
+                format!("icacls \"{path}\" /inheritance:r /grant:r *S-1-5-18:F *S-1-5-32-544:F *S-1-5-19:F, then icacls \"{path}\" /remove each other account named")
+            } else {
+                format!("chmod 600 {path} (a folder: chmod 700)")
+            },
+        ),
+    }
+}
+
 /// The authentication level the server's COM security uses, for [`dcom_checks`].
 pub fn server_authn_level(a: &AppIdSecurity) -> u32 {
     if a.legacy_open_access {
@@ -1503,6 +1567,7 @@ mod tests {
                 Sid::parse(sec::EVERYONE).unwrap(),
                 sec::ACCESS_REMOTE,
             )]),
+            protected: false,
         };
         let weak = AppIdSecurity {
             access: Some(everyone.to_bytes()),
@@ -1590,5 +1655,60 @@ mod tests {
         let j = render_json(&checks);
         assert!(j.contains("{\"name\": \"c \\\"q\\\"\", \"status\": \"FAIL\", \"detail\": \"bad\\\\path\", \"fix\": \"do y\"}"), "{j}");
         assert!(j.starts_with("[\n") && j.ends_with("\n]\n"));
+    }
+
+    #[test]
+    fn the_secret_files_come_from_the_configuration() {
+        let cfg = |ini: &str| {
+            asix_model::config::parse_config(ini.as_bytes(), "ASIXConnect.ini")
+                .unwrap()
+                .0
+        };
+        let dir = std::path::Path::new("/opt/ctopc");
+        assert!(secret_files(&cfg("[Server]\nLogLevel = info\n"), dir).is_empty());
+        let names: Vec<(String, String)> = secret_files(
+            &cfg("[UA]\nUsersFile = /etc/ctopc/users.txt\n[Channel:K1]\nAsixNetKeyFile = keys/k1.pem\n"),
+            dir,
+        )
+        .into_iter()
+        .map(|(w, p)| (w, p.display().to_string()))
+        .collect();
+        let want = [
+            ("OPC UA private key", "/opt/ctopc/pki/private/private.pem"),
+            ("OPC UA private key folder", "/opt/ctopc/pki/private"),
+            ("OPC UA users file", "/etc/ctopc/users.txt"),
+            ("asix link key [Channel:K1]", "/opt/ctopc/keys/k1.pem"),
+        ];
+        assert_eq!(
+            names,
+            want.map(|(w, p)| (w.to_owned(), p.to_owned())).to_vec()
+        );
+    }
+
+    #[test]
+    fn a_secret_file_weaker_than_allowed_warns_with_the_fix() {
+        let table: &[(bool, Option<&str>, Status, &str)] = &[
+            (false, None, Status::Ok, "k.pem: not there"),
+            (true, None, Status::Ok, "k.pem: private"),
+            (
+                true,
+                Some("Users (S-1-5-32-545) may read it (0x1200a9)"),
+                Status::Warn,
+                "k.pem is not private: Users (S-1-5-32-545) may read it",
+            ),
+        ];
+        for (exists, finding, status, detail) in table {
+            let c = secret_check("the key", "k.pem", *exists, *finding);
+            assert_eq!(c.name, "secret: the key");
+            assert_eq!(c.status, *status, "{c:?}");
+            assert!(c.detail.starts_with(detail), "{c:?}");
+            assert_eq!(c.fix.is_empty(), *status == Status::Ok, "{c:?}");
+        }
+        let c = secret_check("the key", "k.pem", true, Some("x"));
+        assert!(
+            c.fix
+                .contains(if cfg!(windows) { "icacls" } else { "chmod 600" }),
+            "{c:?}"
+        );
     }
 }

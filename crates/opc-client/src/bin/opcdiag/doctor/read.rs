@@ -100,6 +100,30 @@ fn checks(global: &Global, options: &DoctorOptions) -> Vec<Check> {
     if let Ok(l) = &loaded {
         out.push(write_rights_check(&l.namespace.config().write_rights));
     }
+    // The files of secrets the configuration names (keys, the users file), their DACLs.
+    if let Ok(l) = &loaded {
+        let cfg = l.namespace.config();
+        let dir = cfg
+            .base_dir
+            .clone()
+            .or_else(|| install_dir.as_ref().map(std::path::PathBuf::from))
+            .unwrap_or_default();
+        let service: Vec<registration::security::Sid> = installed
+            .as_ref()
+            .and_then(|i| ctopc_com::caller::account_sid(&i.account))
+            .and_then(|b| registration::security::Sid::from_bytes(&b))
+            .into_iter()
+            .collect();
+        for (what, path) in secret_files(cfg, &dir) {
+            let finding = ctopc_com::com::secret_file::findings(&path, &service);
+            out.push(secret_check(
+                &what,
+                &path.display().to_string(),
+                path.exists(),
+                finding.as_deref(),
+            ));
+        }
+    }
     let appid = format!("AppID\\{}", guid_string(registration::CLSID_SERVERCTOPC));
     let security = AppIdSecurity {
         access: winreg::read_binary(View::Reg64, &appid, "AccessPermission"),
