@@ -475,6 +475,8 @@ fn demo_space() -> &'static ctopc_ua::space::Space {
             namespace: ns,
             tree,
             scan_rate_ms: 100,
+            // An empty `_Diagnostics` board: its NodeIds resolve to the folder only.
+            diag: Arc::new(ctopc_core::diagnostics::Board::new()),
         }
     })
 }

@@ -49,9 +49,9 @@ const FILE_ATTRIBUTE_NORMAL: u32 = 0x80;
 
 /// What `ctopc_runtime::secret_file` calls on Windows.
 pub const PLATFORM: ctopc_runtime::secret_file::Platform = ctopc_runtime::secret_file::Platform {
-    create: create,
-    narrow: narrow,
-    finding: finding,
+    create,
+    narrow,
+    finding,
 };
 
 /// A descriptor's self-relative bytes in an 8-byte aligned buffer (what the Win32 calls
