@@ -24,6 +24,10 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   subscription counts);
 - the reader's write is Bad_UserAccessDenied; anonymous, a wrong password and
   SecurityPolicy None are refused;
+- texts in the session's locale: sessions with LocaleIds `pl`, `en` and `de, pl-PL` read
+  a variable's, a derived value's, a `_Diagnostics` folder's and item's Description and
+  a property's DisplayName (read and browsed) in Polish, English and Polish, each with
+  its locale;
 - services: RegisterNodes (the registered NodeIds read) and UnregisterNodes, Republish
   (an unknown sequence number is Bad_MessageNotAvailable), TransferSubscriptions to a
   second session of the same user, a monitored item's queue of 3 with DiscardOldest true
@@ -301,8 +305,55 @@ async def scenario(url, work, server):
     await refused("a wrong password refused", wrong_password)
     await refused("SecurityPolicy None refused", no_security)
 
+    await locales(url, cert, key)
     await services(url, cert, key)
     await limits(url, cert, key)
+
+
+# What each language's session reads: KW_A000's Description (KW_A000.FormatedCV has the
+# same), the DisplayName of its property ItemEUType, the Descriptions of the folder
+# _Diagnostics.Server and of the item _Diagnostics.Server.Uptime.
+TEXTS = {
+    "pl": ("Poziom siarki ciekłej w zbiorniku Z101", "Typ jednostek inżynierskich elementu",
+           "Liczniki serwera", "Czas pracy serwera od startu"),
+    "en": ("Liquid sulphur level in tank Z101", "Item EU Type",
+           "The server's counters", "Time since the server started"),
+}
+
+
+async def locales(url, cert, key):
+    """Description and DisplayName in the session's locale (ActivateSession's LocaleIds):
+    the first of them that names Polish or English; the LocalizedText's locale says which."""
+    for ids, lang in [(["pl"], "pl"), (["en"], "en"), (["de", "pl-PL"], "pl")]:
+        description, eu_type, server, uptime = TEXTS[lang]
+        c = client(url, "reader1")
+        c.set_locale(ids)
+        await secure(c, cert, key)
+        async with c:
+            ns = await c.get_namespace_index(NAMESPACE_URI)
+            node = lambda i: c.get_node(ua.NodeId(i, ns))
+
+            def text(t):
+                return (t.Locale, t.Text)
+            a000 = node("KW_A000")
+            got = text(await a000.read_description())
+            check(f"locale {ids}: KW_A000's Description in {lang}", got == (lang, description), str(got))
+            got = text(await node("KW_A000.FormatedCV").read_description())
+            check(f"locale {ids}: KW_A000.FormatedCV's Description in {lang}", got == (lang, description),
+                  str(got))
+            got = text(await (await a000.get_child(["0:ItemEUType"])).read_display_name())
+            check(f"locale {ids}: the property ItemEUType's DisplayName in {lang}", got == (lang, eu_type),
+                  str(got))
+            refs = await a000.get_references(refs=ua.ObjectIds.HasProperty)
+            browsed = {r.BrowseName.Name: text(r.DisplayName) for r in refs}
+            check(f"locale {ids}: browsed, ItemEUType's DisplayName in {lang}",
+                  browsed.get("ItemEUType") == (lang, eu_type), str(browsed.get("ItemEUType")))
+            got = text(await node("_Diagnostics.Server").read_description())
+            check(f"locale {ids}: the folder _Diagnostics.Server's Description in {lang}",
+                  got == (lang, server), str(got))
+            got = text(await node("_Diagnostics.Server.Uptime").read_description())
+            check(f"locale {ids}: _Diagnostics.Server.Uptime's Description in {lang}", got == (lang, uptime),
+                  str(got))
 
 
 # The small limits of the test's [UA] section (main() writes them), checked by limits().

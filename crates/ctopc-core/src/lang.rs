@@ -1,4 +1,5 @@
-//! The languages the server speaks (IOPCCommon locale IDs): Polish and English (US).
+//! The languages the server speaks (IOPCCommon locale IDs, OPC UA LocaleIds): Polish and
+//! English (US).
 //!
 //! AsixConnect 4 offered Polish (0x0415) and English US (0x0409); every other English
 //! variant is accepted and answered in US English. The neutral/default locale IDs map to
@@ -70,6 +71,40 @@ impl Lang {
         &[LCID_POLISH, LCID_ENGLISH_US]
     }
 
+    /// The language for an OPC UA session's LocaleIds (ActivateSession: RFC 3066 tags in
+    /// the client's order of preference): the first that names Polish (`pl`, `pl-PL`) or
+    /// English (`en`, `en-US`, `en-GB`, ...) by its primary subtag, case-insensitive;
+    /// `server_default` when none does (no LocaleIds, or only other languages), as OPC UA
+    /// Part 4 says of a server that supports none of the session's locales.
+    pub fn from_locale_ids<S: AsRef<str>>(
+        locale_ids: impl IntoIterator<Item = S>,
+        server_default: Lang,
+    ) -> Lang {
+        locale_ids
+            .into_iter()
+            .find_map(|id| {
+                let id = id.as_ref().trim();
+                let primary = id.split(['-', '_']).next().unwrap_or(id);
+                if primary.eq_ignore_ascii_case("pl") {
+                    Some(Lang::Polish)
+                } else if primary.eq_ignore_ascii_case("en") {
+                    Some(Lang::English)
+                } else {
+                    None
+                }
+            })
+            .unwrap_or(server_default)
+    }
+
+    /// The locale of texts in this language (an OPC UA LocalizedText's locale): `pl` or
+    /// `en`.
+    pub const fn locale_id(self) -> &'static str {
+        match self {
+            Lang::Polish => "pl",
+            Lang::English => "en",
+        }
+    }
+
     /// The server's default language for the system (or user) default LCID of the
     /// machine: Polish on Polish Windows, English everywhere else.
     pub const fn default_for_system(system_lcid: u32) -> Lang {
@@ -126,6 +161,51 @@ mod tests {
         for lang in Lang::ALL {
             assert_eq!(Lang::from_lcid(lang.lcid(), Lang::English), Some(lang));
         }
+    }
+
+    #[test]
+    fn ua_locale_ids_pick_the_first_supported_language() {
+        // (LocaleIds, server default, expected)
+        let table: &[(&[&str], Lang, Lang)] = &[
+            (&["pl"], Lang::English, Lang::Polish),
+            (&["pl-PL"], Lang::English, Lang::Polish),
+            (&["PL-pl"], Lang::English, Lang::Polish),
+            (&["pl_PL"], Lang::English, Lang::Polish),
+            (&["en-US"], Lang::Polish, Lang::English),
+            (&["en"], Lang::Polish, Lang::English),
+            (&["en-GB"], Lang::Polish, Lang::English),
+            (&["de", "pl"], Lang::English, Lang::Polish),
+            (&["de-DE", "en-US", "pl"], Lang::Polish, Lang::English),
+            (&["pl", "en"], Lang::English, Lang::Polish),
+            (&["de"], Lang::English, Lang::English),
+            (&["de"], Lang::Polish, Lang::Polish),
+            (&[], Lang::English, Lang::English),
+            (&[], Lang::Polish, Lang::Polish),
+            (&[""], Lang::Polish, Lang::Polish),
+            // Only the primary subtag counts: `plx` and `eng` name neither.
+            (&["plx", "eng"], Lang::Polish, Lang::Polish),
+            (&["plx", "eng"], Lang::English, Lang::English),
+        ];
+        for &(ids, default, expected) in table {
+            assert_eq!(
+                Lang::from_locale_ids(ids, default),
+                expected,
+                "{ids:?}, default {default:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_chosen_language_names_itself_as_a_locale_the_picker_takes_back() {
+        for lang in Lang::ALL {
+            let other = match lang {
+                Lang::Polish => Lang::English,
+                Lang::English => Lang::Polish,
+            };
+            assert_eq!(Lang::from_locale_ids([lang.locale_id()], other), lang);
+        }
+        assert_eq!(Lang::Polish.locale_id(), "pl");
+        assert_eq!(Lang::English.locale_id(), "en");
     }
 
     #[test]

@@ -66,7 +66,8 @@ pub struct Setup {
     pub tree: Arc<AddressSpace>,
     pub engine: Arc<EngineClient>,
     pub roles: Arc<dyn Roles>,
-    /// The language of descriptions.
+    /// The server's default language: the texts' language for a session whose LocaleIds
+    /// name neither Polish nor English (see [`AsixNodeManager::session_lang`]).
     pub lang: Lang,
 }
 
@@ -131,6 +132,7 @@ pub struct AsixNodeManager {
     pub engine: Arc<EngineClient>,
     pub monitor: Arc<Monitor>,
     roles: Arc<dyn Roles>,
+    /// The server's default language.
     lang: Lang,
     /// The Value monitored items: their item ID and engine rate.
     items: Mutex<HashMap<MonitoredItemHandle, (String, u32)>>,
@@ -206,11 +208,20 @@ impl AsixNodeManager {
             .admit(context.session_id, std::time::Instant::now())
     }
 
+    /// The language of the texts (Description, the DisplayNames that have a language)
+    /// for the context's session: the first of its LocaleIds (ActivateSession) that names
+    /// Polish or English, else the server's default.
+    pub fn session_lang(&self, context: &RequestContext) -> Lang {
+        let session = context.session().read();
+        let ids = session.locale_ids().unwrap_or_default();
+        Lang::from_locale_ids(ids.iter().map(|id| id.as_ref()), self.lang)
+    }
+
     fn items(&self) -> std::sync::MutexGuard<'_, HashMap<MonitoredItemHandle, (String, u32)>> {
         self.items.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn browse_one(&self, node: &mut BrowseNode, type_tree: &DefaultTypeTree) {
+    fn browse_one(&self, node: &mut BrowseNode, type_tree: &DefaultTypeTree, lang: Lang) {
         let mut rest = VecDeque::new();
         if let Some(cp) = node.take_continuation_point::<BrowseRest>() {
             for r in cp.refs {
@@ -237,7 +248,7 @@ impl AsixNodeManager {
             match self.space.resolve(node.node_id()) {
                 Err(e) => node.set_status(e),
                 Ok(resolved) => {
-                    for r in self.space.references(&resolved) {
+                    for r in self.space.references(&resolved, lang) {
                         let direction_ok = if r.forward {
                             node.allows_forward()
                         } else {
@@ -394,12 +405,13 @@ impl NodeManager for AsixNodeManager {
 
     async fn resolve_external_references(
         &self,
-        _context: &RequestContext,
+        context: &RequestContext,
         items: &mut [&mut ExternalReferenceRequest],
     ) {
+        let lang = self.session_lang(context);
         for item in items {
             if let Ok(r) = self.space.resolve(item.node_id()) {
-                let m = self.space.meta(&r);
+                let m = self.space.meta(&r, lang);
                 item.set(NodeMetadata {
                     node_id: m.node_id.into(),
                     type_definition: m.type_definition.into(),
@@ -417,9 +429,10 @@ impl NodeManager for AsixNodeManager {
         nodes_to_browse: &mut [BrowseNode],
     ) -> Result<(), StatusCode> {
         self.admit(context)?;
+        let lang = self.session_lang(context);
         let type_tree = context.type_tree.read();
         for node in nodes_to_browse {
-            self.browse_one(node, &type_tree);
+            self.browse_one(node, &type_tree, lang);
         }
         Ok(())
     }
@@ -441,6 +454,7 @@ impl NodeManager for AsixNodeManager {
     ) -> Result<(), StatusCode> {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
+        let lang = self.session_lang(context);
         let mut values: Vec<(usize, String)> = Vec::new();
         for (i, node) in nodes_to_read.iter_mut().enumerate() {
             let (id, attribute) = (node.node().node_id.clone(), node.node().attribute_id);
@@ -449,7 +463,7 @@ impl NodeManager for AsixNodeManager {
                 Ok(Resolved::Variable(info)) if attribute == AttributeId::Value => {
                     values.push((i, info.item_id.clone()))
                 }
-                Ok(r) => match self.space.attribute(&r, attribute, may_write, self.lang) {
+                Ok(r) => match self.space.attribute(&r, attribute, may_write, lang) {
                     Ok(v) => node.set_result(DataValue::value_only(v)),
                     Err(e) => node.set_error(e),
                 },
@@ -524,6 +538,7 @@ impl NodeManager for AsixNodeManager {
     ) -> Result<(), StatusCode> {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
+        let lang = self.session_lang(context);
         let mut initial: Vec<(usize, String)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
             let target = item.item_to_monitor().clone();
@@ -557,7 +572,7 @@ impl NodeManager for AsixNodeManager {
                 }
                 r => match self
                     .space
-                    .attribute(&r, target.attribute_id, may_write, self.lang)
+                    .attribute(&r, target.attribute_id, may_write, lang)
                 {
                     Ok(v) => {
                         item.set_initial_value(DataValue::value_only(v));

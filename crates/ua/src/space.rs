@@ -20,10 +20,17 @@
 //!   (HasProperty, PropertyType): `EURange` (DA 102/103), `EngineeringUnits` (100), and
 //!   every other DA property the item has beyond those that are attributes (1-6:
 //!   DataType, Value, AccessLevel, MinimumSamplingInterval; 101: Description).
+//!
+//! Texts come in the language each call is given (the session's: see the node manager),
+//! their LocalizedText's locale saying which (`pl`, `en`): Descriptions of variables
+//! (theirs, a derived item's its variable's), of the `ServerCTOPC` folder and of the
+//! `_Diagnostics` branches and items, and the properties' DisplayName and Description
+//! (the DA property's description). Names (BrowseNames, variables' and folders'
+//! DisplayNames) are the same in every language.
 
 use crate::value::{data_type, to_variant};
 use ctopc_core::browse::{AddressSpace, NodeRef};
-use ctopc_core::diagnostics::{self, is_diagnostic_id, Board};
+use ctopc_core::diagnostics::{self, branch_description, is_diagnostic_id, Board};
 use ctopc_core::lang::Lang;
 use ctopc_core::namespace::{EuInfo, ItemDef, Namespace, OPC_WRITEABLE};
 use ctopc_core::properties::{self as props, ItemInfo, PropertyContext};
@@ -41,6 +48,11 @@ pub const ROOT_ID: u32 = 1;
 pub const ROOT_NAME: &str = "ServerCTOPC";
 /// The namespace URI of the address space.
 pub const NAMESPACE_URI: &str = "urn:askom:ServerCTOPC";
+/// The description of that folder, in Polish and in English.
+pub const ROOT_DESCRIPTION: [&str; 2] = [
+    "Zmienne systemu asix udostępniane przez ServerCTOPC",
+    "The asix system's variables served by ServerCTOPC",
+];
 
 /// The suffixes of the derived items of a variable's value item `<V>`, served as its
 /// components (`<V>.<suffix>`), in this order: the value formatted by `Format`, the
@@ -247,6 +259,20 @@ impl Space {
         }
     }
 
+    /// The display name of a property node in `lang`: the DA property's description
+    /// (`EURange` and `EngineeringUnits`, OPC UA's own properties, keep their names).
+    fn property_display_name(pid: u32, lang: Lang) -> LocalizedText {
+        match pid {
+            props::OPC_PROPERTY_HIGH_EU | props::OPC_PROPERTY_EU_UNITS => {
+                LocalizedText::new("", &Self::property_name(pid))
+            }
+            _ => match props::property_info(pid) {
+                Some(p) => LocalizedText::new(lang.locale_id(), p.description(lang)),
+                None => LocalizedText::new("", &Self::property_name(pid)),
+            },
+        }
+    }
+
     /// The browse name and display name of a tree node (or of an item not in the tree).
     fn item_names(&self, item_id: &str) -> String {
         match self.tree_of(item_id).find_item_id(item_id) {
@@ -308,19 +334,20 @@ impl Space {
         }
     }
 
-    fn property_meta(&self, pid: u32, item_id: &str) -> Meta {
+    fn property_meta(&self, pid: u32, item_id: &str, lang: Lang) -> Meta {
         let name = Self::property_name(pid);
         Meta {
             node_id: self.property_node_id(pid, item_id),
             node_class: NodeClass::Variable,
             browse_name: QualifiedName::new(0, name.as_str()),
-            display_name: LocalizedText::new("", &name),
+            display_name: Self::property_display_name(pid, lang),
             type_definition: VariableTypeId::PropertyType.into(),
         }
     }
 
-    /// The identity of a resolved node.
-    pub fn meta(&self, r: &Resolved) -> Meta {
+    /// The identity of a resolved node; `lang`: the language of the display names that
+    /// have one (the properties').
+    pub fn meta(&self, r: &Resolved, lang: Lang) -> Meta {
         match r {
             Resolved::Root => self.root_meta(),
             Resolved::Folder(item) => match self.tree_of(item).find_item_id(item) {
@@ -342,16 +369,16 @@ impl Space {
                     type_definition: ty.into(),
                 }
             }
-            Resolved::Property(pid, info) => self.property_meta(*pid, &info.item_id),
+            Resolved::Property(pid, info) => self.property_meta(*pid, &info.item_id, lang),
         }
     }
 
     /// Every reference of a node (forward and inverse, hierarchical and type
     /// definitions), in a stable order: the browse's filters and continuation points
-    /// apply over this list.
-    pub fn references(&self, r: &Resolved) -> Vec<Reference> {
+    /// apply over this list. `lang`: the language of the targets' display names.
+    pub fn references(&self, r: &Resolved, lang: Lang) -> Vec<Reference> {
         let mut out = Vec::new();
-        let meta = self.meta(r);
+        let meta = self.meta(r, lang);
         out.push(Reference {
             reference_type: ReferenceTypeId::HasTypeDefinition.into(),
             forward: true,
@@ -423,7 +450,7 @@ impl Space {
                     out.push(Reference {
                         reference_type: ReferenceTypeId::HasProperty.into(),
                         forward: true,
-                        target: self.property_meta(pid, &info.item_id),
+                        target: self.property_meta(pid, &info.item_id, lang),
                     });
                 }
             }
@@ -432,7 +459,7 @@ impl Space {
                 out.push(Reference {
                     reference_type: ReferenceTypeId::HasProperty.into(),
                     forward: false,
-                    target: self.meta(&parent),
+                    target: self.meta(&parent, lang),
                 });
             }
         }
@@ -477,7 +504,7 @@ impl Space {
         may_write: bool,
         lang: Lang,
     ) -> Result<Variant, StatusCode> {
-        let meta = self.meta(r);
+        let meta = self.meta(r, lang);
         let common = match attribute {
             AttributeId::NodeId => Some(Variant::from(meta.node_id.clone())),
             AttributeId::NodeClass => Some(Variant::Int32(meta.node_class as i32)),
@@ -491,7 +518,7 @@ impl Space {
         }
         match r {
             Resolved::Root | Resolved::Folder(_) => match attribute {
-                AttributeId::Description => Ok(Variant::from(LocalizedText::null())),
+                AttributeId::Description => Ok(Variant::from(folder_description(r, lang))),
                 AttributeId::EventNotifier => Ok(Variant::Byte(0)),
                 _ => Err(StatusCode::BadAttributeIdInvalid),
             },
@@ -559,12 +586,10 @@ impl Space {
         };
         Ok(match attribute {
             AttributeId::Value => value,
-            AttributeId::Description => Variant::from(LocalizedText::new(
-                "en",
-                props::property_info(pid)
-                    .map(|p| p.description(Lang::English))
-                    .unwrap_or(""),
-            )),
+            AttributeId::Description => Variant::from(match props::property_info(pid) {
+                Some(p) => LocalizedText::new(lang.locale_id(), p.description(lang)),
+                None => LocalizedText::null(),
+            }),
             AttributeId::DataType => Variant::from(dt),
             AttributeId::ValueRank => Variant::Int32(rank),
             AttributeId::ArrayDimensions => Variant::Empty,
@@ -619,7 +644,26 @@ impl Space {
     }
 }
 
-/// The item's description in `lang` (the other language's when it has none).
+/// The description of a folder in `lang`: the `ServerCTOPC` folder's, a `_Diagnostics`
+/// branch's; none for the branches of the variable set (the namespace has no text for
+/// them).
+pub fn folder_description(r: &Resolved, lang: Lang) -> LocalizedText {
+    let text = match r {
+        Resolved::Root => Some(match lang {
+            Lang::Polish => ROOT_DESCRIPTION[0].to_owned(),
+            Lang::English => ROOT_DESCRIPTION[1].to_owned(),
+        }),
+        Resolved::Folder(item) => branch_description(item, lang),
+        _ => None,
+    };
+    match text {
+        Some(t) => LocalizedText::new(lang.locale_id(), &t),
+        None => LocalizedText::null(),
+    }
+}
+
+/// The item's description in `lang` (the other language's when it has none), with the
+/// locale of the text given.
 pub fn description(info: &ItemInfo, lang: Lang) -> LocalizedText {
     let pl = info.attrs.description.as_deref().filter(|s| !s.is_empty());
     let en = info
@@ -628,11 +672,15 @@ pub fn description(info: &ItemInfo, lang: Lang) -> LocalizedText {
         .as_deref()
         .filter(|s| !s.is_empty());
     let pick = match lang {
-        Lang::English => en.map(|t| ("en", t)).or(pl.map(|t| ("pl", t))),
-        Lang::Polish => pl.map(|t| ("pl", t)).or(en.map(|t| ("en", t))),
+        Lang::English => en
+            .map(|t| (Lang::English, t))
+            .or(pl.map(|t| (Lang::Polish, t))),
+        Lang::Polish => pl
+            .map(|t| (Lang::Polish, t))
+            .or(en.map(|t| (Lang::English, t))),
     };
     match pick {
-        Some((locale, text)) => LocalizedText::new(locale, text),
+        Some((l, text)) => LocalizedText::new(l.locale_id(), text),
         None => LocalizedText::null(),
     }
 }

@@ -121,7 +121,7 @@ fn the_browse_tree_is_folders_under_objects_and_servercctopc() {
     let f = fixture();
     let space = &f.nm.space;
     let root = space.resolve(&NodeId::new(NS, ROOT_ID)).unwrap();
-    let refs = space.references(&root);
+    let refs = space.references(&root, Lang::English);
     assert!(refs.iter().any(|r| !r.forward
         && r.target.node_id == ObjectId::ObjectsFolder
         && r.reference_type == ReferenceTypeId::Organizes));
@@ -142,7 +142,7 @@ fn the_browse_tree_is_folders_under_objects_and_servercctopc() {
     let m = space.resolve(&magazyn.target.node_id).unwrap();
     assert!(matches!(m, Resolved::Folder(_)));
     let tank = space
-        .references(&m)
+        .references(&m, Lang::English)
         .into_iter()
         .find(|r| {
             r.forward && r.target.display_name.text.as_ref() == "Zbiornik siarki ciekłej Z101"
@@ -150,7 +150,7 @@ fn the_browse_tree_is_folders_under_objects_and_servercctopc() {
         .expect("the tank folder");
     let tank = space.resolve(&tank.target.node_id).unwrap();
     let vars: Vec<_> = space
-        .references(&tank)
+        .references(&tank, Lang::English)
         .into_iter()
         .filter(|r| r.forward && r.target.node_class == NodeClass::Variable)
         .map(|r| r.target.node_id)
@@ -166,13 +166,13 @@ fn a_variable_with_a_range_is_an_analog_item_with_its_properties() {
     let f = fixture();
     let space = &f.nm.space;
     let v = space.resolve(&item("KW_A000")).unwrap();
-    let meta = space.meta(&v);
+    let meta = space.meta(&v, Lang::English);
     assert_eq!(
         meta.type_definition,
         NodeId::from(VariableTypeId::AnalogItemType)
     );
     assert_eq!(meta.browse_name.name.as_ref(), "KW_A000");
-    let refs = space.references(&v);
+    let refs = space.references(&v, Lang::English);
     let props: Vec<_> = refs
         .iter()
         .filter(|r| r.forward && r.reference_type == ReferenceTypeId::HasProperty)
@@ -223,7 +223,7 @@ fn a_variable_with_a_range_is_an_analog_item_with_its_properties() {
     // An item without EU information (the description attribute item) is a DataItemType.
     let d = space.resolve(&item("KW_A000.DESC")).unwrap();
     assert_eq!(
-        space.meta(&d).type_definition,
+        space.meta(&d, Lang::English).type_definition,
         NodeId::from(VariableTypeId::DataItemType)
     );
 }
@@ -444,7 +444,7 @@ fn a_ua_monitored_item_and_a_da_group_share_one_source_subscription() {
 /// The forward references of a node, as (reference type, browse name, NodeId).
 fn forward(space: &ctopc_ua::space::Space, r: &Resolved) -> Vec<(NodeId, String, NodeId)> {
     space
-        .references(r)
+        .references(r, Lang::English)
         .into_iter()
         .filter(|r| r.forward && r.reference_type != ReferenceTypeId::HasTypeDefinition)
         .map(|r| {
@@ -475,11 +475,11 @@ fn the_derived_values_are_components_of_the_variable_named_by_their_item_ids() {
         );
         // The child names its parent, and is a variable under its suffix.
         let child = space.resolve(&id).unwrap();
-        let meta = space.meta(&child);
+        let meta = space.meta(&child, Lang::English);
         assert_eq!(meta.browse_name.name.as_ref(), suffix);
         assert_eq!(meta.node_class, NodeClass::Variable);
         let up: Vec<_> = space
-            .references(&child)
+            .references(&child, Lang::English)
             .into_iter()
             .filter(|r| !r.forward && r.reference_type == ReferenceTypeId::HasComponent)
             .map(|r| r.target.node_id)
@@ -495,7 +495,7 @@ fn the_derived_values_are_components_of_the_variable_named_by_their_item_ids() {
     }
     let percent = space.resolve(&item("KW_A000.PercentageCV")).unwrap();
     assert_eq!(
-        space.meta(&percent).type_definition,
+        space.meta(&percent, Lang::English).type_definition,
         NodeId::from(VariableTypeId::AnalogItemType)
     );
     // Only those that resolve: a variable without a range has a FormatedCV and no
@@ -571,10 +571,10 @@ fn diagnostics_is_a_folder_of_readable_variables_first_under_the_root() {
     assert!(organized.len() > 1, "the real branches follow");
     let diag = space.resolve(&item("_Diagnostics")).unwrap();
     assert!(matches!(diag, Resolved::Folder(_)));
-    let meta = space.meta(&diag);
+    let meta = space.meta(&diag, Lang::English);
     assert_eq!(meta.type_definition, NodeId::from(ObjectTypeId::FolderType));
     let up: Vec<_> = space
-        .references(&diag)
+        .references(&diag, Lang::English)
         .into_iter()
         .filter(|r| !r.forward && r.reference_type == ReferenceTypeId::Organizes)
         .map(|r| r.target.node_id)
@@ -594,7 +594,10 @@ fn diagnostics_is_a_folder_of_readable_variables_first_under_the_root() {
     assert_eq!(uptime.2, item("_Diagnostics.Server.Uptime"));
     let u = space.resolve(&uptime.2).unwrap();
     assert!(matches!(u, Resolved::Variable(_)));
-    assert_eq!(space.meta(&u).node_class, NodeClass::Variable);
+    assert_eq!(
+        space.meta(&u, Lang::English).node_class,
+        NodeClass::Variable
+    );
     assert_eq!(
         space
             .attribute(&u, AttributeId::Description, false, Lang::Polish)
@@ -632,4 +635,156 @@ fn diagnostics_is_a_folder_of_readable_variables_first_under_the_root() {
         space.resolve(&item("_Diagnostics.NoSuchSection")).err(),
         Some(StatusCode::BadNodeIdUnknown)
     );
+}
+
+/// The text of a LocalizedText attribute, with its locale.
+fn text(
+    space: &ctopc_ua::space::Space,
+    r: &Resolved,
+    a: AttributeId,
+    lang: Lang,
+) -> (String, String) {
+    match space.attribute(r, a, false, lang).unwrap() {
+        Variant::LocalizedText(t) => (t.locale.as_ref().to_owned(), t.text.as_ref().to_owned()),
+        other => panic!("{a:?} is not a LocalizedText: {other:?}"),
+    }
+}
+
+#[test]
+fn descriptions_and_property_names_are_in_the_language_asked_with_its_locale() {
+    let f = fixture();
+    let space = &f.nm.space;
+    let d = AttributeId::Description;
+    // (node, language, expected (locale, text) of its Description)
+    let v = space.resolve(&item("KW_A000")).unwrap();
+    let formatted = space.resolve(&item("KW_A000.FormatedCV")).unwrap();
+    let root = space.resolve(&NodeId::new(NS, ROOT_ID)).unwrap();
+    let diag = space.resolve(&item("_Diagnostics")).unwrap();
+    let server = space.resolve(&item("_Diagnostics.Server")).unwrap();
+    let channels = space.resolve(&item("_Diagnostics.Channels")).unwrap();
+    let table: &[(&Resolved, Lang, (&str, &str))] = &[
+        (
+            &v,
+            Lang::Polish,
+            ("pl", "Poziom siarki ciekłej w zbiorniku Z101"),
+        ),
+        (
+            &v,
+            Lang::English,
+            ("en", "Liquid sulphur level in tank Z101"),
+        ),
+        // A derived value has its variable's description.
+        (
+            &formatted,
+            Lang::Polish,
+            ("pl", "Poziom siarki ciekłej w zbiorniku Z101"),
+        ),
+        (
+            &formatted,
+            Lang::English,
+            ("en", "Liquid sulphur level in tank Z101"),
+        ),
+        (
+            &root,
+            Lang::Polish,
+            ("pl", ctopc_ua::space::ROOT_DESCRIPTION[0]),
+        ),
+        (
+            &root,
+            Lang::English,
+            ("en", ctopc_ua::space::ROOT_DESCRIPTION[1]),
+        ),
+        (
+            &diag,
+            Lang::Polish,
+            (
+                "pl",
+                "Diagnostyka serwera: serwer, podłączeni klienci, kanały",
+            ),
+        ),
+        (
+            &diag,
+            Lang::English,
+            (
+                "en",
+                "Server diagnostics: the server, the connected clients, the channels",
+            ),
+        ),
+        (&server, Lang::Polish, ("pl", "Liczniki serwera")),
+        (&server, Lang::English, ("en", "The server's counters")),
+        (
+            &channels,
+            Lang::English,
+            ("en", "The data source's channels, one branch per channel"),
+        ),
+    ];
+    for (r, lang, (locale, expected)) in table {
+        assert_eq!(
+            text(space, r, d, *lang),
+            (locale.to_string(), expected.to_string()),
+            "{r:?} in {lang:?}"
+        );
+    }
+    // A branch of the variable set has no description in either language.
+    let groups: Vec<_> = forward(space, &root)
+        .into_iter()
+        .filter(|(_, n, _)| n != "_Diagnostics")
+        .collect();
+    let group = space.resolve(&groups[0].2).unwrap();
+    assert!(matches!(group, Resolved::Folder(_)));
+    for lang in Lang::ALL {
+        assert_eq!(
+            space.attribute(&group, d, false, lang).unwrap(),
+            Variant::from(opcua::types::LocalizedText::null())
+        );
+    }
+    // The properties: DisplayName and Description are the DA property's description in
+    // the language asked (the BrowseName stays); EURange keeps its name.
+    let props = |lang: Lang| -> Vec<(String, String, String)> {
+        space
+            .references(&v, lang)
+            .into_iter()
+            .filter(|r| r.forward && r.reference_type == ReferenceTypeId::HasProperty)
+            .map(|r| {
+                (
+                    r.target.browse_name.name.as_ref().to_owned(),
+                    r.target.display_name.locale.as_ref().to_owned(),
+                    r.target.display_name.text.as_ref().to_owned(),
+                )
+            })
+            .collect()
+    };
+    let (pl, en) = (props(Lang::Polish), props(Lang::English));
+    let eu_type_pl = pl.iter().find(|p| p.0 == "ItemEUType").unwrap();
+    let eu_type_en = en.iter().find(|p| p.0 == "ItemEUType").unwrap();
+    assert_eq!(
+        (eu_type_pl.1.as_str(), eu_type_pl.2.as_str()),
+        ("pl", "Typ jednostek inżynierskich elementu")
+    );
+    assert_eq!(
+        (eu_type_en.1.as_str(), eu_type_en.2.as_str()),
+        ("en", "Item EU Type")
+    );
+    for list in [&pl, &en] {
+        let eu_range = list.iter().find(|p| p.0 == "EURange").unwrap();
+        assert_eq!((eu_range.1.as_str(), eu_range.2.as_str()), ("", "EURange"));
+    }
+    let eu_type = space
+        .resolve(&space.property_node_id(ctopc_core::properties::OPC_PROPERTY_EU_TYPE, "KW_A000"))
+        .unwrap();
+    assert_eq!(
+        text(space, &eu_type, d, Lang::Polish),
+        ("pl".into(), "Typ jednostek inżynierskich elementu".into())
+    );
+    assert_eq!(
+        text(space, &eu_type, AttributeId::DisplayName, Lang::English),
+        ("en".into(), "Item EU Type".into())
+    );
+    // A variable's DisplayName is its name, the same in both languages.
+    for lang in Lang::ALL {
+        assert_eq!(
+            text(space, &v, AttributeId::DisplayName, lang),
+            (String::new(), "KW_A000".into())
+        );
+    }
 }

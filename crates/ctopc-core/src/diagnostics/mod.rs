@@ -411,6 +411,46 @@ impl<'a> DiagItem<'a> {
     }
 }
 
+/// The description of a branch of `_Diagnostics` (the branch itself, its sections, a
+/// client's or a channel's branch) in `lang`; `None` for any other ID (items included:
+/// theirs are their [`Field`]'s). The OPC UA front end serves it as the folder's
+/// Description.
+pub fn branch_description(item_id: &str, lang: Lang) -> Option<String> {
+    let pick = |pl: &str, en: &str| match lang {
+        Lang::Polish => pl.to_owned(),
+        Lang::English => en.to_owned(),
+    };
+    let rest = item_id.strip_prefix(ROOT)?;
+    if rest.is_empty() {
+        return Some(pick(
+            "Diagnostyka serwera: serwer, podłączeni klienci, kanały",
+            "Server diagnostics: the server, the connected clients, the channels",
+        ));
+    }
+    let rest = rest.strip_prefix('.')?;
+    let (section, owner) = match rest.split_once('.') {
+        Some((section, owner)) if !owner.is_empty() && !owner.contains('.') => {
+            (section, Some(owner))
+        }
+        Some(_) => return None,
+        None => (rest, None),
+    };
+    Some(match (section, owner) {
+        (SERVER, None) => pick("Liczniki serwera", "The server's counters"),
+        (CLIENTS, None) => pick(
+            "Podłączeni klienci, po jednej gałęzi na klienta",
+            "The connected clients, one branch per client",
+        ),
+        (CHANNELS, None) => pick(
+            "Kanały źródła danych, po jednej gałęzi na kanał",
+            "The data source's channels, one branch per channel",
+        ),
+        (CLIENTS, Some(c)) => pick(&format!("Klient {c}"), &format!("Client {c}")),
+        (CHANNELS, Some(c)) => pick(&format!("Kanał {c}"), &format!("Channel {c}")),
+        _ => return None,
+    })
+}
+
 /// A name made fit for one segment of an item ID: `.` and control characters become `_`.
 pub fn segment(name: &str) -> String {
     name.chars()

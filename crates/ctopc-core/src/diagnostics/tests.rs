@@ -308,3 +308,61 @@ fn the_namespace_resolves_diagnostic_items_read_only_and_passes_the_rest_on() {
         None
     );
 }
+
+#[test]
+fn the_branches_have_descriptions_in_both_languages_and_items_none() {
+    // (item ID, Polish, English)
+    let table: &[(&str, &str, &str)] = &[
+        (
+            "_Diagnostics",
+            "Diagnostyka serwera: serwer, podłączeni klienci, kanały",
+            "Server diagnostics: the server, the connected clients, the channels",
+        ),
+        (
+            "_Diagnostics.Server",
+            "Liczniki serwera",
+            "The server's counters",
+        ),
+        (
+            "_Diagnostics.Clients",
+            "Podłączeni klienci, po jednej gałęzi na klienta",
+            "The connected clients, one branch per client",
+        ),
+        (
+            "_Diagnostics.Channels",
+            "Kanały źródła danych, po jednej gałęzi na kanał",
+            "The data source's channels, one branch per channel",
+        ),
+        ("_Diagnostics.Clients.HMI#3", "Klient HMI#3", "Client HMI#3"),
+        (
+            "_Diagnostics.Channels.KANAL",
+            "Kanał KANAL",
+            "Channel KANAL",
+        ),
+    ];
+    for &(id, pl, en) in table {
+        assert_eq!(
+            branch_description(id, Lang::Polish).as_deref(),
+            Some(pl),
+            "{id}"
+        );
+        assert_eq!(
+            branch_description(id, Lang::English).as_deref(),
+            Some(en),
+            "{id}"
+        );
+    }
+    for id in [
+        "_Diagnostics.Server.Uptime",
+        "_Diagnostics.Clients.HMI.Name",
+        "_Diagnostics.Clients.",
+        "_Diagnostics.Other",
+        "_DiagnosticsX",
+        "KW_A000",
+        "",
+    ] {
+        for lang in Lang::ALL {
+            assert_eq!(branch_description(id, lang), None, "{id}");
+        }
+    }
+}
