@@ -42,6 +42,45 @@ pub fn e2e_bin(name: &str) -> Result<(), String> {
     ]))
 }
 
+/// The product's packages at `arch` (the server, the server browser and opcdiag at 64-bit;
+/// opcdiag, asix-gate and the test double of `XConnect.ServerCT` at 32-bit), which
+/// [`run_for_tests`] builds in one cargo call with the end-to-end tests.
+pub fn product_packages(arch: Arch) -> &'static [&'static str] {
+    match arch {
+        Arch::X64 => &["serverctopc", "opc-server-list", "opc-client"],
+        Arch::X86 => &["opc-client", "asix-gate", "xconnect-double"],
+    }
+}
+
+/// The Windows build of `cargo xtask test` and `cargo xtask e2e`: at each bitness one
+/// `cargo build` of the product (its packages' libraries and binaries) together with the
+/// end-to-end tests (`tests`: the packages and targets of the tests' one
+/// `cargo test --no-run`, `wine/guard.rs`, which lists the product's packages too), then
+/// the proxy/stub DLLs and the double's type library.
+///
+/// Why together: cargo unifies the features of the dependencies of the packages it builds
+/// at once, dev-dependencies included once a test is built; a product built alone and
+/// tests built alone resolve different features and build the shared dependencies (tokio,
+/// rustls, async-opcua, the windows crate) twice. With the same packages, and a test in
+/// both, the tests' `--no-run` finds every dependency built. The product so built differs
+/// from [`run`]'s only in features that the tests' dev-dependencies turn on (`std` of
+/// getrandom, say); `cargo xtask dist` builds with [`run`].
+pub fn run_for_tests(tests: &[(Arch, Vec<String>)]) -> Result<Artifacts, String> {
+    let root = util::root();
+    for (arch, selection) in tests {
+        util::run(
+            util::cargo()
+                .args(["build", "--release", "--target", arch.target()])
+                .args(selection.iter().filter(|a| *a != "--lib"))
+                .args(["--lib", "--bins"]),
+        )?;
+    }
+    proxy::build_proxy(&root, Arch::X64)?;
+    proxy::build_proxy(&root, Arch::X86)?;
+    type_library()?;
+    Ok(built())
+}
+
 pub fn run(_args: &[String]) -> Result<Artifacts, String> {
     let root = util::root();
     // The server is 64-bit only (COM starts it for clients of either bitness); opcdiag
@@ -99,7 +138,6 @@ pub fn built() -> Artifacts {
 /// loads and registers it). widl imports `stdole2.tlb` from Wine's i386 libraries
 /// (package libwine:i386, which wine32 brings).
 pub fn xconnect_double() -> Result<PathBuf, String> {
-    let root = util::root();
     util::run(util::cargo().args([
         "build",
         "--release",
@@ -108,6 +146,12 @@ pub fn xconnect_double() -> Result<PathBuf, String> {
         "-p",
         "xconnect-double",
     ]))?;
+    type_library()
+}
+
+/// Compiles the double's type library beside its built DLL; the DLL's path.
+fn type_library() -> Result<PathBuf, String> {
+    let root = util::root();
     let dir = Arch::X86.release_dir(&root);
     let tlb = dir.join("xconnect_double.tlb");
     util::run(

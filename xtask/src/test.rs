@@ -9,7 +9,8 @@
 //!    (`cargo xtask ua-interop`, `xtask/src/ua.rs`: `ServerCTOPC serve` natively against
 //!    Python asyncua); the OPC UA benchmark (`cargo xtask bench --ua [--quick]`) is not
 //!    part of the run: it prints figures, and its node-opcua peer starts for minutes;
-//! 4. the Windows build (both bitnesses, `build.rs`); then, **in the background** beside
+//! 4. the Windows build (both bitnesses, `build::run_for_tests`: the product and the
+//!    end-to-end tests in one cargo call per bitness, built once); then, **in the background** beside
 //!    steps 5 to 7 (which mostly wait on Wine and the server, not the CPU), the
 //!    third-party client's builds (both bitnesses, in `target/thirdparty`, which cargo
 //!    locks apart from `target/`) and step 8;
@@ -88,7 +89,10 @@ fn run_all(args: &[String]) -> Result<(), String> {
     }
 
     let t = std::time::Instant::now();
-    let artifacts = build::run(&[])?;
+    let artifacts = build::run_for_tests(&[
+        (Arch::X64, selection(Arch::X64)?),
+        (Arch::X86, selection(Arch::X86)?),
+    ])?;
     took("the Windows build", t);
     // Two steps that need neither the project's prefix nor cargo's build lock run beside
     // the end-to-end tests, which mostly wait on Wine and the server: the third-party
@@ -102,11 +106,13 @@ fn run_all(args: &[String]) -> Result<(), String> {
         let _stations = rest_stations::Stations::start(rest_stations::Sim::Built)?;
         println!("test: end-to-end tests under Wine (one binary at a time, wine/guard.rs)");
         let units = units_64()?;
+        let build64 = selection(Arch::X64)?;
         let plan = guard::Plan {
             target: setup::TARGET,
             test_args: &[],
             limit: E2E_LIMIT,
             retries: 1,
+            build: &build64,
         };
         let t = std::time::Instant::now();
         guard::run_units(&plan, &units)?;
@@ -118,11 +124,12 @@ fn run_all(args: &[String]) -> Result<(), String> {
             Arch::X86.target()
         );
         // marshal_strings (32-bit client) talks to the 64-bit marshal probe, which the
-        // 64-bit build above made (a package's binaries are built for its integration
-        // tests); building it again alone would resolve other features and rebuild.
+        // 64-bit build made (a package's binaries are built for its integration tests).
         let units = units_32();
+        let build32 = selection(Arch::X86)?;
         let plan = guard::Plan {
             target: Arch::X86.target(),
+            build: &build32,
             ..plan
         };
         let t = std::time::Instant::now();
@@ -276,6 +283,33 @@ fn units_64() -> Result<Vec<guard::Unit>, String> {
     Ok(units)
 }
 
+/// The cargo arguments of the end-to-end tests' one `cargo test --no-run` at `arch`: the
+/// product's packages (`build::product_packages`) and the units' packages and targets.
+/// `build::run_for_tests` builds the same packages and tests, so that this finds
+/// everything built (see there why).
+fn selection(arch: Arch) -> Result<Vec<String>, String> {
+    let units = match arch {
+        Arch::X64 => units_64()?,
+        Arch::X86 => units_32(),
+    };
+    let mut args: Vec<String> = Vec::new();
+    for p in build::product_packages(arch) {
+        args.extend(["-p".to_owned(), (*p).to_owned()]);
+    }
+    let mut rest = guard::build_args(&units).into_iter();
+    while let Some(a) = rest.next() {
+        if a == "-p" {
+            let Some(p) = rest.next() else { break };
+            if !build::product_packages(arch).contains(&p.as_str()) {
+                args.extend([a, p]);
+            }
+        } else {
+            args.push(a);
+        }
+    }
+    Ok(args)
+}
+
 /// The 32-bit client's units: the [`E2E_32`] test files (the 32-bit runner,
 /// xtask/wine-runner32.sh, runs them with Wine's 32-bit loader).
 fn units_32() -> Vec<guard::Unit> {
@@ -377,7 +411,10 @@ fn e2e_only(args: &[String]) -> Result<(), String> {
     let x86 = args.first().is_some_and(|a| a == "--x86");
     let args = if x86 { &args[1..] } else { args };
     setup::run(&[])?;
-    let artifacts = build::run(&[])?;
+    let artifacts = build::run_for_tests(&[
+        (Arch::X64, selection(Arch::X64)?),
+        (Arch::X86, selection(Arch::X86)?),
+    ])?;
     let (cargo_args, test_args) = match args.iter().position(|a| a == "--") {
         Some(i) => (&args[..i], &args[i + 1..]),
         None => (args, &[][..]),
@@ -396,20 +433,15 @@ fn e2e_only(args: &[String]) -> Result<(), String> {
         } else {
             units_64()?
         };
+        let arch = if x86 { Arch::X86 } else { Arch::X64 };
+        let build = selection(arch)?;
         let plan = guard::Plan {
-            target: if x86 {
-                Arch::X86.target()
-            } else {
-                setup::TARGET
-            },
+            target: arch.target(),
             test_args,
             limit: E2E_LIMIT,
             retries: 0,
+            build: &build,
         };
-        if x86 {
-            // marshal_strings (32-bit client) talks to the 64-bit marshal probe.
-            build::e2e_bin("marshal-probe")?;
-        }
         guard::run_units(&plan, &units)
     })();
     wine::kill_all();
@@ -518,5 +550,57 @@ fn thirdparty_client(arch: Arch, exe: &std::path::Path) -> Result<(), String> {
             "third-party client ({}) failed: {status}",
             arch.target()
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The packages a unit names.
+    fn packages(units: &[guard::Unit]) -> Vec<String> {
+        let mut out: Vec<String> = units
+            .iter()
+            .filter_map(|u| {
+                let i = u.cargo_args.iter().position(|a| a == "-p")?;
+                u.cargo_args.get(i + 1).cloned()
+            })
+            .collect();
+        out.sort();
+        out.dedup();
+        out
+    }
+
+    /// Every unit's package and target is in its bitness's one build, each package once,
+    /// or the guard's `--no-run` of that selection would not make the unit's executable.
+    #[test]
+    fn the_windows_build_selects_every_unit_and_the_product() {
+        for (arch, units) in [(Arch::X64, units_64().unwrap()), (Arch::X86, units_32())] {
+            let sel = selection(arch).unwrap();
+            let selected: Vec<&String> = sel
+                .windows(2)
+                .filter(|w| w[0] == "-p")
+                .map(|w| &w[1])
+                .collect();
+            let mut wanted = packages(&units);
+            wanted.extend(
+                build::product_packages(arch)
+                    .iter()
+                    .map(|p| (*p).to_owned()),
+            );
+            for p in &wanted {
+                assert_eq!(
+                    selected.iter().filter(|q| **q == p).count(),
+                    1,
+                    "{p} once at {}: {sel:?}",
+                    arch.target()
+                );
+            }
+            for u in &units {
+                for a in u.cargo_args.windows(2).filter(|w| w[0] == "--test") {
+                    assert!(sel.windows(2).any(|w| w == a), "{a:?} at {}", arch.target());
+                }
+            }
+        }
     }
 }

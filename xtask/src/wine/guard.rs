@@ -58,13 +58,13 @@ impl Unit {
         }
     }
 
-    /// The unit tests of `package` (its library and binaries).
+    /// The unit tests of `package`'s library (the packages with end-to-end units have no
+    /// tests in their binaries; selecting `--bins` would build every selected package's
+    /// binaries as tests, the product's too).
     pub fn lib(package: &str) -> Unit {
         Unit {
             label: format!("{package} (unit tests)"),
-            cargo_args: ["-p", package, "--lib", "--bins"]
-                .map(String::from)
-                .to_vec(),
+            cargo_args: ["-p", package, "--lib"].map(String::from).to_vec(),
         }
     }
 }
@@ -186,9 +186,9 @@ pub fn executables(built: &[Built], unit: &Unit) -> Option<Vec<Built>> {
             .filter(|b| b.package == *package && b.kind == "test" && b.name == *name)
             .cloned()
             .collect(),
-        ["-p", package, "--lib", "--bins"] => built
+        ["-p", package, "--lib"] => built
             .iter()
-            .filter(|b| b.package == *package && (b.kind == "lib" || b.kind == "bin"))
+            .filter(|b| b.package == *package && b.kind == "lib")
             .cloned()
             .collect(),
         _ => return None,
@@ -428,6 +428,10 @@ pub struct Plan<'a> {
     pub limit: Duration,
     /// How many times a stalled unit runs again (`cargo xtask test`: 1).
     pub retries: u32,
+    /// The cargo arguments of the one `--no-run` build (`build::test_selection`: what the
+    /// Windows build built, so nothing is built again); empty: the units' own
+    /// ([`build_args`]).
+    pub build: &'a [String],
 }
 
 /// Runs each of `units` (`cargo test --release --target TARGET <unit> -- --test-threads=1
@@ -441,6 +445,7 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<(), String> {
         test_args,
         limit,
         retries,
+        build,
     } = *plan;
     let start = Instant::now();
     let command = |extra: &[&str], unit: Option<&Unit>| {
@@ -450,8 +455,11 @@ pub fn run_units(plan: &Plan<'_>, units: &[Unit]) -> Result<(), String> {
             Some(u) => {
                 c.args(&u.cargo_args);
             }
-            None => {
+            None if build.is_empty() => {
                 c.args(build_args(units));
+            }
+            None => {
+                c.args(build);
             }
         }
         c.args(extra);
@@ -634,7 +642,7 @@ mod tests {
         );
         assert_eq!(
             Unit::lib("ctopc-com").cargo_args,
-            ["-p", "ctopc-com", "--lib", "--bins"]
+            ["-p", "ctopc-com", "--lib"]
         );
     }
 
@@ -648,7 +656,7 @@ mod tests {
         ];
         assert_eq!(
             build_args(&units).join(" "),
-            "-p ctopc-com --lib --bins --test inproc_server -p e2e-tests --test da10"
+            "-p ctopc-com --lib --test inproc_server -p e2e-tests --test da10"
         );
     }
 
