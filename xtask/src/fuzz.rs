@@ -1,4 +1,4 @@
-//! `cargo xtask fuzz [--seconds N] [--stable] [TARGET...]`: every fuzz target of
+//! `cargo xtask fuzz [--seconds N] [--stable | --built] [TARGET...]`: every fuzz target of
 //! `fuzz/` (crate `ctopc-fuzz`) for N seconds each (default 10).
 //!
 //! With cargo-fuzz and a nightly toolchain (`cargo +nightly fuzz --version` works), each
@@ -8,7 +8,8 @@
 //! runner `fuzz-random` mutates the targets' seeds with a seeded PRNG and catches
 //! panics; a failing input lands in `target/fuzz-failures/`. cargo-fuzz is not installed
 //! here: `cargo install cargo-fuzz` once, where crates.io and a nightly are reachable.
-//! `cargo xtask test` runs the stable runner for [`CI_SECONDS`] per target.
+//! `cargo xtask test` runs the stable runner for [`CI_SECONDS`] per target, `--built`:
+//! the runner its native tests built, not through `cargo run`.
 
 use crate::util;
 use std::process::Command;
@@ -39,6 +40,7 @@ const TARGETS: &[&str] = &[
 pub fn run(args: &[String]) -> Result<(), String> {
     let mut seconds: u32 = 10;
     let mut stable = false;
+    let mut built = false;
     let mut names: Vec<String> = Vec::new();
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -50,6 +52,10 @@ pub fn run(args: &[String]) -> Result<(), String> {
                     .ok_or("--seconds needs a whole number")?;
             }
             "--stable" => stable = true,
+            "--built" => {
+                stable = true;
+                built = true;
+            }
             t if TARGETS.contains(&t) => names.push(t.to_owned()),
             other => {
                 return Err(format!(
@@ -67,7 +73,7 @@ pub fn run(args: &[String]) -> Result<(), String> {
                 "fuzz: no cargo-fuzz with a nightly toolchain here; the stable runner instead"
             );
         }
-        stable_runner(seconds, &names)
+        stable_runner(seconds, &names, built)
     }
 }
 
@@ -128,21 +134,38 @@ fn libfuzzer(seconds: u32, names: &[String]) -> Result<(), String> {
     Ok(())
 }
 
-fn stable_runner(seconds: u32, names: &[String]) -> Result<(), String> {
-    let mut c = util::cargo();
-    c.args([
-        "run",
-        "--release",
-        "--quiet",
-        "-p",
-        "ctopc-fuzz",
-        "--bin",
-        "fuzz-random",
-        "--",
-        "--seconds",
-    ])
-    .arg(seconds.to_string())
-    .args(names);
+/// The stable runner; `built`: the `target/release/fuzz-random` that `cargo test
+/// --workspace --release` built (the package has integration tests, so its binaries are
+/// built with them) run as it is, for `cargo run -p ctopc-fuzz` alone would resolve the
+/// package's features apart from the workspace's and build its dependencies again
+/// (async-opcua, tokio, rustls: minutes).
+fn stable_runner(seconds: u32, names: &[String], built: bool) -> Result<(), String> {
+    let mut c = if built {
+        let exe = util::root().join("target/release/fuzz-random");
+        if !exe.is_file() {
+            return Err(format!(
+                "fuzz --built: {} is not built (cargo test --workspace --release builds it)",
+                exe.display()
+            ));
+        }
+        let mut c = Command::new(exe);
+        c.current_dir(util::root());
+        c
+    } else {
+        let mut c = util::cargo();
+        c.args([
+            "run",
+            "--release",
+            "--quiet",
+            "-p",
+            "ctopc-fuzz",
+            "--bin",
+            "fuzz-random",
+            "--",
+        ]);
+        c
+    };
+    c.arg("--seconds").arg(seconds.to_string()).args(names);
     util::run(&mut c).map_err(|e| {
         format!(
             "{e}\nfuzz: a target failed; the input is in target/fuzz-failures/: fix it and \

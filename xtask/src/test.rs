@@ -75,7 +75,7 @@ fn run_all(args: &[String]) -> Result<(), String> {
         fuzz::CI_SECONDS
     );
     fuzz::run(&[
-        "--stable".into(),
+        "--built".into(),
         "--seconds".into(),
         fuzz::CI_SECONDS.to_string(),
     ])?;
