@@ -27,6 +27,7 @@ use asix_net::proto::frame::{
 use asix_net::secure::ServerSecurity;
 use asix_net::server::{self, reply};
 use asix_net::tls::Fingerprint;
+use ctopc_core::audit;
 use ctopc_core::write_rights::{Caller, WriteRights};
 use ctopc_core::{OpcError, Quality, Timestamp, Value};
 use tokio::io::{AsyncWriteExt, BufWriter};
@@ -605,6 +606,70 @@ async fn read(
     results
 }
 
+/// How an audited write item ended.
+#[derive(Debug, Clone, Copy)]
+enum AuditResult {
+    /// The write-rights policy refused it (the client got the original's
+    /// `ASKOM_E_WriteError_IllegalCommand`).
+    Denied,
+    /// Written to the channel, with its HRESULT (0: S_OK).
+    Written(i32),
+}
+
+/// The write audit line of one item (`ctopc_core::audit`'s format, under its target, as
+/// the server's): who wrote it by the link's authenticated identity, beside the name the
+/// client declared.
+fn audit_item(
+    link: &Link,
+    caller: &Caller,
+    v: &asix_net::proto::frame::VarRef,
+    value: &Value,
+    ext: Option<(Quality, Timestamp)>,
+    result: AuditResult,
+) {
+    audit_line(link.client.as_deref(), caller, v, value, ext, result);
+}
+
+fn audit_line(
+    client: Option<&str>,
+    caller: &Caller,
+    v: &asix_net::proto::frame::VarRef,
+    value: &Value,
+    ext: Option<(Quality, Timestamp)>,
+    result: AuditResult,
+) {
+    let identity = caller.to_string();
+    let item = format!("{}.{}", v.channel, v.variable);
+    let (result, denied) = match result {
+        AuditResult::Denied => (Err(OpcError::BadRights), true),
+        AuditResult::Written(0) => (Ok(()), false),
+        AuditResult::Written(hr) => (
+            Err(OpcError::from_hresult(hr).unwrap_or(OpcError::Fail)),
+            false,
+        ),
+    };
+    let record = audit::WriteRecord {
+        time: ctopc_runtime::clock::now(),
+        client: audit::Client::Named(client.unwrap_or("")),
+        identity: Some(&identity),
+        method: if ext.is_some() {
+            "asix::WriteEx"
+        } else {
+            "asix::Write"
+        },
+        group: None,
+        item_id: Some(&item),
+        server_handle: None,
+        value,
+        quality: ext.map(|e| e.0),
+        timestamp: ext.map(|e| e.1),
+        cancel_id: None,
+        result,
+        denied,
+    };
+    info!(target: audit::TARGET, "{}", audit::format_write(&record));
+}
+
 type WriteItem = (
     asix_net::proto::frame::VarRef,
     Value,
@@ -661,6 +726,7 @@ fn write(
         if !d.allowed {
             warn!(caller = %caller, channel = %ch.config.name, variable = %v.variable, decision = %d, "write refused");
             results[i] = OpcError::WriteErrorIllegalCommand.hresult();
+            audit_item(link, &caller, &v, &value, ext, AuditResult::Denied);
             continue;
         }
         debug!(caller = %caller, channel = %ch.config.name, variable = %v.variable, decision = %d, "write");
@@ -679,11 +745,28 @@ fn write(
     }
     let engine = engine.clone();
     let deferred = deferred.clone();
+    let client = link.client.clone();
     tokio::spawn(async move {
         for (ch, idx, batch) in by_channel {
+            let written: Vec<_> = batch
+                .iter()
+                .map(|(variable, value, ext)| (variable.clone(), value.clone(), *ext))
+                .collect();
             let r = engine.write(&ch, batch).await;
-            for (i, x) in idx.into_iter().zip(r) {
+            for ((i, x), (variable, value, ext)) in idx.into_iter().zip(r).zip(written) {
                 results[i] = x.err().unwrap_or(0);
+                let v = asix_net::proto::frame::VarRef {
+                    channel: ch.config.name.clone(),
+                    variable,
+                };
+                audit_line(
+                    client.as_deref(),
+                    &caller,
+                    &v,
+                    &value,
+                    ext,
+                    AuditResult::Written(results[i]),
+                );
             }
         }
         let mut out = Vec::new();

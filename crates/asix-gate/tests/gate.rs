@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 use std::net::{Ipv4Addr, SocketAddr};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use asix_gate::channel::{CallError, ChannelFactory, ServerState};
@@ -28,6 +28,48 @@ struct Pki {
     server: tls::Generated,
     writer: tls::Generated,
     reader: tls::Generated,
+}
+
+/// What the gates of this binary logged under the audit target (`ctopc_core::audit`),
+/// line by line: a process-wide subscriber, set once; each test looks for its own items.
+fn audit_log() -> &'static Arc<Mutex<Vec<u8>>> {
+    static LOG: OnceLock<Arc<Mutex<Vec<u8>>>> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let sink = Arc::clone(&log);
+        tracing_subscriber::fmt()
+            .with_env_filter(tracing_subscriber::EnvFilter::new("audit=info"))
+            .with_ansi(false)
+            .with_writer(move || Capture(Arc::clone(&sink)))
+            .init();
+        log
+    })
+}
+
+struct Capture(Arc<Mutex<Vec<u8>>>);
+
+impl std::io::Write for Capture {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().expect("log").extend_from_slice(buf);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The audit lines that name `item` (`CHANNEL.VARIABLE`).
+fn audit_lines(item: &str) -> Vec<String> {
+    let text = String::from_utf8_lossy(&audit_log().lock().expect("log")).into_owned();
+    let needle = format!("item=\"{item}\"");
+    text.lines()
+        .filter(|l| l.contains(&needle))
+        .map(str::to_owned)
+        .collect()
+}
+
+fn hex(fp: &[u8]) -> String {
+    fp.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 fn pki() -> &'static Pki {
@@ -323,6 +365,7 @@ async fn device_reads_use_dsdevice_or_dsdriver_as_the_channel_says() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn writes_are_granted_and_refused_by_the_certificate() {
+    audit_log();
     let g = gate().await;
     until("KANAL1 open", || g.plant(K1).is_active()).await;
     let mut w = client(&g, &pki().writer, "WRITER.");
@@ -349,10 +392,45 @@ async fn writes_are_granted_and_refused_by_the_certificate() {
     g.plant(K1).set_read_only("B");
     let r = w.write(vec![(k(K1, "B"), Value::R8(1.0))]).await;
     assert_eq!(r, vec![Err(OpcError::WriteErrorDeviceRequestIllegal)]);
+    // Each item has its audit line, naming the certificate that wrote it beside the name
+    // the client declared.
+    let writer = format!(
+        "identity=\"cert:{}\"",
+        hex(&pki().writer.identity.fingerprint())
+    );
+    let reader = format!(
+        "identity=\"cert:{}\"",
+        hex(&pki().reader.identity.fingerprint())
+    );
+    let c = audit_lines("KANAL1.C");
+    assert_eq!(c.len(), 2, "{c:#?}");
+    assert!(
+        c[0].contains("client=\"WRITER.\"")
+            && c[0].contains(&writer)
+            && c[0].contains("method=asix::Write ")
+            && c[0].contains("value=R8:9")
+            && c[0].ends_with("result=S_OK"),
+        "{c:#?}"
+    );
+    assert!(
+        c[1].contains(&reader) && c[1].ends_with("result=denied"),
+        "{c:#?}"
+    );
+    let x = audit_lines("KANAL2.X");
+    assert!(
+        x.len() == 1 && x[0].contains(&writer) && x[0].ends_with("result=denied"),
+        "{x:#?}"
+    );
+    let b = audit_lines("KANAL1.B");
+    assert!(
+        b.len() == 1 && b[0].ends_with("result=ASKOM_E_WriteError_DeviceRequestIllegal"),
+        "{b:#?}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_extended_write_goes_to_writeex_with_local_time() {
+    audit_log();
     let g = gate().await;
     until("KANAL1 open", || g.plant(K1).is_active()).await;
     let mut w = client(&g, &pki().writer, "WRITER.");
@@ -375,6 +453,15 @@ async fn the_extended_write_goes_to_writeex_with_local_time() {
         .calls()
         .iter()
         .any(|c| c.starts_with("WriteEx A")));
+    // The audit line carries the quality and the time (UTC) the client wrote.
+    let a = audit_lines("KANAL1.A");
+    assert!(
+        a.iter().any(|l| l.contains("method=asix::WriteEx")
+            && l.contains("quality=0x0040")
+            && l.contains("timestamp=")
+            && l.ends_with("result=S_OK")),
+        "{a:#?}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
