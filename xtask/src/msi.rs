@@ -13,7 +13,11 @@
 //! wixl 0.101 has no Component/Condition, so a conditional ServiceInstall component (and
 //! AppID `LocalService` row) cannot be built, and no util:Group; and a Registry table can
 //! neither know the clients' group's SID nor write the AppID's security values only where
-//! absent.
+//! absent. After them, at install and upgrade, the deferred `ServerCTOPC.exe
+//! /ProtectSecrets` makes the files of secrets of the configuration the server finds (the
+//! OPC UA certificate store, made when missing, its private key, the users file, the asix
+//! link's keys) private (wixl has no LockPermissions, and a Registry-like table could not
+//! follow the configuration's paths).
 //!
 //! The feature `Gate` (level 2, so off by default: `ADDLOCAL=ALL`) installs asix-gate, the
 //! 32-bit gateway for the asix station, in `asix-gate\` with its example configuration
@@ -33,7 +37,11 @@
 //! and servers, and must see the first value and both writes; the server's command line
 //! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
 //! The default install has no gate; the upgrade adds it (`ADDLOCAL=ALL`: the files and
-//! the service are checked); the uninstall removes it.
+//! the service are checked); the uninstall removes it. `/ProtectSecrets` is checked by
+//! its lines in the server's log (one run at install, one more at the upgrade, nothing
+//! failed) and by what Wine shows of a DACL, the Unix mode it maps it onto: the
+//! certificate store, its private key folder and a users file copied in world-readable
+//! before the upgrade have no group or others bits afterwards.
 //! The three MSIs are built at once; a prefix copy is 1.3 GB. The time of each step, as
 //! measured: docs/benchmarks.md (about 2 minutes with the template kept and the Windows
 //! build up to date, about 3 from a clean target/wine, as in CI).
@@ -522,6 +530,17 @@ mod tests {
             .find(|r| r[0] == "UpgradeUninstallServer")
             .unwrap();
         assert_eq!(upgrade[3], "/UnregServer /KeepSecurity");
+        // The files of secrets: deferred (0x400), not impersonated (0x800), its exit code
+        // checked (no 0x40), at install and upgrade, after the registration.
+        let protect = actions.iter().find(|r| r[0] == "ProtectSecrets").unwrap();
+        assert_eq!(protect[3], "/ProtectSecrets");
+        let t = protect[1].parse::<u32>().unwrap();
+        assert_eq!(t & (0x400 | 0x800 | 0x40), 0x400 | 0x800, "{protect:?}");
+        let sequence = table(&msi, "InstallExecuteSequence").unwrap();
+        let at = |a: &str| sequence.iter().find(|r| r[0] == a).unwrap().clone();
+        assert_eq!(at("ProtectSecrets")[1], "NOT REMOVE=\"ALL\"");
+        let seq = |a: &str| at(a)[2].parse::<u32>().unwrap();
+        assert!(seq("ProtectSecrets") > seq("InstallSecurity").max(seq("InstallService")));
         for a in actions.iter().filter(|r| r[0].starts_with("Rollback")) {
             let t = a[1].parse::<u32>().unwrap();
             assert_eq!(t & (IN_SCRIPT | ROLLBACK), IN_SCRIPT | ROLLBACK, "{a:?}");
@@ -894,6 +913,83 @@ mod wine_test {
                     "msi-test: `ServerCTOPC.exe /RegServer /CreateGroup`: exit {code}, no WARN about Wine's NetLocalGroupAdd:\n{out}"
                 )),
             }
+        }
+
+        /// `/ProtectSecrets`, the MSI's deferred action at install and upgrade: by now
+        /// `runs` times, each a summary line with nothing failed in the server's log
+        /// (`Log\ServerCTOPC.<date>.log`: the action's output has no console), with the
+        /// OPC UA certificate store and its private key folder made private, and each of
+        /// `files` (below the install folder) named private. What Wine can show of the
+        /// DACLs: it keeps none, but maps one set onto the Unix mode (an allow ACE for
+        /// Everyone becomes the others' bits, the owner's the user's), so each path made
+        /// private has no group or others bits, where Wine made the folders 0755.
+        fn secrets(&self, what: &str, runs: usize, files: &[&str]) -> Result<(), String> {
+            let log_dir = self.install_dir().join("Log");
+            let mut lines = Vec::new();
+            for f in walk(&log_dir) {
+                let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+                if name.is_some_and(|n| n.starts_with("ServerCTOPC.") && n.ends_with(".log")) {
+                    let text = std::fs::read(&f).unwrap_or_default();
+                    lines.extend(
+                        String::from_utf8_lossy(&text)
+                            .lines()
+                            .filter(|l| l.contains("ProtectSecrets: "))
+                            .map(str::to_owned),
+                    );
+                }
+            }
+            let summaries: Vec<&String> = lines
+                .iter()
+                .filter(|l| l.contains(" not there yet, "))
+                .collect();
+            let fail = |why: String| {
+                Err(format!(
+                    "msi-test: {what}: /ProtectSecrets: {why}; its lines in {}:\n{}",
+                    log_dir.display(),
+                    lines.join("\n")
+                ))
+            };
+            if summaries.len() != runs {
+                return fail(format!("{} runs logged, not {runs}", summaries.len()));
+            }
+            if let Some(s) = summaries.iter().find(|l| !l.contains(", 0 failed (")) {
+                return fail(format!("a run failed: {s}"));
+            }
+            let mut wanted: Vec<String> = vec![
+                "OPC UA certificate store".into(),
+                "OPC UA private key folder".into(),
+            ];
+            wanted.extend(
+                files
+                    .iter()
+                    .map(|f| format!("{}: private", f.replace('/', "\\"))),
+            );
+            for w in &wanted {
+                if !lines.iter().any(|l| l.contains(w.as_str())) {
+                    return fail(format!("no line naming {w}"));
+                }
+            }
+            use std::os::unix::fs::PermissionsExt as _;
+            let mut modes = Vec::new();
+            for rel in ["pki", "pki/private"].iter().chain(files) {
+                let p = self.install_dir().join(rel);
+                let mode = std::fs::metadata(&p)
+                    .map_err(|e| format!("msi-test: {what}: {}: {e}", p.display()))?
+                    .permissions()
+                    .mode()
+                    & 0o777;
+                if mode & 0o077 != 0 {
+                    return fail(format!(
+                        "{rel} is mode {mode:o}: its group or others may read it"
+                    ));
+                }
+                modes.push(format!("{rel} {mode:o}"));
+            }
+            println!(
+                "msi-test: {what}: /ProtectSecrets ran {runs} time(s), nothing failed; under Wine (DACL as Unix mode): {}",
+                modes.join(", ")
+            );
+            Ok(())
         }
 
         /// `/UnregServer /KeepSecurity` (the MSI's upgrade removal) after an administrator's
@@ -1476,6 +1572,7 @@ mod wine_test {
         clock.lap("installed");
         ctx.installed("after install")?;
         ctx.security("after install", false, 5)?;
+        ctx.secrets("after install", 1, &[])?;
         ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
@@ -1511,6 +1608,16 @@ mod wine_test {
                 Err(format!("msi-test: {when} removed or changed {USER_LOG}"))
             }
         };
+        // A users file someone copied in, readable by all (0644 here: Everyone under
+        // Wine): the upgrade's /ProtectSecrets narrows it.
+        let users = ctx.install_dir().join("ua-users.txt");
+        let users_text = "operator:writer:pbkdf2-sha256:1:c2FsdA:aGFzaA\r\n";
+        std::fs::write(&users, users_text).map_err(|e| format!("{}: {e}", users.display()))?;
+        {
+            use std::os::unix::fs::PermissionsExt as _;
+            std::fs::set_permissions(&users, std::fs::Permissions::from_mode(0o644))
+                .map_err(|e| format!("{}: {e}", users.display()))?;
+        }
         // An administrator's change (dcomcnfg's "Authentication Level" raised to packet
         // privacy, 6) in both views: the upgrade must keep it.
         ctx.set_authentication_level(6)?;
@@ -1529,6 +1636,10 @@ mod wine_test {
             ));
         }
         log_kept("the upgrade")?;
+        if std::fs::read_to_string(&users).unwrap_or_default() != users_text {
+            return Err("msi-test: the upgrade changed ua-users.txt".into());
+        }
+        ctx.secrets("after upgrade", 2, &["ua-users.txt"])?;
         clock.lap(&format!(
             "upgraded to {new_version}: ASIXConnect.ini and {USER_LOG} kept"
         ));
@@ -1554,7 +1665,7 @@ mod wine_test {
                 ctx.dir.join("uninstall.log").display()
             ));
         }
-        let mut user_files = vec!["ASIXConnect.ini".to_owned()];
+        let mut user_files = vec!["ASIXConnect.ini".to_owned(), "ua-users.txt".to_owned()];
         user_files.extend(
             walk(&ctx.install_dir().join("Log"))
                 .iter()
