@@ -41,7 +41,7 @@
 //! its lines in the server's log (one run at install, one more at the upgrade, nothing
 //! failed) and by what Wine shows of a DACL, the Unix mode it maps it onto: the
 //! certificate store, its private key folder and a users file copied in world-readable
-//! before the upgrade have no group or others bits afterwards.
+//! before the upgrade have no others' bits (Everyone's) afterwards.
 //! The three MSIs are built at once; a prefix copy is 1.3 GB. The time of each step, as
 //! measured: docs/benchmarks.md (about 2 minutes with the template kept and the Windows
 //! build up to date, about 3 from a clean target/wine, as in CI).
@@ -405,6 +405,24 @@ pub fn appid_security(
     Ok(out)
 }
 
+/// Whether the msiexec log `log` (`/l*v`) has the action `name` ending with success:
+/// `Action ended <time>: <name>. Return value 1.` (Windows Installer's format, and Wine's
+/// msi's, which logs a deferred action when it is scheduled and again when it runs).
+pub fn action_succeeded(log: &str, name: &str) -> bool {
+    let tail = format!(": {name}. Return value 1.");
+    log.lines()
+        .any(|l| l.starts_with("Action ended ") && l.trim_end().ends_with(&tail))
+}
+
+/// Whether the msiexec log `log` has the action `name` at all (started or ended).
+pub fn action_ran(log: &str, name: &str) -> bool {
+    let tail = format!(": {name}.");
+    log.lines().any(|l| {
+        (l.starts_with("Action ended ") || l.starts_with("Action start "))
+            && (l.trim_end().ends_with(&tail) || l.contains(&format!("{tail} Return value")))
+    })
+}
+
 #[cfg(test)]
 /// The rows of an MSI table as `msiinfo export` prints them (tab-separated, after three
 /// header lines).
@@ -635,6 +653,25 @@ mod tests {
             Some(vec![1, 255, 2])
         );
         assert_eq!(reg_hex("\"x\"=hex:zz", "x"), None);
+    }
+
+    /// Lines as Wine 8's msi writes them (measured): an action ran and succeeded; one
+    /// with a name that only starts the same (`InstallService` / `InstallServices`) is
+    /// another.
+    #[test]
+    fn the_actions_are_read_from_an_msiexec_log() {
+        let log = "Action start 7:31:02: InstallServices.\n\
+                   Action ended 7:31:02: InstallServices. Return value 1.\n\
+                   Action start 7:31:20: InstallSecurity.\n\
+                   Action ended 7:31:21: InstallSecurity. Return value 1.\n\
+                   Action start 7:31:21: ProtectSecrets.\n\
+                   Action ended 7:31:23: ProtectSecrets. Return value 3.\n";
+        assert!(action_succeeded(log, "InstallSecurity"));
+        assert!(!action_succeeded(log, "ProtectSecrets"));
+        assert!(action_ran(log, "ProtectSecrets"));
+        assert!(!action_succeeded(log, "InstallService"));
+        assert!(!action_ran(log, "InstallService"));
+        assert!(action_ran(log, "InstallServices"));
     }
 
     #[test]
@@ -915,14 +952,44 @@ mod wine_test {
             }
         }
 
+        /// The msiexec log `log` (in the test's folder): each of `ran` succeeded, none of
+        /// `not` ran (its condition false). The deferred actions' own output goes nowhere
+        /// (no console): this is how the test knows the MSI ran them.
+        fn actions(&self, log: &str, ran: &[&str], not: &[&str]) -> Result<(), String> {
+            let path = self.dir.join(log);
+            let raw = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            // Windows Installer may write UTF-16; Wine writes ASCII.
+            let text: String = String::from_utf8_lossy(&raw).replace('\0', "");
+            for a in ran {
+                if !action_succeeded(&text, a) {
+                    return Err(format!(
+                        "msi-test: {log}: the action {a} did not end with success ({})",
+                        path.display()
+                    ));
+                }
+            }
+            for a in not {
+                if action_ran(&text, a) {
+                    return Err(format!("msi-test: {log}: the action {a} ran"));
+                }
+            }
+            println!(
+                "msi-test: {log}: {} ran and succeeded; {} did not run",
+                ran.join(", "),
+                not.join(", ")
+            );
+            Ok(())
+        }
+
         /// `/ProtectSecrets`, the MSI's deferred action at install and upgrade: by now
         /// `runs` times, each a summary line with nothing failed in the server's log
         /// (`Log\ServerCTOPC.<date>.log`: the action's output has no console), with the
         /// OPC UA certificate store and its private key folder made private, and each of
         /// `files` (below the install folder) named private. What Wine can show of the
         /// DACLs: it keeps none, but maps one set onto the Unix mode (an allow ACE for
-        /// Everyone becomes the others' bits, the owner's the user's), so each path made
-        /// private has no group or others bits, where Wine made the folders 0755.
+        /// Everyone becomes the others' bits; the holders', measured, the user's and the
+        /// group's: a folder made private is 0770), so each path made private has no
+        /// others' bits, where Wine made the folders 0755 and the users file was 0644.
         fn secrets(&self, what: &str, runs: usize, files: &[&str]) -> Result<(), String> {
             let log_dir = self.install_dir().join("Log");
             let mut lines = Vec::new();
@@ -978,9 +1045,9 @@ mod wine_test {
                     .permissions()
                     .mode()
                     & 0o777;
-                if mode & 0o077 != 0 {
+                if mode & 0o007 != 0 {
                     return fail(format!(
-                        "{rel} is mode {mode:o}: its group or others may read it"
+                        "{rel} is mode {mode:o}: others (Everyone, under Wine) may use it"
                     ));
                 }
                 modes.push(format!("{rel} {mode:o}"));
@@ -1572,6 +1639,18 @@ mod wine_test {
         clock.lap("installed");
         ctx.installed("after install")?;
         ctx.security("after install", false, 5)?;
+        // The plain install's own `/RegServer /CreateGroup` (the clients' group, the AppID's
+        // security) and `/ProtectSecrets` ran and succeeded; not the service's.
+        ctx.actions(
+            "install.log",
+            &[
+                "RegisterPs64",
+                "RegisterPs32",
+                "InstallSecurity",
+                "ProtectSecrets",
+            ],
+            &["InstallService"],
+        )?;
         ctx.secrets("after install", 1, &[])?;
         ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
@@ -1639,6 +1718,11 @@ mod wine_test {
         if std::fs::read_to_string(&users).unwrap_or_default() != users_text {
             return Err("msi-test: the upgrade changed ua-users.txt".into());
         }
+        ctx.actions(
+            "upgrade.log",
+            &["InstallService", "ProtectSecrets"],
+            &["InstallSecurity"],
+        )?;
         ctx.secrets("after upgrade", 2, &["ua-users.txt"])?;
         clock.lap(&format!(
             "upgraded to {new_version}: ASIXConnect.ini and {USER_LOG} kept"
