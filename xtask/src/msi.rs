@@ -550,15 +550,22 @@ mod tests {
         assert_eq!(upgrade[3], "/UnregServer /KeepSecurity");
         // The files of secrets: deferred (0x400), not impersonated (0x800), its exit code
         // checked (no 0x40), at install and upgrade, after the registration.
-        let protect = actions.iter().find(|r| r[0] == "ProtectSecrets").unwrap();
+        let protect = actions.iter().find(|r| r[0] == "LockSecrets").unwrap();
         assert_eq!(protect[3], "/ProtectSecrets");
         let t = protect[1].parse::<u32>().unwrap();
         assert_eq!(t & (0x400 | 0x800 | 0x40), 0x400 | 0x800, "{protect:?}");
         let sequence = table(&msi, "InstallExecuteSequence").unwrap();
         let at = |a: &str| sequence.iter().find(|r| r[0] == a).unwrap().clone();
-        assert_eq!(at("ProtectSecrets")[1], "NOT REMOVE=\"ALL\"");
+        assert_eq!(at("LockSecrets")[1], "NOT REMOVE=\"ALL\"");
         let seq = |a: &str| at(a)[2].parse::<u32>().unwrap();
-        assert!(seq("ProtectSecrets") > seq("InstallSecurity").max(seq("InstallService")));
+        assert!(seq("LockSecrets") > seq("InstallSecurity").max(seq("InstallService")));
+        // A major upgrade removes the older version before this one is installed (wixl
+        // sequences it after InstallFinalize for some action names: the template says so).
+        assert_eq!(
+            seq("RemoveExistingProducts"),
+            seq("InstallValidate") + 1,
+            "{sequence:?}"
+        );
         for a in actions.iter().filter(|r| r[0].starts_with("Rollback")) {
             let t = a[1].parse::<u32>().unwrap();
             assert_eq!(t & (IN_SCRIPT | ROLLBACK), IN_SCRIPT | ROLLBACK, "{a:?}");
@@ -1647,7 +1654,7 @@ mod wine_test {
                 "RegisterPs64",
                 "RegisterPs32",
                 "InstallSecurity",
-                "ProtectSecrets",
+                "LockSecrets",
             ],
             &["InstallService"],
         )?;
@@ -1720,7 +1727,7 @@ mod wine_test {
         }
         ctx.actions(
             "upgrade.log",
-            &["InstallService", "ProtectSecrets"],
+            &["InstallService", "LockSecrets"],
             &["InstallSecurity"],
         )?;
         ctx.secrets("after upgrade", 2, &["ua-users.txt"])?;
