@@ -1,7 +1,9 @@
 //! /RegServer and /UnregServer: every key in both registry views, idempotence, switch
 //! spellings, usage errors; the AppID's security values (AccessPermission,
 //! LaunchPermission, AuthenticationLevel) written where absent in both views, an
-//! administrator's change kept by registering again; and that this process (the suite runs as a 64-bit and as a
+//! administrator's change kept by registering again; `/RegServer /CreateGroup` (the
+//! MSI's) granting the clients' group or saying why it cannot; `/ProtectSecrets` making a
+//! configuration's secrets private; and that this process (the suite runs as a 64-bit and as a
 //! 32-bit client, `cargo xtask test`) finds the server the ways OPC clients look for it:
 //! by category (ICatInformation::EnumClassesOfCategories, DA 2.0 and 3.0) and by ProgID.
 //!
@@ -349,6 +351,144 @@ fn regserver_writes_the_appid_security_where_absent_and_keeps_an_administrators_
             "{what}"
         );
     }
+}
+
+/// What the MSI runs without SERVICE=1, `/RegServer /CreateGroup`, on a fresh
+/// registration: the AppID's values in both views grant the clients' group when it exists
+/// afterwards (remote access only through it), and the output says which: the group made
+/// or found, or, where it cannot exist (Wine: `NetLocalGroupAdd` is a stub), the WARN
+/// naming why and the descriptors without it.
+#[test]
+fn a_fresh_regserver_creategroup_grants_the_clients_group_or_says_why_not() {
+    use ctopc_registration::security;
+    let _restore = RestoreDefaults;
+    assert!(run(&["/UnregServer"]).status.success());
+    let out = run(&["/RegServer", "/CreateGroup"]);
+    assert!(out.status.success(), "{out:?}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let group = security::CLIENTS_GROUP;
+    let clients = ctopc_com::caller::account_sid(group).and_then(|b| security::Sid::from_bytes(&b));
+    match &clients {
+        Some(sid) => {
+            assert!(
+                stdout.contains(&format!("created the local group \"{group}\""))
+                    || stdout.contains(&format!("the local group \"{group}\" exists")),
+                "{stdout}"
+            );
+            assert!(
+                stdout.contains(&format!(
+                    "the local group \"{group}\" ({sid}) may use the server"
+                )),
+                "{stdout}"
+            );
+        }
+        None => {
+            let why = ctopc_com::com::platform::local_group_missing_reason(group);
+            assert!(stdout.contains(&format!("WARN: {why}")), "{stdout}");
+            assert!(
+                stdout.contains(&format!("WARN: no local group \"{group}\"")),
+                "{stdout}"
+            );
+        }
+    }
+    let appid = format!("AppID\\{CLSID}");
+    let access = security::default_access(false, clients.as_ref());
+    let launch = security::default_launch(false, clients.as_ref());
+    for (what, _, rrf) in VIEWS {
+        for (name, want) in [
+            (security::ACCESS_PERMISSION, &access),
+            (security::LAUNCH_PERMISSION, &launch),
+        ] {
+            assert_eq!(
+                raw_in(rrf, &appid, name).as_deref(),
+                Some(want.to_bytes().as_slice()),
+                "{what}: {name}"
+            );
+        }
+        assert_eq!(
+            raw_in(rrf, &appid, security::AUTHENTICATION_LEVEL).as_deref(),
+            Some(&5u32.to_le_bytes()[..]),
+            "{what}"
+        );
+    }
+    // Remote access only through the group, when there is one.
+    let remote: Vec<&security::Sid> = access
+        .dacl
+        .iter()
+        .flatten()
+        .filter(|a| a.allow && a.mask & security::COM_RIGHTS_EXECUTE_REMOTE != 0)
+        .map(|a| &a.sid)
+        .collect();
+    assert_eq!(
+        remote,
+        clients.iter().collect::<Vec<_>>(),
+        "{}",
+        access.sddl()
+    );
+}
+
+/// `/ProtectSecrets --config FILE` (what the MSI runs, without `--config`): a key the
+/// configuration names, readable by Everyone, is private afterwards, the certificate store
+/// and its private key folder are made; one line per path, exit 0; again, the same. Under
+/// Wine a DACL read back is the one Wine makes from the Unix mode (`secret_file`), which
+/// still shows who besides the owner may read.
+#[test]
+fn protect_secrets_makes_the_configurations_secrets_private() {
+    use ctopc_com::com::secret_file::findings;
+    let dir = std::env::temp_dir().join(format!("ctopc-protect-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("certs")).unwrap();
+    let ini = dir.join("ASIXConnect.ini");
+    std::fs::write(
+        &ini,
+        "[Server]\r\nSimulateCurrentData = tak\r\n[Channel:K1]\r\nAsixNetCertFile = certs\\k1-cert.pem\r\nAsixNetKeyFile = certs\\k1.pem\r\n",
+    )
+    .unwrap();
+    let key = dir.join("certs").join("k1.pem");
+    std::fs::write(&key, b"-----BEGIN PRIVATE KEY-----\n").unwrap();
+    // Opened to Everyone (under Wine: the others' bits).
+    let mut open = ctopc_com::com::secret_file::read(&key).unwrap();
+    open.dacl
+        .get_or_insert_with(Vec::new)
+        .push(security_ace_everyone());
+    open.protected = false;
+    ctopc_com::com::secret_file::set_dacl(&key, &open).unwrap();
+    let before = findings(&key, &[]).unwrap_or_default();
+    assert!(
+        before.contains("Everyone (S-1-1-0) may read it"),
+        "{before}"
+    );
+    for round in 0..2 {
+        let out = run(&["/ProtectSecrets", "--config", ini.to_str().unwrap()]);
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "round {round}: {out:?}");
+        for line in [
+            format!("asix link key [Channel:K1] {}: private", key.display()),
+            format!(
+                "OPC UA private key folder {}",
+                dir.join("pki").join("private").display()
+            ),
+            "ProtectSecrets: 4 paths private, 2 not there yet, 0 failed".to_owned(),
+        ] {
+            assert!(stdout.contains(&line), "round {round}: {line} in {stdout}");
+        }
+        assert_eq!(findings(&key, &[]), None, "round {round}");
+        for folder in [
+            dir.join("pki"),
+            dir.join("pki").join("private"),
+            dir.join("certs"),
+        ] {
+            assert!(folder.is_dir(), "{}", folder.display());
+            assert_eq!(findings(&folder, &[]), None, "{}", folder.display());
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An allow ACE reading a file for Everyone.
+fn security_ace_everyone() -> ctopc_registration::security::Ace {
+    use ctopc_registration::security::{Ace, Sid, EVERYONE};
+    Ace::allow(Sid::parse(EVERYONE).unwrap(), 0x0012_00A9)
 }
 
 /// `CLSID_StdComponentCategoriesMgr`.

@@ -13,7 +13,11 @@
 //! wixl 0.101 has no Component/Condition, so a conditional ServiceInstall component (and
 //! AppID `LocalService` row) cannot be built, and no util:Group; and a Registry table can
 //! neither know the clients' group's SID nor write the AppID's security values only where
-//! absent.
+//! absent. After them, at install and upgrade, the deferred `ServerCTOPC.exe
+//! /ProtectSecrets` makes the files of secrets of the configuration the server finds (the
+//! OPC UA certificate store, made when missing, its private key, the users file, the asix
+//! link's keys) private (wixl has no LockPermissions, and a Registry-like table could not
+//! follow the configuration's paths).
 //!
 //! The feature `Gate` (level 2, so off by default: `ADDLOCAL=ALL`) installs asix-gate, the
 //! 32-bit gateway for the asix station, in `asix-gate\` with its example configuration
@@ -33,7 +37,11 @@
 //! and servers, and must see the first value and both writes; the server's command line
 //! (/proc) shows COM started `-Embedding`, after `SERVICE=1` the service (`-ServiceRun`).
 //! The default install has no gate; the upgrade adds it (`ADDLOCAL=ALL`: the files and
-//! the service are checked); the uninstall removes it.
+//! the service are checked); the uninstall removes it. `/ProtectSecrets` is checked by
+//! its lines in the server's log (one run at install, one more at the upgrade, nothing
+//! failed) and by what Wine shows of a DACL, the Unix mode it maps it onto: the
+//! certificate store, its private key folder and a users file copied in world-readable
+//! before the upgrade have no others' bits (Everyone's) afterwards.
 //! The three MSIs are built at once; a prefix copy is 1.3 GB. The time of each step, as
 //! measured: docs/benchmarks.md (about 2 minutes with the template kept and the Windows
 //! build up to date, about 3 from a clean target/wine, as in CI).
@@ -397,6 +405,24 @@ pub fn appid_security(
     Ok(out)
 }
 
+/// Whether the msiexec log `log` (`/l*v`) has the action `name` ending with success:
+/// `Action ended <time>: <name>. Return value 1.` (Windows Installer's format, and Wine's
+/// msi's, which logs a deferred action when it is scheduled and again when it runs).
+pub fn action_succeeded(log: &str, name: &str) -> bool {
+    let tail = format!(": {name}. Return value 1.");
+    log.lines()
+        .any(|l| l.starts_with("Action ended ") && l.trim_end().ends_with(&tail))
+}
+
+/// Whether the msiexec log `log` has the action `name` at all (started or ended).
+pub fn action_ran(log: &str, name: &str) -> bool {
+    let tail = format!(": {name}.");
+    log.lines().any(|l| {
+        (l.starts_with("Action ended ") || l.starts_with("Action start "))
+            && (l.trim_end().ends_with(&tail) || l.contains(&format!("{tail} Return value")))
+    })
+}
+
 #[cfg(test)]
 /// The rows of an MSI table as `msiinfo export` prints them (tab-separated, after three
 /// header lines).
@@ -522,6 +548,24 @@ mod tests {
             .find(|r| r[0] == "UpgradeUninstallServer")
             .unwrap();
         assert_eq!(upgrade[3], "/UnregServer /KeepSecurity");
+        // The files of secrets: deferred (0x400), not impersonated (0x800), its exit code
+        // checked (no 0x40), at install and upgrade, after the registration.
+        let protect = actions.iter().find(|r| r[0] == "LockSecrets").unwrap();
+        assert_eq!(protect[3], "/ProtectSecrets");
+        let t = protect[1].parse::<u32>().unwrap();
+        assert_eq!(t & (0x400 | 0x800 | 0x40), 0x400 | 0x800, "{protect:?}");
+        let sequence = table(&msi, "InstallExecuteSequence").unwrap();
+        let at = |a: &str| sequence.iter().find(|r| r[0] == a).unwrap().clone();
+        assert_eq!(at("LockSecrets")[1], "NOT REMOVE=\"ALL\"");
+        let seq = |a: &str| at(a)[2].parse::<u32>().unwrap();
+        assert!(seq("LockSecrets") > seq("InstallSecurity").max(seq("InstallService")));
+        // A major upgrade removes the older version before this one is installed (wixl
+        // sequences it after InstallFinalize for some action names: the template says so).
+        assert_eq!(
+            seq("RemoveExistingProducts"),
+            seq("InstallValidate") + 1,
+            "{sequence:?}"
+        );
         for a in actions.iter().filter(|r| r[0].starts_with("Rollback")) {
             let t = a[1].parse::<u32>().unwrap();
             assert_eq!(t & (IN_SCRIPT | ROLLBACK), IN_SCRIPT | ROLLBACK, "{a:?}");
@@ -616,6 +660,25 @@ mod tests {
             Some(vec![1, 255, 2])
         );
         assert_eq!(reg_hex("\"x\"=hex:zz", "x"), None);
+    }
+
+    /// Lines as Wine 8's msi writes them (measured): an action ran and succeeded; one
+    /// with a name that only starts the same (`InstallService` / `InstallServices`) is
+    /// another.
+    #[test]
+    fn the_actions_are_read_from_an_msiexec_log() {
+        let log = "Action start 7:31:02: InstallServices.\n\
+                   Action ended 7:31:02: InstallServices. Return value 1.\n\
+                   Action start 7:31:20: InstallSecurity.\n\
+                   Action ended 7:31:21: InstallSecurity. Return value 1.\n\
+                   Action start 7:31:21: ProtectSecrets.\n\
+                   Action ended 7:31:23: ProtectSecrets. Return value 3.\n";
+        assert!(action_succeeded(log, "InstallSecurity"));
+        assert!(!action_succeeded(log, "ProtectSecrets"));
+        assert!(action_ran(log, "ProtectSecrets"));
+        assert!(!action_succeeded(log, "InstallService"));
+        assert!(!action_ran(log, "InstallService"));
+        assert!(action_ran(log, "InstallServices"));
     }
 
     #[test]
@@ -894,6 +957,113 @@ mod wine_test {
                     "msi-test: `ServerCTOPC.exe /RegServer /CreateGroup`: exit {code}, no WARN about Wine's NetLocalGroupAdd:\n{out}"
                 )),
             }
+        }
+
+        /// The msiexec log `log` (in the test's folder): each of `ran` succeeded, none of
+        /// `not` ran (its condition false). The deferred actions' own output goes nowhere
+        /// (no console): this is how the test knows the MSI ran them.
+        fn actions(&self, log: &str, ran: &[&str], not: &[&str]) -> Result<(), String> {
+            let path = self.dir.join(log);
+            let raw = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            // Windows Installer may write UTF-16; Wine writes ASCII.
+            let text: String = String::from_utf8_lossy(&raw).replace('\0', "");
+            for a in ran {
+                if !action_succeeded(&text, a) {
+                    return Err(format!(
+                        "msi-test: {log}: the action {a} did not end with success ({})",
+                        path.display()
+                    ));
+                }
+            }
+            for a in not {
+                if action_ran(&text, a) {
+                    return Err(format!("msi-test: {log}: the action {a} ran"));
+                }
+            }
+            println!(
+                "msi-test: {log}: {} ran and succeeded; {} did not run",
+                ran.join(", "),
+                not.join(", ")
+            );
+            Ok(())
+        }
+
+        /// `/ProtectSecrets`, the MSI's deferred action at install and upgrade: by now
+        /// `runs` times, each a summary line with nothing failed in the server's log
+        /// (`Log\ServerCTOPC.<date>.log`: the action's output has no console), with the
+        /// OPC UA certificate store and its private key folder made private, and each of
+        /// `files` (below the install folder) named private. What Wine can show of the
+        /// DACLs: it keeps none, but maps one set onto the Unix mode (an allow ACE for
+        /// Everyone becomes the others' bits; the holders', measured, the user's and the
+        /// group's: a folder made private is 0770), so each path made private has no
+        /// others' bits, where Wine made the folders 0755 and the users file was 0644.
+        fn secrets(&self, what: &str, runs: usize, files: &[&str]) -> Result<(), String> {
+            let log_dir = self.install_dir().join("Log");
+            let mut lines = Vec::new();
+            for f in walk(&log_dir) {
+                let name = f.file_name().map(|n| n.to_string_lossy().into_owned());
+                if name.is_some_and(|n| n.starts_with("ServerCTOPC.") && n.ends_with(".log")) {
+                    let text = std::fs::read(&f).unwrap_or_default();
+                    lines.extend(
+                        String::from_utf8_lossy(&text)
+                            .lines()
+                            .filter(|l| l.contains("ProtectSecrets: "))
+                            .map(str::to_owned),
+                    );
+                }
+            }
+            let summaries: Vec<&String> = lines
+                .iter()
+                .filter(|l| l.contains(" not there yet, "))
+                .collect();
+            let fail = |why: String| {
+                Err(format!(
+                    "msi-test: {what}: /ProtectSecrets: {why}; its lines in {}:\n{}",
+                    log_dir.display(),
+                    lines.join("\n")
+                ))
+            };
+            if summaries.len() != runs {
+                return fail(format!("{} runs logged, not {runs}", summaries.len()));
+            }
+            if let Some(s) = summaries.iter().find(|l| !l.contains(", 0 failed (")) {
+                return fail(format!("a run failed: {s}"));
+            }
+            let mut wanted: Vec<String> = vec![
+                "OPC UA certificate store".into(),
+                "OPC UA private key folder".into(),
+            ];
+            wanted.extend(
+                files
+                    .iter()
+                    .map(|f| format!("{}: private", f.replace('/', "\\"))),
+            );
+            for w in &wanted {
+                if !lines.iter().any(|l| l.contains(w.as_str())) {
+                    return fail(format!("no line naming {w}"));
+                }
+            }
+            use std::os::unix::fs::PermissionsExt as _;
+            let mut modes = Vec::new();
+            for rel in ["pki", "pki/private"].iter().chain(files) {
+                let p = self.install_dir().join(rel);
+                let mode = std::fs::metadata(&p)
+                    .map_err(|e| format!("msi-test: {what}: {}: {e}", p.display()))?
+                    .permissions()
+                    .mode()
+                    & 0o777;
+                if mode & 0o007 != 0 {
+                    return fail(format!(
+                        "{rel} is mode {mode:o}: others (Everyone, under Wine) may use it"
+                    ));
+                }
+                modes.push(format!("{rel} {mode:o}"));
+            }
+            println!(
+                "msi-test: {what}: /ProtectSecrets ran {runs} time(s), nothing failed; under Wine (DACL as Unix mode): {}",
+                modes.join(", ")
+            );
+            Ok(())
         }
 
         /// `/UnregServer /KeepSecurity` (the MSI's upgrade removal) after an administrator's
@@ -1476,6 +1646,19 @@ mod wine_test {
         clock.lap("installed");
         ctx.installed("after install")?;
         ctx.security("after install", false, 5)?;
+        // The plain install's own `/RegServer /CreateGroup` (the clients' group, the AppID's
+        // security) and `/ProtectSecrets` ran and succeeded; not the service's.
+        ctx.actions(
+            "install.log",
+            &[
+                "RegisterPs64",
+                "RegisterPs32",
+                "InstallSecurity",
+                "LockSecrets",
+            ],
+            &["InstallService"],
+        )?;
+        ctx.secrets("after install", 1, &[])?;
         ctx.clients_group()?;
         ctx.serves("after install", "-Embedding")?;
         clock.lap("both clients served after the install");
@@ -1511,6 +1694,16 @@ mod wine_test {
                 Err(format!("msi-test: {when} removed or changed {USER_LOG}"))
             }
         };
+        // A users file someone copied in, readable by all (0644 here: Everyone under
+        // Wine): the upgrade's /ProtectSecrets narrows it.
+        let users = ctx.install_dir().join("ua-users.txt");
+        let users_text = "operator:writer:pbkdf2-sha256:1:c2FsdA:aGFzaA\r\n";
+        std::fs::write(&users, users_text).map_err(|e| format!("{}: {e}", users.display()))?;
+        {
+            use std::os::unix::fs::PermissionsExt as _;
+            std::fs::set_permissions(&users, std::fs::Permissions::from_mode(0o644))
+                .map_err(|e| format!("{}: {e}", users.display()))?;
+        }
         // An administrator's change (dcomcnfg's "Authentication Level" raised to packet
         // privacy, 6) in both views: the upgrade must keep it.
         ctx.set_authentication_level(6)?;
@@ -1529,6 +1722,15 @@ mod wine_test {
             ));
         }
         log_kept("the upgrade")?;
+        if std::fs::read_to_string(&users).unwrap_or_default() != users_text {
+            return Err("msi-test: the upgrade changed ua-users.txt".into());
+        }
+        ctx.actions(
+            "upgrade.log",
+            &["InstallService", "LockSecrets"],
+            &["InstallSecurity"],
+        )?;
+        ctx.secrets("after upgrade", 2, &["ua-users.txt"])?;
         clock.lap(&format!(
             "upgraded to {new_version}: ASIXConnect.ini and {USER_LOG} kept"
         ));
@@ -1554,7 +1756,7 @@ mod wine_test {
                 ctx.dir.join("uninstall.log").display()
             ));
         }
-        let mut user_files = vec!["ASIXConnect.ini".to_owned()];
+        let mut user_files = vec!["ASIXConnect.ini".to_owned(), "ua-users.txt".to_owned()];
         user_files.extend(
             walk(&ctx.install_dir().join("Log"))
                 .iter()

@@ -29,6 +29,10 @@ pub enum Command {
     },
     /// Trust a client certificate: copy it to the PKI folder's `trusted/`.
     PkiTrust(String),
+    /// Make the files of secrets the configuration names private, and prepare their
+    /// folders (`/ProtectSecrets [--config FILE]`, what the MSI runs): `config` names the
+    /// configuration instead of the usual lookup.
+    ProtectSecrets { config: Option<String> },
     /// Print usage and exit 0.
     Help,
 }
@@ -47,6 +51,16 @@ usage: ServerCTOPC.exe <switch>
                  also create the local group \"ServerCTOPC Clients\" (the MSI does)
   /UnregServer /KeepSecurity
                  keep the AppID's security values (the MSI's major upgrade does)
+  /ProtectSecrets [--config FILE]
+                 make the files of secrets private (readable only by SYSTEM,
+                 Administrators, LOCAL SERVICE and the account running this): the OPC UA
+                 certificate store pki\\ (made when missing, with what is in it), its
+                 private key, the users file, each channel's AsixNetKeyFile, and the
+                 folder of such a file when it is one of its own below the
+                 configuration's (made when missing: files made there later inherit
+                 nothing wider); a file not there yet is no error. One line per path,
+                 also in the log; the MSI runs it at install and upgrade. The
+                 configuration: FILE, else as the server finds it
   -Embedding     (used by COM) serve OPC clients; the server exits when the last
                  client has gone
   -ServiceRun    (used by the service control manager) run as the NT service
@@ -125,6 +139,7 @@ where
         "servicerun" => Command::ServiceRun,
         "serve" => Command::Serve,
         "?" | "h" | "help" => Command::Help,
+        "protectsecrets" => return parse_protect(&args[1..]),
         _ => return Err(format!("unknown switch `{first}`")),
     };
     // COM passes nothing else with -Embedding; registration takes only its option.
@@ -137,6 +152,28 @@ where
         return Err(format!("unexpected argument `{extra}` after `{first}`"));
     }
     Ok(cmd)
+}
+
+const PROTECT_USAGE: &str = "usage: /ProtectSecrets [--config FILE]";
+
+/// The options after `/ProtectSecrets`: none, or `--config FILE` (`/Config`, `-config`
+/// too, in any case).
+fn parse_protect(args: &[String]) -> Result<Command, String> {
+    match args {
+        [] => Ok(Command::ProtectSecrets { config: None }),
+        [option, file]
+            if option
+                .trim_start_matches(['/', '-'])
+                .eq_ignore_ascii_case("config")
+                && option.len() > "config".len()
+                && !file.is_empty() =>
+        {
+            Ok(Command::ProtectSecrets {
+                config: Some(file.clone()),
+            })
+        }
+        _ => Err(PROTECT_USAGE.into()),
+    }
 }
 
 const USER_USAGE: &str = "usage: user add NAME --role reader|writer [--password-stdin]";
@@ -296,6 +333,42 @@ mod tests {
         ] {
             assert!(parse(bad).is_err(), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn protect_secrets_takes_an_optional_configuration() {
+        assert_eq!(
+            parse(["/ProtectSecrets"]),
+            Ok(Command::ProtectSecrets { config: None })
+        );
+        assert_eq!(
+            parse(["-protectsecrets"]),
+            Ok(Command::ProtectSecrets { config: None })
+        );
+        for option in ["--config", "/Config", "-CONFIG"] {
+            assert_eq!(
+                parse(["/ProtectSecrets", option, "D:\\plant\\ASIXConnect.ini"]),
+                Ok(Command::ProtectSecrets {
+                    config: Some("D:\\plant\\ASIXConnect.ini".into())
+                }),
+                "{option}"
+            );
+        }
+        for bad in [
+            &["/ProtectSecrets", "--config"][..],
+            &["/ProtectSecrets", "--config", ""],
+            &["/ProtectSecrets", "config", "a.ini"],
+            &["/ProtectSecrets", "--conf", "a.ini"],
+            &["/ProtectSecrets", "--config", "a.ini", "b"],
+            &["/ProtectSecrets", "/CreateGroup"],
+        ] {
+            assert_eq!(
+                parse(bad),
+                Err("usage: /ProtectSecrets [--config FILE]".into()),
+                "{bad:?}"
+            );
+        }
+        assert!(USAGE.contains("/ProtectSecrets [--config FILE]"));
     }
 
     #[test]

@@ -2,7 +2,8 @@
 //! up logging, choose the data source (`backend`), then hand over to the COM layer
 //! (`ctopc_com::host`) with the namespace and plain values, and the OPC UA front end
 //! (`ua`) to start beside DA over the same runtime when the configuration enables it. On
-//! Linux it serves OPC UA alone (`ua`: `serve`). `user add` and `pki trust` on both.
+//! Linux it serves OPC UA alone (`ua`: `serve`). `user add`, `pki trust` and
+//! `/ProtectSecrets` (`protect`) on both.
 
 mod cli;
 // config and logging are plain Rust, tested natively; the Windows server uses both, the
@@ -11,6 +12,7 @@ mod cli;
 mod config;
 #[cfg_attr(not(windows), allow(dead_code))]
 mod logging;
+mod protect;
 mod ua;
 
 use std::process::ExitCode;
@@ -30,7 +32,63 @@ fn main() -> ExitCode {
         print!("{}", cli::USAGE);
         return ExitCode::SUCCESS;
     }
+    if let cli::Command::ProtectSecrets { config } = &cmd {
+        return protect_secrets(config.as_deref());
+    }
     run(cmd)
+}
+
+/// `/ProtectSecrets [--config FILE]` (`protect`): the configuration (`FILE`, else as the
+/// server finds it), then one line per path on standard output and, on Windows, in the
+/// server's log too (the MSI runs it without a console). Exit code 0 when every path is
+/// private or not there yet; 1 when one could not be made private or the configuration
+/// cannot be read.
+fn protect_secrets(file: Option<&str>) -> ExitCode {
+    use std::path::{Path, PathBuf};
+    let exe_dir = ua::exe_dir();
+    let loaded = match file {
+        Some(f) => {
+            let path = std::path::absolute(f).unwrap_or_else(|_| PathBuf::from(f));
+            asix_model::startup::load_file(Path::new(&path))
+                .map(|l| (config::ConfigSource::File(path), l))
+        }
+        None => config::load(&exe_dir),
+    };
+    let (source, loaded) = match loaded {
+        Ok(x) => x,
+        Err(e) => {
+            let line = format!("{} the configuration cannot be read: {e}", protect::PREFIX);
+            eprintln!("ServerCTOPC: {line}");
+            #[cfg(windows)]
+            logging::emergency(&exe_dir, &line);
+            return ExitCode::FAILURE;
+        }
+    };
+    let config = loaded.namespace.config();
+    // The server's log, as the server resolves its folder.
+    #[cfg(windows)]
+    let _guard = {
+        let mut log_options = config.server.clone();
+        log_options.log_directory = log_options
+            .log_directory
+            .as_deref()
+            .map(|d| config.resolve_path(d).to_string_lossy().into_owned());
+        logging::init(&exe_dir, &log_options)
+    };
+    let targets = protect::plan(config, &ua::config_dir(&source));
+    let ok = protect::run(&targets, &source.log_line(), |line| {
+        println!("{line}");
+        if line.contains(": FAILED: ") {
+            tracing::error!("{line}");
+        } else {
+            tracing::info!("{line}");
+        }
+    });
+    if ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    }
 }
 
 // The data source: plain Rust, tested natively.
@@ -72,7 +130,7 @@ fn run(cmd: cli::Command) -> ExitCode {
                 }
             }
         }
-        cli::Command::Help => Ok(()),
+        cli::Command::Help | cli::Command::ProtectSecrets { .. } => Ok(()),
         cli::Command::UserAdd {
             name,
             role,

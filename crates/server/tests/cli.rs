@@ -1,6 +1,6 @@
-//! The native command line of `ServerCTOPC` as an operator meets it: `user add` and
-//! `pki trust` against a configuration in a scratch folder, and the refusals of bad input
-//! (exit code and message). Linux only: on Windows those commands belong to the COM build.
+//! The native command line of `ServerCTOPC` as an operator meets it: `user add`, `pki
+//! trust` and `/ProtectSecrets` against a configuration in a scratch folder, and the
+//! refusals of bad input (exit code and message). Linux only: on Windows those commands belong to the COM build.
 #![cfg(not(windows))]
 
 use std::io::Write;
@@ -180,5 +180,76 @@ fn pki_trust_refuses_what_is_not_a_certificate_and_trusts_nothing() {
     assert!(
         !dir.join("pki").join("trusted").exists(),
         "something was trusted"
+    );
+}
+
+/// `-ProtectSecrets --config FILE` (the configuration named, not `SERVERCTOPC_INI`'s): the
+/// users file someone opened narrowed to 0600, the certificate store made 0700, a line per
+/// path and the summary; a configuration that cannot be read is exit 1 naming it.
+#[test]
+fn protect_secrets_narrows_the_named_configurations_secrets() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = |p: &Path| std::fs::metadata(p).expect("metadata").permissions().mode() & 0o777;
+    let elsewhere = scratch("protect-env");
+    let dir = scratch("protect");
+    let o = run(
+        &dir,
+        &[
+            "user",
+            "add",
+            "operator1",
+            "--role",
+            "writer",
+            "--password-stdin",
+        ],
+        "Kwas-siarkowy-98%\n",
+    );
+    assert!(o.status.success(), "user add failed: {}", stderr(&o));
+    let users = dir.join("ua-users.txt");
+    std::fs::set_permissions(&users, std::fs::Permissions::from_mode(0o644)).expect("chmod");
+    let ini = dir.join("ASIXConnect.ini");
+    let o = run(
+        &elsewhere,
+        &["-ProtectSecrets", "--config", ini.to_str().expect("utf-8")],
+        "",
+    );
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{out}{}", stderr(&o));
+    assert_eq!(mode(&users), 0o600);
+    assert_eq!(mode(&dir.join("pki")), 0o700);
+    assert_eq!(mode(&dir.join("pki/private")), 0o700);
+    assert!(
+        !elsewhere.join("pki").exists(),
+        "SERVERCTOPC_INI's folder was used"
+    );
+    assert!(
+        out.contains(&format!(
+            "ProtectSecrets: OPC UA users file {}: private",
+            users.display()
+        )),
+        "{out}"
+    );
+    assert!(
+        out.lines().last().is_some_and(|l| l.starts_with(
+            "ProtectSecrets: 3 paths private, 1 not there yet, 0 failed (configuration: "
+        )),
+        "{out}"
+    );
+    let missing = dir.join("missing.ini");
+    let o = run(
+        &dir,
+        &[
+            "/ProtectSecrets",
+            "/config",
+            missing.to_str().expect("utf-8"),
+        ],
+        "",
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("ProtectSecrets: the configuration cannot be read: ")
+            && stderr(&o).contains("missing.ini"),
+        "{}",
+        stderr(&o)
     );
 }
