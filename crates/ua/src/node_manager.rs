@@ -525,6 +525,8 @@ impl NodeManager for AsixNodeManager {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let mut initial: Vec<(usize, String)> = Vec::new();
+        // The Value items, added to the engine together after the loop.
+        let mut values: Vec<(usize, String, u32)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
             let target = item.item_to_monitor().clone();
             let resolved = match self.space.resolve(&target.node_id) {
@@ -541,19 +543,7 @@ impl NodeManager for AsixNodeManager {
                         continue;
                     }
                     let rate = self.monitor.revise(item.sampling_interval());
-                    match self.monitor.add(&info.item_id, rate) {
-                        Ok(()) => {
-                            item.revise_sampling_interval(f64::from(rate));
-                            self.items()
-                                .insert(item.handle(), (info.item_id.clone(), rate));
-                            item.set_status(StatusCode::Good);
-                            initial.push((i, info.item_id.clone()));
-                        }
-                        Err(e) => {
-                            self.budget.give_back();
-                            item.set_status(error_to_status(e, false));
-                        }
-                    }
+                    values.push((i, info.item_id, rate));
                 }
                 r => match self
                     .space
@@ -565,6 +555,28 @@ impl NodeManager for AsixNodeManager {
                     }
                     Err(e) => item.set_status(e),
                 },
+            }
+        }
+        let added = {
+            let req: Vec<(&str, u32)> = values
+                .iter()
+                .map(|(_, id, rate)| (id.as_str(), *rate))
+                .collect();
+            self.monitor.add_many(&req)
+        };
+        for ((i, item_id, rate), r) in values.into_iter().zip(added) {
+            let item = &mut items[i];
+            match r {
+                Ok(()) => {
+                    item.revise_sampling_interval(f64::from(rate));
+                    self.items().insert(item.handle(), (item_id.clone(), rate));
+                    item.set_status(StatusCode::Good);
+                    initial.push((i, item_id));
+                }
+                Err(e) => {
+                    self.budget.give_back();
+                    item.set_status(error_to_status(e, false));
+                }
             }
         }
         if initial.is_empty() {
