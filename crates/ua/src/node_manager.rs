@@ -627,12 +627,17 @@ impl NodeManager for AsixNodeManager {
     }
 
     async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
-        for item in items {
-            let removed = self.items().remove(&item.handle());
-            if let Some((id, rate)) = removed {
-                self.budget.give_back();
-                self.monitor.remove(&id, rate);
-            }
+        let removed: Vec<(String, u32)> = {
+            let mut map = self.items();
+            items
+                .iter()
+                .filter_map(|item| map.remove(&item.handle()))
+                .collect()
+        };
+        for _ in &removed {
+            self.budget.give_back();
         }
+        let req: Vec<(&str, u32)> = removed.iter().map(|(id, r)| (id.as_str(), *r)).collect();
+        self.monitor.remove_many(&req);
     }
 }

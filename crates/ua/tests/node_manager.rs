@@ -401,9 +401,10 @@ fn monitored_items_share_one_engine_item_per_variable_and_deliver_changes() {
     assert_eq!(m.variables(), 0);
 }
 
-/// Monitored items created in one request go to the engine together, with the results of
-/// one by one: one engine item per variable (a variable twice in the request, at two rates,
-/// is placed once), an unknown item refused alone, the others delivering changes.
+/// Monitored items created (and deleted) in one request go to the engine together, with
+/// the results of one by one: one engine item per variable (a variable twice in the
+/// request, at two rates, is placed once), an unknown item refused alone, the others
+/// delivering changes.
 #[test]
 fn monitored_items_created_together_are_placed_as_one_by_one() {
     let f = fixture();
@@ -423,14 +424,16 @@ fn monitored_items_created_together_are_placed_as_one_by_one() {
     wait_until("data changes of both variables", || {
         f.notes.count_for(&item("KW_A001")) >= 1 && f.notes.count_for(&item("KW_A002")) >= 1
     });
-    // The fast item of KW_A001 goes: it moves to the slow group, still one engine item.
-    m.remove("KW_A001", fast);
+    // Deleted together: the fast item of KW_A001 goes, it moves to the slow group, still
+    // one engine item; an item never made changes nothing.
+    m.remove_many(&[("KW_A001", fast), ("NO_SUCH_VARIABLE", fast)]);
     assert_eq!(stats().group_items, 2);
-    m.remove("KW_A001", slow);
-    m.remove("KW_A002", fast);
+    assert_eq!(m.variables(), 2);
+    m.remove_many(&[("KW_A001", slow), ("KW_A002", fast)]);
     assert_eq!(stats().group_items, 0);
     assert_eq!(m.variables(), 0);
     assert!(m.add_many(&[]).is_empty());
+    m.remove_many(&[]);
 }
 
 #[test]
