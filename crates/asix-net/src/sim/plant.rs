@@ -1708,7 +1708,7 @@ mod tests {
     /// One advance of a large plant far behind computes at most `MAX_CATCH_UP_VAR_STEPS`
     /// variable steps (at least one tick) and skips the earlier ticks, whatever the time
     /// behind: the in-process simulation advances the plant under the engine's lock, so a
-    /// device read after an idle hour costs a plant of 100,000 variables 20 ticks, not
+    /// device read after an idle hour costs a plant of 100,000 variables 19 ticks, not
     /// 10,000 (10^9 variable steps, minutes of the engine locked). A small plant still
     /// computes every tick it can.
     #[test]
