@@ -642,10 +642,9 @@ pub const MAX_CATCH_UP_TICKS: u64 = 10_000;
 /// At most this many variable steps (ticks × variables) are computed in one `advance_to`,
 /// and at least one tick: a tick steps every variable of the plant, so a large plant
 /// catches up fewer ticks and skips the rest. The in-process simulation advances the plant
-/// under the engine's lock; without this bound a plant of 1,000,000 variables left idle
-/// for a minute (no subscription polls it) made the next device read compute 240 ticks,
-/// 240,000,000 variable steps, before it answered, and on a loaded machine the plant
-/// never caught up again: every read and every new item waited for it.
+/// under the engine's lock: unbounded, a plant of 1,000,000 variables left idle for a
+/// minute (no subscription polls it) would compute 240 ticks, 240,000,000 variable steps,
+/// at the next device read before answering it, every other read and new item waiting.
 pub const MAX_CATCH_UP_VAR_STEPS: u64 = 2_000_000;
 
 /// The ticks one `advance_to` computes at most for a plant of `vars` variables.
