@@ -138,10 +138,150 @@ impl Monitor {
         r
     }
 
+    /// Monitored items created together, `(item ID, rate ms)` each: as [`Monitor::add`] of
+    /// each in turn, but the variables newly placed in a group are added to it in one
+    /// engine call (one lock of the engine, one source subscription request), not one
+    /// call per item.
+    pub fn add_many(&self, items: &[(&str, u32)]) -> Vec<Result<(), OpcError>> {
+        let mut st = lock(&self.state);
+        let st = &mut *st;
+        for &(item_id, rate) in items {
+            let node = st.nodes.entry(item_id.to_owned()).or_default();
+            if node.rates.is_empty() {
+                st.next_client = st.next_client.wrapping_add(1);
+                node.client = st.next_client;
+                st.by_client.insert(node.client, item_id.to_owned());
+            }
+            *node.rates.entry(rate).or_default() += 1;
+        }
+        // The variables to place (each once), by the rate of the group they go to.
+        let mut by_rate: BTreeMap<u32, Vec<&str>> = BTreeMap::new();
+        let mut seen = std::collections::HashSet::new();
+        for &(item_id, _) in items {
+            if !seen.insert(item_id) {
+                continue;
+            }
+            let node = &st.nodes[item_id];
+            let Some((&want, _)) = node.rates.iter().next() else {
+                continue;
+            };
+            if node.placed.is_some_and(|(r, _)| r == want) {
+                continue;
+            }
+            by_rate.entry(want).or_default().push(item_id);
+        }
+        let mut failed: HashMap<&str, OpcError> = HashMap::new();
+        for (rate, ids) in by_rate {
+            if let Err(e) = self.place_many(st, rate, &ids, &mut failed) {
+                failed.extend(ids.iter().map(|id| (*id, e)));
+            }
+        }
+        items
+            .iter()
+            .map(|&(item_id, rate)| match failed.get(item_id) {
+                Some(&e) => {
+                    self.remove_locked(st, item_id, rate);
+                    Err(e)
+                }
+                None => Ok(()),
+            })
+            .collect()
+    }
+
+    /// Places the variables `ids` (rates already counted) in the group of `rate` ms with
+    /// one engine call; the variables the engine refused go to `failed`.
+    fn place_many<'a>(
+        &self,
+        st: &mut State,
+        rate: u32,
+        ids: &[&'a str],
+        failed: &mut HashMap<&'a str, OpcError>,
+    ) -> Result<(), OpcError> {
+        let group = self.group(st, rate)?;
+        let defs: Vec<ItemDefinition<'_>> = ids
+            .iter()
+            .map(|id| ItemDefinition {
+                item_id: id,
+                access_path: "",
+                active: true,
+                client_handle: st.nodes[*id].client,
+                requested_type: VarType::EMPTY,
+            })
+            .collect();
+        let added = self
+            .runtime()
+            .with_engine(|e, now| e.add_items(now, group, &defs))?;
+        for (i, id) in ids.iter().enumerate() {
+            match added.get(i) {
+                Some(Ok(r)) => {
+                    let old = st
+                        .nodes
+                        .get_mut(*id)
+                        .and_then(|node| node.placed.replace((rate, r.server_handle)));
+                    if let Some((old_rate, handle)) = old {
+                        self.unplace(st, old_rate, handle);
+                    }
+                }
+                Some(Err(e)) => {
+                    failed.insert(*id, *e);
+                }
+                None => {
+                    failed.insert(*id, OpcError::Fail);
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// A monitored item of `item_id` at `rate` ms was deleted.
     pub fn remove(&self, item_id: &str, rate: u32) {
         let mut st = lock(&self.state);
         self.remove_locked(&mut st, item_id, rate);
+    }
+
+    /// Monitored items deleted together, `(item ID, rate ms)` each: as [`Monitor::remove`]
+    /// of each in turn, but the engine items of the variables no item monitors any more
+    /// are removed in one engine call per group, not one call per item.
+    pub fn remove_many(&self, items: &[(&str, u32)]) {
+        let mut st = lock(&self.state);
+        let st = &mut *st;
+        let mut gone: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+        let mut moved = Vec::new();
+        for &(item_id, rate) in items {
+            let Some(node) = st.nodes.get_mut(item_id) else {
+                continue;
+            };
+            if let Some(n) = node.rates.get_mut(&rate) {
+                *n -= 1;
+                if *n == 0 {
+                    node.rates.remove(&rate);
+                }
+            }
+            if !node.rates.is_empty() {
+                moved.push(item_id);
+                continue;
+            }
+            if let Some(node) = st.nodes.remove(item_id) {
+                st.by_client.remove(&node.client);
+                if let Some((rate, handle)) = node.placed {
+                    gone.entry(rate).or_default().push(handle);
+                }
+            }
+        }
+        for (rate, handles) in gone {
+            if let Some(&g) = st.groups.get(&rate) {
+                let _ = self
+                    .runtime()
+                    .with_engine(|e, now| e.remove_items(now, g, &handles));
+            }
+        }
+        for item_id in moved {
+            if st.nodes.contains_key(item_id) {
+                if let Err(e) = self.place(st, item_id) {
+                    tracing::warn!("OPC UA: cannot move {item_id} to another group: {e}");
+                }
+            }
+        }
     }
 
     /// A monitored item's rate changed.

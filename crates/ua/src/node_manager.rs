@@ -540,6 +540,8 @@ impl NodeManager for AsixNodeManager {
         let may_write = self.roles.may_write(&context.token);
         let lang = self.session_lang(context);
         let mut initial: Vec<(usize, String)> = Vec::new();
+        // The Value items, added to the engine together after the loop.
+        let mut values: Vec<(usize, String, u32)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
             let target = item.item_to_monitor().clone();
             let resolved = match self.space.resolve(&target.node_id) {
@@ -556,19 +558,7 @@ impl NodeManager for AsixNodeManager {
                         continue;
                     }
                     let rate = self.monitor.revise(item.sampling_interval());
-                    match self.monitor.add(&info.item_id, rate) {
-                        Ok(()) => {
-                            item.revise_sampling_interval(f64::from(rate));
-                            self.items()
-                                .insert(item.handle(), (info.item_id.clone(), rate));
-                            item.set_status(StatusCode::Good);
-                            initial.push((i, info.item_id.clone()));
-                        }
-                        Err(e) => {
-                            self.budget.give_back();
-                            item.set_status(error_to_status(e, false));
-                        }
-                    }
+                    values.push((i, info.item_id, rate));
                 }
                 r => match self
                     .space
@@ -580,6 +570,28 @@ impl NodeManager for AsixNodeManager {
                     }
                     Err(e) => item.set_status(e),
                 },
+            }
+        }
+        let added = {
+            let req: Vec<(&str, u32)> = values
+                .iter()
+                .map(|(_, id, rate)| (id.as_str(), *rate))
+                .collect();
+            self.monitor.add_many(&req)
+        };
+        for ((i, item_id, rate), r) in values.into_iter().zip(added) {
+            let item = &mut items[i];
+            match r {
+                Ok(()) => {
+                    item.revise_sampling_interval(f64::from(rate));
+                    self.items().insert(item.handle(), (item_id.clone(), rate));
+                    item.set_status(StatusCode::Good);
+                    initial.push((i, item_id));
+                }
+                Err(e) => {
+                    self.budget.give_back();
+                    item.set_status(error_to_status(e, false));
+                }
             }
         }
         if initial.is_empty() {
@@ -630,12 +642,17 @@ impl NodeManager for AsixNodeManager {
     }
 
     async fn delete_monitored_items(&self, _context: &RequestContext, items: &[&MonitoredItemRef]) {
-        for item in items {
-            let removed = self.items().remove(&item.handle());
-            if let Some((id, rate)) = removed {
-                self.budget.give_back();
-                self.monitor.remove(&id, rate);
-            }
+        let removed: Vec<(String, u32)> = {
+            let mut map = self.items();
+            items
+                .iter()
+                .filter_map(|item| map.remove(&item.handle()))
+                .collect()
+        };
+        for _ in &removed {
+            self.budget.give_back();
         }
+        let req: Vec<(&str, u32)> = removed.iter().map(|(id, r)| (id.as_str(), *r)).collect();
+        self.monitor.remove_many(&req);
     }
 }

@@ -401,6 +401,41 @@ fn monitored_items_share_one_engine_item_per_variable_and_deliver_changes() {
     assert_eq!(m.variables(), 0);
 }
 
+/// Monitored items created (and deleted) in one request go to the engine together, with
+/// the results of one by one: one engine item per variable (a variable twice in the
+/// request, at two rates, is placed once), an unknown item refused alone, the others
+/// delivering changes.
+#[test]
+fn monitored_items_created_together_are_placed_as_one_by_one() {
+    let f = fixture();
+    let m = &f.nm.monitor;
+    let (fast, slow) = (m.revise(100.0), m.revise(5000.0));
+    let r = m.add_many(&[
+        ("KW_A001", slow),
+        ("KW_A002", fast),
+        ("NO_SUCH_VARIABLE", fast),
+        ("KW_A001", fast),
+    ]);
+    assert!(r[0].is_ok() && r[1].is_ok() && r[3].is_ok(), "{r:?}");
+    assert!(r[2].is_err());
+    let stats = || f.nm.engine.runtime.lock().engine.stats();
+    assert_eq!(stats().group_items, 2, "one engine item per variable");
+    assert_eq!(m.variables(), 2);
+    wait_until("data changes of both variables", || {
+        f.notes.count_for(&item("KW_A001")) >= 1 && f.notes.count_for(&item("KW_A002")) >= 1
+    });
+    // Deleted together: the fast item of KW_A001 goes, it moves to the slow group, still
+    // one engine item; an item never made changes nothing.
+    m.remove_many(&[("KW_A001", fast), ("NO_SUCH_VARIABLE", fast)]);
+    assert_eq!(stats().group_items, 2);
+    assert_eq!(m.variables(), 2);
+    m.remove_many(&[("KW_A001", slow), ("KW_A002", fast)]);
+    assert_eq!(stats().group_items, 0);
+    assert_eq!(m.variables(), 0);
+    assert!(m.add_many(&[]).is_empty());
+    m.remove_many(&[]);
+}
+
 #[test]
 fn a_ua_monitored_item_and_a_da_group_share_one_source_subscription() {
     use ctopc_core::model::{GroupParams, ItemDefinition};

@@ -639,6 +639,19 @@ pub struct Plant {
 /// ahead (time moves on, the simulation resumes from its state).
 pub const MAX_CATCH_UP_TICKS: u64 = 10_000;
 
+/// At most this many variable steps (ticks × variables) are computed in one `advance_to`,
+/// and at least one tick: a tick steps every variable of the plant, so a large plant
+/// catches up fewer ticks and skips the rest. The in-process simulation advances the plant
+/// under the engine's lock: unbounded, a plant of 1,000,000 variables left idle for a
+/// minute (no subscription polls it) would compute 240 ticks, 240,000,000 variable steps,
+/// at the next device read before answering it, every other read and new item waiting.
+pub const MAX_CATCH_UP_VAR_STEPS: u64 = 2_000_000;
+
+/// The ticks one `advance_to` computes at most for a plant of `vars` variables.
+pub fn max_catch_up_ticks(vars: usize) -> u64 {
+    (MAX_CATCH_UP_VAR_STEPS / (vars as u64).max(1)).clamp(1, MAX_CATCH_UP_TICKS)
+}
+
 /// A reference of a behaviour to another variable of its channel, by name, resolved when
 /// every variable is known ([`Plant::finish`]).
 enum Ref {
@@ -1023,14 +1036,19 @@ impl Plant {
         self.epoch.add_millis(t.saturating_mul(self.tick_ms))
     }
 
-    /// Runs the simulation up to tick `t` (bounded, see [`MAX_CATCH_UP_TICKS`]).
-    pub fn advance_to(&mut self, t: u64) {
-        if t > self.tick + MAX_CATCH_UP_TICKS {
-            self.tick = t - MAX_CATCH_UP_TICKS;
+    /// Runs the simulation up to tick `t`, computing at most [`max_catch_up_ticks`] ticks
+    /// (the earlier ones are skipped). Returns the ticks computed.
+    pub fn advance_to(&mut self, t: u64) -> u64 {
+        let most = max_catch_up_ticks(self.vars.len());
+        if t > self.tick + most {
+            self.tick = t - most;
         }
+        let mut computed = 0;
         while self.tick < t {
             self.step();
+            computed += 1;
         }
+        computed
     }
 
     /// One tick.
@@ -1684,6 +1702,41 @@ mod tests {
                 15002386707565514508
             )
         );
+    }
+
+    /// One advance of a large plant far behind computes at most `MAX_CATCH_UP_VAR_STEPS`
+    /// variable steps (at least one tick) and skips the earlier ticks, whatever the time
+    /// behind: the in-process simulation advances the plant under the engine's lock, so a
+    /// device read after an idle hour costs a plant of 100,000 variables 19 ticks, not
+    /// 10,000 (10^9 variable steps, minutes of the engine locked). A small plant still
+    /// computes every tick it can.
+    #[test]
+    fn a_large_plant_far_behind_computes_a_bounded_number_of_steps() {
+        let db = std::sync::Arc::new(demo_db());
+        let copies = 100_000 / db.variables.len() + 1;
+        let mut p = Plant::from_databases(
+            &vec![std::sync::Arc::clone(&db); copies],
+            "CH",
+            1,
+            250,
+            Timestamp(0),
+        );
+        let n = p.vars().len() as u64;
+        assert!(n >= 100_000, "{n}");
+        let hour = 3600 * 4;
+        let computed = p.advance_to(hour);
+        assert_eq!(computed, MAX_CATCH_UP_VAR_STEPS / n);
+        assert!(computed * n <= MAX_CATCH_UP_VAR_STEPS);
+        assert_eq!(p.tick(), hour);
+        assert_eq!(p.time_of(p.tick()), Timestamp(0).add_millis(hour * 250));
+        assert_eq!(p.advance_to(hour + 1), 1, "then tick by tick");
+        assert_eq!(p.advance_to(hour + 1), 0);
+
+        let mut small = Plant::from_databases(&[db], "CH", 1, 250, Timestamp(0));
+        assert_eq!(small.advance_to(3000), 3000);
+        assert_eq!(max_catch_up_ticks(1_000_000), 2);
+        assert_eq!(max_catch_up_ticks(10_000_000), 1);
+        assert_eq!(max_catch_up_ticks(0), MAX_CATCH_UP_TICKS);
     }
 
     /// A plant made from databases looks names up through the databases' index as a plant

@@ -32,6 +32,8 @@ const READ_PER_CALL: usize = 1000;
 /// Nodes per Browse request of the tree walk, references per node per answer.
 const BROWSE_NODES_PER_CALL: usize = 50;
 const BROWSE_REFS_PER_NODE: u32 = 1000;
+/// The longest array a response may hold (a Publish of every item of a subscription).
+const MAX_ARRAY: usize = 1_000_000;
 /// The largest tree walked (nodes): a bound on memory against any server.
 const MAX_BROWSED: usize = 5_000_000;
 
@@ -135,6 +137,10 @@ fn client(args: &Args) -> Result<Client, String> {
         // message size and the chunk count.
         .max_message_size(0)
         .max_chunk_count(0)
+        // The subscriptions ask for every notification in one Publish (no maximum): its
+        // array holds up to one notification per item, above async-opcua's default of
+        // 1,000 elements (a larger one failed to decode and closed the connection).
+        .max_array_length(MAX_ARRAY)
         .session_name("ua-bench")
         .client()
         .map_err(|e| format!("the OPC UA client: {}", e.join("; ")))
