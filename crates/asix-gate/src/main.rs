@@ -238,6 +238,8 @@ usage: asix-gate [--config FILE] [--check]
         }) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
+                // In the log too: a gate started without a console shows only that.
+                tracing::error!("asix-gate cannot serve: {e}");
                 eprintln!("asix-gate: {e}");
                 ExitCode::FAILURE
             }

@@ -89,8 +89,12 @@ pub struct GateServer {
 
 /// Binds the sockets and serves on the current tokio runtime.
 pub async fn serve(cfg: ServeConfig, engine: Arc<Engine>) -> io::Result<GateServer> {
-    let udp = UdpSocket::bind(cfg.discovery).await?;
-    let tcp = TcpListener::bind(cfg.listen).await?;
+    let udp = UdpSocket::bind(cfg.discovery)
+        .await
+        .map_err(|e| bind_error("discovery (UDP)", cfg.discovery, e))?;
+    let tcp = TcpListener::bind(cfg.listen)
+        .await
+        .map_err(|e| bind_error("link listener (TCP)", cfg.listen, e))?;
     let discovery_addr = udp.local_addr()?;
     let tcp_addr = tcp.local_addr()?;
     let resources = engine
@@ -118,6 +122,12 @@ pub async fn serve(cfg: ServeConfig, engine: Arc<Engine>) -> io::Result<GateServ
         tcp_addr,
         tasks,
     })
+}
+
+/// A bind failure that says which socket, which address and what went wrong (the
+/// platform's text of an OS error may be no more than its number).
+fn bind_error(what: &str, addr: SocketAddr, e: io::Error) -> io::Error {
+    io::Error::new(e.kind(), format!("{what} {addr}: {} ({e})", e.kind()))
 }
 
 impl GateServer {

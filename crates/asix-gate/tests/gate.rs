@@ -718,3 +718,37 @@ async fn requests_to_a_hung_channel_are_bounded() {
         "{reads} reads of {n} reached the Automation server"
     );
 }
+
+/// A discovery or link address in use: `serve` fails naming the socket, the address and
+/// the cause (the gate logs it and exits with it), instead of an OS error number alone.
+#[tokio::test]
+async fn a_port_in_use_is_reported_with_its_socket_and_address() {
+    let taken_udp = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).expect("a UDP port");
+    let udp = taken_udp.local_addr().unwrap();
+    let taken_tcp = std::net::TcpListener::bind((Ipv4Addr::LOCALHOST, 0)).expect("a TCP port");
+    let tcp = taken_tcp.local_addr().unwrap();
+    for (what, f) in [
+        (
+            format!("discovery (UDP) {udp}: address in use"),
+            Box::new(move |c: &mut GateConfig| c.discovery = udp) as Box<dyn Fn(&mut GateConfig)>,
+        ),
+        (
+            format!("link listener (TCP) {tcp}: address in use"),
+            Box::new(move |c: &mut GateConfig| c.listen = tcp),
+        ),
+    ] {
+        let mut cfg = GateConfig::new("GATE1");
+        cfg.listen = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+        cfg.discovery = SocketAddr::from((Ipv4Addr::LOCALHOST, 0));
+        f(&mut cfg);
+        let factory: ChannelFactory =
+            Arc::new(|_: &str| Err(CallError::new(OpcError::Fail, "no plant")));
+        let engine = Engine::start(&cfg, factory);
+        let security = asix_gate::security(&cfg, Some(&pki().server.identity)).expect("security");
+        let r = asix_gate::serve(asix_gate::serve_config(&cfg, security), engine.clone()).await;
+        engine.stop();
+        let e = r.err().expect("serve fails on a port in use");
+        assert_eq!(e.kind(), std::io::ErrorKind::AddrInUse);
+        assert!(e.to_string().starts_with(&what), "{e}");
+    }
+}
