@@ -67,6 +67,18 @@ struct Node {
     placed: Option<(u32, u32)>,
 }
 
+impl Node {
+    /// One monitored item at `rate` ms fewer (the rate gone with its last one).
+    fn release(&mut self, rate: u32) {
+        if let Some(n) = self.rates.get_mut(&rate) {
+            *n -= 1;
+            if *n == 0 {
+                self.rates.remove(&rate);
+            }
+        }
+    }
+}
+
 #[derive(Default)]
 struct State {
     groups: HashMap<u32, GroupHandle>,
@@ -251,12 +263,7 @@ impl Monitor {
             let Some(node) = st.nodes.get_mut(item_id) else {
                 continue;
             };
-            if let Some(n) = node.rates.get_mut(&rate) {
-                *n -= 1;
-                if *n == 0 {
-                    node.rates.remove(&rate);
-                }
-            }
+            node.release(rate);
             if !node.rates.is_empty() {
                 moved.push(item_id);
                 continue;
@@ -294,12 +301,7 @@ impl Monitor {
         let Some(node) = st.nodes.get_mut(item_id) else {
             return;
         };
-        if let Some(n) = node.rates.get_mut(&from) {
-            *n -= 1;
-            if *n == 0 {
-                node.rates.remove(&from);
-            }
-        }
+        node.release(from);
         *node.rates.entry(to).or_default() += 1;
         if let Err(e) = self.place(st, item_id) {
             tracing::warn!("OPC UA: cannot move {item_id} to a {to} ms group: {e}");
@@ -315,12 +317,7 @@ impl Monitor {
         let Some(node) = st.nodes.get_mut(item_id) else {
             return;
         };
-        if let Some(n) = node.rates.get_mut(&rate) {
-            *n -= 1;
-            if *n == 0 {
-                node.rates.remove(&rate);
-            }
-        }
+        node.release(rate);
         if !node.rates.is_empty() {
             if let Err(e) = self.place(st, item_id) {
                 tracing::warn!("OPC UA: cannot move {item_id} to another group: {e}");
