@@ -629,17 +629,6 @@ enum AuditResult {
 /// The write audit line of one item (`ctopc_core::audit`'s format, under its target, as
 /// the server's): who wrote it by the link's authenticated identity, beside the name the
 /// client declared.
-fn audit_item(
-    link: &Link,
-    caller: &Caller,
-    v: &asix_net::proto::frame::VarRef,
-    value: &Value,
-    ext: Option<(Quality, Timestamp)>,
-    result: AuditResult,
-) {
-    audit_line(link.client.as_deref(), caller, v, value, ext, result);
-}
-
 fn audit_line(
     client: Option<&str>,
     caller: &Caller,
@@ -736,7 +725,14 @@ fn write(
         if !d.allowed {
             warn!(caller = %caller, channel = %ch.config.name, variable = %v.variable, decision = %d, "write refused");
             results[i] = OpcError::WriteErrorIllegalCommand.hresult();
-            audit_item(link, &caller, &v, &value, ext, AuditResult::Denied);
+            audit_line(
+                link.client.as_deref(),
+                &caller,
+                &v,
+                &value,
+                ext,
+                AuditResult::Denied,
+            );
             continue;
         }
         debug!(caller = %caller, channel = %ch.config.name, variable = %v.variable, decision = %d, "write");
