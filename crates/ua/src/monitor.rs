@@ -61,21 +61,35 @@ impl Notify for opcua::server::SubscriptionCache {
 struct Node {
     /// The client handle of the variable's engine item (the same in every group).
     client: u32,
-    /// The sampling rates its monitored items ask for, with how many ask for each.
-    rates: BTreeMap<u32, usize>,
+    /// The sampling rates its monitored items ask for, fastest first, with how many ask
+    /// for each (most variables have one: a small vector, not a tree, per variable).
+    rates: Vec<(u32, u32)>,
     /// The group (by rate) and server handle it is an item of.
     placed: Option<(u32, u32)>,
 }
 
 impl Node {
+    /// One monitored item at `rate` ms more.
+    fn acquire(&mut self, rate: u32) {
+        match self.rates.binary_search_by_key(&rate, |&(r, _)| r) {
+            Ok(i) => self.rates[i].1 += 1,
+            Err(i) => self.rates.insert(i, (rate, 1)),
+        }
+    }
+
     /// One monitored item at `rate` ms fewer (the rate gone with its last one).
     fn release(&mut self, rate: u32) {
-        if let Some(n) = self.rates.get_mut(&rate) {
-            *n -= 1;
-            if *n == 0 {
-                self.rates.remove(&rate);
+        if let Ok(i) = self.rates.binary_search_by_key(&rate, |&(r, _)| r) {
+            self.rates[i].1 -= 1;
+            if self.rates[i].1 == 0 {
+                self.rates.remove(i);
             }
         }
+    }
+
+    /// The fastest rate asked for: the group the variable belongs in.
+    fn fastest(&self) -> Option<u32> {
+        self.rates.first().map(|&(r, _)| r)
     }
 }
 
@@ -91,6 +105,8 @@ struct State {
 pub struct Monitor {
     ns: u16,
     client: Arc<EngineClient>,
+    /// The engine's minimum update rate (ms), fixed for the process.
+    min_rate_ms: u32,
     /// async-opcua's subscription cache (known once the server is built).
     subscriptions: OnceLock<Arc<dyn Notify>>,
     state: Mutex<State>,
@@ -103,9 +119,11 @@ fn lock(m: &Mutex<State>) -> MutexGuard<'_, State> {
 
 impl Monitor {
     pub fn new(ns: u16, client: Arc<EngineClient>) -> Arc<Monitor> {
+        let min_rate_ms = client.runtime.lock().engine.config().min_update_rate_ms;
         Arc::new_cyclic(|me| Monitor {
             ns,
             client,
+            min_rate_ms,
             subscriptions: OnceLock::new(),
             state: Mutex::new(State::default()),
             me: me.clone(),
@@ -122,7 +140,7 @@ impl Monitor {
 
     /// The engine's revision of a sampling interval (ms): at least its minimum update rate.
     pub fn revise(&self, sampling_ms: f64) -> u32 {
-        let min = self.runtime().lock().engine.config().min_update_rate_ms;
+        let min = self.min_rate_ms;
         let ms = if sampling_ms.is_finite() && sampling_ms > 0.0 {
             sampling_ms.min(f64::from(u32::MAX)) as u32
         } else {
@@ -142,7 +160,7 @@ impl Monitor {
             node.client = st.next_client;
             st.by_client.insert(node.client, item_id.to_owned());
         }
-        *node.rates.entry(rate).or_default() += 1;
+        node.acquire(rate);
         let r = self.place(st, item_id);
         if r.is_err() {
             self.remove_locked(st, item_id, rate);
@@ -164,7 +182,7 @@ impl Monitor {
                 node.client = st.next_client;
                 st.by_client.insert(node.client, item_id.to_owned());
             }
-            *node.rates.entry(rate).or_default() += 1;
+            node.acquire(rate);
         }
         // The variables to place (each once), by the rate of the group they go to.
         let mut by_rate: BTreeMap<u32, Vec<&str>> = BTreeMap::new();
@@ -174,7 +192,7 @@ impl Monitor {
                 continue;
             }
             let node = &st.nodes[item_id];
-            let Some((&want, _)) = node.rates.iter().next() else {
+            let Some(want) = node.fastest() else {
                 continue;
             };
             if node.placed.is_some_and(|(r, _)| r == want) {
@@ -302,7 +320,7 @@ impl Monitor {
             return;
         };
         node.release(from);
-        *node.rates.entry(to).or_default() += 1;
+        node.acquire(to);
         if let Err(e) = self.place(st, item_id) {
             tracing::warn!("OPC UA: cannot move {item_id} to a {to} ms group: {e}");
         }
@@ -344,7 +362,7 @@ impl Monitor {
     fn place(&self, st: &mut State, item_id: &str) -> Result<(), OpcError> {
         let (want, client, placed) = {
             let node = &st.nodes[item_id];
-            let Some((&want, _)) = node.rates.iter().next() else {
+            let Some(want) = node.fastest() else {
                 return Ok(());
             };
             (want, node.client, node.placed)

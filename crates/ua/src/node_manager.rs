@@ -539,7 +539,6 @@ impl NodeManager for AsixNodeManager {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let lang = self.session_lang(context);
-        let mut initial: Vec<(usize, String)> = Vec::new();
         // The Value items, added to the engine together after the loop.
         let mut values: Vec<(usize, String, u32)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
@@ -572,45 +571,56 @@ impl NodeManager for AsixNodeManager {
                 },
             }
         }
-        let added = {
-            let req: Vec<(&str, u32)> = values
+        if values.is_empty() {
+            return Ok(());
+        }
+        // The engine's part on the blocking pool (it waits for the engine's lock, which
+        // the driver holds while it handles the source's samples): the variables placed in
+        // their groups in one call, then the cached values of those placed in one read.
+        // A variable with a cached value (another monitored item or a DA client
+        // subscribes it) starts with it; otherwise the first sample comes as a data change.
+        let req: Vec<(String, u32)> = values
+            .iter()
+            .map(|(_, id, rate)| (id.clone(), *rate))
+            .collect();
+        let monitor = Arc::clone(&self.monitor);
+        let engine = Arc::clone(&self.engine);
+        let joined = tokio::task::spawn_blocking(move || {
+            let ids: Vec<(&str, u32)> = req.iter().map(|(id, r)| (id.as_str(), *r)).collect();
+            let added = monitor.add_many(&ids);
+            let placed: Vec<(&str, u32)> = ids
                 .iter()
-                .map(|(_, id, rate)| (id.as_str(), *rate))
+                .zip(&added)
+                .filter(|(_, r)| r.is_ok())
+                .map(|((id, _), _)| (*id, MAX_AGE_CACHE))
                 .collect();
-            self.monitor.add_many(&req)
+            let cached = engine.read(&placed);
+            (added, cached)
+        })
+        .await;
+        let Ok((added, cached)) = joined else {
+            for _ in &values {
+                self.budget.give_back();
+            }
+            return Err(StatusCode::BadInternalError);
         };
+        let mut cached = cached.into_iter();
         for ((i, item_id, rate), r) in values.into_iter().zip(added) {
             let item = &mut items[i];
             match r {
                 Ok(()) => {
                     item.revise_sampling_interval(f64::from(rate));
-                    self.items().insert(item.handle(), (item_id.clone(), rate));
+                    self.items().insert(item.handle(), (item_id, rate));
                     item.set_status(StatusCode::Good);
-                    initial.push((i, item_id));
+                    if let Some(Ok(s)) = cached.next() {
+                        if s.quality != ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA {
+                            item.set_initial_value(state_to_data_value(&s));
+                        }
+                    }
                 }
                 Err(e) => {
                     self.budget.give_back();
                     item.set_status(error_to_status(e, false));
-                }
-            }
-        }
-        if initial.is_empty() {
-            return Ok(());
-        }
-        // The cached value, when the variable already has one (another monitored item or
-        // a DA client subscribes it); otherwise the first sample comes as a data change.
-        let ids: Vec<String> = initial.iter().map(|(_, id)| id.clone()).collect();
-        let engine = Arc::clone(&self.engine);
-        let results = tokio::task::spawn_blocking(move || {
-            let req: Vec<(&str, u32)> = ids.iter().map(|s| (s.as_str(), MAX_AGE_CACHE)).collect();
-            engine.read(&req)
-        })
-        .await
-        .map_err(|_| StatusCode::BadInternalError)?;
-        for ((i, _), r) in initial.iter().zip(results) {
-            if let Ok(s) = r {
-                if s.quality != ctopc_core::Quality::BAD_WAITING_FOR_INITIAL_DATA {
-                    items[*i].set_initial_value(state_to_data_value(&s));
                 }
             }
         }

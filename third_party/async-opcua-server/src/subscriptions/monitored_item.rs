@@ -330,7 +330,10 @@ impl MonitoredItem {
             last_data_value: None,
             sample_skipped_data_value: None,
             queue_size: request.queue_size,
-            notification_queue: VecDeque::new(),
+            // ServerCTOPC: room for the queue's size (at most 64 at first) rather than
+            // VecDeque's first growth to 4: most clients ask for 1, and a server holds
+            // one queue per monitored item.
+            notification_queue: VecDeque::with_capacity(request.queue_size.clamp(1, 64)),
             queue_overflow: false,
             any_new_notification: false,
             eu_range: request.eu_range,
