@@ -33,11 +33,11 @@
 
 use std::collections::{btree_map, BTreeMap, HashMap};
 use std::fmt::Debug;
-use std::hash::Hash;
+use std::hash::{BuildHasherDefault, Hash};
 use std::sync::Arc;
 
 use asix_model::{AsixNamespace, Derivation};
-use ctopc_core::compact::{grow_exact, Growth, Idx, PackedValue, SideMap};
+use ctopc_core::compact::{grow_exact, Growth, Idx, IntHasher, PackedValue, SideMap};
 use ctopc_core::model::datasource::{
     ItemVqt, ReadItem, SourceItem, SourceKey, SourceReqId, SourceRequest,
 };
@@ -327,7 +327,10 @@ struct Last {
 /// `lasts` at its item's slot index (24 bytes, where a [`VarState`] and a boxed sample
 /// would take 88).
 struct Vars<V> {
-    map: HashMap<V, VarEntry>,
+    /// By the source's variable (an index or a short name of the server's own
+    /// configuration, never a peer's choice): a multiplicative hash, not SipHash, which
+    /// cost as much as the rest of a sample's handling.
+    map: HashMap<V, VarEntry, BuildHasherDefault<IntHasher>>,
     rich: Vec<VarState>,
     /// Indices of `rich` free for reuse.
     free: Vec<Idx<VarState>>,
@@ -348,7 +351,7 @@ enum VarRef<'a> {
 impl<V: Eq + Hash + Clone> Vars<V> {
     fn new() -> Self {
         Vars {
-            map: HashMap::new(),
+            map: HashMap::default(),
             rich: Vec::new(),
             free: Vec::new(),
             lasts: Vec::new(),

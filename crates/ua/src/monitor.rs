@@ -16,6 +16,7 @@
 
 use crate::status::quality_to_status;
 use crate::value::{timestamp_to_ua, to_variant};
+use ctopc_core::compact::IntHasher;
 use ctopc_core::model::{
     DataChangeKind, Event, GroupHandle, GroupParams, ItemDefinition, ItemState,
 };
@@ -23,6 +24,7 @@ use ctopc_core::{OpcError, VarType};
 use ctopc_runtime::{Delivery, GroupSink, Runtime};
 use opcua::types::{AttributeId, DataValue, NodeId, UAString};
 use std::collections::{BTreeMap, HashMap};
+use std::hash::BuildHasherDefault;
 use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use crate::engine::EngineClient;
@@ -49,10 +51,12 @@ pub trait Notify: Send + Sync {
 
 impl Notify for opcua::server::SubscriptionCache {
     fn data_changes(&self, changes: Vec<(NodeId, DataValue)>) {
+        let (ids, values): (Vec<NodeId>, Vec<DataValue>) = changes.into_iter().unzip();
         self.notify_data_change(
-            changes
-                .iter()
-                .map(|(id, dv)| (dv.clone(), id, AttributeId::Value)),
+            values
+                .into_iter()
+                .zip(&ids)
+                .map(|(dv, id)| (dv, id, AttributeId::Value)),
         );
     }
 }
@@ -97,7 +101,9 @@ impl Node {
 struct State {
     groups: HashMap<u32, GroupHandle>,
     nodes: HashMap<String, Node>,
-    by_client: HashMap<u32, String>,
+    /// By the engine item's client handle (ours: a multiplicative hash, not SipHash, on
+    /// every data change).
+    by_client: HashMap<u32, String, BuildHasherDefault<IntHasher>>,
     next_client: u32,
 }
 
