@@ -28,7 +28,9 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   a variable's, a derived value's, a `_Diagnostics` folder's and item's Description and
   a property's DisplayName (read and browsed) in Polish, English and Polish, each with
   its locale;
-- services: RegisterNodes (the registered NodeIds read) and UnregisterNodes, Republish
+- services: RegisterNodes (the registered NodeIds read) and UnregisterNodes, the Value of
+  a variable, an unknown node and a folder in one Read and one CreateMonitoredItems (Good,
+  Bad_NodeIdUnknown, Bad_AttributeIdInvalid), Republish
   (an unknown sequence number is Bad_MessageNotAvailable), TransferSubscriptions to a
   second session of the same user, a monitored item's queue of 3 with DiscardOldest true
   and false while the value changes faster than the publishing (publishing off, then on);
@@ -404,6 +406,35 @@ async def services(url, cert, key):
               len(registered) == 2 and all(isinstance(v, float) for v in values), str(values))
         await c.unregister_nodes(registered)
         check("UnregisterNodes answers Good", True)
+
+        # The Value of a variable, of an unknown node and of a folder in one Read, and as
+        # monitored items of one CreateMonitoredItems: each node its own answer.
+        names = ("KW_A000", "NO_SUCH_VARIABLE", "_Diagnostics")
+        expected = [ua.StatusCodes.Good, ua.StatusCodes.BadNodeIdUnknown,
+                    ua.StatusCodes.BadAttributeIdInvalid]
+        targets = [ua.ReadValueId(NodeId_=ua.NodeId(n, ns), AttributeId=ua.AttributeIds.Value)
+                   for n in names]
+        params = ua.ReadParameters()
+        params.NodesToRead = targets
+        got = [dv.StatusCode_.value for dv in await c.uaclient.read(params)]
+        check("Read of Values: a variable Good, an unknown node Bad_NodeIdUnknown, "
+              "a folder Bad_AttributeIdInvalid", got == expected, str(got))
+        sub = await c.create_subscription(1000, Changes())
+        items = [ua.MonitoredItemCreateRequest(
+            ItemToMonitor=t, MonitoringMode_=ua.MonitoringMode.Reporting,
+            RequestedParameters=ua.MonitoringParameters(ClientHandle=i + 1, SamplingInterval=1000.0,
+                                                        QueueSize=1, DiscardOldest=True))
+            for i, t in enumerate(targets)]
+        req = ua.CreateMonitoredItemsRequest()
+        req.Parameters = ua.CreateMonitoredItemsParameters(
+            SubscriptionId=sub.subscription_id, TimestampsToReturn_=ua.TimestampsToReturn.Both,
+            ItemsToCreate=items)
+        res = await send(c, req, ua.CreateMonitoredItemsResponse)
+        got = res if isinstance(res, int) else [
+            r.StatusCode_.value for r in res.Results]
+        check("CreateMonitoredItems of Values: a variable Good, an unknown node "
+              "Bad_NodeIdUnknown, a folder Bad_AttributeIdInvalid", got == expected, str(got))
+        await sub.delete()
 
         # Republish of a sequence number the server never sent.
         changes = Changes()

@@ -286,6 +286,46 @@ impl AsixNodeManager {
         }
     }
 
+    /// A node's attribute answered from the address space (no engine read: the Value of a
+    /// variable is the engine's, so a node that resolves to a variable here is one the
+    /// engine did not know, Bad_NodeIdUnknown).
+    fn read_attribute(&self, node: &mut ReadNode, may_write: bool, lang: Lang) {
+        let (id, attribute) = (&node.node().node_id, node.node().attribute_id);
+        match self.space.resolve(id) {
+            Err(e) => node.set_error(e),
+            Ok(Resolved::Variable(_)) if attribute == AttributeId::Value => {
+                node.set_error(StatusCode::BadNodeIdUnknown)
+            }
+            Ok(r) => match self.space.attribute(&r, attribute, may_write, lang) {
+                Ok(v) => node.set_result(DataValue::value_only(v)),
+                Err(e) => node.set_error(e),
+            },
+        }
+    }
+
+    /// A monitored item of a node's attribute answered from the address space: its value
+    /// is the initial (and only) one (no engine item: the Value of a variable is the
+    /// engine's, so a node that resolves to a variable here is one the engine did not
+    /// know, Bad_NodeIdUnknown).
+    fn monitor_attribute(&self, item: &mut CreateMonitoredItem, may_write: bool, lang: Lang) {
+        let target = item.item_to_monitor();
+        let attribute = target.attribute_id;
+        let answer = match self.space.resolve(&target.node_id) {
+            Err(e) => Err(e),
+            Ok(Resolved::Variable(_)) if attribute == AttributeId::Value => {
+                Err(StatusCode::BadNodeIdUnknown)
+            }
+            Ok(r) => self.space.attribute(&r, attribute, may_write, lang),
+        };
+        match answer {
+            Ok(v) => {
+                item.set_initial_value(DataValue::value_only(v));
+                item.set_status(StatusCode::Good);
+            }
+            Err(e) => item.set_status(e),
+        }
+    }
+
     /// Reads the Value of items through the engine (blocking: the caller is on the
     /// blocking pool or a test thread).
     pub fn read_values(&self, items: &[String], max_age: u32) -> Vec<DataValue> {
@@ -455,19 +495,18 @@ impl NodeManager for AsixNodeManager {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let lang = self.session_lang(context);
+        // The Value of our items straight from the engine (which resolves each item once);
+        // every other attribute, and a node the engine does not know as an item (a folder,
+        // nothing), through the address space.
         let mut values: Vec<(usize, String)> = Vec::new();
         for (i, node) in nodes_to_read.iter_mut().enumerate() {
-            let (id, attribute) = (node.node().node_id.clone(), node.node().attribute_id);
-            match self.space.resolve(&id) {
-                Err(e) => node.set_error(e),
-                Ok(Resolved::Variable(info)) if attribute == AttributeId::Value => {
-                    values.push((i, info.item_id.clone()))
+            if node.node().attribute_id == AttributeId::Value {
+                if let Some(item) = self.space.value_item(&node.node().node_id) {
+                    values.push((i, item));
+                    continue;
                 }
-                Ok(r) => match self.space.attribute(&r, attribute, may_write, lang) {
-                    Ok(v) => node.set_result(DataValue::value_only(v)),
-                    Err(e) => node.set_error(e),
-                },
             }
+            self.read_attribute(node, may_write, lang);
         }
         if values.is_empty() {
             return Ok(());
@@ -482,9 +521,13 @@ impl NodeManager for AsixNodeManager {
         .await
         .map_err(|_| StatusCode::BadInternalError)?;
         for ((i, _), r) in values.iter().zip(results) {
+            let node = &mut nodes_to_read[*i];
             match r {
-                Ok(s) => nodes_to_read[*i].set_result(state_to_data_value(&s)),
-                Err(e) => nodes_to_read[*i].set_error(error_to_status(e, false)),
+                Ok(s) => node.set_result(state_to_data_value(&s)),
+                Err(OpcError::UnknownItemId | OpcError::InvalidItemId) => {
+                    self.read_attribute(node, may_write, lang)
+                }
+                Err(e) => node.set_error(error_to_status(e, false)),
             }
         }
         Ok(())
@@ -539,37 +582,24 @@ impl NodeManager for AsixNodeManager {
         self.admit(context)?;
         let may_write = self.roles.may_write(&context.token);
         let lang = self.session_lang(context);
-        // The Value items, added to the engine together after the loop.
+        // The Value of our items, added to the engine together after the loop (which
+        // resolves each item once); every other attribute, and a node the engine does not
+        // know as an item, through the address space.
         let mut values: Vec<(usize, String, u32)> = Vec::new();
         for (i, item) in items.iter_mut().enumerate() {
-            let target = item.item_to_monitor().clone();
-            let resolved = match self.space.resolve(&target.node_id) {
-                Ok(r) => r,
-                Err(e) => {
-                    item.set_status(e);
-                    continue;
-                }
-            };
-            match resolved {
-                Resolved::Variable(info) if target.attribute_id == AttributeId::Value => {
+            let target = item.item_to_monitor();
+            if target.attribute_id == AttributeId::Value {
+                if let Some(item_id) = self.space.value_item(&target.node_id) {
                     if let Err(e) = self.budget.take() {
                         item.set_status(e);
                         continue;
                     }
                     let rate = self.monitor.revise(item.sampling_interval());
-                    values.push((i, info.item_id, rate));
+                    values.push((i, item_id, rate));
+                    continue;
                 }
-                r => match self
-                    .space
-                    .attribute(&r, target.attribute_id, may_write, lang)
-                {
-                    Ok(v) => {
-                        item.set_initial_value(DataValue::value_only(v));
-                        item.set_status(StatusCode::Good);
-                    }
-                    Err(e) => item.set_status(e),
-                },
             }
+            self.monitor_attribute(item, may_write, lang);
         }
         if values.is_empty() {
             return Ok(());
@@ -617,6 +647,10 @@ impl NodeManager for AsixNodeManager {
                             item.set_initial_value(state_to_data_value(&s));
                         }
                     }
+                }
+                Err(OpcError::UnknownItemId | OpcError::InvalidItemId) => {
+                    self.budget.give_back();
+                    self.monitor_attribute(item, may_write, lang);
                 }
                 Err(e) => {
                     self.budget.give_back();

@@ -200,6 +200,18 @@ impl Space {
         }
     }
 
+    /// The item a node's Value attribute reads when the node names one of our items (a
+    /// string NodeId of our namespace), without resolving the item's attributes: the
+    /// engine resolves it again when it reads, and answers an unknown one. What else the
+    /// node is (a folder, a property, nothing) is [`Space::resolve`]'s to say, which the
+    /// caller asks when the engine does not know the item.
+    pub fn value_item(&self, id: &NodeId) -> Option<String> {
+        match self.parse(id)? {
+            Parsed::Item(item) => Some(item),
+            Parsed::Root | Parsed::Property(..) => None,
+        }
+    }
+
     /// The browse tree an item ID belongs to: the `_Diagnostics` branch's current tree, or
     /// the real one.
     fn tree_of(&self, item_id: &str) -> Arc<AddressSpace> {
