@@ -54,6 +54,15 @@ fn run(dir: &Path, args: &[&str], stdin: &str) -> Output {
     child.wait_with_output().expect("ServerCTOPC ends")
 }
 
+/// `user add NAME --role ROLE --password-stdin` with `password` piped in.
+fn user_add(dir: &Path, name: &str, role: &str, password: &str) -> Output {
+    run(
+        dir,
+        &["user", "add", name, "--role", role, "--password-stdin"],
+        &format!("{password}\n"),
+    )
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -62,18 +71,7 @@ fn stderr(o: &Output) -> String {
 fn user_add_keeps_a_salted_hash_and_never_the_password() {
     let dir = scratch("user-add");
     let password = "Kwas-siarkowy-98%";
-    let o = run(
-        &dir,
-        &[
-            "user",
-            "add",
-            "operator1",
-            "--role",
-            "writer",
-            "--password-stdin",
-        ],
-        &format!("{password}\n"),
-    );
+    let o = user_add(&dir, "operator1", "writer", password);
     assert!(o.status.success(), "user add failed: {}", stderr(&o));
     let users = std::fs::read_to_string(dir.join("ua-users.txt")).expect("the users file");
     let line = users
@@ -87,18 +85,7 @@ fn user_add_keeps_a_salted_hash_and_never_the_password() {
     assert!(!String::from_utf8_lossy(&o.stdout).contains(password));
 
     // The same name again replaces the user (a new salt), it does not add a second line.
-    let o = run(
-        &dir,
-        &[
-            "user",
-            "add",
-            "operator1",
-            "--role",
-            "reader",
-            "--password-stdin",
-        ],
-        "another one\n",
-    );
+    let o = user_add(&dir, "operator1", "reader", "another one");
     assert!(o.status.success(), "{}", stderr(&o));
     let users = std::fs::read_to_string(dir.join("ua-users.txt")).expect("the users file");
     let lines: Vec<&str> = users
@@ -192,18 +179,7 @@ fn protect_secrets_narrows_the_named_configurations_secrets() {
     let mode = |p: &Path| std::fs::metadata(p).expect("metadata").permissions().mode() & 0o777;
     let elsewhere = scratch("protect-env");
     let dir = scratch("protect");
-    let o = run(
-        &dir,
-        &[
-            "user",
-            "add",
-            "operator1",
-            "--role",
-            "writer",
-            "--password-stdin",
-        ],
-        "Kwas-siarkowy-98%\n",
-    );
+    let o = user_add(&dir, "operator1", "writer", "Kwas-siarkowy-98%");
     assert!(o.status.success(), "user add failed: {}", stderr(&o));
     let users = dir.join("ua-users.txt");
     std::fs::set_permissions(&users, std::fs::Permissions::from_mode(0o644)).expect("chmod");
