@@ -664,6 +664,64 @@ impl AsixConfig {
             None => PathBuf::from(native),
         }
     }
+
+    /// The files of secrets the configuration names, as the server finds them when its
+    /// configuration file is in `dir`: a configured path through
+    /// [`resolve_path`](Self::resolve_path), a relative one (and an unset one's default)
+    /// beside the configuration. The OPC UA paths are there with or without a `[UA]`
+    /// section (the server makes them once OPC UA is turned on).
+    pub fn secret_paths(&self, dir: &Path) -> SecretPaths {
+        let path = |configured: Option<&str>, default: &str| {
+            let p = configured.map_or_else(|| PathBuf::from(default), |c| self.resolve_path(c));
+            if p.is_absolute() || p.to_string_lossy().starts_with('\\') {
+                p
+            } else {
+                dir.join(p)
+            }
+        };
+        let pki = path(self.ua.pki_directory.as_deref(), UA_PKI_DEFAULT);
+        SecretPaths {
+            ua_private_key: pki.join(ua_private_key_in_store()),
+            ua_pki: pki,
+            ua_users_file: path(self.ua.users_file.as_deref(), UA_USERS_FILE_DEFAULT),
+            key_files: self
+                .channels
+                .iter()
+                .filter_map(|(name, o)| {
+                    let key = o.asix_net_key_file.as_deref()?;
+                    Some((name.clone(), path(Some(key), "")))
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `[UA]`'s certificate store when `PkiDirectory` is unset (beside the configuration).
+pub const UA_PKI_DEFAULT: &str = "pki";
+/// `[UA]`'s users file when `UsersFile` is unset (beside the configuration).
+pub const UA_USERS_FILE_DEFAULT: &str = "ua-users.txt";
+/// The folder of the application instance certificate's private key, in the store.
+pub const UA_PRIVATE_KEY_FOLDER: &str = "private";
+/// The private key's file, in [`UA_PRIVATE_KEY_FOLDER`].
+pub const UA_PRIVATE_KEY_FILE: &str = "private.pem";
+
+/// The OPC UA private key's path relative to the certificate store.
+pub fn ua_private_key_in_store() -> PathBuf {
+    Path::new(UA_PRIVATE_KEY_FOLDER).join(UA_PRIVATE_KEY_FILE)
+}
+
+/// The files of secrets of a configuration ([`AsixConfig::secret_paths`]): the one place
+/// the server, `/ProtectSecrets` and opcdiag's doctor take them from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SecretPaths {
+    /// The OPC UA certificate store (own, private, trusted, rejected).
+    pub ua_pki: PathBuf,
+    /// The OPC UA application instance certificate's private key.
+    pub ua_private_key: PathBuf,
+    /// The OPC UA users file.
+    pub ua_users_file: PathBuf,
+    /// Each channel's `AsixNetKeyFile`: (channel name, path).
+    pub key_files: Vec<(String, PathBuf)>,
 }
 
 /// Why the configuration could not be used.
@@ -1287,6 +1345,36 @@ mod tests {
 
     fn parse(text: &str) -> Result<(AsixConfig, Vec<Warning>), ConfigError> {
         parse_config(text.as_bytes(), "ASIXConnect.ini")
+    }
+
+    /// The secret files: defaults and relative paths beside the configuration's folder,
+    /// absolute ones kept, each channel's key file, the private key in the store's
+    /// `private` folder.
+    #[test]
+    fn secret_paths_are_beside_the_configuration_unless_absolute() {
+        let dir = Path::new("/etc/ctopc");
+        let (c, _) = parse("[Channel:A]\nAsixNetKeyFile = keys/a.pem\n").unwrap();
+        let p = c.secret_paths(dir);
+        assert_eq!(p.ua_pki, dir.join("pki"));
+        assert_eq!(p.ua_private_key, dir.join("pki/private/private.pem"));
+        assert_eq!(p.ua_users_file, dir.join("ua-users.txt"));
+        assert_eq!(p.key_files, [("A".to_owned(), dir.join("keys/a.pem"))]);
+        let (c, _) = parse(
+            "[UA]\nPkiDirectory = /var/lib/ctopc/pki\nUsersFile = users/ua.txt\n\
+             [Channel:B]\nAsixNetKeyFile = /secret/b.pem\n",
+        )
+        .unwrap();
+        let p = c.secret_paths(dir);
+        assert_eq!(p.ua_pki, Path::new("/var/lib/ctopc/pki"));
+        assert_eq!(
+            p.ua_private_key,
+            Path::new("/var/lib/ctopc/pki/private/private.pem")
+        );
+        assert_eq!(p.ua_users_file, dir.join("users/ua.txt"));
+        assert_eq!(
+            p.key_files,
+            [("B".to_owned(), PathBuf::from("/secret/b.pem"))]
+        );
     }
 
     #[test]

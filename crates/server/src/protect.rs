@@ -73,17 +73,8 @@ fn own_folder(folder: &Path, dir: &Path) -> bool {
 /// `dir`, in order: folders before what is in them. Relative paths are beside the
 /// configuration, as the server resolves them.
 pub fn plan(cfg: &AsixConfig, dir: &Path) -> Vec<Target> {
+    let paths = cfg.secret_paths(dir);
     let dir = lexical(dir);
-    let path = |configured: Option<&str>, default: &str| {
-        let p = configured.map_or_else(|| PathBuf::from(default), |c| cfg.resolve_path(c));
-        lexical(
-            &if p.is_absolute() || p.to_string_lossy().starts_with('\\') {
-                p
-            } else {
-                dir.join(p)
-            },
-        )
-    };
     let mut out = Vec::new();
     let target = |what: &str, path: PathBuf, kind| Target {
         what: what.to_owned(),
@@ -103,34 +94,28 @@ pub fn plan(cfg: &AsixConfig, dir: &Path) -> Vec<Target> {
         }
         out.push(target(what, p, Kind::File));
     };
-    let pki = path(cfg.ua.pki_directory.as_deref(), "pki");
+    let pki = lexical(&paths.ua_pki);
     // Never the configuration's folder or one above it as the store.
     if !dir.starts_with(&pki) {
         out.push(target("OPC UA certificate store", pki.clone(), Kind::Tree));
         out.push(target(
             "OPC UA private key folder",
-            pki.join("private"),
+            pki.join(asix_model::config::UA_PRIVATE_KEY_FOLDER),
             Kind::Folder,
         ));
     }
     out.push(target(
         "OPC UA private key",
-        pki.join("private").join("private.pem"),
+        lexical(&paths.ua_private_key),
         Kind::File,
     ));
-    file(
-        &mut out,
-        "OPC UA users file",
-        path(cfg.ua.users_file.as_deref(), "ua-users.txt"),
-    );
-    for (name, o) in &cfg.channels {
-        if let Some(key) = &o.asix_net_key_file {
-            file(
-                &mut out,
-                &format!("asix link key [Channel:{name}]"),
-                path(Some(key), ""),
-            );
-        }
+    file(&mut out, "OPC UA users file", lexical(&paths.ua_users_file));
+    for (name, key) in &paths.key_files {
+        file(
+            &mut out,
+            &format!("asix link key [Channel:{name}]"),
+            lexical(key),
+        );
     }
     out
 }

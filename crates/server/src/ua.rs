@@ -33,23 +33,14 @@ pub fn config_dir(source: &config::ConfigSource) -> PathBuf {
 pub fn settings(ns: &AsixNamespace, dir: &Path) -> ctopc_ua::server::Settings {
     let cfg = ns.config();
     let ua = &cfg.ua;
-    let path = |configured: &Option<String>, default: &str| {
-        let p = match configured {
-            Some(d) => cfg.resolve_path(d),
-            None => PathBuf::from(default),
-        };
-        if p.is_absolute() {
-            p
-        } else {
-            dir.join(p)
-        }
-    };
+    let paths = cfg.secret_paths(dir);
     ctopc_ua::server::Settings {
         endpoint: ua.endpoint.clone(),
         allow_none: ua.allow_none,
         allow_anonymous: ua.allow_anonymous,
-        pki_dir: path(&ua.pki_directory, "pki"),
-        users_file: path(&ua.users_file, "ua-users.txt"),
+        pki_dir: paths.ua_pki,
+        private_key: asix_model::config::ua_private_key_in_store(),
+        users_file: paths.ua_users_file,
         limits: limits(ua),
     }
 }

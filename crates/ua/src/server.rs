@@ -31,9 +31,6 @@ use std::future::Future;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-/// The application instance certificate's private key, below the PKI folder.
-pub const PRIVATE_KEY: &str = "private/private.pem";
-
 /// The `[UA]` settings, as plain values (paths resolved).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
@@ -42,6 +39,9 @@ pub struct Settings {
     pub allow_none: bool,
     pub allow_anonymous: bool,
     pub pki_dir: PathBuf,
+    /// The application instance certificate's private key (made at first start),
+    /// relative to `pki_dir`.
+    pub private_key: PathBuf,
     pub users_file: PathBuf,
     pub limits: Limits,
 }
@@ -161,7 +161,7 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
     })?;
     // The private key's folder owner-only before async-opcua makes the key in it (it
     // writes the file with the default mode); the key itself is narrowed once made.
-    let key_path = settings.pki_dir.join(PRIVATE_KEY);
+    let key_path = settings.pki_dir.join(&settings.private_key);
     let key_existed = key_path.exists();
     if let Some(private) = key_path.parent().filter(|_| !key_existed) {
         std::fs::create_dir_all(private)
@@ -189,7 +189,7 @@ pub async fn start(settings: &Settings, serve: Serve) -> Result<Running, String>
         .diagnostics_enabled(true)
         .create_sample_keypair(true)
         .certificate_path("own/cert.der")
-        .private_key_path(PRIVATE_KEY)
+        .private_key_path(&settings.private_key)
         .pki_dir(settings.pki_dir.clone())
         .trust_client_certs(false)
         .check_cert_time(true)
@@ -288,6 +288,7 @@ mod tests {
             allow_none: false,
             allow_anonymous: false,
             pki_dir: PathBuf::from("pki"),
+            private_key: PathBuf::from("private/private.pem"),
             users_file: PathBuf::from("ua-users.txt"),
             limits: Limits::default(),
         };

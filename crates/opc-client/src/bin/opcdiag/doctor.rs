@@ -929,40 +929,22 @@ pub fn appid_security_checks(a: &AppIdSecurity) -> Vec<Check> {
 /// The files of secrets a configuration names, with what each is: with a `[UA]` section
 /// the OPC UA private key's folder and the key (`PkiDirectory`, default `pki`, its
 /// `private\private.pem`) and the users file (`UsersFile`, default `ua-users.txt`); each
-/// channel's asix-link client key (`AsixNetKeyFile`). Relative paths are beside the
-/// configuration (`dir`), as the server resolves them.
+/// channel's asix-link client key (`AsixNetKeyFile`); where the server takes them from
+/// (`AsixConfig::secret_paths`, the configuration in `dir`).
 pub fn secret_files(
     cfg: &asix_model::config::AsixConfig,
     dir: &std::path::Path,
 ) -> Vec<(String, std::path::PathBuf)> {
-    let path = |configured: Option<&str>, default: &str| {
-        let p = configured.map_or_else(
-            || std::path::PathBuf::from(default),
-            |c| cfg.resolve_path(c),
-        );
-        if p.is_absolute() || p.to_string_lossy().starts_with('\\') {
-            p
-        } else {
-            dir.join(p)
-        }
-    };
+    let paths = cfg.secret_paths(dir);
     let mut out = Vec::new();
     if cfg.ua.section {
-        let private = path(cfg.ua.pki_directory.as_deref(), "pki").join("private");
-        out.push(("OPC UA private key".to_owned(), private.join("private.pem")));
-        out.push(("OPC UA private key folder".to_owned(), private));
-        out.push((
-            "OPC UA users file".to_owned(),
-            path(cfg.ua.users_file.as_deref(), "ua-users.txt"),
-        ));
+        let folder = paths.ua_pki.join(asix_model::config::UA_PRIVATE_KEY_FOLDER);
+        out.push(("OPC UA private key".to_owned(), paths.ua_private_key));
+        out.push(("OPC UA private key folder".to_owned(), folder));
+        out.push(("OPC UA users file".to_owned(), paths.ua_users_file));
     }
-    for (name, o) in &cfg.channels {
-        if let Some(key) = &o.asix_net_key_file {
-            out.push((
-                format!("asix link key [Channel:{name}]"),
-                path(Some(key), ""),
-            ));
-        }
+    for (name, key) in paths.key_files {
+        out.push((format!("asix link key [Channel:{name}]"), key));
     }
     out
 }
