@@ -30,7 +30,8 @@ loopback port), adds a writer and a reader user with `ServerCTOPC user add`, sta
   its locale;
 - services: RegisterNodes (the registered NodeIds read) and UnregisterNodes, the Value of
   a variable, an unknown node and a folder in one Read and one CreateMonitoredItems (Good,
-  Bad_NodeIdUnknown, Bad_AttributeIdInvalid), Republish
+  Bad_NodeIdUnknown, Bad_AttributeIdInvalid), ModifyMonitoredItems (5 s to 100 ms:
+  revised, and the changes come at the new rate), Republish
   (an unknown sequence number is Bad_MessageNotAvailable), TransferSubscriptions to a
   second session of the same user, a monitored item's queue of 3 with DiscardOldest true
   and false while the value changes faster than the publishing (publishing off, then on);
@@ -434,6 +435,23 @@ async def services(url, cert, key):
             r.StatusCode_.value for r in res.Results]
         check("CreateMonitoredItems of Values: a variable Good, an unknown node "
               "Bad_NodeIdUnknown, a folder Bad_AttributeIdInvalid", got == expected, str(got))
+        await sub.delete()
+
+        # ModifyMonitoredItems: an item sampled every 5 s made 100 ms is Good, revised to
+        # 100 ms, and its variable's changes then come at the new rate.
+        got = Changes()
+        sub = await c.create_subscription(100, got)
+        handle = await sub.subscribe_data_change(c.get_node(ua.NodeId("KW_A001", ns)),
+                                                 sampling_interval=5000)
+        await wait_for(lambda: len(got.values) >= 1, 20)
+        res = await sub.modify_monitored_item(handle, 100.0)
+        check("ModifyMonitoredItems: Good, the sampling interval revised to 100 ms",
+              len(res) == 1 and res[0].StatusCode_.is_good()
+              and res[0].RevisedSamplingInterval == 100.0, str(res))
+        before = len(got.values)
+        await wait_for(lambda: len(got.values) >= before + 3, 3)
+        check("ModifyMonitoredItems: the changes come at the new rate (3 within 3 s)",
+              len(got.values) >= before + 3, str(len(got.values) - before))
         await sub.delete()
 
         # Republish of a sequence number the server never sent.

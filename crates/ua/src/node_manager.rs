@@ -666,22 +666,32 @@ impl NodeManager for AsixNodeManager {
         _context: &RequestContext,
         items: &[&MonitoredItemUpdateRef],
     ) {
+        let mut changes: Vec<(String, u32, u32)> = Vec::new();
         for item in items {
             if !item.status_code().is_good() {
                 continue;
             }
             let revised = item.update().revised_sampling_interval;
-            let change = {
-                let mut map = self.items();
-                map.get_mut(&item.handle()).map(|(id, rate)| {
-                    let to = self.monitor.revise(revised);
-                    let from = std::mem::replace(rate, to);
-                    (id.clone(), from, to)
-                })
-            };
-            if let Some((id, from, to)) = change {
-                self.monitor.change(&id, from, to);
+            let mut map = self.items();
+            if let Some((id, rate)) = map.get_mut(&item.handle()) {
+                let to = self.monitor.revise(revised);
+                let from = std::mem::replace(rate, to);
+                changes.push((id.clone(), from, to));
             }
+        }
+        if changes.is_empty() {
+            return;
+        }
+        // A variable moved to another rate's group: engine calls, on the blocking pool.
+        let monitor = Arc::clone(&self.monitor);
+        let moved = tokio::task::spawn_blocking(move || {
+            for (id, from, to) in changes {
+                monitor.change(&id, from, to);
+            }
+        })
+        .await;
+        if moved.is_err() {
+            tracing::error!("OPC UA: moving monitored items to their new rates' groups failed");
         }
     }
 
@@ -696,7 +706,19 @@ impl NodeManager for AsixNodeManager {
         for _ in &removed {
             self.budget.give_back();
         }
-        let req: Vec<(&str, u32)> = removed.iter().map(|(id, r)| (id.as_str(), *r)).collect();
-        self.monitor.remove_many(&req);
+        if removed.is_empty() {
+            return;
+        }
+        // The engine items of the variables no item monitors any more: engine calls, on
+        // the blocking pool.
+        let monitor = Arc::clone(&self.monitor);
+        let gone = tokio::task::spawn_blocking(move || {
+            let req: Vec<(&str, u32)> = removed.iter().map(|(id, r)| (id.as_str(), *r)).collect();
+            monitor.remove_many(&req);
+        })
+        .await;
+        if gone.is_err() {
+            tracing::error!("OPC UA: removing deleted monitored items from the engine failed");
+        }
     }
 }
